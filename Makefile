@@ -1,0 +1,49 @@
+# occgp: `make demo` and `make test` each do the whole set-up on a fresh Debian
+# machine (system packages, .venv, the package with its extras), then run.
+# Both are idempotent: the set-up is redone only when the build inputs change.
+
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.occgp-installed
+EXTRAS ?= test
+BUILD_INPUTS := setup.py pyproject.toml $(wildcard ext/*.pyx ext/*.pxd ext/*.h)
+
+.PHONY: all demo test bench docs system venv install clean distclean
+
+all: test
+
+system:
+	@PYTHON=$(PYTHON) bash tools/install-system-deps.sh
+
+$(PY):
+	@PYTHON=$(PYTHON) bash tools/install-system-deps.sh
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+
+$(STAMP): $(PY) $(BUILD_INPUTS)
+	@PYTHON=$(PYTHON) bash tools/install-system-deps.sh
+	$(PY) -m pip install -q "setuptools>=64" wheel "Cython>=3.0" "numpy>=2.0"
+	$(PY) -m pip install -q --no-build-isolation -e ".[$(EXTRAS)]"
+	@touch $@
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/occgp demo -o demo_out
+
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+bench: $(STAMP)
+	$(PY) bench/bench_octree.py
+
+docs: $(STAMP)
+	$(PY) -m pip install -q -e ".[docs]" --no-build-isolation
+	$(PY) -m sphinx -W --keep-going -b html docs docs/_build/html
+
+clean:
+	rm -rf build docs/_build docs/auto_examples docs/gen_modules ext/*.cpp occgp/*.so demo_out
+
+distclean: clean
+	rm -rf $(VENV) *.egg-info

@@ -1,0 +1,477 @@
+# cython: language_level=3
+# distutils: language = c++
+"""Compiled core of :class:`occgp.OccupancyOctree`: liboctomap's ``OcTree`` behind typed loops.
+
+Nothing here validates user input: :mod:`occgp.octree` coerces and checks every
+array (shape, dtype, finiteness, key range) before it reaches these methods.
+Every loop and every liboctomap call that does real work runs without the GIL;
+a per-tree lock serialises the operations on one tree.
+"""
+
+cimport cython
+from cython.operator cimport dereference as deref, preincrement as inc
+from libc.math cimport floor, isfinite
+from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
+from libc.string cimport memcpy
+from libcpp cimport bool
+from libcpp.memory cimport unique_ptr
+from libcpp.string cimport string
+from libcpp.unordered_map cimport unordered_map
+from libcpp.utility cimport pair
+from libcpp.vector cimport vector
+
+from liboctomap cimport (
+    KeyRay, OcTree, OcTreeKey, OcTreeNode, Pointcloud, istringstream, key_type,
+    ostringstream, point3d,
+)
+
+import threading
+
+import numpy as np
+
+cdef enum:
+    _MAX_VAL = 32768     # half the number of keys per axis (liboctomap's tree_max_val)
+    _DEPTH = 16          # depth of the tree: leaves there have the size of the resolution
+
+#: Half the number of keys per axis (liboctomap's ``tree_max_val``, 16-level tree).
+TREE_MAX_VAL = _MAX_VAL
+#: Depth of the tree: leaves at this depth have the size of the resolution.
+TREE_DEPTH = _DEPTH
+
+ctypedef pair[uint32_t, uint32_t] Counts          # (rays passing through, rays ending in)
+ctypedef unordered_map[uint64_t, Counts] CountMap
+
+
+cdef inline uint64_t _pack(const OcTreeKey& key) noexcept nogil:
+    return (<uint64_t>key[0]) | ((<uint64_t>key[1]) << 16) | ((<uint64_t>key[2]) << 32)
+
+
+cdef inline OcTreeKey _unpack(uint64_t packed) noexcept nogil:
+    return OcTreeKey(<key_type>(packed & 0xFFFF), <key_type>((packed >> 16) & 0xFFFF),
+                     <key_type>((packed >> 32) & 0xFFFF))
+
+
+cdef inline bint _in_key_range(double resolution_factor, float coordinate) noexcept nogil:
+    # liboctomap's coordToKeyChecked: floor(coord / res) + 32768 must lie in [0, 65536).
+    cdef double scaled = floor(resolution_factor * <double>coordinate)
+    return scaled >= -_MAX_VAL and scaled < _MAX_VAL
+
+
+cdef inline bint _effective_end(const point3d& origin, const point3d& point, double max_range,
+                                point3d* end) noexcept nogil:
+    """Set `end` to the ray's end as liboctomap computes it; return True when truncated."""
+    cdef point3d direction = point - origin
+    if max_range < 0 or direction.norm() <= max_range:
+        end[0] = point
+        return False
+    end[0] = origin + direction.normalized() * <float>max_range
+    return True
+
+
+@cython.auto_pickle(False)
+cdef class _OcTree:
+    """A liboctomap ``OcTree`` owned by Python. Use :class:`occgp.OccupancyOctree`."""
+
+    cdef unique_ptr[OcTree] _tree
+    cdef object _lock
+
+    def __cinit__(self, *args, **kwargs):
+        self._lock = threading.Lock()
+
+    cdef OcTree* _get(self) except NULL:
+        cdef OcTree* tree = self._tree.get()
+        if tree == NULL:
+            raise ValueError(f"{type(self).__name__} was not initialised "
+                             "(create it with OccupancyOctree(resolution))")
+        return tree
+
+    def _setup(self, double resolution, double prob_hit, double prob_miss,
+               double clamping_min, double clamping_max, double occupancy_threshold):
+        """Create the C++ tree (parameters were validated by the caller)."""
+        cdef OcTree* tree
+        with self._lock:
+            self._tree.reset(new OcTree(resolution))
+            tree = self._tree.get()
+            tree.setProbHit(prob_hit)
+            tree.setProbMiss(prob_miss)
+            tree.setClampingThresMin(clamping_min)
+            tree.setClampingThresMax(clamping_max)
+            tree.setOccupancyThres(occupancy_threshold)
+
+    # ------------------------------------------------------------------ sensor model
+    def _log_odds_parameters(self):
+        """(hit, miss, clamp min, clamp max, occupancy threshold) as the tree stores them (float32)."""
+        cdef OcTree* tree = self._get()
+        return (tree.getProbHitLog(), tree.getProbMissLog(), tree.getClampingThresMinLog(),
+                tree.getClampingThresMaxLog(), tree.getOccupancyThresLog())
+
+    # ------------------------------------------------------------------ key range
+    def _in_range(self, const float[:, ::1] points):
+        """Boolean mask: which rows of `points` have a valid octree key on every axis."""
+        cdef OcTree* tree = self._get()
+        cdef double rf = 1.0 / tree.getResolution()
+        cdef Py_ssize_t i, n = points.shape[0]
+        out = np.empty(n, dtype=np.bool_)
+        cdef uint8_t[::1] ok = out.view(np.uint8)
+        with nogil:
+            for i in range(n):
+                ok[i] = (_in_key_range(rf, points[i, 0]) and _in_key_range(rf, points[i, 1])
+                         and _in_key_range(rf, points[i, 2]))
+        return out
+
+    def _ends_in_range(self, const float[:, ::1] points, const float[::1] origin,
+                       double max_range):
+        """Like :meth:`_in_range` for the ray ends after truncation at `max_range` (< 0: none)."""
+        cdef OcTree* tree = self._get()
+        cdef double rf = 1.0 / tree.getResolution()
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef point3d o = point3d(origin[0], origin[1], origin[2])
+        cdef point3d end
+        out = np.empty(n, dtype=np.bool_)
+        cdef uint8_t[::1] ok = out.view(np.uint8)
+        with nogil:
+            for i in range(n):
+                _effective_end(o, point3d(points[i, 0], points[i, 1], points[i, 2]),
+                               max_range, &end)
+                ok[i] = (_in_key_range(rf, end.x()) and _in_key_range(rf, end.y())
+                         and _in_key_range(rf, end.z()))
+        return out
+
+    # ------------------------------------------------------------------ updates
+    def _insert_point_cloud(self, const float[:, ::1] points, const float[::1] origin,
+                            double max_range, bint discretize):
+        """liboctomap's ``insertPointCloud`` (free/occupied key sets, one update per cell)."""
+        cdef OcTree* tree = self._get()
+        cdef Pointcloud cloud
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef point3d o = point3d(origin[0], origin[1], origin[2])
+        with self._lock:
+            with nogil:
+                cloud.reserve(n)
+                for i in range(n):
+                    cloud.push_back(points[i, 0], points[i, 1], points[i, 2])
+                tree.insertPointCloud(cloud, o, max_range, False, discretize)
+
+    def _insert_rays(self, const float[:, ::1] points, const float[::1] origin,
+                     double max_range, const uint32_t[::1] weights=None):
+        """Per-ray counting: each cell gets ``n_free*l_miss + n_hit*l_hit`` and one clamp.
+
+        With `weights`, ray i counts ``weights[i]`` times (super rays use this).
+        """
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef point3d o = point3d(origin[0], origin[1], origin[2])
+        cdef bint weighted = weights is not None
+        if weighted and weights.shape[0] != n:
+            raise ValueError(f"weights must have length {n}, got {weights.shape[0]}")
+        cdef KeyRay ray
+        cdef KeyRay.iterator it
+        cdef CountMap counts
+        cdef CountMap.iterator cit
+        cdef OcTreeKey key
+        cdef point3d p, end
+        cdef uint32_t w = 1
+        cdef bint truncated
+        cdef Counts* entry
+        cdef double l_hit = tree.getProbHitLog()
+        cdef double l_miss = tree.getProbMissLog()
+        cdef float delta
+        with self._lock:
+            with nogil:
+                for i in range(n):
+                    if weighted:
+                        w = weights[i]
+                    p = point3d(points[i, 0], points[i, 1], points[i, 2])
+                    truncated = _effective_end(o, p, max_range, &end)
+                    if tree.computeRayKeys(o, end, ray):
+                        it = ray.begin()
+                        while it != ray.end():
+                            entry = &counts[_pack(deref(it))]
+                            entry.first += w
+                            inc(it)
+                    if not truncated and tree.coordToKeyChecked(p, key):
+                        entry = &counts[_pack(key)]
+                        entry.second += w
+                cit = counts.begin()
+                while cit != counts.end():
+                    delta = <float>(deref(cit).second.first * l_miss
+                                    + deref(cit).second.second * l_hit)
+                    tree.updateNode(_unpack(deref(cit).first), delta, False)
+                    inc(cit)
+
+    # ------------------------------------------------------------------ queries
+    def _query(self, const float[:, ::1] points, int what):
+        """Per point: 0 → occupancy probability, 1 → log-odds (NaN where unknown),
+        2 → int8 state (-1 unknown, 0 free, 1 occupied)."""
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef OcTreeKey key
+        cdef OcTreeNode* node
+        out = np.full(n, np.nan) if what != 2 else np.full(n, -1, dtype=np.int8)
+        cdef double[::1] values
+        cdef signed char[::1] states
+        if what == 2:
+            states = out
+        else:
+            values = out
+        with self._lock:
+            with nogil:
+                for i in range(n):
+                    if not tree.coordToKeyChecked(
+                            point3d(points[i, 0], points[i, 1], points[i, 2]), key):
+                        continue
+                    node = tree.search(key, 0)
+                    if node == NULL:
+                        continue
+                    if what == 0:
+                        values[i] = node.getOccupancy()
+                    elif what == 1:
+                        values[i] = node.getLogOdds()
+                    else:
+                        states[i] = 1 if tree.isNodeOccupied(node) else 0
+        return out
+
+    def _cast_rays(self, const float[:, ::1] origins, const float[:, ::1] directions,
+                   bint ignore_unknown, const double[::1] max_range):
+        """liboctomap's ``castRay`` for each (origin, direction) row."""
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t i, n = origins.shape[0]
+        ends = np.empty((n, 3))
+        hits = np.empty(n, dtype=np.bool_)
+        cdef double[:, ::1] ends_v = ends
+        cdef uint8_t[::1] hits_v = hits.view(np.uint8)
+        cdef point3d end
+        with self._lock:
+            with nogil:
+                for i in range(n):
+                    hits_v[i] = tree.castRay(
+                        point3d(origins[i, 0], origins[i, 1], origins[i, 2]),
+                        point3d(directions[i, 0], directions[i, 1], directions[i, 2]),
+                        end, ignore_unknown, max_range[i])
+                    ends_v[i, 0] = end.x()
+                    ends_v[i, 1] = end.y()
+                    ends_v[i, 2] = end.z()
+        return ends, hits
+
+    def _leaves(self, bint occupied_only, const double[:, ::1] bbox=None):
+        """Centres (n, 3), sizes (n,), log-odds (n,) of the leaves, optionally in a box."""
+        cdef OcTree* tree = self._get()
+        cdef vector[double] centers, sizes
+        cdef vector[float] values
+        cdef OcTree.leaf_iterator it, end
+        cdef OcTree.leaf_bbx_iterator bit, bend
+        cdef OcTreeKey kmin, kmax
+        cdef double rf = 1.0 / tree.getResolution()
+        cdef int axis
+        cdef double scaled
+        if bbox is not None:
+            for axis in range(3):
+                # clip the box to the key range, as a box larger than the tree means "all"
+                scaled = floor(rf * bbox[0, axis]) + _MAX_VAL
+                kmin[axis] = <key_type>min(max(scaled, 0.0), 2.0 * _MAX_VAL - 1)
+                scaled = floor(rf * bbox[1, axis]) + _MAX_VAL
+                kmax[axis] = <key_type>min(max(scaled, 0.0), 2.0 * _MAX_VAL - 1)
+        with self._lock:
+            with nogil:
+                if bbox is None:
+                    it = tree.begin_leafs(0)
+                    end = tree.end_leafs()
+                    while it != end:
+                        if not occupied_only or tree.isNodeOccupied(&deref(it)):
+                            _push_leaf(tree, it.getKey(), it.getDepth(), it.getSize(),
+                                       deref(it).getLogOdds(), centers, sizes, values)
+                        inc(it)
+                else:
+                    bit = tree.begin_leafs_bbx(kmin, kmax, 0)
+                    bend = tree.end_leafs_bbx()
+                    while bit != bend:
+                        if not occupied_only or tree.isNodeOccupied(&deref(bit)):
+                            _push_leaf(tree, bit.getKey(), bit.getDepth(), bit.getSize(),
+                                       deref(bit).getLogOdds(), centers, sizes, values)
+                        inc(bit)
+        cdef Py_ssize_t n = sizes.size()
+        out_c = np.empty((n, 3))
+        out_s = np.empty(n)
+        out_v = np.empty(n, dtype=np.float32)
+        cdef double[:, ::1] oc = out_c
+        cdef double[::1] os_ = out_s
+        cdef float[::1] ov = out_v
+        if n:
+            memcpy(&oc[0, 0], centers.data(), 3 * n * sizeof(double))
+            memcpy(&os_[0], sizes.data(), n * sizeof(double))
+            memcpy(&ov[0], values.data(), n * sizeof(float))
+        return out_c, out_s, out_v
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def _resolution(self):
+        return self._get().getResolution()
+
+    def _num_leaves(self):
+        cdef OcTree* tree = self._get()
+        with self._lock:
+            with nogil:
+                n = tree.getNumLeafNodes()
+        return n
+
+    def _num_nodes(self):
+        return self._get().size()
+
+    def _memory_usage(self):
+        return self._get().memoryUsage()
+
+    def _bounds(self):
+        cdef OcTree* tree = self._get()
+        cdef double x0 = 0, y0 = 0, z0 = 0, x1 = 0, y1 = 0, z1 = 0
+        with self._lock:
+            tree.getMetricMin(x0, y0, z0)
+            tree.getMetricMax(x1, y1, z1)
+        return np.array([x0, y0, z0]), np.array([x1, y1, z1])
+
+    def _prune(self):
+        cdef OcTree* tree = self._get()
+        with self._lock:
+            with nogil:
+                tree.prune()
+
+    def _expand(self):
+        cdef OcTree* tree = self._get()
+        with self._lock:
+            with nogil:
+                tree.expand()
+
+    def _clear(self):
+        cdef OcTree* tree = self._get()
+        with self._lock:
+            tree.clear()
+
+    def _to_max_likelihood(self):
+        cdef OcTree* tree = self._get()
+        with self._lock:
+            with nogil:
+                tree.toMaxLikelihood()
+                tree.prune()
+
+    # ------------------------------------------------------------------ serialisation
+    def _write_data(self, bint binary):
+        """The tree's data block (no header) in the .bt (`binary`) or .ot encoding."""
+        cdef OcTree* tree = self._get()
+        cdef ostringstream stream
+        cdef string data
+        with self._lock:
+            with nogil:
+                if binary:
+                    tree.writeBinaryData(stream)
+                else:
+                    tree.writeData(stream)
+                data = stream.str()
+        return <bytes>data
+
+    def _read_data(self, bytes payload, bint binary, double resolution):
+        """Replace the tree by the data block `payload` (validated by the caller)."""
+        cdef OcTree* tree = self._get()
+        cdef string data = payload
+        cdef unique_ptr[istringstream] stream
+        with self._lock:
+            with nogil:
+                tree.clear()
+                tree.setResolution(resolution)
+                stream.reset(new istringstream(data))
+                if binary:
+                    tree.readBinaryData(deref(stream))
+                else:
+                    tree.readData(deref(stream))
+            failed = deref(stream).fail()
+        if failed:
+            with self._lock:
+                tree.clear()
+            raise ValueError("liboctomap could not read the tree data")
+
+
+cdef inline void _push_leaf(OcTree* tree, const OcTreeKey& key, unsigned depth, double size,
+                            float log_odds, vector[double]& centers, vector[double]& sizes,
+                            vector[float]& values) noexcept nogil:
+    centers.push_back(tree.keyToCoord(key[0], depth))
+    centers.push_back(tree.keyToCoord(key[1], depth))
+    centers.push_back(tree.keyToCoord(key[2], depth))
+    sizes.push_back(size)
+    values.push_back(log_odds)
+
+
+# ---------------------------------------------------------------------- file validation
+def _check_binary_data(const uint8_t[::1] data, Py_ssize_t offset):
+    """Walk a .bt data block without building anything.
+
+    Returns (number of nodes, end offset), or raises ValueError when the block is
+    truncated or describes a node deeper than the 16 levels of an OcTree.
+    liboctomap trusts its input; this walk makes sure it gets only valid input.
+    """
+    cdef Py_ssize_t pos = offset, n = data.shape[0], nodes = 1
+    cdef vector[uint8_t] stack            # depth of each inner node still to read
+    cdef uint8_t depth
+    cdef unsigned code, bits, i
+    cdef int err = 0
+    stack.push_back(0)
+    with nogil:
+        while not stack.empty():
+            depth = stack.back()
+            stack.pop_back()
+            if pos + 2 > n:
+                err = 1
+                break
+            bits = data[pos] | (<unsigned>data[pos + 1] << 8)
+            pos += 2
+            # children with children are read depth-first in child order: push in reverse
+            for i in range(7, -1, -1):
+                code = (bits >> (2 * i)) & 3
+                if code != 0:
+                    nodes += 1
+                if code == 3:
+                    if depth + 1 >= _DEPTH:
+                        err = 2
+                        break
+                    stack.push_back(depth + 1)
+            if err:
+                break
+    if err == 1:
+        raise ValueError(f"truncated data: the tree needs more than the {n - offset} bytes given")
+    if err == 2:
+        raise ValueError("corrupt data: a node lies deeper than the 16 levels of an OcTree")
+    return nodes, pos
+
+
+def _check_full_data(const uint8_t[::1] data, Py_ssize_t offset):
+    """Like :func:`_check_binary_data` for a .ot data block (float log-odds + child mask)."""
+    cdef Py_ssize_t pos = offset, n = data.shape[0], nodes = 0
+    cdef vector[uint8_t] stack
+    cdef uint8_t depth, mask
+    cdef float value
+    cdef int i, err = 0
+    stack.push_back(0)
+    with nogil:
+        while not stack.empty():
+            depth = stack.back()
+            stack.pop_back()
+            if pos + 5 > n:
+                err = 1
+                break
+            memcpy(&value, &data[pos], sizeof(float))
+            mask = data[pos + 4]
+            pos += 5
+            nodes += 1
+            if not isfinite(value):
+                err = 3
+                break
+            if mask != 0 and depth + 1 > _DEPTH:
+                err = 2
+                break
+            for i in range(7, -1, -1):
+                if (mask >> i) & 1:
+                    stack.push_back(depth + 1)
+    if err == 1:
+        raise ValueError(f"truncated data: the tree needs more than the {n - offset} bytes given")
+    if err == 2:
+        raise ValueError("corrupt data: a node lies deeper than the 16 levels of an OcTree")
+    if err == 3:
+        raise ValueError("corrupt data: a node holds a non-finite log-odds value")
+    return nodes, pos

@@ -1,0 +1,146 @@
+# cython: language_level=3
+"""Declarations of the parts of liboctomap (Debian's liboctomap-dev) that occgp uses.
+
+C++ names appear here only; everything above this file is snake_case.
+"""
+
+from libc.stdint cimport uint16_t
+from libcpp cimport bool
+from libcpp.string cimport string
+
+
+cdef extern from "<sstream>" namespace "std" nogil:
+    cdef cppclass ostream:
+        pass
+
+    cdef cppclass istream:
+        bool good()
+        bool fail()
+
+    cdef cppclass ostringstream(ostream):
+        ostringstream() except +
+        string str() except +
+
+    cdef cppclass istringstream(istream):
+        istringstream(const string&) except +
+
+
+cdef extern from "octomap/octomap.h" namespace "octomap" nogil:
+    ctypedef uint16_t key_type
+
+    cdef cppclass point3d:
+        point3d() except +
+        point3d(float x, float y, float z) except +
+        float& x()
+        float& y()
+        float& z()
+        point3d operator+(const point3d& other)
+        point3d operator-(const point3d& other)
+        point3d operator*(float factor)
+        double norm()
+        point3d normalized()
+
+    cdef cppclass Pointcloud:
+        Pointcloud() except +
+        void reserve(size_t n) except +
+        void push_back(float x, float y, float z) except +
+        size_t size()
+
+    cdef cppclass OcTreeKey:
+        OcTreeKey() except +
+        OcTreeKey(key_type a, key_type b, key_type c) except +
+        key_type& operator[](unsigned int i)
+        bool operator==(const OcTreeKey& other)
+
+    cdef cppclass KeyRay:
+        cppclass iterator:
+            OcTreeKey& operator*()
+            iterator& operator++()
+            bool operator==(const iterator&)
+            bool operator!=(const iterator&)
+        KeyRay() except +
+        void reset()
+        size_t size()
+        iterator begin()
+        iterator end()
+
+    cdef cppclass OcTreeNode:
+        double getOccupancy()
+        float getLogOdds()
+        void setLogOdds(float value)
+
+    cdef cppclass OcTree:
+        cppclass leaf_iterator:
+            leaf_iterator() except +
+            OcTreeNode& operator*()
+            leaf_iterator& operator++()
+            bool operator==(const leaf_iterator&)
+            bool operator!=(const leaf_iterator&)
+            double getSize()
+            unsigned getDepth()
+            const OcTreeKey& getKey()
+
+        cppclass leaf_bbx_iterator:
+            leaf_bbx_iterator() except +
+            OcTreeNode& operator*()
+            leaf_bbx_iterator& operator++()
+            bool operator==(const leaf_bbx_iterator&)
+            bool operator!=(const leaf_bbx_iterator&)
+            double getSize()
+            unsigned getDepth()
+            const OcTreeKey& getKey()
+
+        OcTree(double resolution) except +
+
+        # sensor model
+        void setProbHit(double prob)
+        void setProbMiss(double prob)
+        void setClampingThresMin(double prob)
+        void setClampingThresMax(double prob)
+        void setOccupancyThres(double prob)
+        float getProbHitLog()
+        float getProbMissLog()
+        float getClampingThresMinLog()
+        float getClampingThresMaxLog()
+        float getOccupancyThresLog()
+
+        # updates
+        void insertPointCloud(const Pointcloud& scan, const point3d& sensor_origin,
+                              double maxrange, bool lazy_eval, bool discretize) except +
+        OcTreeNode* updateNode(const OcTreeKey& key, float log_odds_update,
+                               bool lazy_eval) except +
+        bool computeRayKeys(const point3d& origin, const point3d& end,
+                            KeyRay& ray) except +
+
+        # queries
+        OcTreeNode* search(const OcTreeKey& key, unsigned int depth)
+        bool isNodeOccupied(const OcTreeNode* node)
+        bool coordToKeyChecked(const point3d& coord, OcTreeKey& key)
+        double keyToCoord(key_type key, unsigned depth)
+        bool castRay(const point3d& origin, const point3d& direction, point3d& end,
+                     bool ignoreUnknownCells, double maxRange) except +
+        leaf_iterator begin_leafs(unsigned char maxDepth) except +
+        leaf_iterator end_leafs()
+        leaf_bbx_iterator begin_leafs_bbx(const OcTreeKey& min, const OcTreeKey& max,
+                                          unsigned char maxDepth) except +
+        leaf_bbx_iterator end_leafs_bbx()
+
+        # structure
+        double getResolution()
+        void setResolution(double r)
+        unsigned int getTreeDepth()
+        size_t size()
+        size_t getNumLeafNodes()
+        size_t memoryUsage()
+        void getMetricMin(double& x, double& y, double& z)
+        void getMetricMax(double& x, double& y, double& z)
+        void prune() except +
+        void expand() except +
+        void clear()
+        void toMaxLikelihood()
+
+        # serialisation
+        ostream& writeBinaryData(ostream& s) except +
+        ostream& writeData(ostream& s) except +
+        istream& readBinaryData(istream& s) except +
+        istream& readData(istream& s) except +

@@ -1,0 +1,15 @@
+"""occgp: occupancy mapping from range sensors.
+
+The OctoMap octree under a numpy API (:class:`OccupancyOctree`), synthetic
+scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
+(:mod:`occgp.metrics`, :mod:`occgp.evaluation`) for every mapping method.
+"""
+
+import logging
+
+from .octree import Leaves, OccupancyOctree
+
+__version__ = "0.1.0.dev0"
+__all__ = ["OccupancyOctree", "Leaves", "__version__"]
+
+logging.getLogger("occgp").addHandler(logging.NullHandler())

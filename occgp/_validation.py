@@ -1,0 +1,81 @@
+"""Input checks shared by occgp's public classes.
+
+Every message names the argument, what was expected and what came, so that bad
+input never reaches compiled code (whose own buffer errors are cryptic).
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["as_points", "as_point", "check_real", "check_probability"]
+
+
+def _as_numeric(x: ArrayLike, name: str) -> np.ndarray:
+    try:
+        arr = np.asarray(x)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{name} must be a numeric array, could not convert it: {exc}") from None
+    if arr.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+    return arr
+
+
+def as_points(x: ArrayLike, name: str = "points", dim: int = 3) -> NDArray[np.float64]:
+    """Return `x` as a C-contiguous float64 array of shape (n_points, dim).
+
+    Raises
+    ------
+    TypeError
+        If `x` does not hold real numbers.
+    ValueError
+        If `x` is not of shape (n_points, dim) or holds NaN or inf.
+    """
+    arr = _as_numeric(x, name)
+    if arr.ndim != 2 or arr.shape[1] != dim:
+        raise ValueError(f"{name} must have shape (n_points, {dim}), got {arr.shape}")
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    finite = np.isfinite(arr).all(axis=1)
+    if not finite.all():
+        bad = int(np.count_nonzero(~finite))
+        first = int(np.flatnonzero(~finite)[0])
+        raise ValueError(
+            f"{name} must be finite: {bad} of {len(arr)} rows hold NaN or inf (first: row {first})"
+        )
+    return arr
+
+
+def as_point(x: ArrayLike, name: str = "origin", dim: int = 3) -> NDArray[np.float64]:
+    """Return `x` as a float64 array of shape (dim,), finite."""
+    arr = _as_numeric(x, name)
+    if arr.shape != (dim,):
+        raise ValueError(f"{name} must have shape ({dim},), got {arr.shape}")
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+    return arr
+
+
+def check_real(value: object, name: str, *, low: float | None = None,
+               high: float | None = None, low_open: bool = True,
+               high_open: bool = True) -> float:
+    """Return `value` as a float after checking it is a finite real in the given interval."""
+    if isinstance(value, bool) or not isinstance(value, (numbers.Real, np.floating, np.integer)):
+        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
+    v = float(value)
+    lo_ok = low is None or (v > low if low_open else v >= low)
+    hi_ok = high is None or (v < high if high_open else v <= high)
+    if not np.isfinite(v) or not lo_ok or not hi_ok:
+        lo = "-inf" if low is None else repr(low)
+        hi = "inf" if high is None else repr(high)
+        interval = f"{'(' if low_open else '['}{lo}, {hi}{')' if high_open else ']'}"
+        raise ValueError(f"{name} must lie in {interval}, got {value!r}")
+    return v
+
+
+def check_probability(value: object, name: str) -> float:
+    """Return `value` as a float after checking it lies in the open interval (0, 1)."""
+    return check_real(value, name, low=0.0, high=1.0)

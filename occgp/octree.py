@@ -1,0 +1,613 @@
+"""The log-odds occupancy octree: liboctomap's ``OcTree`` under a numpy API."""
+
+from __future__ import annotations
+
+import os
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import _octomap_format as fmt
+from ._octree import TREE_MAX_VAL, _check_binary_data, _check_full_data, _OcTree
+from ._validation import as_point, as_points, check_probability, check_real
+
+__all__ = ["OccupancyOctree", "Leaves"]
+
+MODES = ("scan", "ray")
+
+
+class Leaves(NamedTuple):
+    """The leaves of an octree, as arrays (one row per leaf)."""
+
+    #: Cell centres, shape (n_leaves, 3), in metres.
+    centers: NDArray[np.float64]
+    #: Cell edge lengths, shape (n_leaves,): the resolution times a power of two.
+    sizes: NDArray[np.float64]
+    #: Log-odds of occupancy, shape (n_leaves,), float32 as liboctomap stores them.
+    log_odds: NDArray[np.float32]
+
+
+class OccupancyOctree(_OcTree):
+    """Probabilistic 3D occupancy map on an octree (OctoMap).
+
+    Each cell holds the log-odds of being occupied. A range scan marks the cells
+    its rays cross as free (``prob_miss``) and the cells they end in as occupied
+    (``prob_hit``); log-odds are clamped to ``[clamping_min, clamping_max]`` so
+    that the map stays updatable, and eight identical children are pruned into
+    their parent. The tree is liboctomap's own ``OcTree``, so maps are
+    interchangeable with every OctoMap tool (``.bt`` and ``.ot`` files).
+
+    Coordinates are converted to single precision, as liboctomap's ``point3d``
+    stores them. Keys are 16 bits per axis: the map covers
+    ``[-32768, 32768) * resolution`` metres on each axis.
+
+    Parameters
+    ----------
+    resolution : float
+        Edge length of the smallest cells, in metres. Must be positive.
+    prob_hit : float, default=0.7
+        Probability that a cell is occupied given a ray ends in it; in (0.5, 1).
+    prob_miss : float, default=0.4
+        Probability that a cell is occupied given a ray crosses it; in (0, 0.5).
+    clamping_min : float, default=0.1192
+        Lower clamping bound (probability); in (0, 0.5).
+    clamping_max : float, default=0.971
+        Upper clamping bound (probability); in (0.5, 1).
+    occupancy_threshold : float, default=0.5
+        Cells at or above this probability count as occupied; in (0, 1).
+
+    Attributes
+    ----------
+    resolution : float
+        Edge length of the smallest cells.
+    num_leaves : int
+        Number of leaves (known cells after pruning).
+    num_nodes : int
+        Number of nodes, inner ones included.
+    bounds : tuple of ndarray of shape (3,)
+        Minimum and maximum corner of the known space (NaN when empty).
+
+    See Also
+    --------
+    occgp.datasets.structured_room : A synthetic scene to map.
+
+    References
+    ----------
+    .. [1] A. Hornung, K. M. Wurm, M. Bennewitz, C. Stachniss and W. Burgard,
+       "OctoMap: an efficient probabilistic 3D mapping framework based on
+       octrees", Autonomous Robots 34(3), 2013.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from occgp import OccupancyOctree
+    >>> m = OccupancyOctree(resolution=0.1)
+    >>> m = m.insert_scan([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], origin=[0.0, 0.0, 0.0])
+    >>> m.is_occupied([[1.0, 0.0, 0.0], [0.5, 0.0, 0.0]])
+    array([ True, False])
+    >>> float(np.round(m.occupancy([[1.0, 0.0, 0.0]])[0], 2))
+    0.7
+    >>> bool(np.isnan(m.occupancy([[5.0, 5.0, 5.0]])[0]))   # never observed
+    True
+    """
+
+    def __init__(
+        self,
+        resolution: float,
+        *,
+        prob_hit: float = 0.7,
+        prob_miss: float = 0.4,
+        clamping_min: float = 0.1192,
+        clamping_max: float = 0.971,
+        occupancy_threshold: float = 0.5,
+    ) -> None:
+        params = dict(
+            resolution=resolution, prob_hit=prob_hit, prob_miss=prob_miss,
+            clamping_min=clamping_min, clamping_max=clamping_max,
+            occupancy_threshold=occupancy_threshold,
+        )
+        self._params = _check_params(params)
+        self._setup(*self._params.values())
+
+    # ------------------------------------------------------------------ parameters
+    def get_params(self) -> dict:
+        """Return the constructor's parameters as a dict."""
+        return dict(self._params)
+
+    @property
+    def resolution(self) -> float:
+        """Edge length of the smallest cells, in metres."""
+        return self._params["resolution"]
+
+    @property
+    def prob_hit(self) -> float:
+        return self._params["prob_hit"]
+
+    @property
+    def prob_miss(self) -> float:
+        return self._params["prob_miss"]
+
+    @property
+    def clamping_min(self) -> float:
+        return self._params["clamping_min"]
+
+    @property
+    def clamping_max(self) -> float:
+        return self._params["clamping_max"]
+
+    @property
+    def occupancy_threshold(self) -> float:
+        return self._params["occupancy_threshold"]
+
+    @property
+    def key_range(self) -> tuple[float, float]:
+        """The interval ``[low, high)`` of coordinates (metres, every axis) the map can hold."""
+        r = self.resolution
+        return -TREE_MAX_VAL * r, TREE_MAX_VAL * r
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(resolution={self.resolution!r}, "
+                f"num_leaves={self.num_leaves})")
+
+    # ------------------------------------------------------------------ updates
+    def insert_scan(
+        self,
+        points: ArrayLike,
+        origin: ArrayLike,
+        *,
+        max_range: float | None = None,
+        mode: str = "scan",
+        discretize: bool = False,
+    ) -> "OccupancyOctree":
+        """Integrate one range scan into the map.
+
+        Each ray from `origin` to a point in `points` marks the cells it crosses
+        as free and its end cell as occupied.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Ray end points in the world frame, in metres. Must be finite. An
+            empty scan (``n_points == 0``) changes nothing.
+        origin : array-like of shape (3,)
+            Sensor position in the world frame, in metres.
+        max_range : float, default=None
+            Rays longer than this are truncated: the cells up to `max_range`
+            are marked free and the end cell is not marked occupied. None means
+            no limit.
+        mode : {"scan", "ray"}, default="scan"
+            ``"scan"`` is liboctomap's ``insertPointCloud``: the scan's sets of
+            free and occupied cells are computed first, a cell in both counts as
+            occupied, and every cell gets at most one update. The tree is
+            identical, leaf for leaf, to liboctomap's. ``"ray"`` counts rays:
+            each cell gets ``n_free * l_miss + n_hit * l_hit`` (``n`` = how many
+            rays pass through / end in it) and is clamped once, whatever the
+            order of the rays.
+        discretize : bool, default=False
+            Only with ``mode="scan"``: cast one ray per distinct end cell, to its
+            centre (liboctomap's ``discretize``), which is faster for dense scans.
+
+        Returns
+        -------
+        self : OccupancyOctree
+            The updated map, to allow chaining.
+
+        Raises
+        ------
+        TypeError
+            If `points` or `origin` does not hold real numbers.
+        ValueError
+            If `points` is not of shape (n_points, 3), `origin` not of shape
+            (3,), either holds NaN or inf or lies outside the key range, or
+            `max_range`, `mode` or `discretize` is invalid. The map is then
+            unchanged.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], mode="ray")
+        >>> m.is_occupied([[1.0, 0, 0]]).tolist()
+        [True]
+        """
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+        if not isinstance(discretize, (bool, np.bool_)):
+            raise TypeError(f"discretize must be a bool, got {type(discretize).__name__}")
+        if discretize and mode != "scan":
+            raise ValueError("discretize=True is only defined for mode='scan'")
+        rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
+        pts = self._as_float32_points(points, "points")
+        org = self._as_float32_origin(origin)
+        if len(pts) == 0:
+            return self
+        ok = self._ends_in_range(pts, org, rng)
+        if not ok.all():
+            self._raise_out_of_range("points", ok, " (after truncation at max_range)"
+                                     if max_range is not None else "")
+        if mode == "scan":
+            self._insert_point_cloud(pts, org, rng, bool(discretize))
+        else:
+            self._insert_rays(pts, org, rng)
+        return self
+
+    # ------------------------------------------------------------------ queries
+    def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Probability of occupancy at each point, NaN where the map knows nothing.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres. Points outside the key range are unknown.
+
+        Returns
+        -------
+        p : ndarray of shape (n_points,)
+            Occupancy probability of the cell holding each point, or NaN.
+        """
+        return self._query(self._as_float32_points(points, "points"), 0)
+
+    def log_odds(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Log-odds of occupancy at each point, NaN where the map knows nothing.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+
+        Returns
+        -------
+        l : ndarray of shape (n_points,)
+            The cell's stored log-odds (float32 values), or NaN.
+        """
+        return self._query(self._as_float32_points(points, "points"), 1)
+
+    def is_occupied(self, points: ArrayLike, *, return_unknown: bool = False):
+        """Whether each point lies in an occupied cell.
+
+        A cell is occupied when its probability is at least
+        ``occupancy_threshold``. Unknown cells are reported as not occupied;
+        ask for `return_unknown` to tell them apart from free ones.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+        return_unknown : bool, default=False
+            Also return the mask of points in unknown cells.
+
+        Returns
+        -------
+        occupied : ndarray of bool, shape (n_points,)
+        unknown : ndarray of bool, shape (n_points,)
+            Only when `return_unknown` is True.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0])
+        >>> occ, unk = m.is_occupied([[1.0, 0, 0], [0.5, 0, 0], [9, 9, 9]], return_unknown=True)
+        >>> occ.tolist(), unk.tolist()
+        ([True, False, False], [False, False, True])
+        """
+        state = self._query(self._as_float32_points(points, "points"), 2)
+        occupied = state == 1
+        return (occupied, state < 0) if return_unknown else occupied
+
+    def cast_rays(
+        self,
+        origins: ArrayLike,
+        directions: ArrayLike,
+        *,
+        max_range: float | ArrayLike | None = None,
+        ignore_unknown: bool = False,
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """Cast rays through the map and return where they stop (liboctomap's ``castRay``).
+
+        A ray stops at the first occupied cell (a hit), at an unknown cell unless
+        `ignore_unknown`, or after `max_range` metres.
+
+        Parameters
+        ----------
+        origins : array-like of shape (n_rays, 3) or (3,)
+            Ray origins; a single origin is shared by all rays.
+        directions : array-like of shape (n_rays, 3)
+            Ray directions; need not be unit length, must not be zero.
+        max_range : float or array-like of shape (n_rays,), default=None
+            Longest distance to travel. None: no limit (with `ignore_unknown`,
+            rays then stop once they leave the map's bounding box).
+        ignore_unknown : bool, default=False
+            Treat unknown cells as free instead of stopping there.
+
+        Returns
+        -------
+        ends : ndarray of shape (n_rays, 3)
+            Centre of the cell where each ray stopped.
+        hits : ndarray of bool, shape (n_rays,)
+            True where the ray stopped at an occupied cell.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).insert_scan([[1.0, 0.05, 0.05]], [0.05, 0.05, 0.05])
+        >>> ends, hits = m.cast_rays([0.05, 0.05, 0.05], [[1.0, 0, 0]])
+        >>> hits.tolist(), ends.round(2).tolist()
+        ([True], [[1.05, 0.05, 0.05]])
+        """
+        dirs = self._as_float32_points(directions, "directions")
+        n = len(dirs)
+        org_arr = np.asarray(origins)
+        if org_arr.ndim == 1:
+            orgs = np.repeat(self._as_float32_origin(origins, "origins")[None], n, axis=0)
+        else:
+            orgs = self._as_float32_points(origins, "origins")
+            if len(orgs) != n:
+                raise ValueError(f"origins must have shape (3,) or ({n}, 3) to match "
+                                 f"directions, got {orgs.shape}")
+        if n and not (np.abs(dirs) > 0).any(axis=1).all():
+            zero = int(np.count_nonzero(~(np.abs(dirs) > 0).any(axis=1)))
+            raise ValueError(f"directions must be non-zero, got {zero} zero vectors")
+        ok = self._in_range(orgs)
+        if not ok.all():
+            self._raise_out_of_range("origins", ok, "")
+        if max_range is None:
+            ranges = np.full(n, -1.0)
+            if ignore_unknown:
+                ranges = self._distance_past_bounds(orgs)
+        else:
+            ranges = np.asarray(max_range, dtype=np.float64)
+            if ranges.ndim == 0:
+                check_real(float(ranges), "max_range", low=0.0)
+                ranges = np.full(n, float(ranges))
+            elif ranges.shape != (n,):
+                raise ValueError(f"max_range must be a scalar or of shape ({n},), "
+                                 f"got {ranges.shape}")
+            elif not (np.isfinite(ranges) & (ranges > 0)).all():
+                raise ValueError("max_range must be positive and finite")
+        return self._cast_rays(orgs, dirs, bool(ignore_unknown), np.ascontiguousarray(ranges))
+
+    def _distance_past_bounds(self, origins: np.ndarray) -> np.ndarray:
+        """Per origin, a range past which no known cell lies (for unlimited casts)."""
+        lo, hi = self.bounds
+        if not np.isfinite(lo).all():
+            return np.full(len(origins), self.resolution)
+        corners = np.array(np.meshgrid(*zip(lo, hi), indexing="ij")).reshape(3, -1).T
+        far = np.linalg.norm(origins[:, None, :] - corners[None], axis=2).max(axis=1)
+        return far + 2 * self.resolution
+
+    def leaves(self, *, occupied_only: bool = False, bbox: ArrayLike | None = None) -> Leaves:
+        """Return every leaf of the tree as arrays.
+
+        Parameters
+        ----------
+        occupied_only : bool, default=False
+            Keep only the occupied leaves.
+        bbox : array-like of shape (2, 3), default=None
+            ``[min_corner, max_corner]``: keep only the leaves overlapping this
+            axis-aligned box.
+
+        Returns
+        -------
+        leaves : Leaves
+            Named tuple ``(centers, sizes, log_odds)``.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).insert_scan([[0.55, 0.05, 0.05]], [0.05, 0.05, 0.05])
+        >>> centers, sizes, log_odds = m.leaves(occupied_only=True)
+        >>> centers.round(2).tolist(), sizes.round(2).tolist()
+        ([[0.55, 0.05, 0.05]], [0.1])
+        """
+        if bbox is not None:
+            box = np.asarray(bbox)
+            if box.dtype.kind not in "iuf":
+                raise TypeError(f"bbox must hold real numbers, got dtype {box.dtype}")
+            if box.shape != (2, 3):
+                raise ValueError(f"bbox must have shape (2, 3) (min and max corner), "
+                                 f"got {box.shape}")
+            box = np.ascontiguousarray(box, dtype=np.float64)
+            if np.isnan(box).any() or (box[0] > box[1]).any():
+                raise ValueError(f"bbox must have min <= max on every axis, got {box.tolist()}")
+            box = np.clip(box, *(np.array(self.key_range) * [1, 1 - 1e-12]))
+            return Leaves(*self._leaves(bool(occupied_only), box))
+        return Leaves(*self._leaves(bool(occupied_only)))
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def num_leaves(self) -> int:
+        """Number of leaves (known cells, after pruning)."""
+        return self._num_leaves()
+
+    @property
+    def num_nodes(self) -> int:
+        """Number of nodes in the tree, inner nodes included."""
+        return self._num_nodes()
+
+    @property
+    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(min corner, max corner) of the known space, in metres; NaN when empty."""
+        if self.num_nodes == 0:
+            return np.full(3, np.nan), np.full(3, np.nan)
+        return self._bounds()
+
+    def memory_usage(self) -> int:
+        """Bytes used by the tree's nodes (liboctomap's estimate)."""
+        return self._memory_usage()
+
+    def prune(self) -> "OccupancyOctree":
+        """Merge every set of eight identical leaves into their parent; return self."""
+        self._prune()
+        return self
+
+    def expand(self) -> "OccupancyOctree":
+        """Split every pruned leaf down to the finest resolution; return self."""
+        self._expand()
+        return self
+
+    def clear(self) -> "OccupancyOctree":
+        """Remove every cell; return self."""
+        self._clear()
+        return self
+
+    # ------------------------------------------------------------------ I/O
+    def to_bytes(self, format: str = "ot") -> bytes:
+        """Serialise the map in an OctoMap file format.
+
+        Parameters
+        ----------
+        format : {"ot", "bt"}, default="ot"
+            ``"ot"`` keeps every log-odds value. ``"bt"`` is OctoMap's compact
+            binary format: it keeps only whether each leaf is free or occupied
+            (reading it back gives clamped values). The map itself is unchanged.
+
+        Returns
+        -------
+        data : bytes
+            The contents of a file that OctoMap's tools (octovis, ...) read.
+        """
+        binary = _check_format(format) == "bt"
+        if binary:
+            # liboctomap's .bt writer stores the max-likelihood tree: build it on a copy
+            tree = type(self).from_bytes(self.to_bytes("ot"), **self._sensor_params())
+            tree._to_max_likelihood()
+            body = tree._write_data(True)
+            size = tree.num_nodes
+        else:
+            body = self._write_data(False)
+            size = self.num_nodes
+        return fmt.write_header(binary, size, self.resolution) + body
+
+    @classmethod
+    def from_bytes(cls, data: bytes, **params) -> "OccupancyOctree":
+        """Build a map from the contents of a ``.bt`` or ``.ot`` file.
+
+        Parameters
+        ----------
+        data : bytes
+            File contents; the format is read from the header.
+        **params
+            Sensor-model parameters (``prob_hit``, ``clamping_min``, ...); the
+            files store only the resolution. The clamping bounds give the
+            values of ``.bt`` leaves.
+
+        Raises
+        ------
+        ValueError
+            If the data is not an OcTree file, is truncated or corrupt.
+        """
+        if not isinstance(data, (bytes, bytearray, memoryview)):
+            raise TypeError(f"data must be bytes, got {type(data).__name__}")
+        return cls._from_data(bytes(data), "data", params)
+
+    def save(self, path: str | os.PathLike, format: str | None = None) -> "OccupancyOctree":
+        """Write the map to an OctoMap file (see :meth:`to_bytes`).
+
+        Parameters
+        ----------
+        path : str or path-like
+            Destination. Its suffix (``.bt`` or ``.ot``) gives the format unless
+            `format` is set.
+        format : {"ot", "bt"}, default=None
+
+        Returns
+        -------
+        self : OccupancyOctree
+        """
+        path = os.fspath(path)
+        if format is None:
+            format = os.path.splitext(path)[1].lstrip(".").lower()
+            if format not in fmt.FORMATS:
+                raise ValueError(f"path must end in .bt or .ot (or pass format=), got {path!r}")
+        data = self.to_bytes(format)
+        with open(path, "wb") as f:
+            f.write(data)
+        return self
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, **params) -> "OccupancyOctree":
+        """Read a map from an OctoMap ``.bt`` or ``.ot`` file.
+
+        Parameters
+        ----------
+        path : str or path-like
+        **params
+            Sensor-model parameters, as for :meth:`from_bytes`.
+
+        Raises
+        ------
+        OSError
+            If the file cannot be read.
+        ValueError
+            If it is not an OcTree file, or is truncated or corrupt.
+        """
+        path = os.fspath(path)
+        with open(path, "rb") as f:
+            data = f.read()
+        return cls._from_data(data, path, params)
+
+    @classmethod
+    def _from_data(cls, data: bytes, source: str, params: dict) -> "OccupancyOctree":
+        header = fmt.parse_header(data, source)
+        if header.tree_type != "OcTree":
+            raise ValueError(f"{source} holds a {header.tree_type!r} tree; only 'OcTree' "
+                             "(occupancy) files can be read")
+        tree = cls(header.resolution, **params)
+        if header.size == 0:
+            return tree
+        check = _check_binary_data if header.binary else _check_full_data
+        buf = np.frombuffer(data, dtype=np.uint8)
+        try:
+            nodes, end = check(buf, header.data_offset)
+        except ValueError as exc:
+            raise ValueError(f"{source}: {exc}") from None
+        if nodes != header.size:
+            raise ValueError(f"{source}: corrupt data: the header announces {header.size} "
+                             f"nodes, the data holds {nodes}")
+        tree._read_data(data[header.data_offset:end], header.binary, header.resolution)
+        return tree
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), self.get_params(), self.to_bytes("ot")))
+
+    # ------------------------------------------------------------------ helpers
+    def _sensor_params(self) -> dict:
+        return {k: v for k, v in self._params.items() if k != "resolution"}
+
+    def _as_float32_points(self, x: ArrayLike, name: str) -> np.ndarray:
+        return np.ascontiguousarray(as_points(x, name), dtype=np.float32)
+
+    def _as_float32_origin(self, x: ArrayLike, name: str = "origin") -> np.ndarray:
+        org = np.ascontiguousarray(as_point(x, name), dtype=np.float32)
+        if not self._in_range(org[None]).all():
+            lo, hi = self.key_range
+            raise ValueError(f"{name} {org.tolist()} lies outside the octree's key range "
+                             f"[{lo:g}, {hi:g}) m at resolution {self.resolution:g}")
+        return org
+
+    def _raise_out_of_range(self, name: str, ok: np.ndarray, what: str) -> None:
+        lo, hi = self.key_range
+        bad = int(np.count_nonzero(~ok))
+        raise ValueError(
+            f"{bad} of {len(ok)} {name}{what} lie outside the octree's key range "
+            f"[{lo:g}, {hi:g}) m on some axis at resolution {self.resolution:g} "
+            f"(first: row {int(np.flatnonzero(~ok)[0])}); the map is unchanged"
+        )
+
+
+def _rebuild(cls, params: dict, data: bytes) -> OccupancyOctree:
+    """Unpickle: the header stores the resolution with full precision (repr)."""
+    return cls.from_bytes(data, **{k: v for k, v in params.items() if k != "resolution"})
+
+
+def _check_format(format: str) -> str:
+    if format not in fmt.FORMATS:
+        raise ValueError(f"format must be one of {fmt.FORMATS}, got {format!r}")
+    return format
+
+
+def _check_params(params: dict) -> dict:
+    """Validate the constructor's parameters; return them as floats."""
+    out = dict(params)
+    out["resolution"] = check_real(params["resolution"], "resolution", low=0.0)
+    out["prob_hit"] = check_real(params["prob_hit"], "prob_hit", low=0.5, high=1.0)
+    out["prob_miss"] = check_real(params["prob_miss"], "prob_miss", low=0.0, high=0.5)
+    out["clamping_min"] = check_real(params["clamping_min"], "clamping_min", low=0.0, high=0.5)
+    out["clamping_max"] = check_real(params["clamping_max"], "clamping_max", low=0.5, high=1.0)
+    out["occupancy_threshold"] = check_probability(params["occupancy_threshold"],
+                                                   "occupancy_threshold")
+    return out
