@@ -285,7 +285,10 @@ cdef class _OcTree:
                     bit = tree.begin_leafs_bbx(kmin, kmax, 0)
                     bend = tree.end_leafs_bbx()
                     while bit != bend:
-                        if not occupied_only or tree.isNodeOccupied(&deref(bit)):
+                        # liboctomap's box iterator also yields coarse leaves that only
+                        # touch the box: keep the leaves whose key range meets it
+                        if (_meets(bit.getKey(), bit.getDepth(), kmin, kmax)
+                                and (not occupied_only or tree.isNodeOccupied(&deref(bit)))):
                             _push_leaf(tree, bit.getKey(), bit.getDepth(), bit.getSize(),
                                        deref(bit).getLogOdds(), centers, sizes, values)
                         inc(bit)
@@ -386,6 +389,17 @@ cdef class _OcTree:
             with self._lock:
                 tree.clear()
             raise ValueError("liboctomap could not read the tree data")
+
+
+cdef inline bint _meets(const OcTreeKey& key, unsigned depth, const OcTreeKey& kmin,
+                        const OcTreeKey& kmax) noexcept nogil:
+    """Whether the node at `key`, `depth` covers a key in the box [kmin, kmax]."""
+    cdef unsigned mask = (1u << (_DEPTH - depth)) - 1
+    cdef int axis
+    for axis in range(3):
+        if (key[axis] & ~mask) > kmax[axis] or (key[axis] | mask) < kmin[axis]:
+            return False
+    return True
 
 
 cdef inline void _push_leaf(OcTree* tree, const OcTreeKey& key, unsigned depth, double size,
