@@ -1,0 +1,20 @@
+"""The .pyi stubs of the compiled modules agree with what they export (mypy.stubtest)."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_compiled_module_stubs_match_runtime():
+    pytest.importorskip("mypy.stubtest")
+    env = dict(os.environ, MYPYPATH=str(ROOT))
+    result = subprocess.run(
+        [sys.executable, "-m", "mypy.stubtest", "occgp._octree", "--ignore-missing-stub",
+         "--mypy-config-file", str(ROOT / "pyproject.toml")],
+        capture_output=True, text=True, cwd=ROOT, env=env)
+    assert result.returncode == 0, result.stdout + result.stderr
