@@ -324,7 +324,7 @@ class OccupancyOctree(_OcTree):
 
         Examples
         --------
-        >>> m = OccupancyOctree(0.1).insert_scan([[1.0, 0.05, 0.05]], [0.05, 0.05, 0.05])
+        >>> m = OccupancyOctree(0.1).insert_scan([[1.02, 0.05, 0.05]], [0.05, 0.05, 0.05])
         >>> ends, hits = m.cast_rays([0.05, 0.05, 0.05], [[1.0, 0, 0]])
         >>> hits.tolist(), ends.round(2).tolist()
         ([True], [[1.05, 0.05, 0.05]])
