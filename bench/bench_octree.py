@@ -65,16 +65,19 @@ def main(argv=None):
         print(header)
         print("-" * len(header))
         for res in (0.1, 0.2):
-            t_cpp = time_octomap_insert(exe, scan_file, res, repeats=args.repeats)
-            rows = [("liboctomap (C++)", t_cpp, None)]
-            for mode in ("scan", "ray"):
-                t = best_of(args.repeats, lambda: OccupancyOctree(res).insert_scan(
-                    points, origin, mode=mode))
-                rows.append((f"occgp {mode}", t, OccupancyOctree(res).insert_scan(
-                    points, origin, mode=mode).num_leaves))
-            for name, t, leaves in rows:
-                ratio = f"{t / t_cpp:8.3f}x"
-                print(f"{res:>10.2f}  {name:<18}{t:>10.4f}{ratio:>9}"
+            # interleaved repeats, so that drift of the machine hits every method alike
+            times = {"liboctomap (C++)": [], "occgp scan": [], "occgp ray": []}
+            for _ in range(args.repeats):
+                times["liboctomap (C++)"].append(time_octomap_insert(exe, scan_file, res, 1))
+                for mode in ("scan", "ray"):
+                    times[f"occgp {mode}"].append(best_of(1, lambda: OccupancyOctree(
+                        res).insert_scan(points, origin, mode=mode)))
+            t_cpp = min(times["liboctomap (C++)"])
+            for name, ts in times.items():
+                mode = name.split()[-1]
+                leaves = (OccupancyOctree(res).insert_scan(points, origin, mode=mode).num_leaves
+                          if name.startswith("occgp") else None)
+                print(f"{res:>10.2f}  {name:<18}{min(ts):>10.4f}{min(ts) / t_cpp:>8.3f}x"
                       f"{'' if leaves is None else f'{leaves:,}':>10}")
         print("\n(vs C++: occgp's time over liboctomap's on the same points; "
               "1.05x = 5% overhead)\n")

@@ -1,0 +1,64 @@
+"""Synthetic scenes with exact ground truth, sensor simulators and scan readers.
+
+Scenes
+------
+:func:`structured_room`, :func:`unstructured_room` (or :func:`make_scene`)
+build 10 x 7 x 2 m rooms of analytic solids (:class:`Scene`) with exact
+occupancy, signed distance and ray casting, and an la3dm-like sensor
+(:meth:`Scene.scan`: 4 poses x 3 scans x 3500 returns). :func:`room_2d`
+builds the 22 x 18 m 2D room of the GP papers (:class:`Scene2D`), scanned by
+a 180-degree, 17-beam, 8 m laser along a 26-pose path
+(:class:`LaserScan2D`).
+
+Readers
+-------
+:func:`read_pcd` / :func:`write_pcd` (PCD ascii, binary,
+binary_compressed), :func:`read_kitti_bin`, :func:`read_scan_graph` /
+:func:`write_scan_graph` (OctoMap ``.graph``), :func:`read_xyz` (text,
+optionally compressed), :func:`read_scan_log` (OctoMap text logs),
+:func:`load_scan_folder` and :func:`read_scans` (dispatch by suffix).
+Every scan is a :class:`Scan` ``(points, origin)``; a sequence of scans is a
+``list[Scan]``.
+
+Examples
+--------
+>>> from occgp.datasets import structured_room
+>>> scans = structured_room().scan(n_poses=1, scans_per_pose=1, n_points=50)
+>>> scans[0].points.shape
+(50, 3)
+"""
+
+from ._pcd import lzf_decompress, read_pcd, write_pcd
+from ._readers import (
+    load_scan_folder,
+    read_kitti_bin,
+    read_scan_graph,
+    read_scan_log,
+    read_scans,
+    read_xyz,
+    write_scan_graph,
+)
+from ._scan import Scan
+from ._scene2d import LaserScan2D, Scene2D, room_2d
+from ._scenes import Scene, make_scene, structured_room, unstructured_room
+
+__all__ = [
+    "Scan",
+    "Scene",
+    "Scene2D",
+    "LaserScan2D",
+    "structured_room",
+    "unstructured_room",
+    "make_scene",
+    "room_2d",
+    "read_pcd",
+    "write_pcd",
+    "lzf_decompress",
+    "read_kitti_bin",
+    "read_scan_graph",
+    "write_scan_graph",
+    "read_xyz",
+    "read_scan_log",
+    "load_scan_folder",
+    "read_scans",
+]

@@ -1,0 +1,49 @@
+"""Small file helpers shared by the readers: path checks, whole-file reads."""
+
+import bz2
+import errno
+import gzip
+import lzma
+import os
+from pathlib import Path
+
+__all__ = ["as_path", "read_bytes", "read_maybe_compressed"]
+
+
+def as_path(path, name="path") -> Path:
+    """Coerce a str / os.PathLike to :class:`~pathlib.Path` (TypeError otherwise)."""
+    try:
+        return Path(os.fspath(path))
+    except TypeError:
+        raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}") from None
+
+
+def _check_file(path: Path) -> None:
+    if not path.exists():
+        raise FileNotFoundError(errno.ENOENT, "no such file", str(path))
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "expected a file, got a directory", str(path))
+
+
+def read_bytes(path) -> bytes:
+    """Read a whole file; OSError (FileNotFoundError, ...) naming the path."""
+    path = as_path(path)
+    _check_file(path)
+    return path.read_bytes()
+
+
+def read_maybe_compressed(path) -> bytes:
+    """Read a file, decompressing ``.bz2``, ``.gz`` and ``.xz`` by suffix.
+
+    A corrupt or truncated compressed stream raises ValueError naming the file.
+    """
+    path = as_path(path)
+    raw = read_bytes(path)
+    suffix = path.suffix.lower()
+    openers = {".bz2": bz2.decompress, ".gz": gzip.decompress, ".xz": lzma.decompress}
+    if suffix not in openers:
+        return raw
+    try:
+        return openers[suffix](raw)
+    except (OSError, EOFError, ValueError, lzma.LZMAError) as exc:
+        raise ValueError(f"{path}: corrupt or truncated {suffix[1:]} stream ({exc})") from None

@@ -1,0 +1,416 @@
+"""A 2D room seen by a planar laser: the setting of the GP occupancy papers.
+
+The room is 22 x 18 m (interior x in [-11, 11], y in [-9, 9]) with 0.2 m
+walls, four interior walls with doorways, five (partly rotated) boxes and
+five round pillars. A robot follows a fixed path through the doorways and
+takes 26 scans with a 180-degree, 17-beam laser of 8 m range (O'Callaghan &
+Ramos, "Gaussian process occupancy maps"; Kim & Kim, "Continuous occupancy
+maps using overlapping local Gaussian processes"). Beams without a return
+(``hit`` False) have range ``max_range``; the GP methods use them as free
+segments.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ._scenes import _as_points, _as_rays, _check_max_range, _check_positive_int, _check_seed
+
+__all__ = ["LaserScan2D", "Scene2D", "room_2d"]
+
+_INF = np.inf
+
+
+class LaserScan2D(NamedTuple):
+    """One planar laser scan.
+
+    Attributes
+    ----------
+    origin : ndarray of shape (2,)
+        Sensor position in the world frame, metres.
+    heading : float
+        Sensor heading, radians from +x.
+    angles : ndarray of shape (n_beams,)
+        Beam angles relative to `heading`, radians.
+    ranges : ndarray of shape (n_beams,)
+        Measured ranges; `max_range` for beams without a return.
+    hit : ndarray of shape (n_beams,), dtype bool
+        Whether each beam returned.
+    max_range : float
+        Maximum range of the laser.
+
+    Examples
+    --------
+    >>> s = LaserScan2D(np.zeros(2), 0.0, np.array([0.0, np.pi / 2]),
+    ...                 np.array([1.0, 8.0]), np.array([True, False]), 8.0)
+    >>> s.points.round(12).tolist()
+    [[1.0, 0.0]]
+    >>> s.end_points.round(12).tolist()
+    [[1.0, 0.0], [0.0, 8.0]]
+    """
+
+    origin: NDArray[np.float64]
+    heading: float
+    angles: NDArray[np.float64]
+    ranges: NDArray[np.float64]
+    hit: NDArray[np.bool_]
+    max_range: float
+
+    @property
+    def directions(self) -> NDArray[np.float64]:
+        """Unit beam directions in the world frame, shape (n_beams, 2)."""
+        world = self.heading + self.angles
+        return np.column_stack([np.cos(world), np.sin(world)])
+
+    @property
+    def end_points(self) -> NDArray[np.float64]:
+        """End of every beam (at `max_range` for no return), shape (n_beams, 2)."""
+        return self.origin + self.ranges[:, None] * self.directions
+
+    @property
+    def points(self) -> NDArray[np.float64]:
+        """End points of the beams with a return, shape (n_hits, 2)."""
+        return self.end_points[self.hit]
+
+
+def _slab(o, d, lo, hi):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta, tb = (lo - o) / d, (hi - o) / d
+    t0, t1 = np.minimum(ta, tb), np.maximum(ta, tb)
+    par = d == 0.0
+    if par.any():
+        inside = (o >= lo) & (o <= hi)
+        t0 = np.where(par, np.where(inside, -_INF, _INF), t0)
+        t1 = np.where(par, np.where(inside, _INF, -_INF), t1)
+    return t0, t1
+
+
+class _Rect:
+    """Solid rectangle ``|x_i| <= half_i`` in a frame turned by `angle`."""
+
+    def __init__(self, center, half, angle=0.0):
+        self.center = np.asarray(center, dtype=np.float64)
+        self.half = np.asarray(half, dtype=np.float64)
+        c, s = np.cos(angle), np.sin(angle)
+        self.rotation = np.array([[c, -s], [s, c]])
+
+    def _local(self, p):
+        return (p - self.center) @ self.rotation
+
+    def contains(self, p):
+        return np.all(np.abs(self._local(p)) <= self.half, axis=1)
+
+    def signed_distance(self, p):
+        q = np.abs(self._local(p)) - self.half
+        return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
+
+    def intersect(self, o, d):
+        o, d = self._local(o), d @ self.rotation
+        ax, bx = _slab(o[:, 0], d[:, 0], -self.half[0], self.half[0])
+        ay, by = _slab(o[:, 1], d[:, 1], -self.half[1], self.half[1])
+        t0, t1 = np.maximum(ax, ay), np.minimum(bx, by)
+        start = np.maximum(t0, 0.0)
+        return np.where((t1 >= start) & (t0 <= t1), start, _INF)
+
+
+class _Circle:
+    """Solid disc of `radius` about `center`."""
+
+    def __init__(self, center, radius):
+        self.center = np.asarray(center, dtype=np.float64)
+        self.radius = float(radius)
+
+    def contains(self, p):
+        return np.sum((p - self.center) ** 2, axis=1) <= self.radius**2
+
+    def signed_distance(self, p):
+        return np.linalg.norm(p - self.center, axis=1) - self.radius
+
+    def intersect(self, o, d):
+        oc = o - self.center
+        b = np.sum(oc * d, axis=1)
+        c = np.sum(oc * oc, axis=1) - self.radius**2
+        disc = b * b - c
+        sq = np.sqrt(np.maximum(disc, 0.0))
+        t0, t1 = -b - sq, -b + sq
+        start = np.maximum(t0, 0.0)
+        return np.where((disc >= 0) & (t1 >= start), start, _INF)
+
+
+class Scene2D:
+    """A 2D room of rectangles and discs, with exact occupancy and ray casting.
+
+    Build it with :func:`room_2d`.
+
+    Parameters
+    ----------
+    solids : list of primitives
+        Rectangles and discs; the scene is their union.
+    labels : list of str
+        One name per solid.
+    interior_bounds : tuple of two array-like of shape (2,)
+        The free interior box (inside the outer walls).
+    wall_thickness : float
+        Thickness of the outer walls.
+    path : array-like of shape (n_vertices, 2)
+        Polyline followed by the robot, see :meth:`poses`.
+
+    Examples
+    --------
+    >>> room = room_2d()
+    >>> room.occupancy([[0.0, 0.0], [11.1, 0.0]]).tolist()
+    [False, True]
+    """
+
+    def __init__(self, solids, labels, interior_bounds, wall_thickness, path):
+        self.solids = list(solids)
+        self.labels = list(labels)
+        self._interior = tuple(np.asarray(b, dtype=np.float64) for b in interior_bounds)
+        self.wall_thickness = float(wall_thickness)
+        self.path = np.asarray(path, dtype=np.float64)
+
+    def __repr__(self):
+        return f"Scene2D(n_solids={len(self.solids)})"
+
+    @property
+    def bounds(self):
+        """``(min (2,), max (2,))`` of the room including the outer walls."""
+        return self._interior[0] - self.wall_thickness, self._interior[1] + self.wall_thickness
+
+    @property
+    def interior_bounds(self):
+        """``(min (2,), max (2,))`` inside the outer walls."""
+        return self._interior[0].copy(), self._interior[1].copy()
+
+    def occupancy(self, points: ArrayLike) -> NDArray[np.bool_]:
+        """Exact membership of 2D `points` (shape (n_points, 2)) in the solids.
+
+        Examples
+        --------
+        >>> room_2d().occupancy([[-1.0, 6.5]]).tolist()    # a pillar
+        [True]
+        """
+        points = _as_points(points, "points", dim=2)
+        out = np.zeros(len(points), dtype=bool)
+        for solid in self.solids:
+            out |= solid.contains(points)
+        return out
+
+    def signed_distance(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Signed distance to the solids (negative inside), shape (n_points,).
+
+        Exact outside the solids; inside overlapping solids, a lower bound.
+
+        Examples
+        --------
+        >>> round(float(room_2d().signed_distance([[0.0, 8.5]])[0]), 12)
+        0.5
+        """
+        points = _as_points(points, "points", dim=2)
+        return np.min([s.signed_distance(points) for s in self.solids], axis=0)
+
+    def ray_cast(self, origins: ArrayLike, directions: ArrayLike, max_range: float = np.inf):
+        """Exact first intersection of 2D rays with the solids.
+
+        Parameters
+        ----------
+        origins : array-like of shape (2,) or (n_rays, 2)
+        directions : array-like of shape (n_rays, 2)
+            Normalised internally; must be non-zero.
+        max_range : float, default=inf
+
+        Returns
+        -------
+        distances : ndarray of shape (n_rays,)
+            Distance to the first hit, `max_range` for misses.
+        hit : ndarray of shape (n_rays,), dtype bool
+
+        Examples
+        --------
+        >>> d, hit = room_2d().ray_cast([0.0, 0.0], [[0.0, 1.0]])
+        >>> float(d[0]), bool(hit[0])
+        (9.0, True)
+        """
+        origins, directions = _as_rays(origins, directions, dim=2)
+        max_range = _check_max_range(max_range)
+        t = np.full(len(directions), np.inf)
+        for solid in self.solids:
+            np.minimum(t, solid.intersect(origins, directions), out=t)
+        hit = (t <= max_range) & np.isfinite(t)
+        return np.where(hit, t, max_range), hit
+
+    def poses(self, n_poses: int = 26):
+        """Poses equally spaced (by arc length) along :attr:`path`.
+
+        Parameters
+        ----------
+        n_poses : int, default=26
+
+        Returns
+        -------
+        origins : ndarray of shape (n_poses, 2)
+        headings : ndarray of shape (n_poses,)
+            Direction of travel, radians from +x.
+
+        Examples
+        --------
+        >>> origins, headings = room_2d().poses()
+        >>> origins.shape, headings.shape
+        ((26, 2), (26,))
+        """
+        n_poses = _check_positive_int(n_poses, "n_poses")
+        seg = np.diff(self.path, axis=0)
+        length = np.linalg.norm(seg, axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(length)])
+        s = np.linspace(0.0, cum[-1], n_poses) if n_poses > 1 else np.zeros(1)
+        k = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
+        u = (s - cum[k]) / length[k]
+        origins = self.path[k] + u[:, None] * seg[k]
+        headings = np.arctan2(seg[k, 1], seg[k, 0])
+        return origins, headings
+
+    def scan(
+        self,
+        n_poses: int = 26,
+        n_beams: int = 17,
+        fov: float = np.pi,
+        max_range: float = 8.0,
+        noise: float = 0.0,
+        seed: int = 0,
+    ) -> list:
+        """Simulate a planar laser along the robot's path.
+
+        Parameters
+        ----------
+        n_poses : int, default=26
+            Scans, equally spaced along :attr:`path` (see :meth:`poses`).
+        n_beams : int, default=17
+            Beams per scan, evenly spread over `fov` (both ends included).
+        fov : float, default=pi
+            Field of view, radians, centred on the heading.
+        max_range : float, default=8.0
+            Beams with no return closer than this have ``hit`` False and
+            range `max_range`.
+        noise : float, default=0.0
+            Standard deviation (metres) of Gaussian noise added to the
+            ranges of returning beams.
+        seed : int, default=0
+            Seed of the noise (``np.random.default_rng(seed)``).
+
+        Returns
+        -------
+        scans : list of LaserScan2D
+
+        Examples
+        --------
+        >>> scans = room_2d().scan()
+        >>> len(scans), scans[0].ranges.shape
+        (26, (17,))
+        """
+        n_beams = _check_positive_int(n_beams, "n_beams")
+        fov = float(fov)
+        if not 0 <= fov <= 2 * np.pi:
+            raise ValueError(f"fov must be in [0, 2 pi], got {fov}")
+        max_range = _check_max_range(max_range)
+        if not np.isfinite(max_range):
+            raise ValueError("max_range must be finite for a laser scan")
+        noise = float(noise)
+        if not noise >= 0:
+            raise ValueError(f"noise must be non-negative, got {noise}")
+        rng = np.random.default_rng(_check_seed(seed))
+        origins, headings = self.poses(n_poses)
+        angles = np.linspace(-fov / 2, fov / 2, n_beams) if n_beams > 1 else np.zeros(1)
+        world = headings[:, None] + angles  # (n_poses, n_beams)
+        dirs = np.stack([np.cos(world), np.sin(world)], axis=-1).reshape(-1, 2)
+        ray_origins = np.repeat(origins, n_beams, axis=0)
+        ranges, hit = self.ray_cast(ray_origins, dirs, max_range)
+        if noise > 0:
+            eps = rng.normal(0.0, noise, len(ranges))
+            ranges = np.where(hit, np.clip(ranges + eps, 0.0, None), ranges)
+        ranges = ranges.reshape(n_poses, n_beams)
+        hit = hit.reshape(n_poses, n_beams)
+        return [
+            LaserScan2D(origins[i].copy(), float(headings[i]), angles.copy(), ranges[i].copy(),
+                        hit[i].copy(), max_range)
+            for i in range(len(origins))
+        ]
+
+
+def room_2d(seed: int = 0) -> Scene2D:
+    """The 22 x 18 m 2D room of the GP occupancy-map experiments.
+
+    Interior ``[-11, 11] x [-9, 9]`` inside 0.2 m outer walls; four interior
+    walls with doorways, five boxes (two rotated) and five discs. The
+    robot's path (:attr:`Scene2D.path`) stays at least 0.5 m from every
+    obstacle.
+
+    Parameters
+    ----------
+    seed : int, default=0
+        0 gives the fixed default room; another seed moves each box and disc
+        by up to 0.3 m (deterministically), keeping them 0.5 m from the path.
+
+    Returns
+    -------
+    scene : Scene2D
+
+    Examples
+    --------
+    >>> room = room_2d()
+    >>> [b.tolist() for b in room.bounds]
+    [[-11.2, -9.2], [11.2, 9.2]]
+    """
+    seed = _check_seed(seed)
+    hx, hy, t = 11.0, 9.0, 0.2
+    solids = [
+        _Rect([-hx - t / 2, 0.0], [t / 2, hy + t]),
+        _Rect([hx + t / 2, 0.0], [t / 2, hy + t]),
+        _Rect([0.0, -hy - t / 2], [hx + t, t / 2]),
+        _Rect([0.0, hy + t / 2], [hx + t, t / 2]),
+        # interior walls (doorways at y in [-2, 1] on x = -3, x in [-2.9, 2.9] at y = 2.5)
+        _Rect([-3.0, -5.5], [0.1, 3.5]),
+        _Rect([-3.0, 5.0], [0.1, 4.0]),
+        _Rect([7.0, 2.5], [4.0, 0.1]),
+        _Rect([-9.0, 3.0], [2.0, 0.1]),
+    ]
+    labels = ["wall_-x", "wall_+x", "wall_-y", "wall_+y",
+              "inner_wall_1", "inner_wall_2", "inner_wall_3", "inner_wall_4"]
+    path = np.array([
+        [-9.0, -4.0], [-5.5, -6.5], [-5.0, -0.5], [0.0, -0.5], [0.5, -5.5], [4.5, -7.0],
+        [9.0, -4.0], [9.0, 0.8], [4.0, 1.2], [0.0, 1.5], [0.0, 4.0], [2.0, 7.5], [8.5, 7.5],
+    ])
+    objects = [
+        ("box_1", lambda dx, dy: _Rect([-8.5 + dx, -7.0 + dy], [1.2, 0.7])),
+        ("box_2", lambda dx, dy: _Rect([-8.0 + dx, 6.5 + dy], [0.8, 0.8], np.radians(30))),
+        ("box_3", lambda dx, dy: _Rect([6.0 + dx, -3.0 + dy], [1.6, 0.5], np.radians(-20))),
+        ("box_4", lambda dx, dy: _Rect([8.0 + dx, 4.5 + dy], [0.6, 1.2])),
+        ("box_5", lambda dx, dy: _Rect([-1.0 + dx, -7.6 + dy], [1.0, 0.5], np.radians(15))),
+        ("disc_1", lambda dx, dy: _Circle([-7.0 + dx, -1.5 + dy], 0.6)),
+        ("disc_2", lambda dx, dy: _Circle([2.5 + dx, -3.0 + dy], 0.8)),
+        ("disc_3", lambda dx, dy: _Circle([6.0 + dx, -0.5 + dy], 0.5)),
+        ("disc_4", lambda dx, dy: _Circle([-1.0 + dx, 6.5 + dy], 0.8)),
+        ("disc_5", lambda dx, dy: _Circle([-6.0 + dx, 6.0 + dy], 0.5)),
+    ]
+    rng = np.random.default_rng(seed) if seed else None
+    samples = _path_samples(path)
+    for label, build in objects:
+        solid = build(0.0, 0.0)
+        if rng is not None:
+            for _ in range(20):
+                cand = build(*rng.uniform(-0.3, 0.3, 2))
+                if cand.signed_distance(samples).min() >= 0.5:
+                    solid = cand
+                    break
+        solids.append(solid)
+        labels.append(label)
+    return Scene2D(solids, labels, ([-hx, -hy], [hx, hy]), t, path)
+
+
+def _path_samples(path, step=0.05):
+    """Points every `step` metres along a polyline (for clearance checks)."""
+    out = [path[:1]]
+    for a, b in zip(path[:-1], path[1:]):
+        n = max(int(np.ceil(np.linalg.norm(b - a) / step)), 1)
+        out.append(a + np.linspace(0, 1, n + 1)[1:, None] * (b - a))
+    return np.vstack(out)
