@@ -48,8 +48,7 @@ ys = np.arange(lo[1], hi[1], 0.05) + 0.025
 gx, gy = np.meshgrid(xs, ys)
 q = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, z)])
 
-cmap = plt.get_cmap("viridis").copy()
-cmap.set_bad("0.75")
+cmap = plt.get_cmap("viridis").with_extremes(bad="0.75")
 fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), layout="constrained")
 extent = (lo[0], hi[0], lo[1], hi[1])
 axes[0].imshow(room.occupancy(q).reshape(gx.shape), origin="lower", extent=extent,

@@ -31,7 +31,7 @@ def mapping_methods(resolution: float) -> dict:
 
 
 def demo(outdir: str | Path = "demo_out", *, resolution: float = 0.1, seed: int = 0,
-         progress: bool | None = None, out=sys.stdout) -> list:
+         progress: bool | None = None, out=None) -> list:
     """Map the synthetic structured room with every method and score the maps.
 
     The room (10 x 7 x 2 m) is scanned like the la3dm data set (4 poses x 3
@@ -49,6 +49,7 @@ def demo(outdir: str | Path = "demo_out", *, resolution: float = 0.1, seed: int 
     from .datasets import structured_room
     from .evaluation import compare_methods, format_table, held_out_split
 
+    out = sys.stdout if out is None else out
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     scene = structured_room(seed=seed)
@@ -102,9 +103,7 @@ def _plot_slice(rows, scene, scans, path: Path, z: float | None = None) -> None:
 def _cmap():
     from matplotlib import colormaps
 
-    cmap = colormaps["viridis"].copy()
-    cmap.set_bad("0.75")
-    return cmap
+    return colormaps["viridis"].with_extremes(bad="0.75")
 
 
 def _plot_roc(rows, test, path: Path) -> None:
@@ -126,7 +125,7 @@ def _plot_roc(rows, test, path: Path) -> None:
 
 
 def map_scans(paths, output: str | Path, *, resolution: float = 0.1, mode: str = "scan",
-              max_range: float | None = None, progress: bool | None = None, out=sys.stdout):
+              max_range: float | None = None, progress: bool | None = None, out=None):
     """Build an octree from scan files and save it (``.bt`` or ``.ot``).
 
     Returns
@@ -137,6 +136,7 @@ def map_scans(paths, output: str | Path, *, resolution: float = 0.1, mode: str =
 
     from .datasets import read_scans
 
+    out = sys.stdout if out is None else out
     output = Path(output)
     if output.suffix not in (".bt", ".ot"):
         raise ValueError(f"output must end in .bt or .ot, got {str(output)!r}")
