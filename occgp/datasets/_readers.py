@@ -420,8 +420,8 @@ def load_scan_folder(path, pattern: str | None = "*.pcd") -> list:
     ----------
     path : str or os.PathLike
         The folder.
-    pattern : str or None, default="*.pcd"
-        Glob pattern of the files to read; None reads every file with a
+    pattern : str or None, optional
+        Glob pattern of the files to read (default ``"*.pcd"``); None reads every file with a
         supported suffix (see :func:`read_scans`).
 
     Returns
