@@ -98,13 +98,6 @@ cdef class _OcTree:
             tree.setClampingThresMax(clamping_max)
             tree.setOccupancyThres(occupancy_threshold)
 
-    # ------------------------------------------------------------------ sensor model
-    def _log_odds_parameters(self):
-        """(hit, miss, clamp min, clamp max, occupancy threshold) as the tree stores them (float32)."""
-        cdef OcTree* tree = self._get()
-        return (tree.getProbHitLog(), tree.getProbMissLog(), tree.getClampingThresMinLog(),
-                tree.getClampingThresMaxLog(), tree.getOccupancyThresLog())
-
     # ------------------------------------------------------------------ key range
     def _in_range(self, const float[:, ::1] points):
         """Boolean mask: which rows of `points` have a valid octree key on every axis."""
@@ -306,10 +299,6 @@ cdef class _OcTree:
         return out_c, out_s, out_v
 
     # ------------------------------------------------------------------ structure
-    @property
-    def _resolution(self):
-        return self._get().getResolution()
-
     def _num_leaves(self):
         cdef OcTree* tree = self._get()
         with self._lock:

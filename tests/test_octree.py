@@ -307,3 +307,18 @@ def test_threads_share_a_tree_safely(tiny_room):
     for p, o in scans:
         sequential.insert_scan(p, o)
     assert_same_leaves(shared, sequential)
+
+
+def test_weighted_rays_count_as_copies():
+    """The compiled ray counter's weights (used by super rays): weight w == w copies."""
+    rng = np.random.default_rng(5)
+    (points, origin), = random_scans(rng, n_scans=1, n_points=30)
+    weights = rng.integers(1, 6, len(points)).astype(np.uint32)
+    weighted = OccupancyOctree(0.1)
+    weighted._insert_rays(points.astype(np.float32), origin.astype(np.float32), -1.0, weights)
+    copies = OccupancyOctree(0.1).insert_scan(np.repeat(points, weights, axis=0), origin,
+                                              mode="ray")
+    assert_same_leaves(weighted, copies)
+    with pytest.raises(ValueError, match="weights must have length 30, got 2"):
+        weighted._insert_rays(points.astype(np.float32), origin.astype(np.float32), -1.0,
+                              weights[:2])
