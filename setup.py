@@ -61,6 +61,8 @@ def extensions():
             Extension(
                 f"occgp.{pyx.stem}",
                 [str(pyx.relative_to(HERE))],
+                depends=[str(f.relative_to(HERE)) for f in (HERE / "ext").glob("*.[hp]*")
+                         if f.suffix in (".h", ".pxd")],
                 language="c++",
                 include_dirs=[np.get_include(), "ext", *inc],
                 library_dirs=libdirs,

@@ -16,14 +16,40 @@ from libc.string cimport memcpy
 from libcpp cimport bool
 from libcpp.memory cimport unique_ptr
 from libcpp.string cimport string
-from libcpp.unordered_map cimport unordered_map
-from libcpp.utility cimport pair
 from libcpp.vector cimport vector
 
 from liboctomap cimport (
     KeyRay, OcTree, OcTreeKey, OcTreeNode, Pointcloud, istringstream, key_type,
     ostringstream, point3d,
 )
+
+from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
+
+
+cdef extern from "_keytable.h" namespace "occgp" nogil:
+    cdef cppclass KeyCounts:
+        uint64_t key
+        uint32_t n_free
+        uint32_t n_hit
+
+    cdef cppclass KeyTable:
+        KeyTable() except +
+        void reset(size_t expected) except +
+        KeyCounts* get(uint64_t key) except +
+        bint contains(uint64_t key) const
+        size_t size()
+        size_t capacity() const
+        const KeyCounts& slot(size_t i) const
+
+    cdef cppclass CellBox:
+        CellBox() except +
+        bint reset(const int* lo, const int* hi, uint64_t max_cells) except +
+        bint inside(int x, int y, int z) const
+        bint test(int x, int y, int z) const
+        void set(int x, int y, int z)
+
+cdef extern from "_keytable.h" nogil:
+    const uint64_t KEY_EMPTY "occgp::KeyTable::kEmpty"
 
 import threading
 
@@ -32,14 +58,13 @@ import numpy as np
 cdef enum:
     _MAX_VAL = 32768     # half the number of keys per axis (liboctomap's tree_max_val)
     _DEPTH = 16          # depth of the tree: leaves there have the size of the resolution
+    _MAX_REGION_CELLS = 1 << 28   # larger scan key boxes are not culled (2 x 32 MB of bits)
 
 #: Half the number of keys per axis (liboctomap's ``tree_max_val``, 16-level tree).
 TREE_MAX_VAL = _MAX_VAL
 #: Depth of the tree: leaves at this depth have the size of the resolution.
 TREE_DEPTH = _DEPTH
 
-ctypedef pair[uint32_t, uint32_t] Counts          # (rays passing through, rays ending in)
-ctypedef unordered_map[uint64_t, Counts] CountMap
 
 
 cdef inline uint64_t _pack(const OcTreeKey& key) noexcept nogil:
@@ -145,52 +170,102 @@ cdef class _OcTree:
                     cloud.push_back(points[i, 0], points[i, 1], points[i, 2])
                 tree.insertPointCloud(cloud, o, max_range, False, discretize)
 
-    def _insert_rays(self, const float[:, ::1] points, const float[::1] origin,
-                     double max_range, const uint32_t[::1] weights=None):
-        """Per-ray counting: each cell gets ``n_free*l_miss + n_hit*l_hit`` and one clamp.
+    def _insert_batch(self, const float[:, ::1] points, const float[::1] origin,
+                      double max_range, bint ray_mode, bint culling,
+                      const uint32_t[::1] weights=None):
+        """Insert a scan through occgp's own key table, optionally culled.
 
-        With `weights`, ray i counts ``weights[i]`` times (super rays use this).
+        Every ray is traversed by liboctomap's ``computeRayKeys``; the cells are
+        collected with their counts (rays passing through, rays ending in) and
+        each updated once: in scan mode with ``l_hit`` if any ray ends in it,
+        else ``l_miss`` (liboctomap's ``insertPointCloud``); in ray mode with
+        ``n_free*l_miss + n_hit*l_hit``. With `culling`, the cells of the
+        scan's culling region (see :func:`_build_region`) are skipped: they are
+        at the lower clamp and hold no end point, so their update is a no-op.
+        With `weights` (ray mode), ray i counts ``weights[i]`` times.
+
+        Returns (region_cells, updated_cells, region_seconds); region_cells is
+        -1 when culling was off or the scan's key box was too large to cull.
         """
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t i, n = points.shape[0]
-        cdef point3d o = point3d(origin[0], origin[1], origin[2])
         cdef bint weighted = weights is not None
         if weighted and weights.shape[0] != n:
             raise ValueError(f"weights must have length {n}, got {weights.shape[0]}")
+        cdef point3d o = point3d(origin[0], origin[1], origin[2])
+        cdef vector[point3d] ends
+        cdef vector[uint8_t] truncated
+        cdef KeyTable table
+        cdef CellBox region
         cdef KeyRay ray
-        cdef KeyRay.iterator it
-        cdef CountMap counts
-        cdef CountMap.iterator cit
-        cdef OcTreeKey key
-        cdef point3d p, end
+        cdef KeyRay.iterator it, stop
+        cdef OcTreeKey ko, key
+        cdef KeyCounts* entry
+        cdef int lo[3]
+        cdef int hi[3]
+        cdef int axis, max_level = 0, level
         cdef uint32_t w = 1
-        cdef bint truncated
-        cdef Counts* entry
-        cdef double l_hit = tree.getProbHitLog()
-        cdef double l_miss = tree.getProbMissLog()
-        cdef float delta
+        cdef long region_cells = -1
+        cdef size_t slot, updated = 0
+        cdef float l_hit = tree.getProbHitLog(), l_miss = tree.getProbMissLog()
+        cdef double seconds = 0
+        cdef timespec t0, t1
         with self._lock:
             with nogil:
+                tree.coordToKeyChecked(o, ko)
+                for axis in range(3):
+                    lo[axis] = hi[axis] = ko[axis]
+                ends.resize(n)
+                truncated.resize(n)
+                table.reset(<size_t>n * 4)
+                # end cells first: they bound the region and may never join it
+                for i in range(n):
+                    truncated[i] = _effective_end(
+                        o, point3d(points[i, 0], points[i, 1], points[i, 2]), max_range,
+                        &ends[i])
+                    tree.coordToKeyChecked(ends[i], key)
+                    level = 0
+                    for axis in range(3):
+                        lo[axis] = min(lo[axis], <int>key[axis])
+                        hi[axis] = max(hi[axis], <int>key[axis])
+                        level += abs(<int>key[axis] - <int>ko[axis])
+                    max_level = max(max_level, level)
+                    if not truncated[i]:
+                        entry = table.get(_pack(key))
+                        entry.n_hit += weights[i] if weighted else 1
+                if culling:
+                    clock_gettime(CLOCK_MONOTONIC, &t0)
+                    region_cells = _build_region(tree, ko, lo, hi, max_level, table, region)
+                    clock_gettime(CLOCK_MONOTONIC, &t1)
+                    seconds = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec)
                 for i in range(n):
                     if weighted:
                         w = weights[i]
-                    p = point3d(points[i, 0], points[i, 1], points[i, 2])
-                    truncated = _effective_end(o, p, max_range, &end)
-                    if tree.computeRayKeys(o, end, ray):
-                        it = ray.begin()
-                        while it != ray.end():
-                            entry = &counts[_pack(deref(it))]
-                            entry.first += w
+                    if not tree.computeRayKeys(o, ends[i], ray):
+                        continue
+                    it = ray.begin()
+                    stop = ray.end()
+                    if region_cells > 0:
+                        # the region is closed under stepping toward the origin, so a
+                        # ray's cells in it form a prefix of its traversal
+                        while it != stop and _in_region(region, deref(it)):
                             inc(it)
-                    if not truncated and tree.coordToKeyChecked(p, key):
-                        entry = &counts[_pack(key)]
-                        entry.second += w
-                cit = counts.begin()
-                while cit != counts.end():
-                    delta = <float>(deref(cit).second.first * l_miss
-                                    + deref(cit).second.second * l_hit)
-                    tree.updateNode(_unpack(deref(cit).first), delta, False)
-                    inc(cit)
+                    while it != stop:
+                        entry = table.get(_pack(deref(it)))
+                        entry.n_free += w
+                        inc(it)
+                for slot in range(table.capacity()):
+                    if table.slot(slot).key == KEY_EMPTY:
+                        continue
+                    key = _unpack(table.slot(slot).key)
+                    if ray_mode:
+                        tree.updateNode(key, <float>(table.slot(slot).n_free * <double>l_miss
+                                                     + table.slot(slot).n_hit * <double>l_hit),
+                                        False)
+                    else:
+                        tree.updateNode(key, l_hit if table.slot(slot).n_hit else l_miss, False)
+                    updated += 1
+        return region_cells, updated, seconds
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):
@@ -378,6 +453,79 @@ cdef class _OcTree:
             with self._lock:
                 tree.clear()
             raise ValueError("liboctomap could not read the tree data")
+
+
+cdef inline bint _in_region(const CellBox& region, const OcTreeKey& key) noexcept nogil:
+    return (region.inside(key[0], key[1], key[2])
+            and region.test(key[0], key[1], key[2]))
+
+
+cdef long _build_region(OcTree* tree, const OcTreeKey& ko, const int* lo, const int* hi,
+                        int max_level, const KeyTable& ends, CellBox& region) noexcept nogil:
+    """Grow the scan's culling region (Kwon, dissertation §2.3.5, Alg. 3).
+
+    Breadth first over Manhattan levels from the sensor's cell, inside the key
+    box of the scan: a cell joins when it is fully free (log-odds at the lower
+    clamp), holds no end point of the scan (occgp's exactness rule), and each of
+    its test cells (one step toward the origin on every axis where its key
+    differs from the origin's) is already in. Returns the number of cells, or
+    -1 when the box is too large (no culling).
+    """
+    cdef CellBox seen
+    cdef vector[OcTreeKey] frontier, next_frontier
+    cdef OcTreeKey c, nb, t
+    cdef OcTreeNode* node
+    cdef float floor_log = tree.getClampingThresMinLog()
+    cdef int level, axis, b, d, step
+    cdef size_t j
+    cdef long count = 0
+    cdef bint ok
+    if (not region.reset(lo, hi, _MAX_REGION_CELLS)
+            or not seen.reset(lo, hi, _MAX_REGION_CELLS)):
+        return -1
+    node = tree.search(ko, 0)
+    if node == NULL or node.getLogOdds() > floor_log or ends.contains(_pack(ko)):
+        return 0
+    region.set(ko[0], ko[1], ko[2])
+    seen.set(ko[0], ko[1], ko[2])
+    frontier.push_back(ko)
+    count = 1
+    for level in range(1, max_level + 1):
+        next_frontier.clear()
+        for j in range(frontier.size()):
+            c = frontier[j]
+            for axis in range(3):
+                for d in range(2):
+                    step = 1 if d == 0 else -1
+                    if c[axis] != ko[axis] and (step > 0) != (c[axis] > ko[axis]):
+                        continue            # only away from the origin
+                    nb = c
+                    nb[axis] = <key_type>(<int>c[axis] + step)
+                    if (not seen.inside(nb[0], nb[1], nb[2])
+                            or seen.test(nb[0], nb[1], nb[2])):
+                        continue
+                    seen.set(nb[0], nb[1], nb[2])
+                    ok = True
+                    for b in range(3):      # test cells: one step back toward the origin
+                        if nb[b] == ko[b]:
+                            continue
+                        t = nb
+                        t[b] = <key_type>(<int>nb[b] + (-1 if nb[b] > ko[b] else 1))
+                        if not _in_region(region, t):
+                            ok = False
+                            break
+                    if not ok or ends.contains(_pack(nb)):
+                        continue
+                    node = tree.search(nb, 0)
+                    if node == NULL or node.getLogOdds() > floor_log:
+                        continue
+                    region.set(nb[0], nb[1], nb[2])
+                    next_frontier.push_back(nb)
+                    count += 1
+        if next_frontier.empty():
+            break
+        frontier.swap(next_frontier)
+    return count
 
 
 cdef inline bint _meets(const OcTreeKey& key, unsigned depth, const OcTreeKey& kmin,

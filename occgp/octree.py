@@ -15,6 +15,7 @@ from ._validation import as_point, as_points, check_probability, check_real
 __all__ = ["OccupancyOctree", "Leaves"]
 
 MODES = ("scan", "ray")
+METHODS = ("plain", "culling")
 
 
 class Leaves(NamedTuple):
@@ -77,6 +78,9 @@ class OccupancyOctree(_OcTree):
     .. [1] A. Hornung, K. M. Wurm, M. Bennewitz, C. Stachniss and W. Burgard,
        "OctoMap: an efficient probabilistic 3D mapping framework based on
        octrees", Autonomous Robots 34(3), 2013.
+    .. [2] Y. Kwon, "Real-time dense occupancy mapping using spatial
+       correlation of point clouds", dissertation, KAIST School of Computing,
+       2022, ch. 2 (super rays and the culling region; §2.3.5, Alg. 3).
 
     Examples
     --------
@@ -158,6 +162,7 @@ class OccupancyOctree(_OcTree):
         *,
         max_range: float | None = None,
         mode: str = "scan",
+        method: str = "plain",
         discretize: bool = False,
     ) -> "OccupancyOctree":
         """Integrate one range scan into the map.
@@ -184,6 +189,17 @@ class OccupancyOctree(_OcTree):
             each cell gets ``n_free * l_miss + n_hit * l_hit`` (``n`` = how many
             rays pass through / end in it) and is clamped once, whatever the
             order of the rays.
+        method : {"plain", "culling"}, default="plain"
+            How the rays are traversed; every method gives the same map, bit for
+            bit. ``"plain"`` traverses every ray in full (with ``mode="scan"``
+            it is liboctomap's ``insertPointCloud`` itself). ``"culling"``
+            first grows the scan's *culling region* [2]_: the cells around the
+            sensor that are fully free (at the lower clamp), hold no end point
+            of the scan, and are reached from the sensor through such cells
+            only. A ray's cells in the region form a prefix of its traversal
+            and their updates would change nothing, so they are skipped. It
+            pays off once the map has saturated free space, e.g. along a
+            trajectory.
         discretize : bool, default=False
             Only with ``mode="scan"``: cast one ray per distinct end cell, to its
             centre (liboctomap's ``discretize``), which is faster for dense scans.
@@ -211,10 +227,12 @@ class OccupancyOctree(_OcTree):
         """
         if mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if not isinstance(discretize, (bool, np.bool_)):
             raise TypeError(f"discretize must be a bool, got {type(discretize).__name__}")
-        if discretize and mode != "scan":
-            raise ValueError("discretize=True is only defined for mode='scan'")
+        if discretize and (mode != "scan" or method != "plain"):
+            raise ValueError("discretize=True is only defined for mode='scan', method='plain'")
         rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
         pts = self._as_float32_points(points, "points")
         org = self._as_float32_origin(origin)
@@ -224,10 +242,10 @@ class OccupancyOctree(_OcTree):
         if not ok.all():
             self._raise_out_of_range("points", ok, " (after truncation at max_range)"
                                      if max_range is not None else "")
-        if mode == "scan":
+        if mode == "scan" and method == "plain":
             self._insert_point_cloud(pts, org, rng, bool(discretize))
         else:
-            self._insert_rays(pts, org, rng)
+            self._insert_batch(pts, org, rng, mode == "ray", method == "culling")
         return self
 
     # ------------------------------------------------------------------ queries

@@ -315,10 +315,11 @@ def test_weighted_rays_count_as_copies():
     (points, origin), = random_scans(rng, n_scans=1, n_points=30)
     weights = rng.integers(1, 6, len(points)).astype(np.uint32)
     weighted = OccupancyOctree(0.1)
-    weighted._insert_rays(points.astype(np.float32), origin.astype(np.float32), -1.0, weights)
+    weighted._insert_batch(points.astype(np.float32), origin.astype(np.float32), -1.0, True,
+                           False, weights)
     copies = OccupancyOctree(0.1).insert_scan(np.repeat(points, weights, axis=0), origin,
                                               mode="ray")
     assert_same_leaves(weighted, copies)
     with pytest.raises(ValueError, match="weights must have length 30, got 2"):
-        weighted._insert_rays(points.astype(np.float32), origin.astype(np.float32), -1.0,
-                              weights[:2])
+        weighted._insert_batch(points.astype(np.float32), origin.astype(np.float32), -1.0,
+                               True, False, weights[:2])

@@ -1,0 +1,144 @@
+// Small containers for occgp's scan updates (used from ext/_octree.pyx).
+//
+// KeyTable: open-addressing hash table from a packed octree key (3 x 16 bits) to
+//   the number of rays that pass through the cell and that end in it. Replaces
+//   liboctomap's std::tr1 unordered sets, which dominate the cost of a scan update.
+// CellBox: a bitset over a box of keys (the culling region of one scan).
+#ifndef OCCGP_KEYTABLE_H
+#define OCCGP_KEYTABLE_H
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace occgp {
+
+struct KeyCounts {
+  uint64_t key;
+  uint32_t n_free;  // rays passing through the cell
+  uint32_t n_hit;   // rays ending in the cell
+};
+
+class KeyTable {
+ public:
+  static constexpr uint64_t kEmpty = ~uint64_t(0);
+
+  KeyTable() { reset(1024); }
+
+  // Drop every entry; keep room for about `expected` keys.
+  void reset(size_t expected) {
+    size_t cap = 16;
+    while (cap < 2 * expected) cap <<= 1;
+    slots_.assign(cap, KeyCounts{kEmpty, 0, 0});
+    mask_ = cap - 1;
+    size_ = 0;
+  }
+
+  // The entry of `key`, inserted with zero counts when absent.
+  KeyCounts* get(uint64_t key) {
+    if (2 * (size_ + 1) > slots_.size()) grow();
+    size_t i = hash(key) & mask_;
+    while (true) {
+      KeyCounts& s = slots_[i];
+      if (s.key == key) return &s;
+      if (s.key == kEmpty) {
+        s.key = key;
+        ++size_;
+        return &s;
+      }
+      i = (i + 1) & mask_;
+    }
+  }
+
+  bool contains(uint64_t key) const {
+    size_t i = hash(key) & mask_;
+    while (true) {
+      const KeyCounts& s = slots_[i];
+      if (s.key == key) return true;
+      if (s.key == kEmpty) return false;
+      i = (i + 1) & mask_;
+    }
+  }
+
+  size_t size() const { return size_; }
+  size_t capacity() const { return slots_.size(); }
+  const KeyCounts& slot(size_t i) const { return slots_[i]; }
+
+ private:
+  static size_t hash(uint64_t k) {  // murmur3 finaliser
+    k ^= k >> 33;
+    k *= 0xff51afd7ed558ccdULL;
+    k ^= k >> 33;
+    return static_cast<size_t>(k);
+  }
+
+  void grow() {
+    std::vector<KeyCounts> old;
+    old.swap(slots_);
+    slots_.assign(old.size() * 2, KeyCounts{kEmpty, 0, 0});
+    mask_ = slots_.size() - 1;
+    for (const KeyCounts& s : old) {
+      if (s.key == kEmpty) continue;
+      size_t i = hash(s.key) & mask_;
+      while (slots_[i].key != kEmpty) i = (i + 1) & mask_;
+      slots_[i] = s;
+    }
+  }
+
+  std::vector<KeyCounts> slots_;
+  size_t mask_ = 0;
+  size_t size_ = 0;
+};
+
+// A bitset over the keys lo[a] <= k[a] <= hi[a].
+class CellBox {
+ public:
+  // Returns false (and holds nothing) when the box has more than `max_cells` cells.
+  bool reset(const int lo[3], const int hi[3], uint64_t max_cells) {
+    uint64_t n = 1;
+    for (int a = 0; a < 3; ++a) {
+      lo_[a] = lo[a];
+      dim_[a] = static_cast<uint64_t>(hi[a] - lo[a] + 1);
+      n *= dim_[a];
+    }
+    if (n > max_cells) {
+      bits_.clear();
+      return false;
+    }
+    bits_.assign((n + 63) / 64, 0);
+    return true;
+  }
+
+  bool inside(int x, int y, int z) const {
+    return x >= lo_[0] && y >= lo_[1] && z >= lo_[2] &&
+           static_cast<uint64_t>(x - lo_[0]) < dim_[0] &&
+           static_cast<uint64_t>(y - lo_[1]) < dim_[1] &&
+           static_cast<uint64_t>(z - lo_[2]) < dim_[2];
+  }
+
+  // The caller checks inside() first.
+  bool test(int x, int y, int z) const {
+    uint64_t i = index(x, y, z);
+    return (bits_[i >> 6] >> (i & 63)) & 1;
+  }
+
+  void set(int x, int y, int z) {
+    uint64_t i = index(x, y, z);
+    bits_[i >> 6] |= uint64_t(1) << (i & 63);
+  }
+
+ private:
+  uint64_t index(int x, int y, int z) const {
+    return (static_cast<uint64_t>(z - lo_[2]) * dim_[1] + static_cast<uint64_t>(y - lo_[1])) *
+               dim_[0] +
+           static_cast<uint64_t>(x - lo_[0]);
+  }
+
+  int lo_[3] = {0, 0, 0};
+  uint64_t dim_[3] = {0, 0, 0};
+  std::vector<uint64_t> bits_;
+};
+
+}  // namespace occgp
+
+#endif  // OCCGP_KEYTABLE_H

@@ -1,0 +1,99 @@
+"""The culling region: every method gives the map of the plain method, bit for bit."""
+
+import numpy as np
+import pytest
+
+from occgp import OccupancyOctree
+from test_octree import assert_same_leaves, random_scans
+
+
+def room_sequence(rng, n_scans=8, n_points=600):
+    """A box room scanned from nearby poses, then a new obstacle in its free space."""
+    scans = []
+    for k in range(n_scans):
+        origin = np.array([0.0, 0.0, 0.5]) + rng.uniform(-0.15, 0.15, 3)
+        d = rng.normal(size=(n_points, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        # distance to the walls of a 4 x 4 x 2 m box around (0, 0, 1)
+        t = np.min(np.where(d > 0, (np.array([2.0, 2.0, 2.0]) - origin) / np.where(d > 0, d, 1),
+                            (np.array([-2.0, -2.0, 0.0]) - origin) / np.where(d < 0, d, -1)),
+                   axis=1)
+        points = origin + d * t[:, None]
+        if k == n_scans - 1:            # something appears where space was free
+            points[:80] = origin + d[:80] * rng.uniform(0.3, 1.0, (80, 1))
+        scans.append((points, origin))
+    return scans
+
+
+def build(scans, resolution, **kwargs):
+    m = OccupancyOctree(resolution)
+    for points, origin in scans:
+        m.insert_scan(points, origin, **kwargs)
+    return m
+
+
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+@pytest.mark.parametrize("resolution", [0.1, 0.2])
+def test_culling_equals_plain_on_a_revisited_room(mode, resolution):
+    scans = room_sequence(np.random.default_rng(0))
+    plain = build(scans, resolution, mode=mode)
+    culled = build(scans, resolution, mode=mode, method="culling")
+    assert_same_leaves(culled, plain)
+
+
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+def test_culling_region_is_used_and_skips_cells(mode):
+    scans = room_sequence(np.random.default_rng(1))
+    m = build(scans[:-1], 0.1, mode=mode)
+    points, origin = scans[-1]
+    stats = m._insert_batch(points.astype(np.float32), origin.astype(np.float32), -1.0,
+                            mode == "ray", True)
+    assert stats[0] > 100                      # region cells
+    plain = build(scans[:-1], 0.1, mode=mode)
+    full = plain._insert_batch(points.astype(np.float32), origin.astype(np.float32), -1.0,
+                               mode == "ray", False)
+    assert full[0] == -1 and stats[1] < full[1]   # fewer cells updated
+    assert_same_leaves(m, plain)
+
+
+@pytest.mark.parametrize("max_range", [None, 1.0])
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+def test_culling_equals_plain_on_random_scans(mode, max_range):
+    rng = np.random.default_rng(2)
+    scans = random_scans(rng, n_scans=3, n_points=300) * 3     # revisits saturate space
+    plain = build(scans, 0.1, mode=mode, max_range=max_range)
+    culled = build(scans, 0.1, mode=mode, max_range=max_range, method="culling")
+    assert_same_leaves(culled, plain)
+
+
+def test_batch_scan_update_equals_liboctomap():
+    """occgp's own key table in scan mode gives liboctomap's insertPointCloud tree."""
+    scans = room_sequence(np.random.default_rng(3), n_scans=4)
+    ref = build(scans, 0.1)
+    m = OccupancyOctree(0.1)
+    for points, origin in scans:
+        m._insert_batch(points.astype(np.float32), origin.astype(np.float32), -1.0, False, False)
+    assert_same_leaves(m, ref)
+
+
+def test_culling_keeps_end_points_out_of_the_region():
+    """An end point in saturated free space must get its hit (DESIGN's exactness rule)."""
+    origin = np.array([0.05, 0.05, 0.05])
+    wall = np.column_stack([np.full(50, 2.05), np.linspace(-0.5, 0.5, 50), np.zeros(50) + 0.05])
+    for method in ("plain", "culling"):
+        m = OccupancyOctree(0.1)
+        for _ in range(6):
+            m.insert_scan(wall, origin, mode="ray", method=method)
+        m.insert_scan(np.vstack([wall, [[1.05, 0.05, 0.05]]]), origin, mode="ray", method=method)
+        if method == "plain":
+            expected = m.log_odds([[1.05, 0.05, 0.05]])
+        else:
+            assert m.log_odds([[1.05, 0.05, 0.05]]) == expected
+
+
+def test_culling_rejects_discretize():
+    with pytest.raises(ValueError, match="discretize=True is only defined"):
+        OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="culling",
+                                         discretize=True)
+    with pytest.raises(ValueError, match=r"method must be one of \('plain', 'culling'\)"):
+        OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="fast")
