@@ -50,6 +50,17 @@ class KeyTable {
     }
   }
 
+  // The entry of `key`, or nullptr when absent.
+  KeyCounts* find(uint64_t key) {
+    size_t i = hash(key) & mask_;
+    while (true) {
+      KeyCounts& s = slots_[i];
+      if (s.key == key) return &s;
+      if (s.key == kEmpty) return nullptr;
+      i = (i + 1) & mask_;
+    }
+  }
+
   bool contains(uint64_t key) const {
     size_t i = hash(key) & mask_;
     while (true) {

@@ -36,6 +36,7 @@ cdef extern from "_keytable.h" namespace "occgp" nogil:
         KeyTable() except +
         void reset(size_t expected) except +
         KeyCounts* get(uint64_t key) except +
+        KeyCounts* find(uint64_t key)
         bint contains(uint64_t key) const
         size_t size()
         size_t capacity() const
@@ -59,6 +60,7 @@ cdef enum:
     _MAX_VAL = 32768     # half the number of keys per axis (liboctomap's tree_max_val)
     _DEPTH = 16          # depth of the tree: leaves there have the size of the resolution
     _MAX_REGION_CELLS = 1 << 28   # larger scan key boxes are not culled (2 x 32 MB of bits)
+    _MAX_DENSE_CELLS = 1 << 24    # up to this, a scan's free counts live in an array (64 MB)
 
 #: Half the number of keys per axis (liboctomap's ``tree_max_val``, 16-level tree).
 TREE_MAX_VAL = _MAX_VAL
@@ -206,10 +208,16 @@ cdef class _OcTree:
         cdef int axis, max_level = 0, level
         cdef uint32_t w = 1
         cdef long region_cells = -1
-        cdef size_t slot, updated = 0
+        cdef size_t slot, j, updated = 0
         cdef float l_hit = tree.getProbHitLog(), l_miss = tree.getProbMissLog()
         cdef double seconds = 0
         cdef timespec t0, t1
+        cdef vector[uint32_t] free_counts     # dense counts over the scan's key box
+        cdef vector[uint64_t] touched         # box indices with a nonzero count
+        cdef uint64_t dims[3]
+        cdef uint64_t idx, box_cells = 1
+        cdef bint dense
+        cdef uint32_t n_free, n_hit
         with self._lock:
             with nogil:
                 tree.coordToKeyChecked(o, ko)
@@ -238,6 +246,12 @@ cdef class _OcTree:
                     region_cells = _build_region(tree, ko, lo, hi, max_level, table, region)
                     clock_gettime(CLOCK_MONOTONIC, &t1)
                     seconds = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec)
+                for axis in range(3):
+                    dims[axis] = <uint64_t>(hi[axis] - lo[axis] + 1)
+                    box_cells *= dims[axis]
+                dense = box_cells <= _MAX_DENSE_CELLS
+                if dense:
+                    free_counts.assign(box_cells, 0)
                 for i in range(n):
                     if weighted:
                         w = weights[i]
@@ -250,20 +264,37 @@ cdef class _OcTree:
                         # ray's cells in it form a prefix of its traversal
                         while it != stop and _in_region(region, deref(it)):
                             inc(it)
-                    while it != stop:
-                        entry = table.get(_pack(deref(it)))
-                        entry.n_free += w
-                        inc(it)
+                    if dense:
+                        while it != stop:
+                            idx = _box_index(deref(it), lo, dims)
+                            if free_counts[idx] == 0:
+                                touched.push_back(idx)
+                            free_counts[idx] += w
+                            inc(it)
+                    else:
+                        while it != stop:
+                            entry = table.get(_pack(deref(it)))
+                            entry.n_free += w
+                            inc(it)
+                # one update per cell: the traversed cells, then end cells no ray crossed
+                for j in range(touched.size()):
+                    idx = touched[j]
+                    key = _box_key(idx, lo, dims)
+                    entry = table.find(_pack(key))
+                    _update(tree, key, free_counts[idx], entry.n_hit if entry != NULL else 0,
+                            ray_mode, l_hit, l_miss)
+                updated = touched.size()
                 for slot in range(table.capacity()):
                     if table.slot(slot).key == KEY_EMPTY:
                         continue
                     key = _unpack(table.slot(slot).key)
-                    if ray_mode:
-                        tree.updateNode(key, <float>(table.slot(slot).n_free * <double>l_miss
-                                                     + table.slot(slot).n_hit * <double>l_hit),
-                                        False)
-                    else:
-                        tree.updateNode(key, l_hit if table.slot(slot).n_hit else l_miss, False)
+                    n_free = table.slot(slot).n_free
+                    n_hit = table.slot(slot).n_hit
+                    if dense:
+                        if free_counts[_box_index(key, lo, dims)]:
+                            continue        # updated above
+                        n_free = 0
+                    _update(tree, key, n_free, n_hit, ray_mode, l_hit, l_miss)
                     updated += 1
         return region_cells, updated, seconds
 
@@ -453,6 +484,31 @@ cdef class _OcTree:
             with self._lock:
                 tree.clear()
             raise ValueError("liboctomap could not read the tree data")
+
+
+cdef inline uint64_t _box_index(const OcTreeKey& key, const int* lo,
+                                const uint64_t* dims) noexcept nogil:
+    return ((<uint64_t>(key[2] - lo[2]) * dims[1] + <uint64_t>(key[1] - lo[1])) * dims[0]
+            + <uint64_t>(key[0] - lo[0]))
+
+
+cdef inline OcTreeKey _box_key(uint64_t idx, const int* lo, const uint64_t* dims) noexcept nogil:
+    cdef OcTreeKey key
+    key[0] = <key_type>(lo[0] + idx % dims[0])
+    idx //= dims[0]
+    key[1] = <key_type>(lo[1] + idx % dims[1])
+    key[2] = <key_type>(lo[2] + idx // dims[1])
+    return key
+
+
+cdef inline int _update(OcTree* tree, const OcTreeKey& key, uint32_t n_free, uint32_t n_hit,
+                        bint ray_mode, float l_hit, float l_miss) except -1 nogil:
+    """One cell's update of a scan: liboctomap's insertPointCloud rule, or ray counting."""
+    if ray_mode:
+        tree.updateNode(key, <float>(n_free * <double>l_miss + n_hit * <double>l_hit), False)
+    else:
+        tree.updateNode(key, l_hit if n_hit else l_miss, False)
+    return 0
 
 
 cdef inline bint _in_region(const CellBox& region, const OcTreeKey& key) noexcept nogil:
