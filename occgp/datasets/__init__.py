@@ -41,6 +41,7 @@ from ._readers import (
 from ._scan import Scan
 from ._scene2d import LaserScan2D, Scene2D, room_2d
 from ._scenes import Scene, make_scene, structured_room, unstructured_room
+from ._simulate import LidarSensor, free_path, simulate_scans
 
 __all__ = [
     "Scan",
@@ -61,4 +62,7 @@ __all__ = [
     "read_scan_log",
     "load_scan_folder",
     "read_scans",
+    "LidarSensor",
+    "simulate_scans",
+    "free_path",
 ]
