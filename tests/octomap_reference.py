@@ -73,6 +73,16 @@ def time_octomap_insert(exe: Path, scan_file: Path, resolution, repeats=3,
     return float(out.stdout)
 
 
+def time_octomap_sequence(exe: Path, scan_files, resolution, *, rays=False,
+                          max_range=None) -> list[float]:
+    """Seconds liboctomap takes for each scan, inserted in order into one tree
+    (``insertPointCloud``, or ``insertPointCloudRays`` with `rays`)."""
+    out = subprocess.run([str(exe), "--sequence", "rays" if rays else "cloud", repr(resolution),
+                          repr(-1.0 if max_range is None else max_range),
+                          *map(str, scan_files)], check=True, capture_output=True, text=True)
+    return [float(v) for v in out.stdout.split()]
+
+
 # ---------------------------------------------------------------------- mode="ray" model
 def logodds32(p: float) -> np.float32:
     return f32(math.log(p / (1.0 - p)))

@@ -5,6 +5,9 @@
 //       Insert the scans in order into one fresh OcTree and write it as a .ot file.
 //   octomap_insert --time REPEATS RES MAXRANGE SCAN.bin
 //       Print the best wall time in seconds of inserting the scan into a fresh tree.
+//   octomap_insert --sequence cloud|rays RES MAXRANGE SCAN.bin [SCAN.bin ...]
+//       Insert the scans in order into one tree with insertPointCloud (cloud) or
+//       insertPointCloudRays (rays); print each insertion's wall time in seconds.
 //
 // SCAN.bin holds float32 values: the origin (x y z), then the points (x y z)...
 #include <octomap/octomap.h>
@@ -48,6 +51,24 @@ int main(int argc, char** argv) {
       best = std::min(best, std::chrono::duration<double>(t1 - t0).count());
     }
     std::printf("%.9f\n", best);
+    return 0;
+  }
+  if (argc >= 6 && std::string(argv[1]) == "--sequence") {
+    bool rays = std::string(argv[2]) == "rays";
+    octomap::OcTree tree(std::atof(argv[3]));
+    double maxrange = std::atof(argv[4]);
+    for (int i = 5; i < argc; ++i) {
+      octomap::point3d origin;
+      octomap::Pointcloud cloud;
+      if (!read_scan(argv[i], origin, cloud)) return 3;
+      auto t0 = std::chrono::steady_clock::now();
+      if (rays)
+        tree.insertPointCloudRays(cloud, origin, maxrange, false);
+      else
+        tree.insertPointCloud(cloud, origin, maxrange, false, false);
+      auto t1 = std::chrono::steady_clock::now();
+      std::printf("%.9f\n", std::chrono::duration<double>(t1 - t0).count());
+    }
     return 0;
   }
   if (argc < 10) {

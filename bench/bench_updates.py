@@ -1,0 +1,142 @@
+"""Benchmark scan insertion methods against liboctomap (dissertation ch. 2, Tables 2.2-2.4).
+
+Datasets, simulated or read in the same run:
+
+* ``geb079``: a dense trajectory in the real OctoMap of building 079
+  (``../shared/data/octomap/geb079.bt``): ``--scans`` poses 1 m apart along a
+  collision-free path at 1 m height, each a 720 x 150-beam laser scan
+  (about 106k points);
+* ``scan.dat``: OctoMap's real dense scan (88,206 points) inserted from
+  ``--poses`` nearby sensor positions (the points shifted with the sensor).
+
+For every resolution, every method inserts the same scans in order into one
+map, and the table gives frames per second, the mean culling-region time and
+update time per scan (ms), the cells updated per scan, and the speed-up over
+liboctomap's ``insertPointCloud`` (``mode="scan"`` rows) or
+``insertPointCloudRays`` (``mode="ray"`` rows), both called from C++ on the
+same points. Every occgp method's map is checked to equal the plain method's,
+leaf for leaf. Times are wall clock, single thread; ratios, not absolute
+times, are what carries over between machines.
+
+Run: ``python bench/bench_updates.py [--scans 20] [--resolutions 0.1 0.2 ...]``.
+"""
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from octomap_reference import build_octomap_insert, time_octomap_sequence, write_scan_bin  # noqa: E402
+
+from occgp import OccupancyOctree  # noqa: E402
+from occgp.datasets import free_path, read_xyz, simulate_scans  # noqa: E402
+
+DATA = ROOT / ".." / "shared" / "data" / "octomap"
+METHODS = [("scan", "plain"), ("scan", "culling"), ("ray", "plain"), ("ray", "culling")]
+
+
+def geb079_trajectory(n_scans, seed=0):
+    env = OccupancyOctree.load(DATA / "geb079.bt")
+    poses = free_path(env, n_scans, step=1.0, seed=seed)
+    return simulate_scans(env, poses, seed=seed, progress=False)
+
+
+def scan_dat_poses(n_poses, seed=0):
+    scan = read_xyz(DATA / "scan.dat.bz2")
+    rng = np.random.default_rng(seed)
+    shifts = np.vstack([np.zeros(3), rng.uniform(-0.5, 0.5, (n_poses - 1, 3)) * [1, 1, 0.2]])
+    return [(scan.points + s, scan.origin + s) for s in shifts]
+
+
+def run_occgp(scans, resolution, mode, method):
+    """Insert the scans in order; return the map, per-scan seconds, region s, cells."""
+    tree = OccupancyOctree(resolution)
+    total, region, cells = [], [], []
+    for points, origin in scans:
+        p32 = np.ascontiguousarray(points, dtype=np.float32)
+        o32 = np.ascontiguousarray(origin, dtype=np.float32)
+        t0 = time.perf_counter()
+        if mode == "scan" and method == "plain":
+            tree.insert_scan(points, origin)          # liboctomap's insertPointCloud
+            stats = (-1, 0, 0.0)
+        else:
+            # the compiled call insert_scan makes, to read its statistics
+            tree._ends_in_range(p32, o32, -1.0)      # the validation insert_scan does
+            stats = tree._insert_batch(p32, o32, -1.0, mode == "ray", method == "culling")
+        total.append(time.perf_counter() - t0)
+        region.append(stats[2])
+        cells.append(stats[1])
+    return tree, np.array(total), np.array(region), np.array(cells)
+
+
+def same_map(a, b):
+    la, lb = a.leaves(), b.leaves()
+    if len(la.sizes) != len(lb.sizes):
+        return False
+    oa = np.lexsort((la.sizes, *la.centers.T))
+    ob = np.lexsort((lb.sizes, *lb.centers.T))
+    return (np.array_equal(la.centers[oa], lb.centers[ob])
+            and np.array_equal(la.log_odds[oa], lb.log_odds[ob]))
+
+
+def bench_dataset(name, scans, resolutions, exe, tmp):
+    n_pts = np.mean([len(p) for p, _ in scans])
+    print(f"\n== {name}: {len(scans)} scans, {n_pts:,.0f} points per scan ==")
+    files = [write_scan_bin(Path(tmp) / f"{name}_{i}.bin", p, o) for i, (p, o) in enumerate(scans)]
+    header = (f"{'res':>5}  {'method':<34}{'FPS':>8}{'region ms':>11}{'update ms':>11}"
+              f"{'cells/scan':>12}{'speed-up':>10}  map")
+    print(header)
+    print("-" * len(header))
+    for res in resolutions:
+        ref = {"scan": time_octomap_sequence(exe, files, res),
+               "ray": time_octomap_sequence(exe, files, res, rays=True)}
+        for mode, label in (("scan", "insertPointCloud"), ("ray", "insertPointCloudRays")):
+            t = np.sum(ref[mode])
+            print(f"{res:>5.2f}  {'liboctomap ' + label:<34}{len(files) / t:>8.2f}{'':>11}"
+                  f"{1e3 * t / len(files):>11.1f}{'':>12}{1.0:>9.2f}x")
+        plain = {}
+        for mode, method in METHODS:
+            tree, total, region, cells = run_occgp(scans, res, mode, method)
+            if method == "plain":
+                plain[mode] = tree
+                same = "(reference)"
+            else:
+                same = "identical" if same_map(tree, plain[mode]) else "DIFFERENT"
+            t = total.sum()
+            region_ms = f"{1e3 * region.mean():.1f}" if method == "culling" else ""
+            cell_txt = f"{cells.mean():,.0f}" if cells.any() else ""
+            print(f"{res:>5.2f}  {f'occgp octree mode={mode} {method}':<34}{len(scans) / t:>8.2f}"
+                  f"{region_ms:>11}{1e3 * (t - region.sum()) / len(scans):>11.1f}{cell_txt:>12}"
+                  f"{np.sum(ref[mode]) / t:>9.2f}x  {same}")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--scans", type=int, default=20)
+    parser.add_argument("--poses", type=int, default=4)
+    parser.add_argument("--resolutions", type=float, nargs="+",
+                        default=[0.1, 0.2, 0.4, 0.8, 1.0])
+    parser.add_argument("--datasets", nargs="+", default=["geb079", "scan.dat"])
+    args = parser.parse_args(argv)
+    if not DATA.exists():
+        sys.exit(f"{DATA} is absent (../shared/data beside the project root)")
+    with tempfile.TemporaryDirectory() as tmp:
+        exe = build_octomap_insert(Path(tmp))
+        if exe is None:
+            sys.exit("no C++ compiler or liboctomap pkg-config file to build the reference")
+        for name in args.datasets:
+            scans = (geb079_trajectory(args.scans) if name == "geb079"
+                     else scan_dat_poses(args.poses))
+            bench_dataset(name, scans, args.resolutions, exe, tmp)
+    print("\nspeed-up: liboctomap's time over occgp's on the same scans, same run "
+          "(mode=scan rows vs insertPointCloud, mode=ray rows vs insertPointCloudRays).")
+
+
+if __name__ == "__main__":
+    main()
