@@ -18,6 +18,11 @@ from libcpp.memory cimport unique_ptr
 from libcpp.string cimport string
 from libcpp.vector cimport vector
 
+from _keys cimport (
+    KEY_DEPTH as _DEPTH, KEY_EMPTY, KEY_MAX_VAL as _MAX_VAL, CellBox, KeyCounts, KeyTable,
+    effective_end as _effective_end, in_key_range as _in_key_range, pack_key as _pack,
+    unpack_key as _unpack,
+)
 from liboctomap cimport (
     KeyRay, OcTree, OcTreeKey, OcTreeNode, Pointcloud, istringstream, key_type,
     ostringstream, point3d,
@@ -26,39 +31,11 @@ from liboctomap cimport (
 from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 
-cdef extern from "_keytable.h" namespace "occgp" nogil:
-    cdef cppclass KeyCounts:
-        uint64_t key
-        uint32_t n_free
-        uint32_t n_hit
-
-    cdef cppclass KeyTable:
-        KeyTable() except +
-        void reset(size_t expected) except +
-        KeyCounts* get(uint64_t key) except +
-        KeyCounts* find(uint64_t key)
-        bint contains(uint64_t key) const
-        size_t size()
-        size_t capacity() const
-        const KeyCounts& slot(size_t i) const
-
-    cdef cppclass CellBox:
-        CellBox() except +
-        bint reset(const int* lo, const int* hi, uint64_t max_cells) except +
-        bint inside(int x, int y, int z) const
-        bint test(int x, int y, int z) const
-        void set(int x, int y, int z)
-
-cdef extern from "_keytable.h" nogil:
-    const uint64_t KEY_EMPTY "occgp::KeyTable::kEmpty"
-
 import threading
 
 import numpy as np
 
 cdef enum:
-    _MAX_VAL = 32768     # half the number of keys per axis (liboctomap's tree_max_val)
-    _DEPTH = 16          # depth of the tree: leaves there have the size of the resolution
     _MAX_REGION_CELLS = 1 << 28   # larger scan key boxes are not culled (2 x 32 MB of bits)
     _MAX_DENSE_CELLS = 1 << 24    # up to this, a scan's free counts live in an array (64 MB)
 
@@ -69,30 +46,12 @@ TREE_DEPTH = _DEPTH
 
 
 
-cdef inline uint64_t _pack(const OcTreeKey& key) noexcept nogil:
-    return (<uint64_t>key[0]) | ((<uint64_t>key[1]) << 16) | ((<uint64_t>key[2]) << 32)
 
 
-cdef inline OcTreeKey _unpack(uint64_t packed) noexcept nogil:
-    return OcTreeKey(<key_type>(packed & 0xFFFF), <key_type>((packed >> 16) & 0xFFFF),
-                     <key_type>((packed >> 32) & 0xFFFF))
 
 
-cdef inline bint _in_key_range(double resolution_factor, float coordinate) noexcept nogil:
-    # liboctomap's coordToKeyChecked: floor(coord / res) + 32768 must lie in [0, 65536).
-    cdef double scaled = floor(resolution_factor * <double>coordinate)
-    return scaled >= -_MAX_VAL and scaled < _MAX_VAL
 
 
-cdef inline bint _effective_end(const point3d& origin, const point3d& point, double max_range,
-                                point3d* end) noexcept nogil:
-    """Set `end` to the ray's end as liboctomap computes it; return True when truncated."""
-    cdef point3d direction = point - origin
-    if max_range < 0 or direction.norm() <= max_range:
-        end[0] = point
-        return False
-    end[0] = origin + direction.normalized() * <float>max_range
-    return True
 
 
 @cython.auto_pickle(False)

@@ -7,9 +7,10 @@ scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
 
 import logging
 
+from .grid import GridMap
 from .octree import Leaves, OccupancyOctree
 
 __version__ = "0.1.0.dev0"
-__all__ = ["OccupancyOctree", "Leaves", "__version__"]
+__all__ = ["OccupancyOctree", "GridMap", "Leaves", "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())

@@ -10,11 +10,12 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_compiled_module_stubs_match_runtime():
+@pytest.mark.parametrize("module", ["occgp._octree", "occgp._grid"])
+def test_compiled_module_stubs_match_runtime(module):
     pytest.importorskip("mypy.stubtest")
     env = dict(os.environ, MYPYPATH=str(ROOT))
     result = subprocess.run(
-        [sys.executable, "-m", "mypy.stubtest", "occgp._octree", "--ignore-missing-stub",
+        [sys.executable, "-m", "mypy.stubtest", module, "--ignore-missing-stub",
          "--mypy-config-file", str(ROOT / "pyproject.toml")],
         capture_output=True, text=True, cwd=ROOT, env=env)
     assert result.returncode == 0, result.stdout + result.stderr

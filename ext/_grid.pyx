@@ -1,0 +1,292 @@
+# cython: language_level=3
+# distutils: language = c++
+"""Compiled core of :class:`occgp.GridMap`: a hashed uniform grid on liboctomap's keys.
+
+The cells live in an ``unordered_map`` from the packed 16-bit keys of
+liboctomap to float32 log-odds. A private liboctomap ``OcTree`` of the same
+resolution holds the sensor model and computes the keys and the ray traversals
+(``computeRayKeys``, ``coordToKeyChecked``, ``keyToCoord``), so the grid finds
+exactly the cells the octree finds; a scan's cells are counted in occgp's key
+table (``_keytable.h``) and each is updated once, as ``updateNode`` does.
+
+Nothing here validates user input: :mod:`occgp.grid` coerces and checks every
+array before it reaches these methods. Every loop runs without the GIL; a
+per-map lock serialises the operations on one map.
+"""
+
+cimport cython
+from cython.operator cimport dereference as deref, preincrement as inc
+from libc.math cimport exp
+from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
+from libcpp cimport bool
+from libcpp.algorithm cimport sort
+from libcpp.memory cimport unique_ptr
+from libcpp.unordered_map cimport unordered_map
+from libcpp.utility cimport pair
+from libcpp.vector cimport vector
+
+from liboctomap cimport KeyRay, OcTree, OcTreeKey, point3d
+from _keys cimport (
+    KEY_DEPTH, KEY_EMPTY, KeyTable, effective_end, in_key_range, pack_key, unpack_key,
+)
+
+import threading
+
+import numpy as np
+
+ctypedef unordered_map[uint64_t, float] CellMap         # packed key -> log-odds
+ctypedef pair[uint64_t, float] Cell
+
+
+cdef inline void _apply(float* value, bint created, float update, float lo,
+                        float hi) noexcept nogil:
+    """liboctomap's ``updateNode(key, update)`` on one cell (`value` is 0 when `created`)."""
+    if not created and ((update >= 0 and value[0] >= hi) or (update <= 0 and value[0] <= lo)):
+        return                                   # already at the bound: no change
+    value[0] += update
+    if value[0] < lo:
+        value[0] = lo
+    elif value[0] > hi:
+        value[0] = hi
+
+
+@cython.auto_pickle(False)
+cdef class _Grid:
+    """A hashed uniform grid owned by Python. Use :class:`occgp.GridMap`."""
+
+    cdef unique_ptr[OcTree] _key_tree   # key calculator and sensor model; holds no cells
+    cdef CellMap _cells
+    cdef object _lock
+
+    def __cinit__(self, *args, **kwargs):
+        self._lock = threading.Lock()
+
+    cdef OcTree* _get(self) except NULL:
+        cdef OcTree* tree = self._key_tree.get()
+        if tree == NULL:
+            raise ValueError(f"{type(self).__name__} was not initialised "
+                             "(create it with GridMap(resolution))")
+        return tree
+
+    def _setup(self, double resolution, double prob_hit, double prob_miss,
+               double clamping_min, double clamping_max, double occupancy_threshold):
+        """Create the key calculator (parameters were validated by the caller)."""
+        cdef OcTree* tree
+        with self._lock:
+            self._cells.clear()
+            self._key_tree.reset(new OcTree(resolution))
+            tree = self._key_tree.get()
+            tree.setProbHit(prob_hit)
+            tree.setProbMiss(prob_miss)
+            tree.setClampingThresMin(clamping_min)
+            tree.setClampingThresMax(clamping_max)
+            tree.setOccupancyThres(occupancy_threshold)
+
+    # ------------------------------------------------------------------ key range
+    def _in_range(self, const float[:, ::1] points):
+        """Boolean mask: which rows of `points` have a valid key on every axis."""
+        cdef double rf = 1.0 / self._get().getResolution()
+        cdef Py_ssize_t i, n = points.shape[0]
+        out = np.empty(n, dtype=np.bool_)
+        cdef uint8_t[::1] ok = out.view(np.uint8)
+        with nogil:
+            for i in range(n):
+                ok[i] = (in_key_range(rf, points[i, 0]) and in_key_range(rf, points[i, 1])
+                         and in_key_range(rf, points[i, 2]))
+        return out
+
+    def _ends_in_range(self, const float[:, ::1] points, const float[::1] origin,
+                       double max_range):
+        """Like :meth:`_in_range` for the ray ends after truncation at `max_range` (< 0: none)."""
+        cdef double rf = 1.0 / self._get().getResolution()
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef point3d o = point3d(origin[0], origin[1], origin[2])
+        cdef point3d end
+        out = np.empty(n, dtype=np.bool_)
+        cdef uint8_t[::1] ok = out.view(np.uint8)
+        with nogil:
+            for i in range(n):
+                effective_end(o, point3d(points[i, 0], points[i, 1], points[i, 2]),
+                              max_range, &end)
+                ok[i] = (in_key_range(rf, end.x()) and in_key_range(rf, end.y())
+                         and in_key_range(rf, end.z()))
+        return out
+
+    # ------------------------------------------------------------------ updates
+    def _insert(self, const float[:, ::1] points, const float[::1] origin, double max_range,
+                bint ray_mode, const uint32_t[::1] weights=None):
+        """Insert a scan: count each cell's rays, then update each cell once.
+
+        Every ray is traversed by liboctomap's ``computeRayKeys``; the cells are
+        collected with their counts (rays passing through, rays ending in). In
+        scan mode a cell gets ``l_hit`` if any ray ends in it, else ``l_miss``
+        (liboctomap's ``insertPointCloud``); in ray mode it gets
+        ``n_free*l_miss + n_hit*l_hit``. With `weights`, ray i counts
+        ``weights[i]`` times (super rays use this).
+        """
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef bint weighted = weights is not None
+        if weighted and weights.shape[0] != n:
+            raise ValueError(f"weights must have length {n}, got {weights.shape[0]}")
+        cdef point3d o = point3d(origin[0], origin[1], origin[2])
+        cdef point3d p, end
+        cdef KeyRay ray
+        cdef KeyRay.iterator it
+        cdef OcTreeKey key
+        cdef KeyTable table
+        cdef size_t slot
+        cdef uint32_t w = 1
+        cdef bint truncated
+        cdef float update
+        cdef pair[CellMap.iterator, bool] cell
+        cdef float l_hit = tree.getProbHitLog(), l_miss = tree.getProbMissLog()
+        cdef float lo = tree.getClampingThresMinLog(), hi = tree.getClampingThresMaxLog()
+        with self._lock:
+            with nogil:
+                table.reset(<size_t>n * 4)
+                for i in range(n):
+                    if weighted:
+                        w = weights[i]
+                    p = point3d(points[i, 0], points[i, 1], points[i, 2])
+                    truncated = effective_end(o, p, max_range, &end)
+                    if tree.computeRayKeys(o, end, ray):
+                        it = ray.begin()
+                        while it != ray.end():
+                            table.get(pack_key(deref(it))).n_free += w
+                            inc(it)
+                    if not truncated and tree.coordToKeyChecked(p, key):
+                        table.get(pack_key(key)).n_hit += w
+                if self._cells.empty():
+                    self._cells.reserve(table.size())
+                for slot in range(table.capacity()):
+                    if table.slot(slot).key == KEY_EMPTY:
+                        continue
+                    if ray_mode:
+                        update = <float>(table.slot(slot).n_free * <double>l_miss
+                                         + table.slot(slot).n_hit * <double>l_hit)
+                    else:       # a cell both crossed and hit counts as occupied
+                        update = l_hit if table.slot(slot).n_hit else l_miss
+                    cell = self._cells.insert(Cell(table.slot(slot).key, 0.0))
+                    _apply(&deref(cell.first).second, cell.second, update, lo, hi)
+
+    # ------------------------------------------------------------------ queries
+    def _query(self, const float[:, ::1] points, int what):
+        """Per point: 0 → occupancy probability, 1 → log-odds (NaN where unknown),
+        2 → int8 state (-1 unknown, 0 free, 1 occupied)."""
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef OcTreeKey key
+        cdef CellMap.iterator found
+        cdef float value, threshold = tree.getOccupancyThresLog()
+        out = np.full(n, np.nan) if what != 2 else np.full(n, -1, dtype=np.int8)
+        cdef double[::1] values
+        cdef signed char[::1] states
+        if what == 2:
+            states = out
+        else:
+            values = out
+        with self._lock:
+            with nogil:
+                for i in range(n):
+                    if not tree.coordToKeyChecked(
+                            point3d(points[i, 0], points[i, 1], points[i, 2]), key):
+                        continue
+                    found = self._cells.find(pack_key(key))
+                    if found == self._cells.end():
+                        continue
+                    value = deref(found).second
+                    if what == 0:      # liboctomap's probability(log-odds)
+                        values[i] = 1. - (1. / (1. + exp(<double>value)))
+                    elif what == 1:
+                        values[i] = value
+                    else:
+                        states[i] = 1 if value >= threshold else 0
+        return out
+
+    def _cells_sorted(self, bint occupied_only):
+        """Keys (n, 3) uint16, centres (n, 3) and float32 log-odds of the cells, by packed key."""
+        cdef OcTree* tree = self._get()
+        cdef float threshold = tree.getOccupancyThresLog()
+        cdef vector[Cell] cells
+        cdef CellMap.iterator it
+        cdef OcTreeKey key
+        cdef Py_ssize_t i, n
+        cdef int axis
+        with self._lock:
+            with nogil:
+                cells.reserve(self._cells.size())
+                it = self._cells.begin()
+                while it != self._cells.end():
+                    if not occupied_only or deref(it).second >= threshold:
+                        cells.push_back(deref(it))
+                    inc(it)
+        n = cells.size()
+        keys = np.empty((n, 3), dtype=np.uint16)
+        centers = np.empty((n, 3))
+        values = np.empty(n, dtype=np.float32)
+        cdef uint16_t[:, ::1] kv = keys
+        cdef double[:, ::1] cv = centers
+        cdef float[::1] vv = values
+        with nogil:
+            sort(cells.begin(), cells.end())
+            for i in range(n):
+                key = unpack_key(cells[i].first)
+                for axis in range(3):
+                    kv[i, axis] = key[axis]
+                    cv[i, axis] = tree.keyToCoord(key[axis], KEY_DEPTH)
+                vv[i] = cells[i].second
+        return keys, centers, values
+
+    def _set_cells(self, const uint16_t[:, ::1] keys, const float[::1] values):
+        """Replace every cell by `keys` (n, 3) and `values` (n,) (validated by the caller)."""
+        self._get()
+        cdef Py_ssize_t i, n = keys.shape[0]
+        with self._lock:
+            with nogil:
+                self._cells.clear()
+                self._cells.reserve(n)
+                for i in range(n):
+                    self._cells[pack_key(OcTreeKey(keys[i, 0], keys[i, 1], keys[i, 2]))] = \
+                        values[i]
+
+    # ------------------------------------------------------------------ structure
+    def _num_cells(self):
+        with self._lock:
+            return self._cells.size()
+
+    def _memory_usage(self):
+        """Bytes of the hash map: a node (entry, next pointer) per cell, a pointer per bucket."""
+        with self._lock:
+            return (self._cells.size() * (sizeof(Cell) + sizeof(void*))
+                    + self._cells.bucket_count() * sizeof(void*))
+
+    def _bounds(self):
+        """(min corner, max corner) of the known cells, as liboctomap's getMetricMin/Max."""
+        cdef OcTree* tree = self._get()
+        cdef double half = tree.getResolution() / 2.0
+        cdef uint16_t lo[3]
+        cdef uint16_t hi[3]
+        cdef OcTreeKey key
+        cdef CellMap.iterator it
+        cdef int axis
+        for axis in range(3):
+            lo[axis] = 0xFFFF
+            hi[axis] = 0
+        with self._lock:
+            with nogil:
+                it = self._cells.begin()
+                while it != self._cells.end():
+                    key = unpack_key(deref(it).first)
+                    for axis in range(3):
+                        lo[axis] = min(lo[axis], key[axis])
+                        hi[axis] = max(hi[axis], key[axis])
+                    inc(it)
+        return (np.array([tree.keyToCoord(lo[axis], KEY_DEPTH) - half for axis in range(3)]),
+                np.array([tree.keyToCoord(hi[axis], KEY_DEPTH) + half for axis in range(3)]))
+
+    def _clear(self):
+        cdef CellMap empty
+        with self._lock:
+            with nogil:
+                self._cells.swap(empty)        # frees the buckets too

@@ -1,0 +1,73 @@
+# cython: language_level=3
+"""Key arithmetic shared by the compiled maps: liboctomap's 16-bit keys, packed and checked.
+
+Inline ``nogil`` helpers and declarations only, so this file builds no module of
+its own: ``from _keys cimport pack_key, KeyTable, ...``. The arithmetic is
+liboctomap's, so every map that uses it finds the same cells as its ``OcTree``.
+"""
+
+from libc.math cimport floor
+from libc.stdint cimport uint32_t, uint64_t
+
+from liboctomap cimport OcTreeKey, key_type, point3d
+
+
+cdef extern from "_keytable.h" namespace "occgp" nogil:
+    cdef cppclass KeyCounts:
+        uint64_t key
+        uint32_t n_free       # rays passing through the cell
+        uint32_t n_hit        # rays ending in the cell
+
+    cdef cppclass KeyTable:   # packed key -> KeyCounts, for the cells of one scan
+        KeyTable() except +
+        void reset(size_t expected) except +
+        KeyCounts* get(uint64_t key) except +
+        KeyCounts* find(uint64_t key)
+        bint contains(uint64_t key) const
+        size_t size()
+        size_t capacity() const
+        const KeyCounts& slot(size_t i) const
+
+    cdef cppclass CellBox:    # a bitset over a box of keys
+        CellBox() except +
+        bint reset(const int* lo, const int* hi, uint64_t max_cells) except +
+        bint inside(int x, int y, int z) const
+        bint test(int x, int y, int z) const
+        void set(int x, int y, int z)
+
+cdef extern from "_keytable.h" nogil:
+    const uint64_t KEY_EMPTY "occgp::KeyTable::kEmpty"
+
+cdef enum:
+    KEY_MAX_VAL = 32768     # half the number of keys per axis (liboctomap's tree_max_val)
+    KEY_DEPTH = 16          # depth of the finest cells in a 16-bit key tree
+
+
+cdef inline uint64_t pack_key(const OcTreeKey& key) noexcept nogil:
+    """The three 16-bit keys in one integer (x in the low bits), for hash maps."""
+    return (<uint64_t>key[0]) | ((<uint64_t>key[1]) << 16) | ((<uint64_t>key[2]) << 32)
+
+
+cdef inline OcTreeKey unpack_key(uint64_t packed) noexcept nogil:
+    return OcTreeKey(<key_type>(packed & 0xFFFF), <key_type>((packed >> 16) & 0xFFFF),
+                     <key_type>((packed >> 32) & 0xFFFF))
+
+
+cdef inline bint in_key_range(double resolution_factor, float coordinate) noexcept nogil:
+    """liboctomap's coordToKeyChecked: floor(coord / res) + 32768 must lie in [0, 65536)."""
+    cdef double scaled = floor(resolution_factor * <double>coordinate)
+    return scaled >= -KEY_MAX_VAL and scaled < KEY_MAX_VAL
+
+
+cdef inline bint effective_end(const point3d& origin, const point3d& point, double max_range,
+                               point3d* end) noexcept nogil:
+    """Set `end` to the ray's end as liboctomap's computeUpdate does; True when truncated.
+
+    `max_range` < 0 means no limit.
+    """
+    cdef point3d direction = point - origin
+    if max_range < 0 or direction.norm() <= max_range:
+        end[0] = point
+        return False
+    end[0] = origin + direction.normalized() * <float>max_range
+    return True

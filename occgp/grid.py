@@ -1,0 +1,360 @@
+"""A uniform 3D occupancy grid with the octree's update semantics (the "GridMap" baseline)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ._grid import _Grid
+from ._octree import TREE_MAX_VAL
+from ._validation import as_point, as_points, check_real
+from .octree import MODES, Leaves, _check_params
+
+__all__ = ["GridMap"]
+
+#: Pickle payload: per cell three little-endian uint16 keys, then the float32 log-odds.
+_KEY_DTYPE, _VALUE_DTYPE = np.dtype("<u2"), np.dtype("<f4")
+_CELL_BYTES = 3 * _KEY_DTYPE.itemsize + _VALUE_DTYPE.itemsize
+
+
+class GridMap(_Grid):
+    """Probabilistic 3D occupancy map on a uniform grid (hashed cells).
+
+    Every cell has the edge length `resolution` and holds the log-odds of being
+    occupied; only observed cells are stored, in a hash map keyed by the cell's
+    integer coordinates. Keys, ray traversal (3D-DDA), sensor model, clamping
+    and both update modes are exactly those of :class:`OccupancyOctree`: after
+    the same scans, the grid holds the same cells with the same float32
+    log-odds as the octree expanded to its finest level. Without the tree,
+    nothing is pruned or propagated to parents, which makes updates cheaper and
+    uniform free space more expensive to store. This is the "GridMap" baseline
+    of the super-ray and culling-region experiments [1]_.
+
+    Coordinates are converted to single precision. Keys are 16 bits per axis:
+    the map covers ``[-32768, 32768) * resolution`` metres on each axis.
+
+    Parameters
+    ----------
+    resolution : float
+        Edge length of the cells, in metres. Must be positive.
+    prob_hit : float, default=0.7
+        Probability that a cell is occupied given a ray ends in it; in (0.5, 1).
+    prob_miss : float, default=0.4
+        Probability that a cell is occupied given a ray crosses it; in (0, 0.5).
+    clamping_min : float, default=0.1192
+        Lower clamping bound (probability); in (0, 0.5).
+    clamping_max : float, default=0.971
+        Upper clamping bound (probability); in (0.5, 1).
+    occupancy_threshold : float, default=0.5
+        Cells at or above this probability count as occupied; in (0, 1).
+
+    Attributes
+    ----------
+    resolution : float
+        Edge length of the cells.
+    num_cells : int
+        Number of known cells.
+    bounds : tuple of ndarray of shape (3,)
+        Minimum and maximum corner of the known space (NaN when empty).
+
+    See Also
+    --------
+    OccupancyOctree : The same map on liboctomap's octree.
+
+    References
+    ----------
+    .. [1] Y. Kwon, "Real-time dense occupancy mapping using spatial correlation
+       of point clouds", Ph.D. dissertation, KAIST, 2022, ch. 2 (super rays and
+       culling region; GridMap + 3D-DDA baseline, §2.4.1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from occgp import GridMap
+    >>> m = GridMap(resolution=0.1)
+    >>> m = m.insert_scan([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], origin=[0.0, 0.0, 0.0])
+    >>> m.is_occupied([[1.0, 0.0, 0.0], [0.5, 0.0, 0.0]])
+    array([ True, False])
+    >>> float(np.round(m.occupancy([[1.0, 0.0, 0.0]])[0], 2))
+    0.7
+    >>> bool(np.isnan(m.occupancy([[5.0, 5.0, 5.0]])[0]))   # never observed
+    True
+    """
+
+    def __init__(
+        self,
+        resolution: float,
+        *,
+        prob_hit: float = 0.7,
+        prob_miss: float = 0.4,
+        clamping_min: float = 0.1192,
+        clamping_max: float = 0.971,
+        occupancy_threshold: float = 0.5,
+    ) -> None:
+        params = dict(
+            resolution=resolution, prob_hit=prob_hit, prob_miss=prob_miss,
+            clamping_min=clamping_min, clamping_max=clamping_max,
+            occupancy_threshold=occupancy_threshold,
+        )
+        self._params = _check_params(params)
+        self._setup(*self._params.values())
+
+    # ------------------------------------------------------------------ parameters
+    def get_params(self) -> dict:
+        """Return the constructor's parameters as a dict."""
+        return dict(self._params)
+
+    @property
+    def resolution(self) -> float:
+        """Edge length of the cells, in metres."""
+        return self._params["resolution"]
+
+    @property
+    def prob_hit(self) -> float:
+        return self._params["prob_hit"]
+
+    @property
+    def prob_miss(self) -> float:
+        return self._params["prob_miss"]
+
+    @property
+    def clamping_min(self) -> float:
+        return self._params["clamping_min"]
+
+    @property
+    def clamping_max(self) -> float:
+        return self._params["clamping_max"]
+
+    @property
+    def occupancy_threshold(self) -> float:
+        return self._params["occupancy_threshold"]
+
+    @property
+    def key_range(self) -> tuple[float, float]:
+        """The interval ``[low, high)`` of coordinates (metres, every axis) the map can hold."""
+        r = self.resolution
+        return -TREE_MAX_VAL * r, TREE_MAX_VAL * r
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(resolution={self.resolution!r}, num_cells={self.num_cells})"
+
+    # ------------------------------------------------------------------ updates
+    def insert_scan(
+        self,
+        points: ArrayLike,
+        origin: ArrayLike,
+        *,
+        max_range: float | None = None,
+        mode: str = "scan",
+    ) -> "GridMap":
+        """Integrate one range scan into the map.
+
+        Each ray from `origin` to a point in `points` marks the cells it crosses
+        as free and its end cell as occupied, cell for cell as
+        :meth:`OccupancyOctree.insert_scan` does.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Ray end points in the world frame, in metres. Must be finite. An
+            empty scan (``n_points == 0``) changes nothing.
+        origin : array-like of shape (3,)
+            Sensor position in the world frame, in metres.
+        max_range : float, default=None
+            Rays longer than this are truncated: the cells up to `max_range`
+            are marked free and the end cell is not marked occupied. None means
+            no limit.
+        mode : {"scan", "ray"}, default="scan"
+            ``"scan"`` follows liboctomap's ``insertPointCloud``: the scan's sets
+            of free and occupied cells are computed first, a cell in both counts
+            as occupied, and every cell gets at most one update. ``"ray"`` counts
+            rays: each cell gets ``n_free * l_miss + n_hit * l_hit`` (``n`` = how
+            many rays pass through / end in it) and is clamped once.
+
+        Returns
+        -------
+        self : GridMap
+            The updated map, to allow chaining.
+
+        Raises
+        ------
+        TypeError
+            If `points` or `origin` does not hold real numbers.
+        ValueError
+            If `points` is not of shape (n_points, 3), `origin` not of shape
+            (3,), either holds NaN or inf or lies outside the key range, or
+            `max_range` or `mode` is invalid. The map is then unchanged.
+
+        Examples
+        --------
+        >>> m = GridMap(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], mode="ray")
+        >>> m.is_occupied([[1.0, 0, 0]]).tolist()
+        [True]
+        >>> m.num_cells        # the cells the ray crosses, and its end cell
+        10
+        """
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+        rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
+        pts = _as_float32(as_points(points, "points"))
+        org = self._as_float32_origin(origin)
+        if len(pts) == 0:
+            return self
+        ok = self._ends_in_range(pts, org, rng)
+        if not ok.all():
+            self._raise_out_of_range("points", ok, " (after truncation at max_range)"
+                                     if max_range is not None else "")
+        self._insert(pts, org, rng, mode == "ray")
+        return self
+
+    # ------------------------------------------------------------------ queries
+    def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Probability of occupancy at each point, NaN where the map knows nothing.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres. Points outside the key range are unknown.
+
+        Returns
+        -------
+        p : ndarray of shape (n_points,)
+            Occupancy probability of the cell holding each point, or NaN.
+        """
+        return self._query(_as_float32(as_points(points, "points")), 0)
+
+    def log_odds(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Log-odds of occupancy at each point, NaN where the map knows nothing.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+
+        Returns
+        -------
+        l : ndarray of shape (n_points,)
+            The cell's stored log-odds (float32 values), or NaN.
+        """
+        return self._query(_as_float32(as_points(points, "points")), 1)
+
+    def is_occupied(self, points: ArrayLike, *, return_unknown: bool = False):
+        """Whether each point lies in an occupied cell.
+
+        A cell is occupied when its probability is at least
+        ``occupancy_threshold``. Unknown cells are reported as not occupied;
+        ask for `return_unknown` to tell them apart from free ones.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+        return_unknown : bool, default=False
+            Also return the mask of points in unknown cells.
+
+        Returns
+        -------
+        occupied : ndarray of bool, shape (n_points,)
+        unknown : ndarray of bool, shape (n_points,)
+            Only when `return_unknown` is True.
+
+        Examples
+        --------
+        >>> m = GridMap(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0])
+        >>> occ, unk = m.is_occupied([[1.0, 0, 0], [0.5, 0, 0], [9, 9, 9]], return_unknown=True)
+        >>> occ.tolist(), unk.tolist()
+        ([True, False, False], [False, False, True])
+        """
+        state = self._query(_as_float32(as_points(points, "points")), 2)
+        occupied = state == 1
+        return (occupied, state < 0) if return_unknown else occupied
+
+    def cells(self, *, occupied_only: bool = False) -> Leaves:
+        """Return every known cell as arrays, ordered by key (z, then y, then x).
+
+        Parameters
+        ----------
+        occupied_only : bool, default=False
+            Keep only the occupied cells.
+
+        Returns
+        -------
+        cells : Leaves
+            Named tuple ``(centers, sizes, log_odds)``; every size is the
+            resolution, centres are liboctomap's (``keyToCoord``).
+
+        Examples
+        --------
+        >>> m = GridMap(0.1).insert_scan([[0.55, 0.05, 0.05]], [0.05, 0.05, 0.05])
+        >>> centers, sizes, log_odds = m.cells(occupied_only=True)
+        >>> centers.round(2).tolist(), sizes.round(2).tolist()
+        ([[0.55, 0.05, 0.05]], [0.1])
+        """
+        _, centers, values = self._cells_sorted(bool(occupied_only))
+        return Leaves(centers, np.full(len(values), self.resolution), values)
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def num_cells(self) -> int:
+        """Number of known cells."""
+        return self._num_cells()
+
+    @property
+    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(min corner, max corner) of the known space, in metres; NaN when empty."""
+        if self.num_cells == 0:
+            return np.full(3, np.nan), np.full(3, np.nan)
+        return self._bounds()
+
+    def memory_usage(self) -> int:
+        """Bytes used by the cells' hash map (an estimate of its nodes and buckets)."""
+        return self._memory_usage()
+
+    def clear(self) -> "GridMap":
+        """Remove every cell; return self."""
+        self._clear()
+        return self
+
+    def __reduce__(self):
+        keys, _, values = self._cells_sorted(False)
+        payload = keys.astype(_KEY_DTYPE).tobytes() + values.astype(_VALUE_DTYPE).tobytes()
+        return (_rebuild, (type(self), self.get_params(), payload))
+
+    # ------------------------------------------------------------------ helpers
+    def _load_payload(self, payload: bytes) -> "GridMap":
+        """Replace the cells by those in a :meth:`__reduce__` payload."""
+        if len(payload) % _CELL_BYTES:
+            raise ValueError(f"payload must hold {_CELL_BYTES} bytes per cell, "
+                             f"got {len(payload)} bytes")
+        n = len(payload) // _CELL_BYTES
+        keys = np.frombuffer(payload, _KEY_DTYPE, 3 * n).reshape(n, 3)
+        values = np.frombuffer(payload, _VALUE_DTYPE, n, offset=keys.nbytes)
+        if not np.isfinite(values).all():
+            raise ValueError("payload holds non-finite log-odds")
+        self._set_cells(np.ascontiguousarray(keys, np.uint16),
+                        np.ascontiguousarray(values, np.float32))
+        return self
+
+    def _as_float32_origin(self, x: ArrayLike, name: str = "origin") -> np.ndarray:
+        org = _as_float32(as_point(x, name))
+        if not self._in_range(org[None]).all():
+            lo, hi = self.key_range
+            raise ValueError(f"{name} {org.tolist()} lies outside the grid's key range "
+                             f"[{lo:g}, {hi:g}) m at resolution {self.resolution:g}")
+        return org
+
+    def _raise_out_of_range(self, name: str, ok: np.ndarray, what: str) -> None:
+        lo, hi = self.key_range
+        bad = int(np.count_nonzero(~ok))
+        raise ValueError(
+            f"{bad} of {len(ok)} {name}{what} lie outside the grid's key range "
+            f"[{lo:g}, {hi:g}) m on some axis at resolution {self.resolution:g} "
+            f"(first: row {int(np.flatnonzero(~ok)[0])}); the map is unchanged"
+        )
+
+
+def _as_float32(x: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=np.float32)
+
+
+def _rebuild(cls, params: dict, payload: bytes) -> GridMap:
+    """Unpickle a :class:`GridMap`."""
+    return cls(**params)._load_payload(payload)

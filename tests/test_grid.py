@@ -1,0 +1,327 @@
+"""GridMap: cell for cell the octree's finest level, queries, pickling, bad input."""
+
+import copy
+import pickle
+import threading
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from conftest import data_path
+from occgp import GridMap, OccupancyOctree
+from octomap_reference import MAX_VAL, leaf_values, ray_mode_reference
+
+PARAMS = dict(prob_hit=0.75, prob_miss=0.35, clamping_min=0.12, clamping_max=0.97)
+
+
+def random_scans(rng, n_scans=4, n_points=150, spread=2.0):
+    """Scans of random rays from origins scattered around the map's centre."""
+    scans = []
+    for _ in range(n_scans):
+        origin = rng.uniform(-0.7, 0.7, 3)
+        direction = rng.normal(size=(n_points, 3))
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        points = origin + direction * rng.uniform(0.1, spread, (n_points, 1))
+        scans.append((points, origin))
+    return scans
+
+
+def with_revisits(scans):
+    """`scans`, the first again, then four times one that saturates its cells (clamping)."""
+    points, origin = scans[1]
+    return [*scans, scans[0], *[(np.repeat(points[:8], 10, axis=0), origin)] * 4, scans[2]]
+
+
+def grid_values(grid):
+    """Cell key → float32 log-odds, keys computed from the centres as `leaf_values` does."""
+    centers, sizes, values = grid.cells()
+    assert np.all(sizes == grid.resolution)
+    keys = np.floor(centers / grid.resolution).astype(np.int64) + MAX_VAL
+    return {tuple(k): v for k, v in zip(keys.tolist(), values)}
+
+
+def assert_same_cells(got, expected):
+    assert got.keys() == expected.keys()
+    keys = sorted(expected)
+    assert_array_equal(np.array([got[k] for k in keys], np.float32).view(np.uint32),
+                       np.array([expected[k] for k in keys], np.float32).view(np.uint32))
+
+
+def build_both(scans, resolution, **kwargs):
+    grid, tree = GridMap(resolution, **PARAMS), OccupancyOctree(resolution, **PARAMS)
+    for points, origin in scans:
+        assert grid.insert_scan(points, origin, **kwargs) is grid
+        tree.insert_scan(points, origin, **kwargs)
+    return grid, tree
+
+
+# ---------------------------------------------------------------------- exactness
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+@pytest.mark.parametrize("max_range", [None, 1.1])
+@pytest.mark.parametrize("resolution", [0.05, 0.1])
+def test_random_scans_equal_octree_cell_for_cell(mode, max_range, resolution):
+    scans = with_revisits(random_scans(np.random.default_rng(0)))
+    grid, tree = build_both(scans, resolution, mode=mode, max_range=max_range)
+    expected = leaf_values(tree)
+    assert_same_cells(grid_values(grid), expected)
+    assert grid.num_cells == len(expected) > 300
+    values = np.array(list(expected.values()))
+    for bound in (0.12, 0.97):                                   # cells saturated both ways
+        assert (values == np.float32(np.log(bound / (1 - bound)))).any()
+
+
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+@pytest.mark.parametrize("max_range", [None, 0.8])
+def test_tiny_room_equals_octree_cell_for_cell(tiny_room, mode, max_range):
+    points, origin = tiny_room
+    shifted = [(points, origin + offset) for offset in ([0, 0, 0], [0.3, -0.2, 0.1])]
+    grid, tree = build_both(shifted * 2, 0.1, mode=mode, max_range=max_range)
+    assert_same_cells(grid_values(grid), leaf_values(tree))
+
+
+@pytest.mark.parametrize("max_range", [None, 0.9])
+def test_ray_mode_equals_pure_python_reference(max_range):
+    scans = with_revisits(random_scans(np.random.default_rng(1), n_scans=3, n_points=40))
+    grid = GridMap(0.1)
+    for points, origin in scans:
+        grid.insert_scan(points, origin, mode="ray", max_range=max_range)
+    assert_same_cells(grid_values(grid), ray_mode_reference(scans, 0.1, max_range=max_range))
+
+
+def test_real_scan_equals_octree():
+    from occgp.datasets import read_xyz
+
+    scan = read_xyz(data_path("octomap", "scan.dat.bz2"))
+    points = scan.points[::32]
+    for mode in ("scan", "ray"):
+        grid = GridMap(0.2).insert_scan(points, scan.origin, mode=mode)
+        tree = OccupancyOctree(0.2).insert_scan(points, scan.origin, mode=mode)
+        assert_same_cells(grid_values(grid), leaf_values(tree))
+
+
+def test_weighted_rays_count_as_copies():
+    (points, origin), = random_scans(np.random.default_rng(5), n_scans=1, n_points=30)
+    weights = np.random.default_rng(6).integers(1, 6, len(points)).astype(np.uint32)
+    weighted = GridMap(0.1)
+    weighted._insert(points.astype(np.float32), origin.astype(np.float32), -1.0, True, weights)
+    copies = GridMap(0.1).insert_scan(np.repeat(points, weights, axis=0), origin, mode="ray")
+    assert_same_cells(grid_values(weighted), grid_values(copies))
+    with pytest.raises(ValueError, match="weights must have length 30, got 2"):
+        weighted._insert(points.astype(np.float32), origin.astype(np.float32), -1.0, True,
+                         weights[:2])
+
+
+# ---------------------------------------------------------------------- queries
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+def test_queries_agree_with_octree(tiny_room, mode):
+    points, origin = tiny_room
+    grid, tree = build_both([(points, origin)], 0.1, mode=mode)
+    rng = np.random.default_rng(2)
+    q = np.vstack([points, rng.uniform(-1.5, 1.5, (300, 3)), [[0, 0, 0.5], [7, 7, 7],
+                                                                [1e6, 0, 0]]])
+    p = grid.occupancy(q)
+    assert np.isnan(p).any() and not np.isnan(p).all()
+    assert_array_equal(p, tree.occupancy(q))                  # NaN where unknown, too
+    assert_array_equal(grid.log_odds(q), tree.log_odds(q))
+    occ, unknown = grid.is_occupied(q, return_unknown=True)
+    tree_occ, tree_unknown = tree.is_occupied(q, return_unknown=True)
+    assert_array_equal(occ, tree_occ)
+    assert_array_equal(unknown, tree_unknown)
+    assert_array_equal(unknown, np.isnan(p))
+    assert_array_equal(grid.is_occupied(q), occ)
+
+
+def test_cells_bounds_and_structure(tiny_room):
+    points, origin = tiny_room
+    grid, tree = build_both([(points, origin)], 0.1)
+    leaves = OccupancyOctree.from_bytes(tree.to_bytes(), **PARAMS).expand().leaves()
+    order = np.lexsort(leaves.centers.T)
+    cells = grid.cells()
+    assert_array_equal(cells.centers, leaves.centers[order])      # keyToCoord, sorted by key
+    assert_array_equal(cells.log_odds, leaves.log_odds[order])
+    occupied = grid.cells(occupied_only=True)
+    assert 0 < len(occupied.sizes) < len(cells.sizes)
+    assert grid.is_occupied(occupied.centers).all()
+    for got, expected in zip(grid.bounds, tree.bounds):
+        assert_allclose(got, expected, rtol=0, atol=1e-12)
+    assert grid.memory_usage() > grid.num_cells * 12
+    assert grid.clear() is grid and grid.num_cells == 0
+    assert np.isnan(grid.bounds[0]).all() and len(grid.cells().sizes) == 0
+    assert np.isnan(grid.occupancy(points)).all()
+
+
+def test_parameters_repr_and_empty_scan():
+    m = GridMap(0.05, prob_hit=0.8, prob_miss=0.3, clamping_min=0.2, clamping_max=0.9,
+                occupancy_threshold=0.6)
+    assert m.resolution == 0.05 and m.prob_hit == 0.8 and m.prob_miss == 0.3
+    assert m.clamping_min == 0.2 and m.clamping_max == 0.9 and m.occupancy_threshold == 0.6
+    assert m.get_params() == dict(resolution=0.05, prob_hit=0.8, prob_miss=0.3,
+                                  clamping_min=0.2, clamping_max=0.9, occupancy_threshold=0.6)
+    assert m.key_range == (-32768 * 0.05, 32768 * 0.05)
+    assert repr(m) == "GridMap(resolution=0.05, num_cells=0)"
+    assert m.insert_scan(np.empty((0, 3)), [0, 0, 0]) is m and m.num_cells == 0
+    m.insert_scan([[1.0, 0, 0]] * 5, [0, 0, 0])
+    assert m.log_odds([[1.0, 0, 0]])[0] == pytest.approx(np.log(0.8 / 0.2), rel=1e-6)
+    assert m.is_occupied([[1.0, 0, 0]])[0]
+    strict = GridMap(0.1, occupancy_threshold=0.8).insert_scan([[1.0, 0, 0]], [0, 0, 0])
+    assert not strict.is_occupied([[1.0, 0, 0]])[0]               # p = 0.7 < 0.8
+    assert repr(m) == f"GridMap(resolution=0.05, num_cells={m.num_cells})"
+
+
+def test_max_range_truncates_rays():
+    m = GridMap(0.1).insert_scan([[3.05, 0.05, 0.05]], [0.05, 0.05, 0.05], max_range=1.0)
+    occ, unknown = m.is_occupied([[3.05, 0.05, 0.05], [0.55, 0.05, 0.05]], return_unknown=True)
+    assert unknown[0] and not occ[1] and not unknown[1]
+    assert len(m.cells(occupied_only=True).sizes) == 0
+
+
+# ---------------------------------------------------------------------- copies, threads
+@pytest.fixture
+def small_map(tiny_room):
+    points, origin = tiny_room
+    return GridMap(0.1, **PARAMS).insert_scan(points, origin).insert_scan(points[:50], origin,
+                                                                          mode="ray")
+
+
+def test_pickle_and_deepcopy_keep_every_cell(small_map):
+    for original in (small_map, GridMap(0.2, prob_hit=0.8)):
+        for clone in (pickle.loads(pickle.dumps(original)), copy.deepcopy(original)):
+            assert type(clone) is GridMap and clone is not original
+            assert clone.get_params() == original.get_params()
+            assert_same_cells(grid_values(clone), grid_values(original))
+    clone = copy.deepcopy(small_map)
+    clone.insert_scan([[0.5, 0.5, 0.5]], [0, 0, 0.5])
+    assert grid_values(clone) != grid_values(small_map)
+    assert len(pickle.dumps(small_map)) < 11 * small_map.num_cells + 500
+
+
+def test_corrupt_payload_is_refused(small_map):
+    payload = small_map.__reduce__()[1][2]
+    with pytest.raises(ValueError, match="payload must hold 10 bytes per cell, got 7 bytes"):
+        GridMap(0.1)._load_payload(payload[:7])
+    bad = bytearray(payload)
+    bad[-4:] = np.float32(np.inf).tobytes()
+    with pytest.raises(ValueError, match="payload holds non-finite log-odds"):
+        GridMap(0.1)._load_payload(bytes(bad))
+
+
+def test_threads_share_a_map_safely(tiny_room):
+    points, origin = tiny_room
+    rng = np.random.default_rng(4)
+    scans = [(points + rng.normal(0, 0.02, points.shape), origin) for _ in range(20)]
+    shared, errors = GridMap(0.05), []
+
+    def write():
+        for p, o in scans:
+            shared.insert_scan(p, o)
+
+    def read():
+        try:
+            for _ in range(50):
+                shared.occupancy(points)
+                shared.cells(occupied_only=True)
+        except Exception as exc:   # pragma: no cover - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=write)] + [threading.Thread(target=read) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    sequential = GridMap(0.05)
+    for p, o in scans:
+        sequential.insert_scan(p, o)
+    assert_same_cells(grid_values(shared), grid_values(sequential))
+
+
+# ---------------------------------------------------------------------- bad input
+@pytest.fixture
+def m():
+    return GridMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
+
+
+@pytest.mark.parametrize("bad", [np.zeros((5, 2)), np.zeros(3), [[1, 2]]])
+def test_insert_rejects_bad_shape(m, bad):
+    with pytest.raises(ValueError, match=r"points must have shape \(n_points, 3\), got"):
+        m.insert_scan(bad, [0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("bad", [[["a", "b", "c"]], np.zeros((2, 3), dtype=complex)])
+def test_insert_rejects_non_numeric(m, bad):
+    with pytest.raises(TypeError, match="points must hold real numbers, got dtype"):
+        m.insert_scan(bad, [0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf])
+def test_insert_rejects_non_finite_points_and_keeps_map(m, value):
+    before = grid_values(m)
+    pts = np.ones((10, 3))
+    pts[7, 1] = value
+    with pytest.raises(ValueError, match=r"points must be finite: 1 of 10 rows .* row 7"):
+        m.insert_scan(pts, [0, 0, 0])
+    assert grid_values(m) == before
+
+
+@pytest.mark.parametrize("bad, match", [
+    ([0, 0], r"origin must have shape \(3,\), got \(2,\)"),
+    ([0, np.nan, 0], "origin must be finite"),
+    (["x", "y", "z"], "origin must hold real numbers"),
+])
+def test_insert_rejects_bad_origin(m, bad, match):
+    err = TypeError if "real numbers" in match else ValueError
+    with pytest.raises(err, match=match):
+        m.insert_scan([[1.0, 1, 1]], bad)
+
+
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+def test_points_outside_key_range_rejected_and_map_unchanged(m, mode):
+    before = grid_values(m)
+    pts = np.array([[1.0, 0, 0], [4000.0, 0, 0], [0, -3300, 0]])
+    with pytest.raises(ValueError, match=r"2 of 3 points lie outside the grid's key range "
+                       r"\[-3276.8, 3276.8\) m .* row 1\); the map is unchanged"):
+        m.insert_scan(pts, [0, 0, 0], mode=mode)
+    with pytest.raises(ValueError, match=r"origin \[5000.0, 0.0, 0.0\] lies outside"):
+        m.insert_scan([[1.0, 0, 0]], [5000, 0, 0], mode=mode)
+    assert grid_values(m) == before
+    m.insert_scan([[4000.0, 0, 0]], [0, 0, 0], max_range=2.0, mode=mode)   # truncated: fine
+    assert not m.is_occupied([[1.5, 0, 0]])[0]
+
+
+@pytest.mark.parametrize("kwargs, err, match", [
+    (dict(mode="fast"), ValueError, r"mode must be one of \('scan', 'ray'\), got 'fast'"),
+    (dict(max_range=0.0), ValueError, r"max_range must lie in \(0.0, inf\), got 0.0"),
+    (dict(max_range=np.nan), ValueError, "max_range must lie in"),
+    (dict(max_range="5"), TypeError, "max_range must be a real number, got str"),
+])
+def test_insert_rejects_bad_options(m, kwargs, err, match):
+    with pytest.raises(err, match=match):
+        m.insert_scan([[1.0, 0, 0]], [0, 0, 0], **kwargs)
+
+
+@pytest.mark.parametrize("kwargs, err, match", [
+    (dict(resolution=0.0), ValueError, r"resolution must lie in \(0.0, inf\), got 0.0"),
+    (dict(resolution="0.1"), TypeError, "resolution must be a real number, got str"),
+    (dict(prob_hit=1.0), ValueError, r"prob_hit must lie in \(0.5, 1.0\), got 1.0"),
+    (dict(prob_miss=0.6), ValueError, r"prob_miss must lie in \(0.0, 0.5\)"),
+    (dict(clamping_min=0.6), ValueError, r"clamping_min must lie in \(0.0, 0.5\)"),
+    (dict(clamping_max=0.4), ValueError, r"clamping_max must lie in \(0.5, 1.0\)"),
+    (dict(occupancy_threshold=1.5), ValueError, "occupancy_threshold must lie in"),
+])
+def test_constructor_rejects_bad_parameters(kwargs, err, match):
+    with pytest.raises(err, match=match):
+        GridMap(**{"resolution": 0.1, **kwargs})
+
+
+@pytest.mark.parametrize("method", ["occupancy", "log_odds", "is_occupied"])
+def test_queries_reject_bad_points(m, method):
+    with pytest.raises(ValueError, match=r"points must have shape \(n_points, 3\)"):
+        getattr(m, method)([1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match="points must be finite"):
+        getattr(m, method)([[np.nan, 0, 0]])
+
+
+def test_uninitialised_core_raises():
+    with pytest.raises(ValueError, match="was not initialised"):
+        GridMap.__new__(GridMap).occupancy([[0.0, 0.0, 0.0]])
