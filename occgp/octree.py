@@ -193,7 +193,7 @@ class OccupancyOctree(_OcTree):
             How the rays are traversed; every method gives the same map, bit for
             bit. ``"plain"`` traverses every ray in full (with ``mode="scan"``
             it is liboctomap's ``insertPointCloud`` itself). ``"culling"``
-            first grows the scan's *culling region* [2]_: the cells around the
+            first grows the scan's *culling region* [1]_: the cells around the
             sensor that are fully free (at the lower clamp), hold no end point
             of the scan, and are reached from the sensor through such cells
             only. A ray's cells in the region form a prefix of its traversal
@@ -218,6 +218,11 @@ class OccupancyOctree(_OcTree):
             (3,), either holds NaN or inf or lies outside the key range, or
             `max_range`, `mode` or `discretize` is invalid. The map is then
             unchanged.
+
+        References
+        ----------
+        .. [1] Y. Kwon, "Real-time dense occupancy mapping using spatial
+           correlation of point clouds", dissertation, KAIST, 2022, §2.3.5.
 
         Examples
         --------
