@@ -6,9 +6,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._grid import _Grid
-from ._octree import TREE_MAX_VAL
-from ._validation import as_point, as_points, check_real
-from .octree import MODES, Leaves, _check_params
+from ._logodds_map import Leaves, LogOddsMap
 
 __all__ = ["GridMap"]
 
@@ -17,7 +15,7 @@ _KEY_DTYPE, _VALUE_DTYPE = np.dtype("<u2"), np.dtype("<f4")
 _CELL_BYTES = 3 * _KEY_DTYPE.itemsize + _VALUE_DTYPE.itemsize
 
 
-class GridMap(_Grid):
+class GridMap(LogOddsMap, _Grid):
     """Probabilistic 3D occupancy map on a uniform grid (hashed cells).
 
     Every cell has the edge length `resolution` and holds the log-odds of being
@@ -81,59 +79,7 @@ class GridMap(_Grid):
     True
     """
 
-    def __init__(
-        self,
-        resolution: float,
-        *,
-        prob_hit: float = 0.7,
-        prob_miss: float = 0.4,
-        clamping_min: float = 0.1192,
-        clamping_max: float = 0.971,
-        occupancy_threshold: float = 0.5,
-    ) -> None:
-        params = dict(
-            resolution=resolution, prob_hit=prob_hit, prob_miss=prob_miss,
-            clamping_min=clamping_min, clamping_max=clamping_max,
-            occupancy_threshold=occupancy_threshold,
-        )
-        self._params = _check_params(params)
-        self._setup(*self._params.values())
-
-    # ------------------------------------------------------------------ parameters
-    def get_params(self) -> dict:
-        """Return the constructor's parameters as a dict."""
-        return dict(self._params)
-
-    @property
-    def resolution(self) -> float:
-        """Edge length of the cells, in metres."""
-        return self._params["resolution"]
-
-    @property
-    def prob_hit(self) -> float:
-        return self._params["prob_hit"]
-
-    @property
-    def prob_miss(self) -> float:
-        return self._params["prob_miss"]
-
-    @property
-    def clamping_min(self) -> float:
-        return self._params["clamping_min"]
-
-    @property
-    def clamping_max(self) -> float:
-        return self._params["clamping_max"]
-
-    @property
-    def occupancy_threshold(self) -> float:
-        return self._params["occupancy_threshold"]
-
-    @property
-    def key_range(self) -> tuple[float, float]:
-        """The interval ``[low, high)`` of coordinates (metres, every axis) the map can hold."""
-        r = self.resolution
-        return -TREE_MAX_VAL * r, TREE_MAX_VAL * r
+    _kind = "grid"
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(resolution={self.resolution!r}, num_cells={self.num_cells})"
@@ -193,80 +139,13 @@ class GridMap(_Grid):
         >>> m.num_cells        # the cells the ray crosses, and its end cell
         10
         """
-        if mode not in MODES:
-            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
-        rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
-        pts = _as_float32(as_points(points, "points"))
-        org = self._as_float32_origin(origin)
-        if len(pts) == 0:
-            return self
-        ok = self._ends_in_range(pts, org, rng)
-        if not ok.all():
-            self._raise_out_of_range("points", ok, " (after truncation at max_range)"
-                                     if max_range is not None else "")
-        self._insert(pts, org, rng, mode == "ray")
+        scan = self._validated_scan(points, origin, max_range, mode)
+        if scan is not None:
+            pts, org, rng = scan
+            self._insert(pts, org, rng, mode == "ray")
         return self
 
     # ------------------------------------------------------------------ queries
-    def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Probability of occupancy at each point, NaN where the map knows nothing.
-
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            Query points, in metres. Points outside the key range are unknown.
-
-        Returns
-        -------
-        p : ndarray of shape (n_points,)
-            Occupancy probability of the cell holding each point, or NaN.
-        """
-        return self._query(_as_float32(as_points(points, "points")), 0)
-
-    def log_odds(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Log-odds of occupancy at each point, NaN where the map knows nothing.
-
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-
-        Returns
-        -------
-        l : ndarray of shape (n_points,)
-            The cell's stored log-odds (float32 values), or NaN.
-        """
-        return self._query(_as_float32(as_points(points, "points")), 1)
-
-    def is_occupied(self, points: ArrayLike, *, return_unknown: bool = False):
-        """Whether each point lies in an occupied cell.
-
-        A cell is occupied when its probability is at least
-        ``occupancy_threshold``. Unknown cells are reported as not occupied;
-        ask for `return_unknown` to tell them apart from free ones.
-
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-        return_unknown : bool, default=False
-            Also return the mask of points in unknown cells.
-
-        Returns
-        -------
-        occupied : ndarray of bool, shape (n_points,)
-        unknown : ndarray of bool, shape (n_points,)
-            Only when `return_unknown` is True.
-
-        Examples
-        --------
-        >>> m = GridMap(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0])
-        >>> occ, unk = m.is_occupied([[1.0, 0, 0], [0.5, 0, 0], [9, 9, 9]], return_unknown=True)
-        >>> occ.tolist(), unk.tolist()
-        ([True, False, False], [False, False, True])
-        """
-        state = self._query(_as_float32(as_points(points, "points")), 2)
-        occupied = state == 1
-        return (occupied, state < 0) if return_unknown else occupied
-
     def cells(self, *, occupied_only: bool = False) -> Leaves:
         """Return every known cell as arrays, ordered by key (z, then y, then x).
 
@@ -332,28 +211,6 @@ class GridMap(_Grid):
         self._set_cells(np.ascontiguousarray(keys, np.uint16),
                         np.ascontiguousarray(values, np.float32))
         return self
-
-    def _as_float32_origin(self, x: ArrayLike, name: str = "origin") -> np.ndarray:
-        org = _as_float32(as_point(x, name))
-        if not self._in_range(org[None]).all():
-            lo, hi = self.key_range
-            raise ValueError(f"{name} {org.tolist()} lies outside the grid's key range "
-                             f"[{lo:g}, {hi:g}) m at resolution {self.resolution:g}")
-        return org
-
-    def _raise_out_of_range(self, name: str, ok: np.ndarray, what: str) -> None:
-        lo, hi = self.key_range
-        bad = int(np.count_nonzero(~ok))
-        raise ValueError(
-            f"{bad} of {len(ok)} {name}{what} lie outside the grid's key range "
-            f"[{lo:g}, {hi:g}) m on some axis at resolution {self.resolution:g} "
-            f"(first: row {int(np.flatnonzero(~ok)[0])}); the map is unchanged"
-        )
-
-
-def _as_float32(x: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(x, dtype=np.float32)
-
 
 def _rebuild(cls, params: dict, payload: bytes) -> GridMap:
     """Unpickle a :class:`GridMap`."""

@@ -3,33 +3,21 @@
 from __future__ import annotations
 
 import os
-from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _octomap_format as fmt
-from ._octree import TREE_MAX_VAL, _check_binary_data, _check_full_data, _OcTree
-from ._validation import as_point, as_points, check_probability, check_real
+from ._logodds_map import Leaves, LogOddsMap
+from ._octree import _check_binary_data, _check_full_data, _OcTree
+from ._validation import check_real
 
 __all__ = ["OccupancyOctree", "Leaves"]
 
-MODES = ("scan", "ray")
 METHODS = ("plain", "culling")
 
 
-class Leaves(NamedTuple):
-    """The leaves of an octree, as arrays (one row per leaf)."""
-
-    #: Cell centres, shape (n_leaves, 3), in metres.
-    centers: NDArray[np.float64]
-    #: Cell edge lengths, shape (n_leaves,): the resolution times a power of two.
-    sizes: NDArray[np.float64]
-    #: Log-odds of occupancy, shape (n_leaves,), float32 as liboctomap stores them.
-    log_odds: NDArray[np.float32]
-
-
-class OccupancyOctree(_OcTree):
+class OccupancyOctree(LogOddsMap, _OcTree):
     """Probabilistic 3D occupancy map on an octree (OctoMap).
 
     Each cell holds the log-odds of being occupied. A range scan marks the cells
@@ -96,59 +84,7 @@ class OccupancyOctree(_OcTree):
     True
     """
 
-    def __init__(
-        self,
-        resolution: float,
-        *,
-        prob_hit: float = 0.7,
-        prob_miss: float = 0.4,
-        clamping_min: float = 0.1192,
-        clamping_max: float = 0.971,
-        occupancy_threshold: float = 0.5,
-    ) -> None:
-        params = dict(
-            resolution=resolution, prob_hit=prob_hit, prob_miss=prob_miss,
-            clamping_min=clamping_min, clamping_max=clamping_max,
-            occupancy_threshold=occupancy_threshold,
-        )
-        self._params = _check_params(params)
-        self._setup(*self._params.values())
-
-    # ------------------------------------------------------------------ parameters
-    def get_params(self) -> dict:
-        """Return the constructor's parameters as a dict."""
-        return dict(self._params)
-
-    @property
-    def resolution(self) -> float:
-        """Edge length of the smallest cells, in metres."""
-        return self._params["resolution"]
-
-    @property
-    def prob_hit(self) -> float:
-        return self._params["prob_hit"]
-
-    @property
-    def prob_miss(self) -> float:
-        return self._params["prob_miss"]
-
-    @property
-    def clamping_min(self) -> float:
-        return self._params["clamping_min"]
-
-    @property
-    def clamping_max(self) -> float:
-        return self._params["clamping_max"]
-
-    @property
-    def occupancy_threshold(self) -> float:
-        return self._params["occupancy_threshold"]
-
-    @property
-    def key_range(self) -> tuple[float, float]:
-        """The interval ``[low, high)`` of coordinates (metres, every axis) the map can hold."""
-        r = self.resolution
-        return -TREE_MAX_VAL * r, TREE_MAX_VAL * r
+    _kind = "octree"
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(resolution={self.resolution!r}, "
@@ -230,23 +166,16 @@ class OccupancyOctree(_OcTree):
         >>> m.is_occupied([[1.0, 0, 0]]).tolist()
         [True]
         """
-        if mode not in MODES:
-            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if not isinstance(discretize, (bool, np.bool_)):
             raise TypeError(f"discretize must be a bool, got {type(discretize).__name__}")
         if discretize and (mode != "scan" or method != "plain"):
             raise ValueError("discretize=True is only defined for mode='scan', method='plain'")
-        rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
-        pts = self._as_float32_points(points, "points")
-        org = self._as_float32_origin(origin)
-        if len(pts) == 0:
+        scan = self._validated_scan(points, origin, max_range, mode)
+        if scan is None:
             return self
-        ok = self._ends_in_range(pts, org, rng)
-        if not ok.all():
-            self._raise_out_of_range("points", ok, " (after truncation at max_range)"
-                                     if max_range is not None else "")
+        pts, org, rng = scan
         if mode == "scan" and method == "plain":
             self._insert_point_cloud(pts, org, rng, bool(discretize))
         else:
@@ -254,65 +183,6 @@ class OccupancyOctree(_OcTree):
         return self
 
     # ------------------------------------------------------------------ queries
-    def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Probability of occupancy at each point, NaN where the map knows nothing.
-
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            Query points, in metres. Points outside the key range are unknown.
-
-        Returns
-        -------
-        p : ndarray of shape (n_points,)
-            Occupancy probability of the cell holding each point, or NaN.
-        """
-        return self._query(self._as_float32_points(points, "points"), 0)
-
-    def log_odds(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Log-odds of occupancy at each point, NaN where the map knows nothing.
-
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-
-        Returns
-        -------
-        l : ndarray of shape (n_points,)
-            The cell's stored log-odds (float32 values), or NaN.
-        """
-        return self._query(self._as_float32_points(points, "points"), 1)
-
-    def is_occupied(self, points: ArrayLike, *, return_unknown: bool = False):
-        """Whether each point lies in an occupied cell.
-
-        A cell is occupied when its probability is at least
-        ``occupancy_threshold``. Unknown cells are reported as not occupied;
-        ask for `return_unknown` to tell them apart from free ones.
-
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-        return_unknown : bool, default=False
-            Also return the mask of points in unknown cells.
-
-        Returns
-        -------
-        occupied : ndarray of bool, shape (n_points,)
-        unknown : ndarray of bool, shape (n_points,)
-            Only when `return_unknown` is True.
-
-        Examples
-        --------
-        >>> m = OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0])
-        >>> occ, unk = m.is_occupied([[1.0, 0, 0], [0.5, 0, 0], [9, 9, 9]], return_unknown=True)
-        >>> occ.tolist(), unk.tolist()
-        ([True, False, False], [False, False, True])
-        """
-        state = self._query(self._as_float32_points(points, "points"), 2)
-        occupied = state == 1
-        return (occupied, state < 0) if return_unknown else occupied
-
     def cast_rays(
         self,
         origins: ArrayLike,
@@ -591,27 +461,6 @@ class OccupancyOctree(_OcTree):
     def _sensor_params(self) -> dict:
         return {k: v for k, v in self._params.items() if k != "resolution"}
 
-    def _as_float32_points(self, x: ArrayLike, name: str) -> np.ndarray:
-        return np.ascontiguousarray(as_points(x, name), dtype=np.float32)
-
-    def _as_float32_origin(self, x: ArrayLike, name: str = "origin") -> np.ndarray:
-        org = np.ascontiguousarray(as_point(x, name), dtype=np.float32)
-        if not self._in_range(org[None]).all():
-            lo, hi = self.key_range
-            raise ValueError(f"{name} {org.tolist()} lies outside the octree's key range "
-                             f"[{lo:g}, {hi:g}) m at resolution {self.resolution:g}")
-        return org
-
-    def _raise_out_of_range(self, name: str, ok: np.ndarray, what: str) -> None:
-        lo, hi = self.key_range
-        bad = int(np.count_nonzero(~ok))
-        raise ValueError(
-            f"{bad} of {len(ok)} {name}{what} lie outside the octree's key range "
-            f"[{lo:g}, {hi:g}) m on some axis at resolution {self.resolution:g} "
-            f"(first: row {int(np.flatnonzero(~ok)[0])}); the map is unchanged"
-        )
-
-
 def _rebuild(cls, params: dict, data: bytes) -> OccupancyOctree:
     """Unpickle: the header stores the resolution with full precision (repr)."""
     return cls.from_bytes(data, **{k: v for k, v in params.items() if k != "resolution"})
@@ -621,16 +470,3 @@ def _check_format(format: str) -> str:
     if format not in fmt.FORMATS:
         raise ValueError(f"format must be one of {fmt.FORMATS}, got {format!r}")
     return format
-
-
-def _check_params(params: dict) -> dict:
-    """Validate the constructor's parameters; return them as floats."""
-    out = dict(params)
-    out["resolution"] = check_real(params["resolution"], "resolution", low=0.0)
-    out["prob_hit"] = check_real(params["prob_hit"], "prob_hit", low=0.5, high=1.0)
-    out["prob_miss"] = check_real(params["prob_miss"], "prob_miss", low=0.0, high=0.5)
-    out["clamping_min"] = check_real(params["clamping_min"], "clamping_min", low=0.0, high=0.5)
-    out["clamping_max"] = check_real(params["clamping_max"], "clamping_max", low=0.5, high=1.0)
-    out["occupancy_threshold"] = check_probability(params["occupancy_threshold"],
-                                                   "occupancy_threshold")
-    return out
