@@ -10,8 +10,9 @@ Datasets, simulated or read in the same run:
   ``--poses`` nearby sensor positions (the points shifted with the sensor).
 
 For every resolution, every method inserts the same scans in order into one
-map, and the table gives frames per second, the mean culling-region time and
-update time per scan (ms), the cells updated per scan, and the speed-up over
+map, and the table gives frames per second, the mean pre-processing time
+(super rays, culling region) and update time per scan (ms), the cells updated
+and the rays traversed per scan, and the speed-up over
 liboctomap's ``insertPointCloud`` (``mode="scan"`` rows) or
 ``insertPointCloudRays`` (``mode="ray"`` rows), both called from C++ on the
 same points. Every occgp method's map is checked to equal the plain method's,
@@ -38,7 +39,8 @@ from occgp import OccupancyOctree  # noqa: E402
 from occgp.datasets import free_path, read_xyz, simulate_scans  # noqa: E402
 
 DATA = ROOT / ".." / "shared" / "data" / "octomap"
-METHODS = [("scan", "plain"), ("scan", "culling"), ("ray", "plain"), ("ray", "culling")]
+METHODS = [(mode, method) for mode in ("scan", "ray")
+           for method in ("plain", "culling", "superray", "superray+culling")]
 
 
 def geb079_trajectory(n_scans, seed=0):
@@ -55,24 +57,27 @@ def scan_dat_poses(n_poses, seed=0):
 
 
 def run_occgp(scans, resolution, mode, method):
-    """Insert the scans in order; return the map, per-scan seconds, region s, cells."""
+    """Insert the scans in order; return the map, per-scan seconds, pre-processing s
+    (super rays and culling region), updated cells and traversed rays per scan."""
     tree = OccupancyOctree(resolution)
-    total, region, cells = [], [], []
+    total, region, cells, rays = [], [], [], []
     for points, origin in scans:
         p32 = np.ascontiguousarray(points, dtype=np.float32)
         o32 = np.ascontiguousarray(origin, dtype=np.float32)
         t0 = time.perf_counter()
         if mode == "scan" and method == "plain":
             tree.insert_scan(points, origin)          # liboctomap's insertPointCloud
-            stats = (-1, 0, 0.0)
+            stats = (-1, 0, 0.0, len(points))
         else:
             # the compiled call insert_scan makes, to read its statistics
             tree._ends_in_range(p32, o32, -1.0)      # the validation insert_scan does
-            stats = tree._insert_batch(p32, o32, -1.0, mode == "ray", method == "culling")
+            stats = tree._insert_batch(p32, o32, -1.0, mode == "ray", method.endswith("culling"),
+                                       None, 20 if method.startswith("superray") else 0)
         total.append(time.perf_counter() - t0)
         region.append(stats[2])
         cells.append(stats[1])
-    return tree, np.array(total), np.array(region), np.array(cells)
+        rays.append(stats[3])
+    return tree, np.array(total), np.array(region), np.array(cells), np.array(rays)
 
 
 def same_map(a, b):
@@ -89,8 +94,8 @@ def bench_dataset(name, scans, resolutions, exe, tmp):
     n_pts = np.mean([len(p) for p, _ in scans])
     print(f"\n== {name}: {len(scans)} scans, {n_pts:,.0f} points per scan ==")
     files = [write_scan_bin(Path(tmp) / f"{name}_{i}.bin", p, o) for i, (p, o) in enumerate(scans)]
-    header = (f"{'res':>5}  {'method':<34}{'FPS':>8}{'region ms':>11}{'update ms':>11}"
-              f"{'cells/scan':>12}{'speed-up':>10}  map")
+    header = (f"{'res':>5}  {'method':<41}{'FPS':>7}{'proc ms':>9}{'update ms':>11}"
+              f"{'cells/scan':>12}{'rays/scan':>11}{'speed-up':>10}  map")
     print(header)
     print("-" * len(header))
     for res in resolutions:
@@ -98,22 +103,22 @@ def bench_dataset(name, scans, resolutions, exe, tmp):
                "ray": time_octomap_sequence(exe, files, res, rays=True)}
         for mode, label in (("scan", "insertPointCloud"), ("ray", "insertPointCloudRays")):
             t = np.sum(ref[mode])
-            print(f"{res:>5.2f}  {'liboctomap ' + label:<34}{len(files) / t:>8.2f}{'':>11}"
-                  f"{1e3 * t / len(files):>11.1f}{'':>12}{1.0:>9.2f}x")
+            print(f"{res:>5.2f}  {'liboctomap ' + label:<41}{len(files) / t:>7.2f}{'':>9}"
+                  f"{1e3 * t / len(files):>11.1f}{'':>12}{n_pts:>11,.0f}{1.0:>9.2f}x")
         plain = {}
         for mode, method in METHODS:
-            tree, total, region, cells = run_occgp(scans, res, mode, method)
+            tree, total, region, cells, rays = run_occgp(scans, res, mode, method)
             if method == "plain":
                 plain[mode] = tree
                 same = "(reference)"
             else:
                 same = "identical" if same_map(tree, plain[mode]) else "DIFFERENT"
             t = total.sum()
-            region_ms = f"{1e3 * region.mean():.1f}" if method == "culling" else ""
+            proc_ms = f"{1e3 * region.mean():.1f}" if method != "plain" else ""
             cell_txt = f"{cells.mean():,.0f}" if cells.any() else ""
-            print(f"{res:>5.2f}  {f'occgp octree mode={mode} {method}':<34}{len(scans) / t:>8.2f}"
-                  f"{region_ms:>11}{1e3 * (t - region.sum()) / len(scans):>11.1f}{cell_txt:>12}"
-                  f"{np.sum(ref[mode]) / t:>9.2f}x  {same}")
+            print(f"{res:>5.2f}  {f'occgp octree mode={mode} {method}':<41}{len(scans) / t:>7.2f}"
+                  f"{proc_ms:>9}{1e3 * (t - region.sum()) / len(scans):>11.1f}{cell_txt:>12}"
+                  f"{rays.mean():>11,.0f}{np.sum(ref[mode]) / t:>9.2f}x  {same}")
 
 
 def main(argv=None):

@@ -17,6 +17,7 @@ cdef extern from "_keytable.h" namespace "occgp" nogil:
         uint64_t key
         uint32_t n_free       # rays passing through the cell
         uint32_t n_hit        # rays ending in the cell
+        uint32_t group        # super rays: 1 + index of the cell's group of end points, or 0
 
     cdef cppclass KeyTable:   # packed key -> KeyCounts, for the cells of one scan
         KeyTable() except +

@@ -17,6 +17,7 @@ struct KeyCounts {
   uint64_t key;
   uint32_t n_free;  // rays passing through the cell
   uint32_t n_hit;   // rays ending in the cell
+  uint32_t group;   // super rays: 1 + the index of the cell's group of end points, or 0
 };
 
 class KeyTable {
@@ -29,7 +30,7 @@ class KeyTable {
   void reset(size_t expected) {
     size_t cap = 16;
     while (cap < 2 * expected) cap <<= 1;
-    slots_.assign(cap, KeyCounts{kEmpty, 0, 0});
+    slots_.assign(cap, KeyCounts{kEmpty, 0, 0, 0});
     mask_ = cap - 1;
     size_ = 0;
   }
@@ -86,7 +87,7 @@ class KeyTable {
   void grow() {
     std::vector<KeyCounts> old;
     old.swap(slots_);
-    slots_.assign(old.size() * 2, KeyCounts{kEmpty, 0, 0});
+    slots_.assign(old.size() * 2, KeyCounts{kEmpty, 0, 0, 0});
     mask_ = slots_.size() - 1;
     for (const KeyCounts& s : old) {
       if (s.key == kEmpty) continue;

@@ -10,12 +10,14 @@ a per-tree lock serialises the operations on one tree.
 
 cimport cython
 from cython.operator cimport dereference as deref, preincrement as inc
-from libc.math cimport floor, isfinite
+from libc.math cimport fabs, floor, fmax, fmin, isfinite, ldexp, sqrt
 from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
 from libc.string cimport memcpy
 from libcpp cimport bool
 from libcpp.memory cimport unique_ptr
+from libcpp.algorithm cimport sort
 from libcpp.string cimport string
+from libcpp.utility cimport pair
 from libcpp.vector cimport vector
 
 from _keys cimport (
@@ -34,6 +36,9 @@ from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 import threading
 
 import numpy as np
+
+cdef extern from *:
+    int _clz64 "__builtin_clzll"(unsigned long long x) nogil
 
 cdef enum:
     _MAX_REGION_CELLS = 1 << 28   # larger scan key boxes are not culled (2 x 32 MB of bits)
@@ -133,7 +138,7 @@ cdef class _OcTree:
 
     def _insert_batch(self, const float[:, ::1] points, const float[::1] origin,
                       double max_range, bint ray_mode, bint culling,
-                      const uint32_t[::1] weights=None):
+                      const uint32_t[::1] weights=None, int superray_threshold=0):
         """Insert a scan through occgp's own key table, optionally culled.
 
         Every ray is traversed by liboctomap's ``computeRayKeys``; the cells are
@@ -143,16 +148,23 @@ cdef class _OcTree:
         ``n_free*l_miss + n_hit*l_hit``. With `culling`, the cells of the
         scan's culling region (see :func:`_build_region`) are skipped: they are
         at the lower clamp and hold no end point, so their update is a no-op.
-        With `weights` (ray mode), ray i counts ``weights[i]`` times.
+        With `weights` (ray mode), ray i counts ``weights[i]`` times. With
+        `superray_threshold` > 0, the rays are first grouped into super rays
+        (see :func:`_super_rays`) and one ray per class is traversed.
 
-        Returns (region_cells, updated_cells, region_seconds); region_cells is
-        -1 when culling was off or the scan's key box was too large to cull.
+        Returns (region_cells, updated_cells, preprocessing_seconds,
+        traversed_rays); region_cells is -1 when culling was off or the scan's
+        key box was too large to cull.
         """
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t i, n = points.shape[0]
         cdef bint weighted = weights is not None
         if weighted and weights.shape[0] != n:
             raise ValueError(f"weights must have length {n}, got {weights.shape[0]}")
+        if weighted and superray_threshold > 0:
+            raise ValueError("weights and super rays do not combine")
+        cdef vector[uint32_t] ray_ids, ray_weights     # the rays to traverse, super rays
+        cdef Py_ssize_t r, n_trav = n
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
         cdef vector[point3d] ends
         cdef vector[uint8_t] truncated
@@ -200,20 +212,29 @@ cdef class _OcTree:
                     if not truncated[i]:
                         entry = table.get(_pack(key))
                         entry.n_hit += weights[i] if weighted else 1
+                clock_gettime(CLOCK_MONOTONIC, &t0)
+                if superray_threshold > 0:
+                    _super_rays(tree, o, ko, ends, truncated, table, superray_threshold,
+                                ray_ids, ray_weights)
+                    n_trav = ray_ids.size()
                 if culling:
-                    clock_gettime(CLOCK_MONOTONIC, &t0)
                     region_cells = _build_region(tree, ko, lo, hi, max_level, table, region)
-                    clock_gettime(CLOCK_MONOTONIC, &t1)
-                    seconds = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec)
+                clock_gettime(CLOCK_MONOTONIC, &t1)
+                seconds = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec)
                 for axis in range(3):
                     dims[axis] = <uint64_t>(hi[axis] - lo[axis] + 1)
                     box_cells *= dims[axis]
                 dense = box_cells <= _MAX_DENSE_CELLS
                 if dense:
                     free_counts.assign(box_cells, 0)
-                for i in range(n):
-                    if weighted:
-                        w = weights[i]
+                for r in range(n_trav):
+                    if superray_threshold > 0:
+                        i = ray_ids[r]
+                        w = ray_weights[r]
+                    else:
+                        i = r
+                        if weighted:
+                            w = weights[i]
                     if not tree.computeRayKeys(o, ends[i], ray):
                         continue
                     it = ray.begin()
@@ -225,10 +246,16 @@ cdef class _OcTree:
                             inc(it)
                     if dense:
                         while it != stop:
-                            idx = _box_index(deref(it), lo, dims)
-                            if free_counts[idx] == 0:
-                                touched.push_back(idx)
-                            free_counts[idx] += w
+                            # liboctomap's traversal may step past the end cell before
+                            # its length test stops it: such cells go to the table
+                            if _in_box(deref(it), lo, dims):
+                                idx = _box_index(deref(it), lo, dims)
+                                if free_counts[idx] == 0:
+                                    touched.push_back(idx)
+                                free_counts[idx] += w
+                            else:
+                                entry = table.get(_pack(deref(it)))
+                                entry.n_free += w
                             inc(it)
                     else:
                         while it != stop:
@@ -249,13 +276,13 @@ cdef class _OcTree:
                     key = _unpack(table.slot(slot).key)
                     n_free = table.slot(slot).n_free
                     n_hit = table.slot(slot).n_hit
-                    if dense:
+                    if dense and _in_box(key, lo, dims):
                         if free_counts[_box_index(key, lo, dims)]:
                             continue        # updated above
                         n_free = 0
                     _update(tree, key, n_free, n_hit, ray_mode, l_hit, l_miss)
                     updated += 1
-        return region_cells, updated, seconds
+        return region_cells, updated, seconds, n_trav
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):
@@ -445,6 +472,13 @@ cdef class _OcTree:
             raise ValueError("liboctomap could not read the tree data")
 
 
+cdef inline bint _in_box(const OcTreeKey& key, const int* lo,
+                         const uint64_t* dims) noexcept nogil:
+    return (<uint64_t>(<int>key[0] - lo[0]) < dims[0]
+            and <uint64_t>(<int>key[1] - lo[1]) < dims[1]
+            and <uint64_t>(<int>key[2] - lo[2]) < dims[2])
+
+
 cdef inline uint64_t _box_index(const OcTreeKey& key, const int* lo,
                                 const uint64_t* dims) noexcept nogil:
     return ((<uint64_t>(key[2] - lo[2]) * dims[1] + <uint64_t>(key[1] - lo[1])) * dims[0]
@@ -467,6 +501,198 @@ cdef inline int _update(OcTree* tree, const OcTreeKey& key, uint32_t n_free, uin
         tree.updateNode(key, <float>(n_free * <double>l_miss + n_hit * <double>l_hit), False)
     else:
         tree.updateNode(key, l_hit if n_hit else l_miss, False)
+    return 0
+
+
+cdef struct Crossing:
+    int axis          # the axis whose border the rays of a group cross
+    int other         # the coordinate read at that border
+    double border     # the border's position on `axis`, in metres
+    int key_lo        # lowest key `other` may have there
+    int n_keys        # how many keys `other` may have there
+
+
+cdef int _super_rays(OcTree* tree, const point3d& o, const OcTreeKey& ko,
+                     vector[point3d]& ends, const vector[uint8_t]& truncated,
+                     KeyTable& table, int threshold, vector[uint32_t]& rays,
+                     vector[uint32_t]& weights) except -1 nogil:
+    """Group the rays of a scan into super rays (Kwon, dissertation §2.3.1-2.3.4).
+
+    Fills `rays` (indices of the rays to traverse) and `weights` (how many rays
+    each stands for). Rays ending in a cell that holds at least `threshold` end
+    points are classified by their *signature*: at every border a ray crosses
+    between the origin's cell and its end cell, the keys of the other
+    coordinates there; only the crossings where the rays into that end cell can
+    differ ("critical", the mapping lines) are evaluated. Equal signatures mean
+    the same traversed cells, so one ray of each class is traversed with the
+    class size as weight.
+
+    Exactness against liboctomap's float traversal: a ray joins a class only
+    when it is *certified* -- at every crossing (critical or not) the other
+    coordinate, and its end point in its cell, clear the nearest cell border by
+    more than a margin several times the error of liboctomap's
+    single-precision ray arithmetic: 2^-19 (length + resolution) for its float
+    direction, plus 2^-21 resolution times the slope |d_b / d_a| for the
+    single-precision half-cell offset of its borders. Its float traversal then
+    equals the exact one. Every other ray is traversed on its own. (A border
+    through the origin is crossed first, at t = 0, by every ray heading that
+    way; the margins of that crossing certify it like any other.)
+    """
+    cdef double res = tree.getResolution(), rf = 1.0 / res
+    cdef double oc[3]
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef double pc[3]
+    cdef Py_ssize_t n = ends.size(), i, j, g, m, first
+    cdef uint32_t n_groups = 0, idx
+    cdef vector[uint32_t] group_of, offsets, order
+    cdef vector[Crossing] crossings
+    cdef vector[pair[uint64_t, uint32_t]] signed_rays
+    cdef Crossing c
+    cdef OcTreeKey key, kv
+    cdef KeyCounts* entry
+    cdef int a, b, step, code_bits, nk, d_a
+    cdef long jj
+    cdef double delta, eb, r, r_min, r_max, r_abs, s, b1, b2, t, y, kb, border, slack
+    cdef double far2
+    cdef uint64_t code
+    cdef bint ok
+    oc[0] = o.x()
+    oc[1] = o.y()
+    oc[2] = o.z()
+    eb = ldexp(res, -21)          # 4 x the single-precision offset of liboctomap's borders
+    # groups of rays by end cell, for the cells with at least `threshold` end points
+    group_of.assign(n, 0)
+    for i in range(n):
+        if truncated[i]:
+            continue
+        tree.coordToKeyChecked(ends[i], key)
+        entry = table.find(_pack(key))
+        if entry == NULL or entry.n_hit < <uint32_t>threshold:
+            continue
+        if entry.group == 0:
+            n_groups += 1
+            entry.group = n_groups
+        group_of[i] = entry.group
+    offsets.assign(n_groups + 2, 0)
+    for i in range(n):
+        if group_of[i]:
+            offsets[group_of[i] + 1] += 1
+        else:
+            rays.push_back(<uint32_t>i)
+            weights.push_back(1)
+    for g in range(1, n_groups + 2):
+        offsets[g] += offsets[g - 1]
+    order.resize(offsets[n_groups + 1])
+    for i in range(n):
+        if group_of[i]:
+            order[offsets[group_of[i]]] = <uint32_t>i
+            offsets[group_of[i]] += 1
+    # offsets[g] now ends group g (1-based), i.e. starts group g + 1
+    for g in range(1, n_groups + 1):
+        first = offsets[g - 1]
+        tree.coordToKeyChecked(ends[order[first]], kv)
+        far2 = 0
+        for a in range(3):
+            lo[a] = (<double>kv[a] - _MAX_VAL) * res
+            hi[a] = lo[a] + res
+            far2 += fmax((lo[a] - oc[a]) ** 2, (hi[a] - oc[a]) ** 2)
+        # 2^-19 (length + res): 4 x the error of liboctomap's float32 ray direction
+        delta = ldexp(sqrt(far2) + res, -19)
+        ok = True
+        crossings.clear()
+        code_bits = 0
+        a = 0
+        while ok and a < 3:
+            d_a = <int>kv[a] - <int>ko[a]
+            if d_a != 0:
+                step = 1 if d_a > 0 else -1
+                for b in range(a + 1, 3):
+                    if kv[b] == ko[b]:
+                        continue     # the rays stay in one b-slab: the end margins certify it
+                    # the slopes d_b / d_a of the rays into the end cell: extreme at corners
+                    r_min = 1e300
+                    r_max = -1e300
+                    for i in range(4):
+                        s = (hi[a] if i & 1 else lo[a]) - oc[a]
+                        if s == 0:
+                            continue   # the origin on the end cell's face: only X_1, at t = 0
+                        r = ((hi[b] if i & 2 else lo[b]) - oc[b]) / s
+                        r_min = fmin(r_min, r)
+                        r_max = fmax(r_max, r)
+                    slack = delta + eb * fmax(fabs(r_min), fabs(r_max))
+                    for jj in range(1, abs(d_a) + 1):
+                        border = (<double>(<int>ko[a] + (jj if step > 0 else 1 - jj))
+                                  - _MAX_VAL) * res
+                        s = border - oc[a]
+                        if s == 0:         # crossed at the origin by every ray
+                            b1 = b2 = oc[b]
+                        elif r_min > r_max:
+                            ok = False     # degenerate end cell: leave the group plain
+                            break
+                        else:
+                            b1 = oc[b] + s * r_min
+                            b2 = oc[b] + s * r_max
+                        c.key_lo = <int>floor((fmin(b1, b2) - slack) * rf)
+                        nk = <int>floor((fmax(b1, b2) + slack) * rf) - c.key_lo + 1
+                        if nk == 1:
+                            continue     # every ray of the group has the same key here
+                        code_bits += 64 - _clz64(<uint64_t>(nk - 1))
+                        if code_bits > 62:
+                            ok = False
+                            break
+                        c.axis = a
+                        c.other = b
+                        c.border = border
+                        c.n_keys = nk
+                        crossings.push_back(c)
+                    if not ok:
+                        break
+            a += 1
+        if not ok:
+            for m in range(first, offsets[g]):
+                rays.push_back(order[m])
+                weights.push_back(1)
+            continue
+        signed_rays.clear()
+        for m in range(first, offsets[g]):
+            idx = order[m]
+            pc[0] = ends[idx].x()
+            pc[1] = ends[idx].y()
+            pc[2] = ends[idx].z()
+            ok = True
+            for a in range(3):
+                if fmin(pc[a] - lo[a], hi[a] - pc[a]) <= delta:
+                    ok = False
+            code = 0
+            j = 0
+            while ok and j < <Py_ssize_t>crossings.size():
+                c = crossings[j]
+                r_abs = fabs((pc[c.other] - oc[c.other]) / (pc[c.axis] - oc[c.axis]))
+                t = (c.border - oc[c.axis]) / (pc[c.axis] - oc[c.axis])
+                y = oc[c.other] + t * (pc[c.other] - oc[c.other])
+                kb = floor(y * rf)
+                if (fmin(y - kb * res, (kb + 1) * res - y) <= delta + eb * r_abs
+                        or kb < c.key_lo or kb >= c.key_lo + c.n_keys):
+                    ok = False
+                else:
+                    code = code * <uint64_t>c.n_keys + <uint64_t>(<int>kb - c.key_lo)
+                j += 1
+            if ok:
+                signed_rays.push_back(pair[uint64_t, uint32_t](code, idx))
+            else:
+                rays.push_back(idx)
+                weights.push_back(1)
+        sort(signed_rays.begin(), signed_rays.end())
+        m = 0
+        while m < <Py_ssize_t>signed_rays.size():
+            j = m
+            while (j < <Py_ssize_t>signed_rays.size()
+                   and signed_rays[j].first == signed_rays[m].first):
+                j += 1
+            rays.push_back(signed_rays[m].second)
+            weights.push_back(<uint32_t>(j - m))
+            m = j
     return 0
 
 

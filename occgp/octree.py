@@ -14,7 +14,7 @@ from ._validation import check_real
 
 __all__ = ["OccupancyOctree", "Leaves"]
 
-METHODS = ("plain", "culling")
+METHODS = ("plain", "culling", "superray", "superray+culling")
 
 
 class OccupancyOctree(LogOddsMap, _OcTree):
@@ -99,6 +99,7 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         max_range: float | None = None,
         mode: str = "scan",
         method: str = "plain",
+        superray_threshold: int = 20,
         discretize: bool = False,
     ) -> "OccupancyOctree":
         """Integrate one range scan into the map.
@@ -125,17 +126,28 @@ class OccupancyOctree(LogOddsMap, _OcTree):
             each cell gets ``n_free * l_miss + n_hit * l_hit`` (``n`` = how many
             rays pass through / end in it) and is clamped once, whatever the
             order of the rays.
-        method : {"plain", "culling"}, default="plain"
+        method : {"plain", "culling", "superray", "superray+culling"}, default="plain"
             How the rays are traversed; every method gives the same map, bit for
             bit. ``"plain"`` traverses every ray in full (with ``mode="scan"``
-            it is liboctomap's ``insertPointCloud`` itself). ``"culling"``
+            it is liboctomap's ``insertPointCloud`` itself). ``"superray"``
+            groups the rays that end in a cell holding at least
+            `superray_threshold` end points into *super rays* [1]_: rays whose
+            crossings of the cell borders on the way (the mapping lines) give
+            the same keys traverse the same cells, so one of them is traversed
+            and counted for all. A ray joins a super ray only when its margins
+            to every border exceed the error bound of liboctomap's
+            single-precision traversal, which keeps the map identical; other
+            rays are traversed on their own. ``"culling"``
             first grows the scan's *culling region* [1]_: the cells around the
             sensor that are fully free (at the lower clamp), hold no end point
             of the scan, and are reached from the sensor through such cells
             only. A ray's cells in the region form a prefix of its traversal
             and their updates would change nothing, so they are skipped. It
             pays off once the map has saturated free space, e.g. along a
-            trajectory.
+            trajectory. ``"superray+culling"`` does both.
+        superray_threshold : int, default=20
+            With the super-ray methods, the fewest end points a cell must hold
+            for its rays to be grouped; at least 1.
         discretize : bool, default=False
             Only with ``mode="scan"``: cast one ray per distinct end cell, to its
             centre (liboctomap's ``discretize``), which is faster for dense scans.
@@ -158,7 +170,8 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         References
         ----------
         .. [1] Y. Kwon, "Real-time dense occupancy mapping using spatial
-           correlation of point clouds", dissertation, KAIST, 2022, §2.3.5.
+           correlation of point clouds", dissertation, KAIST, 2022, ch. 2
+           (super rays §2.3.1-2.3.4 and appendix; culling region §2.3.5).
 
         Examples
         --------
@@ -168,6 +181,12 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         """
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        if isinstance(superray_threshold, (bool, np.bool_)) or not isinstance(
+                superray_threshold, (int, np.integer)):
+            raise TypeError(f"superray_threshold must be an int, "
+                            f"got {type(superray_threshold).__name__}")
+        if superray_threshold < 1:
+            raise ValueError(f"superray_threshold must be >= 1, got {superray_threshold}")
         if not isinstance(discretize, (bool, np.bool_)):
             raise TypeError(f"discretize must be a bool, got {type(discretize).__name__}")
         if discretize and (mode != "scan" or method != "plain"):
@@ -179,7 +198,8 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         if mode == "scan" and method == "plain":
             self._insert_point_cloud(pts, org, rng, bool(discretize))
         else:
-            self._insert_batch(pts, org, rng, mode == "ray", method == "culling")
+            self._insert_batch(pts, org, rng, mode == "ray", method.endswith("culling"), None,
+                               int(superray_threshold) if method.startswith("superray") else 0)
         return self
 
     # ------------------------------------------------------------------ queries

@@ -95,5 +95,21 @@ def test_culling_rejects_discretize():
     with pytest.raises(ValueError, match="discretize=True is only defined"):
         OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="culling",
                                          discretize=True)
-    with pytest.raises(ValueError, match=r"method must be one of \('plain', 'culling'\)"):
+    with pytest.raises(ValueError, match=r"method must be one of \('plain', 'culling', "):
         OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="fast")
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_batch_update_with_end_points_on_cell_corners(seed):
+    """End points on corners: liboctomap's traversal can step past the end cell."""
+    rng = np.random.default_rng(seed)
+    res = 0.2
+    origin = np.round(rng.uniform(-1, 1, 3) / res) * res          # origin on a corner too
+    points = np.round(rng.uniform(-3, 3, (2000, 3)) / res) * res
+    points[::3] += rng.uniform(0, res, (len(points[::3]), 3)) * (rng.uniform(size=3) < 0.5)
+    for mode in ("scan", "ray"):
+        plain = build([(points, origin)] * 3, res, mode=mode)
+        for method in ("culling", "superray", "superray+culling"):
+            got = build([(points, origin)] * 3, res, mode=mode, method=method,
+                        superray_threshold=2)
+            assert_same_leaves(got, plain)

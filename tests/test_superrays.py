@@ -1,0 +1,135 @@
+"""Super rays: every method gives the plain method's map, leaf for leaf.
+
+Super rays group rays by the keys of their border crossings, and only rays
+whose margins clear liboctomap's single-precision error bound are grouped; the
+tests aim at the places where that could go wrong: origins and end points on
+cell borders, edges and corners, rays along an axis, repeated points, end cells
+next to the origin's cell, and scans revisiting saturated space.
+"""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from occgp import OccupancyOctree
+from test_octree import assert_same_leaves
+
+METHODS = ["superray", "superray+culling"]
+
+
+def clustered_scan(rng, origin, resolution, n_clusters=25, per_cluster=40, spread=3.0):
+    """Dense clusters of end points, each inside one cell at a random distance."""
+    centers = origin + rng.normal(size=(n_clusters, 3)) * spread
+    cells = np.floor(centers / resolution)
+    pts = (cells[:, None, :] + rng.uniform(0, 1, (n_clusters, per_cluster, 3))) * resolution
+    return pts.reshape(-1, 3)
+
+
+def build(scans, resolution, **kwargs):
+    m = OccupancyOctree(resolution)
+    for points, origin in scans:
+        m.insert_scan(points, origin, **kwargs)
+    return m
+
+
+def check_all_methods(scans, resolution, threshold=5, max_range=None):
+    for mode in ("scan", "ray"):
+        plain = build(scans, resolution, mode=mode, max_range=max_range)
+        for method in METHODS:
+            got = build(scans, resolution, mode=mode, method=method, max_range=max_range,
+                        superray_threshold=threshold)
+            assert_same_leaves(got, plain)
+
+
+@pytest.mark.parametrize("resolution", [0.1, 0.2, 0.4])
+def test_superrays_equal_plain_on_dense_clusters(resolution):
+    rng = np.random.default_rng(0)
+    origin = np.array([0.33, -0.21, 0.57])
+    scans = [(clustered_scan(rng, origin, resolution), origin) for _ in range(2)]
+    scans.append(scans[0])
+    check_all_methods(scans, resolution)
+
+
+def test_superrays_group_rays():
+    rng = np.random.default_rng(1)
+    origin = np.array([0.33, -0.21, 0.57], dtype=np.float32)
+    points = clustered_scan(rng, origin, 0.4, spread=1.5).astype(np.float32)
+    m = OccupancyOctree(0.4)
+    stats = m._insert_batch(points, origin, -1.0, False, False, None, 5)
+    assert stats[3] < len(points) / 3            # rays traversed
+    plain = OccupancyOctree(0.4)
+    assert plain._insert_batch(points, origin, -1.0, False, False)[3] == len(points)
+
+
+@pytest.mark.parametrize("origin", [
+    [0.2, 0.2, 0.2],            # a corner of four cells' borders
+    [0.2, 0.33, 0.57],          # on an x border
+    [0.2, 0.4, 0.57],           # on an edge
+    [0.31, 0.17, 0.0],          # on the z = 0 border
+])
+def test_origin_on_borders(origin):
+    rng = np.random.default_rng(2)
+    origin = np.array(origin)
+    scans = [(clustered_scan(rng, origin, 0.2, spread=1.0), origin) for _ in range(2)]
+    check_all_methods(scans, 0.2)
+
+
+def test_end_points_on_borders_axis_rays_and_repeats():
+    res = 0.2
+    origin = np.array([0.1, 0.1, 0.1])                         # a cell centre
+    rng = np.random.default_rng(3)
+    k = rng.integers(-8, 8, (300, 3))
+    on_borders = k * res                                        # cell corners
+    on_faces = (k + rng.uniform(0, 1, (300, 3)) * [1, 0, 1]) * res   # y on a border
+    axis = origin + np.column_stack([np.linspace(-2, 2, 200), np.zeros(200), np.zeros(200)])
+    near = origin + rng.uniform(-0.3, 0.3, (200, 3))           # cells next to the origin's
+    repeats = np.repeat(on_faces[:10], 30, axis=0)
+    points = np.vstack([on_borders, on_faces, axis, near, repeats])
+    check_all_methods([(points, origin), (points[::-1], origin)], res, threshold=1)
+
+
+def test_max_range_with_superrays():
+    rng = np.random.default_rng(4)
+    origin = np.array([0.05, 0.05, 0.05])
+    scans = [(clustered_scan(rng, origin, 0.2), origin)] * 2
+    check_all_methods(scans, 0.2, max_range=2.0)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    resolution=st.sampled_from([0.05, 0.1, 0.2, 0.25, 0.5, 1.0]),
+    origin_kind=st.sampled_from(["random", "centre", "border", "corner"]),
+    snap=st.sampled_from([0.0, 0.5, 1.0]),
+    threshold=st.integers(1, 8),
+    seed=st.integers(0, 2**31 - 1),
+)
+def test_superrays_property(resolution, origin_kind, snap, threshold, seed):
+    """Random clouds, origins and resolutions: super rays never change the map."""
+    rng = np.random.default_rng(seed)
+    o = rng.uniform(-2, 2, 3)
+    if origin_kind == "centre":
+        o = (np.floor(o / resolution) + 0.5) * resolution
+    elif origin_kind == "border":
+        o[rng.integers(3)] = np.round(o[0] / resolution) * resolution
+    elif origin_kind == "corner":
+        o = np.round(o / resolution) * resolution
+    points = clustered_scan(rng, o, resolution, n_clusters=12, per_cluster=20,
+                            spread=8 * resolution)
+    # snap a share of the coordinates to cell borders
+    mask = rng.uniform(size=points.shape) < snap * 0.3
+    points[mask] = np.round(points[mask] / resolution) * resolution
+    scans = [(points, o), (points[rng.permutation(len(points))], o)]
+    check_all_methods(scans, resolution, threshold=threshold)
+
+
+@pytest.mark.parametrize("bad, err, match", [
+    (0, ValueError, "superray_threshold must be >= 1, got 0"),
+    (-3, ValueError, "superray_threshold must be >= 1"),
+    (2.5, TypeError, "superray_threshold must be an int, got float"),
+    (True, TypeError, "superray_threshold must be an int, got bool"),
+])
+def test_superray_threshold_is_checked(bad, err, match):
+    with pytest.raises(err, match=match):
+        OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="superray",
+                                         superray_threshold=bad)
