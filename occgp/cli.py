@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from .grid import GridMap
 from .octree import OccupancyOctree
 
 __all__ = ["main", "demo", "map_scans"]
@@ -22,11 +23,20 @@ class _RayModeOctree(OccupancyOctree):
         return super().insert_scan(points, origin, mode="ray", **kwargs)
 
 
+class _RayModeGrid(GridMap):
+    """A grid whose scans go in with per-ray counting (``mode="ray"``)."""
+
+    def insert_scan(self, points, origin, **kwargs):
+        return super().insert_scan(points, origin, mode="ray", **kwargs)
+
+
 def mapping_methods(resolution: float) -> dict:
     """Every mapping method occgp has, as name → factory of an empty map."""
     return {
         "octree (scan)": lambda: OccupancyOctree(resolution),
         "octree (ray)": lambda: _RayModeOctree(resolution),
+        "grid (scan)": lambda: GridMap(resolution),
+        "grid (ray)": lambda: _RayModeGrid(resolution),
     }
 
 

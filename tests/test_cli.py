@@ -15,7 +15,11 @@ def test_demo_prints_table_and_writes_files(tmp_path):
     rows = demo(tmp_path, resolution=0.2, progress=False, out=out)
     text = out.getvalue()
     assert "octree (scan)" in text and "octree (ray)" in text and "AUC" in text
-    assert {r.method for r in rows} == {"octree (scan)", "octree (ray)"}
+    assert {r.method for r in rows} == {"octree (scan)", "octree (ray)", "grid (scan)",
+                                        "grid (ray)"}
+    by_name = {r.method: r for r in rows}   # the grid is the octree cell for cell
+    assert by_name["grid (scan)"].auc == by_name["octree (scan)"].auc
+    assert by_name["grid (ray)"].mse == by_name["octree (ray)"].mse
     assert all(0.5 < r.auc <= 1 and r.seconds > 0 for r in rows)
     for name in ("map.bt", "slice.png", "roc.png"):
         assert (tmp_path / name).stat().st_size > 1000
