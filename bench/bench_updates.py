@@ -57,27 +57,19 @@ def scan_dat_poses(n_poses, seed=0):
 
 
 def run_occgp(scans, resolution, mode, method):
-    """Insert the scans in order; return the map, per-scan seconds, pre-processing s
-    (super rays and culling region), updated cells and traversed rays per scan."""
+    """Insert the scans in order with ``insert_scan``; return the map, per-scan seconds,
+    pre-processing seconds (super rays, culling region), updated cells and traversed rays."""
     tree = OccupancyOctree(resolution)
-    total, region, cells, rays = [], [], [], []
+    total, proc, cells, rays = [], [], [], []
     for points, origin in scans:
-        p32 = np.ascontiguousarray(points, dtype=np.float32)
-        o32 = np.ascontiguousarray(origin, dtype=np.float32)
         t0 = time.perf_counter()
-        if mode == "scan" and method == "plain":
-            tree.insert_scan(points, origin)          # liboctomap's insertPointCloud
-            stats = (-1, 0, 0.0, len(points))
-        else:
-            # the compiled call insert_scan makes, to read its statistics
-            tree._ends_in_range(p32, o32, -1.0)      # the validation insert_scan does
-            stats = tree._insert_batch(p32, o32, -1.0, mode == "ray", method.endswith("culling"),
-                                       None, 20 if method.startswith("superray") else 0)
+        tree.insert_scan(points, origin, mode=mode, method=method)
         total.append(time.perf_counter() - t0)
-        region.append(stats[2])
-        cells.append(stats[1])
-        rays.append(stats[3])
-    return tree, np.array(total), np.array(region), np.array(cells), np.array(rays)
+        stats = tree.last_insert_
+        proc.append(stats.get("preprocessing_seconds", 0.0))
+        cells.append(stats.get("updated_cells", 0))
+        rays.append(stats["rays"])
+    return tree, np.array(total), np.array(proc), np.array(cells), np.array(rays)
 
 
 def same_map(a, b):

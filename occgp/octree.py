@@ -56,6 +56,11 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         Number of nodes, inner ones included.
     bounds : tuple of ndarray of shape (3,)
         Minimum and maximum corner of the known space (NaN when empty).
+    last_insert_ : dict
+        Statistics of the last :meth:`insert_scan`: ``rays`` traversed (super
+        rays count once), and, for the methods occgp implements itself,
+        ``updated_cells``, ``region_cells`` (-1 without culling) and
+        ``preprocessing_seconds`` (super rays and culling region).
 
     See Also
     --------
@@ -197,9 +202,13 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         pts, org, rng = scan
         if mode == "scan" and method == "plain":
             self._insert_point_cloud(pts, org, rng, bool(discretize))
+            self.last_insert_ = {"rays": len(pts)}
         else:
-            self._insert_batch(pts, org, rng, mode == "ray", method.endswith("culling"), None,
-                               int(superray_threshold) if method.startswith("superray") else 0)
+            region, cells, seconds, rays = self._insert_batch(
+                pts, org, rng, mode == "ray", method.endswith("culling"), None,
+                int(superray_threshold) if method.startswith("superray") else 0)
+            self.last_insert_ = {"rays": rays, "updated_cells": cells,
+                                 "region_cells": region, "preprocessing_seconds": seconds}
         return self
 
     # ------------------------------------------------------------------ queries

@@ -133,3 +133,15 @@ def test_superray_threshold_is_checked(bad, err, match):
     with pytest.raises(err, match=match):
         OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="superray",
                                          superray_threshold=bad)
+
+
+def test_last_insert_statistics():
+    rng = np.random.default_rng(5)
+    origin = np.array([0.33, -0.21, 0.57])
+    points = clustered_scan(rng, origin, 0.4, spread=1.5)
+    m = OccupancyOctree(0.4).insert_scan(points, origin)
+    assert m.last_insert_ == {"rays": len(points)}
+    m.insert_scan(points, origin, method="superray+culling", superray_threshold=5)
+    stats = m.last_insert_
+    assert stats["rays"] < len(points) and stats["updated_cells"] > 0
+    assert stats["region_cells"] >= 0 and stats["preprocessing_seconds"] >= 0
