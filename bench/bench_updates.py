@@ -23,9 +23,11 @@ Run: ``python bench/bench_updates.py [--scans 20] [--resolutions 0.1 0.2 ...]``.
 """
 
 import argparse
+import multiprocessing
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -54,6 +56,15 @@ def scan_dat_poses(n_poses, seed=0):
     rng = np.random.default_rng(seed)
     shifts = np.vstack([np.zeros(3), rng.uniform(-0.5, 0.5, (n_poses - 1, 3)) * [1, 1, 0.2]])
     return [(scan.points + s, scan.origin + s) for s in shifts]
+
+
+def run_fresh(scans, resolution, mode, method):
+    """:func:`run_occgp` in a new process, as the C++ reference runs: a long-lived
+    process's fragmented heap slows liboctomap's node allocations, which would blur
+    the comparison."""
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
+        return pool.submit(run_occgp, scans, resolution, mode, method).result()
 
 
 def run_occgp(scans, resolution, mode, method):
@@ -99,7 +110,7 @@ def bench_dataset(name, scans, resolutions, exe, tmp):
                   f"{1e3 * t / len(files):>11.1f}{'':>12}{n_pts:>11,.0f}{1.0:>9.2f}x")
         plain = {}
         for mode, method in METHODS:
-            tree, total, region, cells, rays = run_occgp(scans, res, mode, method)
+            tree, total, region, cells, rays = run_fresh(scans, res, mode, method)
             if method == "plain":
                 plain[mode] = tree
                 same = "(reference)"
