@@ -202,7 +202,7 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         pts, org, rng = scan
         if mode == "scan" and method == "plain":
             self._insert_point_cloud(pts, org, rng, bool(discretize))
-            self.last_insert_ = {"rays": len(pts)}
+            self.last_insert_: dict[str, float] = {"rays": len(pts)}
         else:
             region, cells, seconds, rays = self._insert_batch(
                 pts, org, rng, mode == "ray", method.endswith("culling"), None,
