@@ -27,7 +27,8 @@ from libcpp.vector cimport vector
 
 from liboctomap cimport KeyRay, OcTree, OcTreeKey, point3d
 from _keys cimport (
-    KEY_DEPTH, KEY_EMPTY, KeyTable, effective_end, in_key_range, pack_key, unpack_key,
+    KEY_DEPTH, KEY_EMPTY, KeyTable, effective_end, mark_ends_in_range, mark_in_range, pack_key,
+    unpack_key,
 )
 
 import threading
@@ -86,30 +87,21 @@ cdef class _Grid:
     def _in_range(self, const float[:, ::1] points):
         """Boolean mask: which rows of `points` have a valid key on every axis."""
         cdef double rf = 1.0 / self._get().getResolution()
-        cdef Py_ssize_t i, n = points.shape[0]
-        out = np.empty(n, dtype=np.bool_)
+        out = np.empty(points.shape[0], dtype=np.bool_)
         cdef uint8_t[::1] ok = out.view(np.uint8)
         with nogil:
-            for i in range(n):
-                ok[i] = (in_key_range(rf, points[i, 0]) and in_key_range(rf, points[i, 1])
-                         and in_key_range(rf, points[i, 2]))
+            mark_in_range(rf, points, ok)
         return out
 
     def _ends_in_range(self, const float[:, ::1] points, const float[::1] origin,
                        double max_range):
         """Like :meth:`_in_range` for the ray ends after truncation at `max_range` (< 0: none)."""
         cdef double rf = 1.0 / self._get().getResolution()
-        cdef Py_ssize_t i, n = points.shape[0]
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
-        cdef point3d end
-        out = np.empty(n, dtype=np.bool_)
+        out = np.empty(points.shape[0], dtype=np.bool_)
         cdef uint8_t[::1] ok = out.view(np.uint8)
         with nogil:
-            for i in range(n):
-                effective_end(o, point3d(points[i, 0], points[i, 1], points[i, 2]),
-                              max_range, &end)
-                ok[i] = (in_key_range(rf, end.x()) and in_key_range(rf, end.y())
-                         and in_key_range(rf, end.z()))
+            mark_ends_in_range(rf, points, o, max_range, ok)
         return out
 
     # ------------------------------------------------------------------ updates

@@ -7,7 +7,7 @@ liboctomap's, so every map that uses it finds the same cells as its ``OcTree``.
 """
 
 from libc.math cimport floor
-from libc.stdint cimport uint32_t, uint64_t
+from libc.stdint cimport uint8_t, uint32_t, uint64_t
 
 from liboctomap cimport OcTreeKey, key_type, point3d
 
@@ -72,3 +72,27 @@ cdef inline bint effective_end(const point3d& origin, const point3d& point, doub
         return False
     end[0] = origin + direction.normalized() * <float>max_range
     return True
+
+
+cdef inline void mark_in_range(double resolution_factor, const float[:, ::1] points,
+                               uint8_t[::1] ok) noexcept nogil:
+    """ok[i] = whether row i of `points` has a valid key on every axis."""
+    cdef Py_ssize_t i
+    for i in range(points.shape[0]):
+        ok[i] = (in_key_range(resolution_factor, points[i, 0])
+                 and in_key_range(resolution_factor, points[i, 1])
+                 and in_key_range(resolution_factor, points[i, 2]))
+
+
+cdef inline void mark_ends_in_range(double resolution_factor, const float[:, ::1] points,
+                                    const point3d& origin, double max_range,
+                                    uint8_t[::1] ok) noexcept nogil:
+    """Like :func:`mark_in_range` for the ray ends after truncation at `max_range`."""
+    cdef Py_ssize_t i
+    cdef point3d end
+    for i in range(points.shape[0]):
+        effective_end(origin, point3d(points[i, 0], points[i, 1], points[i, 2]), max_range,
+                      &end)
+        ok[i] = (in_key_range(resolution_factor, end.x())
+                 and in_key_range(resolution_factor, end.y())
+                 and in_key_range(resolution_factor, end.z()))

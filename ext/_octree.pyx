@@ -22,7 +22,7 @@ from libcpp.vector cimport vector
 
 from _keys cimport (
     KEY_DEPTH as _DEPTH, KEY_EMPTY, KEY_MAX_VAL as _MAX_VAL, CellBox, KeyCounts, KeyTable,
-    effective_end as _effective_end, in_key_range as _in_key_range, pack_key as _pack,
+    effective_end as _effective_end, mark_ends_in_range, mark_in_range, pack_key as _pack,
     unpack_key as _unpack,
 )
 from liboctomap cimport (
@@ -91,34 +91,23 @@ cdef class _OcTree:
 
     # ------------------------------------------------------------------ key range
     def _in_range(self, const float[:, ::1] points):
-        """Boolean mask: which rows of `points` have a valid octree key on every axis."""
-        cdef OcTree* tree = self._get()
-        cdef double rf = 1.0 / tree.getResolution()
-        cdef Py_ssize_t i, n = points.shape[0]
-        out = np.empty(n, dtype=np.bool_)
+        """Boolean mask: which rows of `points` have a valid key on every axis."""
+        cdef double rf = 1.0 / self._get().getResolution()
+        out = np.empty(points.shape[0], dtype=np.bool_)
         cdef uint8_t[::1] ok = out.view(np.uint8)
         with nogil:
-            for i in range(n):
-                ok[i] = (_in_key_range(rf, points[i, 0]) and _in_key_range(rf, points[i, 1])
-                         and _in_key_range(rf, points[i, 2]))
+            mark_in_range(rf, points, ok)
         return out
 
     def _ends_in_range(self, const float[:, ::1] points, const float[::1] origin,
                        double max_range):
         """Like :meth:`_in_range` for the ray ends after truncation at `max_range` (< 0: none)."""
-        cdef OcTree* tree = self._get()
-        cdef double rf = 1.0 / tree.getResolution()
-        cdef Py_ssize_t i, n = points.shape[0]
+        cdef double rf = 1.0 / self._get().getResolution()
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
-        cdef point3d end
-        out = np.empty(n, dtype=np.bool_)
+        out = np.empty(points.shape[0], dtype=np.bool_)
         cdef uint8_t[::1] ok = out.view(np.uint8)
         with nogil:
-            for i in range(n):
-                _effective_end(o, point3d(points[i, 0], points[i, 1], points[i, 2]),
-                               max_range, &end)
-                ok[i] = (_in_key_range(rf, end.x()) and _in_key_range(rf, end.y())
-                         and _in_key_range(rf, end.z()))
+            mark_ends_in_range(rf, points, o, max_range, ok)
         return out
 
     # ------------------------------------------------------------------ updates
