@@ -68,7 +68,7 @@ def extensions():
                 library_dirs=libdirs,
                 libraries=libs,
                 runtime_library_dirs=libdirs,
-                extra_compile_args=["-std=c++17", "-O3", *extra],
+                extra_compile_args=["-std=c++17", "-O3", "-ffp-contract=off", *extra],
                 define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
             )
         )

@@ -8,6 +8,7 @@ liboctomap's, so every map that uses it finds the same cells as its ``OcTree``.
 
 from libc.math cimport floor
 from libc.stdint cimport uint8_t, uint32_t, uint64_t
+from libcpp.vector cimport vector
 
 from liboctomap cimport OcTreeKey, key_type, point3d
 
@@ -38,6 +39,14 @@ cdef extern from "_keytable.h" namespace "occgp" nogil:
 
 cdef extern from "_keytable.h" nogil:
     const uint64_t KEY_EMPTY "occgp::KeyTable::kEmpty"
+
+cdef extern from "_raywalk.h" namespace "occgp" nogil:
+    cdef cppclass RayWalker:  # liboctomap's computeRayKeys, one cell at a time
+        bint start(double resolution, const point3d& origin, const OcTreeKey& key_origin,
+                   const point3d& end, const OcTreeKey& key_end)
+        bint next()
+        int key(int axis) const
+        bint walk_back(const CellBox& region, vector[uint64_t]& cells) except + nogil
 
 cdef enum:
     KEY_MAX_VAL = 32768     # half the number of keys per axis (liboctomap's tree_max_val)

@@ -22,6 +22,7 @@ from libcpp.vector cimport vector
 
 from _keys cimport (
     KEY_DEPTH as _DEPTH, KEY_EMPTY, KEY_MAX_VAL as _MAX_VAL, CellBox, KeyCounts, KeyTable,
+    RayWalker,
     effective_end as _effective_end, mark_ends_in_range, mark_in_range, pack_key as _pack,
     unpack_key as _unpack,
 )
@@ -50,13 +51,13 @@ TREE_MAX_VAL = _MAX_VAL
 TREE_DEPTH = _DEPTH
 
 
-
-
-
-
-
-
-
+cdef extern from "_octree_batch.h" namespace "occgp" nogil:
+    cdef cppclass CellUpdate:
+        uint64_t code
+        float update
+    uint64_t morton_code(unsigned x, unsigned y, unsigned z)
+    size_t apply_updates(OcTree& tree, vector[CellUpdate]& cells,
+                         vector[CellUpdate]& scratch) except +
 
 
 @cython.auto_pickle(False)
@@ -159,8 +160,6 @@ cdef class _OcTree:
         cdef vector[uint8_t] truncated
         cdef KeyTable table
         cdef CellBox region
-        cdef KeyRay ray
-        cdef KeyRay.iterator it, stop
         cdef OcTreeKey ko, key
         cdef KeyCounts* entry
         cdef int lo[3]
@@ -177,21 +176,34 @@ cdef class _OcTree:
         cdef uint64_t dims[3]
         cdef uint64_t idx, box_cells = 1
         cdef bint dense
-        cdef uint32_t n_free, n_hit
+        cdef uint32_t n_free
+        cdef vector[OcTreeKey] end_keys
+        cdef vector[uint8_t] end_ok
+        cdef RayWalker walker
+        cdef vector[uint64_t] back
+        cdef bint more
+        cdef double res = tree.getResolution()
+        cdef int x, y, z
+        cdef long traversed = 0
+        cdef vector[CellUpdate] cells, scratch
+        cdef CellUpdate cell
         with self._lock:
             with nogil:
                 tree.coordToKeyChecked(o, ko)
                 for axis in range(3):
                     lo[axis] = hi[axis] = ko[axis]
                 ends.resize(n)
+                end_keys.resize(n)
+                end_ok.resize(n)
                 truncated.resize(n)
-                table.reset(<size_t>n * 4)
+                table.reset(<size_t>n // 8)
                 # end cells first: they bound the region and may never join it
                 for i in range(n):
                     truncated[i] = _effective_end(
                         o, point3d(points[i, 0], points[i, 1], points[i, 2]), max_range,
                         &ends[i])
-                    tree.coordToKeyChecked(ends[i], key)
+                    end_ok[i] = tree.coordToKeyChecked(ends[i], key)
+                    end_keys[i] = key
                     level = 0
                     for axis in range(3):
                         lo[axis] = min(lo[axis], <int>key[axis])
@@ -224,54 +236,56 @@ cdef class _OcTree:
                         i = r
                         if weighted:
                             w = weights[i]
-                    if not tree.computeRayKeys(o, ends[i], ray):
-                        continue
-                    it = ray.begin()
-                    stop = ray.end()
-                    if region_cells > 0:
+                    if not end_ok[i]:
+                        continue        # computeRayKeys's out-of-range check
+                    more = walker.start(res, o, ko, ends[i], end_keys[i])
+                    if more and region_cells > 0:
+                        back.clear()
+                        if walker.walk_back(region, back):
+                            for j in range(back.size()):
+                                key = _unpack(back[j])
+                                _count_free(key[0], key[1], key[2], w, dense, lo, dims,
+                                            free_counts, touched, table)
+                            traversed += back.size()
+                            continue
                         # the region is closed under stepping toward the origin, so a
                         # ray's cells in it form a prefix of its traversal
-                        while it != stop and _in_region(region, deref(it)):
-                            inc(it)
-                    if dense:
-                        while it != stop:
-                            # liboctomap's traversal may step past the end cell before
-                            # its length test stops it: such cells go to the table
-                            if _in_box(deref(it), lo, dims):
-                                idx = _box_index(deref(it), lo, dims)
-                                if free_counts[idx] == 0:
-                                    touched.push_back(idx)
-                                free_counts[idx] += w
-                            else:
-                                entry = table.get(_pack(deref(it)))
-                                entry.n_free += w
-                            inc(it)
-                    else:
-                        while it != stop:
-                            entry = table.get(_pack(deref(it)))
-                            entry.n_free += w
-                            inc(it)
+                        while more and region.inside(walker.key(0), walker.key(1),
+                                                     walker.key(2)) and region.test(
+                                walker.key(0), walker.key(1), walker.key(2)):
+                            more = walker.next()
+                    while more:
+                        _count_free(walker.key(0), walker.key(1), walker.key(2), w, dense, lo,
+                                    dims, free_counts, touched, table)
+                        traversed += 1
+                        more = walker.next()
                 # one update per cell: the traversed cells, then end cells no ray crossed
+                cells.reserve(touched.size() + table.size())
                 for j in range(touched.size()):
                     idx = touched[j]
                     key = _box_key(idx, lo, dims)
                     entry = table.find(_pack(key))
-                    _update(tree, key, free_counts[idx], entry.n_hit if entry != NULL else 0,
-                            ray_mode, l_hit, l_miss)
-                updated = touched.size()
+                    cell.code = morton_code(key[0], key[1], key[2])
+                    cell.update = _update_value(free_counts[idx],
+                                                entry.n_hit if entry != NULL else 0,
+                                                ray_mode, l_hit, l_miss)
+                    cells.push_back(cell)
                 for slot in range(table.capacity()):
                     if table.slot(slot).key == KEY_EMPTY:
                         continue
                     key = _unpack(table.slot(slot).key)
                     n_free = table.slot(slot).n_free
-                    n_hit = table.slot(slot).n_hit
                     if dense and _in_box(key, lo, dims):
                         if free_counts[_box_index(key, lo, dims)]:
-                            continue        # updated above
+                            continue        # collected above
                         n_free = 0
-                    _update(tree, key, n_free, n_hit, ray_mode, l_hit, l_miss)
-                    updated += 1
-        return region_cells, updated, seconds, n_trav
+                    cell.code = morton_code(key[0], key[1], key[2])
+                    cell.update = _update_value(n_free, table.slot(slot).n_hit, ray_mode,
+                                                l_hit, l_miss)
+                    cells.push_back(cell)
+                updated = cells.size()
+                apply_updates(tree[0], cells, scratch)
+        return region_cells, updated, seconds, n_trav, traversed
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):
@@ -483,14 +497,34 @@ cdef inline OcTreeKey _box_key(uint64_t idx, const int* lo, const uint64_t* dims
     return key
 
 
-cdef inline int _update(OcTree* tree, const OcTreeKey& key, uint32_t n_free, uint32_t n_hit,
-                        bint ray_mode, float l_hit, float l_miss) except -1 nogil:
+cdef inline int _count_free(int kx, int ky, int kz, uint32_t w, bint dense, const int* lo,
+                            const uint64_t* dims, vector[uint32_t]& free_counts,
+                            vector[uint64_t]& touched, KeyTable& table) except -1 nogil:
+    """Count `w` rays through the cell (kx, ky, kz): in the scan's dense box, or the table."""
+    cdef uint64_t x = <uint64_t>(kx - lo[0]), y = <uint64_t>(ky - lo[1]), z = <uint64_t>(kz - lo[2])
+    cdef uint64_t idx
+    cdef OcTreeKey key
+    # liboctomap's traversal may step past the end cell before its length test stops
+    # it: such cells lie outside the box and go to the table
+    if dense and x < dims[0] and y < dims[1] and z < dims[2]:
+        idx = (z * dims[1] + y) * dims[0] + x
+        if free_counts[idx] == 0:
+            touched.push_back(idx)
+        free_counts[idx] += w
+    else:
+        key[0] = <key_type>kx
+        key[1] = <key_type>ky
+        key[2] = <key_type>kz
+        table.get(_pack(key)).n_free += w
+    return 0
+
+
+cdef inline float _update_value(uint32_t n_free, uint32_t n_hit, bint ray_mode, float l_hit,
+                               float l_miss) noexcept nogil:
     """One cell's update of a scan: liboctomap's insertPointCloud rule, or ray counting."""
     if ray_mode:
-        tree.updateNode(key, <float>(n_free * <double>l_miss + n_hit * <double>l_hit), False)
-    else:
-        tree.updateNode(key, l_hit if n_hit else l_miss, False)
-    return 0
+        return <float>(n_free * <double>l_miss + n_hit * <double>l_hit)
+    return l_hit if n_hit else l_miss
 
 
 cdef struct Crossing:

@@ -38,6 +38,8 @@ def as_points(x: ArrayLike, name: str = "points", dim: int = 3) -> NDArray[np.fl
     if arr.ndim != 2 or arr.shape[1] != dim:
         raise ValueError(f"{name} must have shape (n_points, {dim}), got {arr.shape}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if np.isfinite(arr).all():
+        return arr
     finite = np.isfinite(arr).all(axis=1)
     if not finite.all():
         bad = int(np.count_nonzero(~finite))

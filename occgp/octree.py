@@ -204,11 +204,12 @@ class OccupancyOctree(LogOddsMap, _OcTree):
             self._insert_point_cloud(pts, org, rng, bool(discretize))
             self.last_insert_: dict[str, float] = {"rays": len(pts)}
         else:
-            region, cells, seconds, rays = self._insert_batch(
+            region, cells, seconds, rays, traversed = self._insert_batch(
                 pts, org, rng, mode == "ray", method.endswith("culling"), None,
                 int(superray_threshold) if method.startswith("superray") else 0)
             self.last_insert_ = {"rays": rays, "updated_cells": cells,
-                                 "region_cells": region, "preprocessing_seconds": seconds}
+                                 "traversed_cells": traversed, "region_cells": region,
+                                 "preprocessing_seconds": seconds}
         return self
 
     # ------------------------------------------------------------------ queries

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from occgp import OccupancyOctree
+from conftest import data_path
 from test_octree import assert_same_leaves, random_scans
 
 
@@ -113,3 +114,63 @@ def test_batch_update_with_end_points_on_cell_corners(seed):
             got = build([(points, origin)] * 3, res, mode=mode, method=method,
                         superray_threshold=2)
             assert_same_leaves(got, plain)
+
+
+# ----------------------------------------------------------------- real data, every method
+METHODS = ("culling", "superray", "superray+culling")
+
+
+@pytest.fixture(scope="module")
+def geb079_trajectory():
+    """Six dense scans (720 x 150 beams, about 100k points each) along a path in geb079."""
+    from occgp.datasets import LidarSensor, free_path, simulate_scans
+    env = OccupancyOctree.load(data_path("octomap", "geb079.bt"))
+    poses = free_path(env, 6, step=1.0, seed=0)
+    return simulate_scans(env, poses, LidarSensor(), seed=0, progress=False)
+
+
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+@pytest.mark.parametrize("resolution", [0.1, 0.2, 0.4])
+def test_every_method_equals_plain_on_a_geb079_trajectory(geb079_trajectory, mode, resolution):
+    plain = build(geb079_trajectory, resolution, mode=mode)
+    for method in METHODS:
+        assert_same_leaves(build(geb079_trajectory, resolution, mode=mode, method=method), plain)
+
+
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+def test_every_method_equals_plain_on_scan_dat_from_nearby_poses(mode):
+    from occgp.datasets import read_xyz
+    scan = read_xyz(data_path("octomap", "scan.dat.bz2"))
+    rng = np.random.default_rng(0)
+    shifts = np.vstack([np.zeros(3), rng.uniform(-0.5, 0.5, (3, 3)) * [1, 1, 0.2]])
+    scans = [(scan.points + s, scan.origin + s) for s in shifts]
+    plain = build(scans, 0.2, mode=mode, max_range=20.0)
+    for method in METHODS:
+        got = build(scans, 0.2, mode=mode, method=method, max_range=20.0)
+        assert_same_leaves(got, plain)
+
+
+@pytest.mark.parametrize("expand", [False, True])
+def test_updates_of_a_loaded_tree_equal_liboctomaps(expand):
+    """Pruned, saturated nodes of a real map are expanded, updated and pruned again as
+    liboctomap's updateNode does; on an expanded tree, cells whose update is a no-op
+    leave their unpruned ancestors as they are."""
+    path = data_path("octomap", "geb079.bt")
+    rng = np.random.default_rng(4)
+    origin = np.array([0.0, 0.0, 1.0])
+    d = rng.normal(size=(20_000, 3))
+    points = origin + 6 * d / np.linalg.norm(d, axis=1, keepdims=True) * rng.uniform(
+        0.1, 1, (len(d), 1))
+    maps = {}
+    for method in ("reference", *METHODS):
+        m = OccupancyOctree.load(path)
+        if expand:
+            m.expand()
+        if method == "reference":   # liboctomap's insertPointCloud: updateNode per cell
+            m._insert_point_cloud(points.astype(np.float32), origin.astype(np.float32),
+                                  -1.0, False)
+        else:
+            m.insert_scan(points, origin, method=method)
+        maps[method] = m
+    for method in METHODS:
+        assert_same_leaves(maps[method], maps["reference"])

@@ -1,0 +1,181 @@
+// liboctomap's ray traversal, one cell at a time (used from ext/_scan.pxd).
+//
+// RayWalker visits exactly the cells that OcTreeBaseImpl::computeRayKeys
+// (liboctomap 1.9) writes into a KeyRay, in the same order, with the same
+// single/double precision arithmetic -- but inline, without storing the keys,
+// and choosing the axis of each step without a branch (the branch on the
+// smallest tMax is mispredicted about every other step in liboctomap's loop).
+// Build without floating-point contraction (-ffp-contract=off) so that the
+// arithmetic stays that of liboctomap's own build.
+#ifndef OCCGP_RAYWALK_H
+#define OCCGP_RAYWALK_H
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include <octomap/OcTreeKey.h>
+#include <octomap/octomap_types.h>
+
+#include "_keytable.h"
+
+namespace occgp {
+
+class RayWalker {
+ public:
+  // Start the walk of the ray from `origin` (in the cell `key_origin`) to `end`
+  // (in the cell `key_end`); `resolution` is the tree's. Returns false when the
+  // ray has no cells to walk (both ends in one cell, where computeRayKeys
+  // returns an empty ray); otherwise key() is the origin's cell.
+  bool start(double resolution, const octomap::point3d& origin,
+             const octomap::OcTreeKey& key_origin, const octomap::point3d& end,
+             const octomap::OcTreeKey& key_end) {
+    if (key_origin == key_end) return false;
+    octomap::point3d direction = end - origin;
+    length_ = static_cast<float>(direction.norm());
+    direction /= length_;
+    int step[3];
+    double t_max[3], t_delta[3];
+    for (int i = 0; i < 3; ++i) {
+      if (direction(i) > 0.0) step[i] = 1;
+      else if (direction(i) < 0.0) step[i] = -1;
+      else step[i] = 0;
+      if (step[i] != 0) {
+        // keyToCoord(key) of the origin's cell, then its border in the ray's direction
+        double border = (static_cast<double>(static_cast<int>(key_origin[i]) - kMaxVal) + 0.5) *
+                        resolution;
+        border += static_cast<float>(step[i] * resolution * 0.5);
+        t_max[i] = (border - origin(i)) / direction(i);
+        t_delta[i] = resolution / std::fabs(direction(i));
+      } else {
+        t_max[i] = std::numeric_limits<double>::max();
+        t_delta[i] = std::numeric_limits<double>::max();
+      }
+    }
+    // scalars rather than arrays, so that the loop state stays in registers
+    k0_ = key_origin[0], k1_ = key_origin[1], k2_ = key_origin[2];
+    e0_ = key_end[0], e1_ = key_end[1], e2_ = key_end[2];
+    s0_ = step[0], s1_ = step[1], s2_ = step[2];
+    t0_ = t_max[0], t1_ = t_max[1], t2_ = t_max[2];
+    d0_ = t_delta[0], d1_ = t_delta[1], d2_ = t_delta[2];
+    return true;
+  }
+
+  // Step to the next cell of the ray; false when the ray has no more cells.
+  bool next() {
+    // the axis of the smallest tMax, ties resolved as computeRayKeys resolves them
+    const bool c01 = t0_ < t1_, c02 = t0_ < t2_, c12 = t1_ < t2_;
+    const bool m0 = c01 & c02;
+    const bool m1 = !c01 & c12;
+    const bool m2 = !(m0 | m1);
+    k0_ += m0 ? s0_ : 0;
+    k1_ += m1 ? s1_ : 0;
+    k2_ += m2 ? s2_ : 0;
+    t0_ += m0 ? d0_ : 0.0;  // adding +0.0 leaves every tMax value unchanged
+    t1_ += m1 ? d1_ : 0.0;
+    t2_ += m2 ? d2_ : 0.0;
+    // keys are 16 bits: compare them modulo 2^16, as OcTreeKey does
+    if ((((k0_ ^ e0_) | (k1_ ^ e1_) | (k2_ ^ e2_)) & 0xFFFF) == 0) return false;
+    const double dist = std::min(std::min(t0_, t1_), t2_);
+    return !(dist > length_);
+  }
+
+  // The current cell's key on `axis`.
+  int key(int axis) const { return (axis == 0 ? k0_ : axis == 1 ? k1_ : k2_) & 0xFFFF; }
+
+  // The culling region's shortcut (Kwon, dissertation 2.3.5): right after start(),
+  // append to `cells` (packed keys, x in the low bits) the cells of the ray that
+  // lie outside `region`, found walking back from the end cell, and return
+  // true -- or return false, appending nothing, when that walk cannot be
+  // certified to give the cells that next() gives; walk forward then.
+  //
+  // The walk back is exact: the j-th border crossing on axis i lies at
+  // t0_i + j d_i, the values next() accumulates one addition at a time. Each
+  // choice next() makes between two crossings is certified when the exact
+  // values differ by more than both accumulations can err, (j + 3) 2^-52 |t|.
+  // Where all choices after the ray's last cell in the region are certified,
+  // next() takes the same cells there (a tie broken the other way inside the
+  // region only swaps cells that are in the region too: it is closed under a
+  // step toward the origin on any axis), and reaches the end cell.
+  bool walk_back(const CellBox& region, std::vector<uint64_t>& cells) const {
+    const int step[3] = {s0_, s1_, s2_};
+    const double t0[3] = {t0_, t1_, t2_};
+    const double dt[3] = {d0_, d1_, d2_};
+    const int origin[3] = {k0_, k1_, k2_};
+    int key[3] = {e0_, e1_, e2_};
+    long count[3];   // crossings on each axis between the origin's cell and the current one
+    double last[3];  // the crossing into the current cell's slab on each axis (-inf: none)
+    double next[3];  // the crossing out of it (+inf: the ray is parallel to the slab)
+    long most = 0;
+    double largest = 0;
+    for (int i = 0; i < 3; ++i) {
+      count[i] = static_cast<long>(key[i] - origin[i]) * step[i];
+      if (count[i] < 0 || (step[i] == 0 && key[i] != origin[i])) return false;
+      if (step[i] == 0) {
+        last[i] = -std::numeric_limits<double>::infinity();
+        next[i] = std::numeric_limits<double>::infinity();
+        continue;
+      }
+      next[i] = t0[i] + static_cast<double>(count[i]) * dt[i];
+      last[i] = count[i] > 0 ? t0[i] + static_cast<double>(count[i] - 1) * dt[i]
+                             : -std::numeric_limits<double>::infinity();
+      most = std::max(most, count[i]);
+      largest = std::max(largest, std::fabs(t0[i]) + static_cast<double>(count[i] + 1) * dt[i]);
+    }
+    // what the accumulated and the computed crossings can err, both together
+    const double margin =
+        2.0 * static_cast<double>(most + 3) * std::numeric_limits<double>::epsilon() * largest;
+    const size_t first = cells.size();
+    bool at_end = true;
+    while (count[0] + count[1] + count[2] > 0) {
+      // the crossing into the current cell: the latest of the three
+      const int dim = last[0] >= last[1] ? (last[0] >= last[2] ? 0 : 2)
+                                         : (last[1] >= last[2] ? 1 : 2);
+      const double entry = last[dim];
+      // next() took it as the earliest of the next crossings on the three axes
+      bool ok = !(at_end && entry + margin >= static_cast<double>(length_));
+      for (int i = 0; i < 3; ++i) ok &= (i == dim || next[i] - entry > margin);
+      if (!ok) {
+        cells.resize(first);
+        return false;
+      }
+      if (!at_end) {
+        // the entry into a cell of the region is certified: the cells before it are in
+        // the region, whichever way next() breaks their ties
+        if (region.inside(key[0], key[1], key[2]) && region.test(key[0], key[1], key[2]))
+          return true;
+        cells.push_back(pack(key));
+      }
+      at_end = false;
+      --count[dim];
+      key[dim] -= step[dim];
+      next[dim] = entry;
+      last[dim] = count[dim] > 0 ? t0[dim] + static_cast<double>(count[dim] - 1) * dt[dim]
+                                 : -std::numeric_limits<double>::infinity();
+    }
+    // the origin's cell
+    if (!(region.inside(key[0], key[1], key[2]) && region.test(key[0], key[1], key[2])))
+      cells.push_back(pack(key));
+    return true;
+  }
+
+ private:
+  static uint64_t pack(const int* key) {
+    return static_cast<uint64_t>(key[0] & 0xFFFF) | (static_cast<uint64_t>(key[1] & 0xFFFF) << 16) |
+           (static_cast<uint64_t>(key[2] & 0xFFFF) << 32);
+  }
+
+  static constexpr int kMaxVal = 32768;  // liboctomap's tree_max_val
+  int k0_ = 0, k1_ = 0, k2_ = 0;
+  int e0_ = 0, e1_ = 0, e2_ = 0;
+  int s0_ = 0, s1_ = 0, s2_ = 0;
+  double t0_ = 0, t1_ = 0, t2_ = 0;
+  double d0_ = 0, d1_ = 0, d2_ = 0;
+  float length_ = 0;
+};
+
+}  // namespace occgp
+
+#endif  // OCCGP_RAYWALK_H
