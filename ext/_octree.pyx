@@ -10,7 +10,7 @@ a per-tree lock serialises the operations on one tree.
 
 cimport cython
 from cython.operator cimport dereference as deref, preincrement as inc
-from libc.math cimport fabs, floor, fmax, fmin, isfinite, ldexp, sqrt
+from libc.math cimport fabs, floor, isfinite, ldexp, sqrt
 from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
 from libc.string cimport memcpy
 from libcpp cimport bool
@@ -66,6 +66,10 @@ cdef class _OcTree:
 
     cdef unique_ptr[OcTree] _tree
     cdef object _lock
+    # a scan's dense ray counts over its key box, kept between scans (zero between
+    # scans unless _counts_dirty) to spare allocating and clearing megabytes per scan
+    cdef vector[uint32_t] _counts
+    cdef bint _counts_dirty
 
     def __cinit__(self, *args, **kwargs):
         self._lock = threading.Lock()
@@ -142,9 +146,10 @@ cdef class _OcTree:
         `superray_threshold` > 0, the rays are first grouped into super rays
         (see :func:`_super_rays`) and one ray per class is traversed.
 
-        Returns (region_cells, updated_cells, preprocessing_seconds,
-        traversed_rays); region_cells is -1 when culling was off or the scan's
-        key box was too large to cull.
+        Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
+        seconds), seconds = (end points, pre-processing (super rays and
+        culling region), traversal, tree update); region_cells is -1 when
+        culling was off or the scan's key box was too large to cull.
         """
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t i, n = points.shape[0]
@@ -169,9 +174,7 @@ cdef class _OcTree:
         cdef long region_cells = -1
         cdef size_t slot, j, updated = 0
         cdef float l_hit = tree.getProbHitLog(), l_miss = tree.getProbMissLog()
-        cdef double seconds = 0
-        cdef timespec t0, t1
-        cdef vector[uint32_t] free_counts     # dense counts over the scan's key box
+        cdef timespec t[5]
         cdef vector[uint64_t] touched         # box indices with a nonzero count
         cdef uint64_t dims[3]
         cdef uint64_t idx, box_cells = 1
@@ -189,6 +192,7 @@ cdef class _OcTree:
         cdef CellUpdate cell
         with self._lock:
             with nogil:
+                clock_gettime(CLOCK_MONOTONIC, &t[0])
                 tree.coordToKeyChecked(o, ko)
                 for axis in range(3):
                     lo[axis] = hi[axis] = ko[axis]
@@ -213,21 +217,21 @@ cdef class _OcTree:
                     if not truncated[i]:
                         entry = table.get(_pack(key))
                         entry.n_hit += weights[i] if weighted else 1
-                clock_gettime(CLOCK_MONOTONIC, &t0)
+                clock_gettime(CLOCK_MONOTONIC, &t[1])
                 if superray_threshold > 0:
-                    _super_rays(tree, o, ko, ends, truncated, table, superray_threshold,
+                    _super_rays(tree, o, ko, ends, end_keys, truncated, table, superray_threshold,
                                 ray_ids, ray_weights)
                     n_trav = ray_ids.size()
                 if culling:
                     region_cells = _build_region(tree, ko, lo, hi, max_level, table, region)
-                clock_gettime(CLOCK_MONOTONIC, &t1)
-                seconds = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec)
+                clock_gettime(CLOCK_MONOTONIC, &t[2])
                 for axis in range(3):
                     dims[axis] = <uint64_t>(hi[axis] - lo[axis] + 1)
                     box_cells *= dims[axis]
                 dense = box_cells <= _MAX_DENSE_CELLS
-                if dense:
-                    free_counts.assign(box_cells, 0)
+                if dense and (self._counts_dirty or self._counts.size() < box_cells):
+                    self._counts.assign(max(box_cells, self._counts.size()), 0)
+                self._counts_dirty = True
                 for r in range(n_trav):
                     if superray_threshold > 0:
                         i = ray_ids[r]
@@ -245,7 +249,7 @@ cdef class _OcTree:
                             for j in range(back.size()):
                                 key = _unpack(back[j])
                                 _count_free(key[0], key[1], key[2], w, dense, lo, dims,
-                                            free_counts, touched, table)
+                                            self._counts, touched, table)
                             traversed += back.size()
                             continue
                         # the region is closed under stepping toward the origin, so a
@@ -256,9 +260,10 @@ cdef class _OcTree:
                             more = walker.next()
                     while more:
                         _count_free(walker.key(0), walker.key(1), walker.key(2), w, dense, lo,
-                                    dims, free_counts, touched, table)
+                                    dims, self._counts, touched, table)
                         traversed += 1
                         more = walker.next()
+                clock_gettime(CLOCK_MONOTONIC, &t[3])
                 # one update per cell: the traversed cells, then end cells no ray crossed
                 cells.reserve(touched.size() + table.size())
                 for j in range(touched.size()):
@@ -266,7 +271,7 @@ cdef class _OcTree:
                     key = _box_key(idx, lo, dims)
                     entry = table.find(_pack(key))
                     cell.code = morton_code(key[0], key[1], key[2])
-                    cell.update = _update_value(free_counts[idx],
+                    cell.update = _update_value(self._counts[idx],
                                                 entry.n_hit if entry != NULL else 0,
                                                 ray_mode, l_hit, l_miss)
                     cells.push_back(cell)
@@ -276,16 +281,22 @@ cdef class _OcTree:
                     key = _unpack(table.slot(slot).key)
                     n_free = table.slot(slot).n_free
                     if dense and _in_box(key, lo, dims):
-                        if free_counts[_box_index(key, lo, dims)]:
+                        if self._counts[_box_index(key, lo, dims)]:
                             continue        # collected above
                         n_free = 0
                     cell.code = morton_code(key[0], key[1], key[2])
                     cell.update = _update_value(n_free, table.slot(slot).n_hit, ray_mode,
                                                 l_hit, l_miss)
                     cells.push_back(cell)
+                for j in range(touched.size()):
+                    self._counts[touched[j]] = 0
+                self._counts_dirty = False
                 updated = cells.size()
                 apply_updates(tree[0], cells, scratch)
-        return region_cells, updated, seconds, n_trav, traversed
+                clock_gettime(CLOCK_MONOTONIC, &t[4])
+        seconds = tuple([(t[k + 1].tv_sec - t[k].tv_sec) + 1e-9 * (t[k + 1].tv_nsec - t[k].tv_nsec)
+                         for k in range(4)])
+        return region_cells, updated, n_trav, traversed, seconds
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):
@@ -527,6 +538,14 @@ cdef inline float _update_value(uint32_t n_free, uint32_t n_hit, bint ray_mode, 
     return l_hit if n_hit else l_miss
 
 
+cdef inline double _dmin(double a, double b) noexcept nogil:
+    return a if a < b else b
+
+
+cdef inline double _dmax(double a, double b) noexcept nogil:
+    return a if a > b else b
+
+
 cdef struct Crossing:
     int axis          # the axis whose border the rays of a group cross
     int other         # the coordinate read at that border
@@ -536,7 +555,8 @@ cdef struct Crossing:
 
 
 cdef int _super_rays(OcTree* tree, const point3d& o, const OcTreeKey& ko,
-                     vector[point3d]& ends, const vector[uint8_t]& truncated,
+                     vector[point3d]& ends, const vector[OcTreeKey]& end_keys,
+                     const vector[uint8_t]& truncated,
                      KeyTable& table, int threshold, vector[uint32_t]& rays,
                      vector[uint32_t]& weights) except -1 nogil:
     """Group the rays of a scan into super rays (Kwon, dissertation §2.3.1-2.3.4).
@@ -578,6 +598,8 @@ cdef int _super_rays(OcTree* tree, const point3d& o, const OcTreeKey& ko,
     cdef long jj
     cdef double delta, eb, r, r_min, r_max, r_abs, s, b1, b2, t, y, kb, border, slack
     cdef double far2
+    cdef double dp[3]
+    cdef double inv[3]
     cdef uint64_t code
     cdef bint ok
     oc[0] = o.x()
@@ -589,8 +611,7 @@ cdef int _super_rays(OcTree* tree, const point3d& o, const OcTreeKey& ko,
     for i in range(n):
         if truncated[i]:
             continue
-        tree.coordToKeyChecked(ends[i], key)
-        entry = table.find(_pack(key))
+        entry = table.find(_pack(end_keys[i]))
         if entry == NULL or entry.n_hit < <uint32_t>threshold:
             continue
         if entry.group == 0:
@@ -614,12 +635,12 @@ cdef int _super_rays(OcTree* tree, const point3d& o, const OcTreeKey& ko,
     # offsets[g] now ends group g (1-based), i.e. starts group g + 1
     for g in range(1, n_groups + 1):
         first = offsets[g - 1]
-        tree.coordToKeyChecked(ends[order[first]], kv)
+        kv = end_keys[order[first]]
         far2 = 0
         for a in range(3):
             lo[a] = (<double>kv[a] - _MAX_VAL) * res
             hi[a] = lo[a] + res
-            far2 += fmax((lo[a] - oc[a]) ** 2, (hi[a] - oc[a]) ** 2)
+            far2 += _dmax((lo[a] - oc[a]) ** 2, (hi[a] - oc[a]) ** 2)
         # 2^-19 (length + res): 4 x the error of liboctomap's float32 ray direction
         delta = ldexp(sqrt(far2) + res, -19)
         ok = True
@@ -641,9 +662,9 @@ cdef int _super_rays(OcTree* tree, const point3d& o, const OcTreeKey& ko,
                         if s == 0:
                             continue   # the origin on the end cell's face: only X_1, at t = 0
                         r = ((hi[b] if i & 2 else lo[b]) - oc[b]) / s
-                        r_min = fmin(r_min, r)
-                        r_max = fmax(r_max, r)
-                    slack = delta + eb * fmax(fabs(r_min), fabs(r_max))
+                        r_min = _dmin(r_min, r)
+                        r_max = _dmax(r_max, r)
+                    slack = delta + eb * _dmax(fabs(r_min), fabs(r_max))
                     for jj in range(1, abs(d_a) + 1):
                         border = (<double>(<int>ko[a] + (jj if step > 0 else 1 - jj))
                                   - _MAX_VAL) * res
@@ -656,8 +677,8 @@ cdef int _super_rays(OcTree* tree, const point3d& o, const OcTreeKey& ko,
                         else:
                             b1 = oc[b] + s * r_min
                             b2 = oc[b] + s * r_max
-                        c.key_lo = <int>floor((fmin(b1, b2) - slack) * rf)
-                        nk = <int>floor((fmax(b1, b2) + slack) * rf) - c.key_lo + 1
+                        c.key_lo = <int>floor((_dmin(b1, b2) - slack) * rf)
+                        nk = <int>floor((_dmax(b1, b2) + slack) * rf) - c.key_lo + 1
                         if nk == 1:
                             continue     # every ray of the group has the same key here
                         code_bits += 64 - _clz64(<uint64_t>(nk - 1))
@@ -685,17 +706,19 @@ cdef int _super_rays(OcTree* tree, const point3d& o, const OcTreeKey& ko,
             pc[2] = ends[idx].z()
             ok = True
             for a in range(3):
-                if fmin(pc[a] - lo[a], hi[a] - pc[a]) <= delta:
+                if _dmin(pc[a] - lo[a], hi[a] - pc[a]) <= delta:
                     ok = False
+                dp[a] = pc[a] - oc[a]
+                # the rays of a group cross borders of axis a only when dp[a] != 0
+                inv[a] = 1.0 / dp[a] if dp[a] != 0 else 0.0
             code = 0
             j = 0
             while ok and j < <Py_ssize_t>crossings.size():
                 c = crossings[j]
-                r_abs = fabs((pc[c.other] - oc[c.other]) / (pc[c.axis] - oc[c.axis]))
-                t = (c.border - oc[c.axis]) / (pc[c.axis] - oc[c.axis])
-                y = oc[c.other] + t * (pc[c.other] - oc[c.other])
+                r_abs = fabs(dp[c.other] * inv[c.axis])
+                y = oc[c.other] + (c.border - oc[c.axis]) * inv[c.axis] * dp[c.other]
                 kb = floor(y * rf)
-                if (fmin(y - kb * res, (kb + 1) * res - y) <= delta + eb * r_abs
+                if (_dmin(y - kb * res, (kb + 1) * res - y) <= delta + eb * r_abs
                         or kb < c.key_lo or kb >= c.key_lo + c.n_keys):
                     ok = False
                 else:

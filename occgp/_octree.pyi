@@ -19,7 +19,8 @@ class _OcTree:
     def _insert_batch(self, points: NDArray[np.float32], origin: NDArray[np.float32],
                       max_range: float, ray_mode: bool, culling: bool,
                       weights: NDArray[np.uint32] | None = None,
-                      superray_threshold: int = 0) -> tuple[int, int, float, int, int]: ...
+                      superray_threshold: int = 0,
+                      ) -> tuple[int, int, int, int, tuple[float, float, float, float]]: ...
     def _query(self, points: NDArray[np.float32], what: int) -> NDArray[np.float64]: ...
     def _cast_rays(self, origins: NDArray[np.float32], directions: NDArray[np.float32],
                    ignore_unknown: bool, max_range: NDArray[np.float64],

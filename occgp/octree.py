@@ -59,8 +59,12 @@ class OccupancyOctree(LogOddsMap, _OcTree):
     last_insert_ : dict
         Statistics of the last :meth:`insert_scan`: ``rays`` traversed (super
         rays count once), and, for the methods occgp implements itself,
-        ``updated_cells``, ``region_cells`` (-1 without culling) and
-        ``preprocessing_seconds`` (super rays and culling region).
+        ``updated_cells``, ``traversed_cells`` (cell visits that counted a
+        ray: those the culling region spares are not walked or not counted),
+        ``region_cells`` (-1 without culling) and the seconds spent on the
+        end points, on pre-processing (super rays and culling region), on
+        traversal and on the tree update: ``endpoint_seconds``,
+        ``preprocessing_seconds``, ``traversal_seconds``, ``update_seconds``.
 
     See Also
     --------
@@ -204,12 +208,14 @@ class OccupancyOctree(LogOddsMap, _OcTree):
             self._insert_point_cloud(pts, org, rng, bool(discretize))
             self.last_insert_: dict[str, float] = {"rays": len(pts)}
         else:
-            region, cells, seconds, rays, traversed = self._insert_batch(
+            region, cells, rays, traversed, seconds = self._insert_batch(
                 pts, org, rng, mode == "ray", method.endswith("culling"), None,
                 int(superray_threshold) if method.startswith("superray") else 0)
-            self.last_insert_ = {"rays": rays, "updated_cells": cells,
-                                 "traversed_cells": traversed, "region_cells": region,
-                                 "preprocessing_seconds": seconds}
+            self.last_insert_ = {
+                "rays": rays, "updated_cells": cells, "traversed_cells": traversed,
+                "region_cells": region, "endpoint_seconds": seconds[0],
+                "preprocessing_seconds": seconds[1], "traversal_seconds": seconds[2],
+                "update_seconds": seconds[3]}
         return self
 
     # ------------------------------------------------------------------ queries

@@ -57,9 +57,9 @@ def test_superrays_group_rays():
     points = clustered_scan(rng, origin, 0.4, spread=1.5).astype(np.float32)
     m = OccupancyOctree(0.4)
     stats = m._insert_batch(points, origin, -1.0, False, False, None, 5)
-    assert stats[3] < len(points) / 3            # rays traversed
+    assert stats[2] < len(points) / 3            # rays traversed
     plain = OccupancyOctree(0.4)
-    assert plain._insert_batch(points, origin, -1.0, False, False)[3] == len(points)
+    assert plain._insert_batch(points, origin, -1.0, False, False)[2] == len(points)
 
 
 @pytest.mark.parametrize("origin", [
@@ -144,4 +144,6 @@ def test_last_insert_statistics():
     m.insert_scan(points, origin, method="superray+culling", superray_threshold=5)
     stats = m.last_insert_
     assert stats["rays"] < len(points) and stats["updated_cells"] > 0
-    assert stats["region_cells"] >= 0 and stats["preprocessing_seconds"] >= 0
+    assert stats["region_cells"] >= 0 and stats["traversed_cells"] > 0
+    for phase in ("endpoint", "preprocessing", "traversal", "update"):
+        assert stats[f"{phase}_seconds"] >= 0
