@@ -6,8 +6,9 @@ The cells live in an ``unordered_map`` from the packed 16-bit keys of
 liboctomap to float32 log-odds. A private liboctomap ``OcTree`` of the same
 resolution holds the sensor model and computes the keys and the ray traversals
 (``computeRayKeys``, ``coordToKeyChecked``, ``keyToCoord``), so the grid finds
-exactly the cells the octree finds; a scan's cells are counted in occgp's key
-table (``_keytable.h``) and each is updated once, as ``updateNode`` does.
+exactly the cells the octree finds; a scan's cells are collected by the
+octree's own pipeline (``ext/_scan.pxd``: rays, super rays, culling region)
+and each is updated once, as ``updateNode`` does.
 
 Nothing here validates user input: :mod:`occgp.grid` coerces and checks every
 array before it reaches these methods. Every loop runs without the GIL; a
@@ -25,11 +26,11 @@ from libcpp.unordered_map cimport unordered_map
 from libcpp.utility cimport pair
 from libcpp.vector cimport vector
 
-from liboctomap cimport KeyRay, OcTree, OcTreeKey, point3d
-from _keys cimport (
-    KEY_DEPTH, KEY_EMPTY, KeyTable, effective_end, mark_ends_in_range, mark_in_range, pack_key,
-    unpack_key,
-)
+from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
+
+from liboctomap cimport OcTree, OcTreeKey, point3d
+from _keys cimport KEY_DEPTH, mark_ends_in_range, mark_in_range, pack_key, unpack_key
+from _scan cimport ScanCell, ScanStats, scan_updates
 
 import threading
 
@@ -37,6 +38,22 @@ import numpy as np
 
 ctypedef unordered_map[uint64_t, float] CellMap         # packed key -> log-odds
 ctypedef pair[uint64_t, float] Cell
+
+
+cdef struct GridView:
+    CellMap* cells
+    float floor      # lower clamping bound (log-odds)
+
+
+cdef bint _fully_free(void* view, const OcTreeKey& key) noexcept nogil:
+    """FreeTest of a grid: the cell is known and at the lower clamping bound."""
+    cdef GridView* v = <GridView*>view
+    cdef CellMap.iterator found = v.cells.find(pack_key(key))
+    return found != v.cells.end() and deref(found).second <= v.floor
+
+
+cdef inline double _elapsed(const timespec& a, const timespec& b) noexcept nogil:
+    return (b.tv_sec - a.tv_sec) + 1e-9 * (b.tv_nsec - a.tv_nsec)
 
 
 cdef inline void _apply(float* value, bint created, float update, float lo,
@@ -58,6 +75,8 @@ cdef class _Grid:
     cdef unique_ptr[OcTree] _key_tree   # key calculator and sensor model; holds no cells
     cdef CellMap _cells
     cdef object _lock
+    cdef vector[uint32_t] _counts       # scratch of scan_updates, zero between scans
+    cdef bint _counts_dirty
 
     def __cinit__(self, *args, **kwargs):
         self._lock = threading.Lock()
@@ -106,61 +125,51 @@ cdef class _Grid:
 
     # ------------------------------------------------------------------ updates
     def _insert(self, const float[:, ::1] points, const float[::1] origin, double max_range,
-                bint ray_mode, const uint32_t[::1] weights=None):
-        """Insert a scan: count each cell's rays, then update each cell once.
+                bint ray_mode, bint culling=False, const uint32_t[::1] weights=None,
+                int superray_threshold=0):
+        """Insert a scan: one update per cell (see ``scan_updates`` in ``ext/_scan.pxd``).
 
-        Every ray is traversed by liboctomap's ``computeRayKeys``; the cells are
-        collected with their counts (rays passing through, rays ending in). In
-        scan mode a cell gets ``l_hit`` if any ray ends in it, else ``l_miss``
-        (liboctomap's ``insertPointCloud``); in ray mode it gets
-        ``n_free*l_miss + n_hit*l_hit``. With `weights`, ray i counts
-        ``weights[i]`` times (super rays use this).
+        The cells, their counts and updates are the octree's; each update is
+        applied to the hash map as liboctomap's ``updateNode`` applies it. With
+        `culling` the scan's culling region is grown over this grid's cells;
+        with `weights` (ray mode), ray i counts ``weights[i]`` times; with
+        `superray_threshold` > 0 the rays are grouped into super rays first.
+
+        Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
+        seconds), seconds = (end points, pre-processing, traversal, update).
         """
         cdef OcTree* tree = self._get()
-        cdef Py_ssize_t i, n = points.shape[0]
-        cdef bint weighted = weights is not None
-        if weighted and weights.shape[0] != n:
-            raise ValueError(f"weights must have length {n}, got {weights.shape[0]}")
+        cdef Py_ssize_t j, n = points.shape[0]
+        cdef const uint32_t* w = NULL
+        if weights is not None:
+            if weights.shape[0] != n:
+                raise ValueError(f"weights must have length {n}, got {weights.shape[0]}")
+            if superray_threshold > 0:
+                raise ValueError("weights and super rays do not combine")
+            w = &weights[0] if n else NULL
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
-        cdef point3d p, end
-        cdef KeyRay ray
-        cdef KeyRay.iterator it
-        cdef OcTreeKey key
-        cdef KeyTable table
-        cdef size_t slot
-        cdef uint32_t w = 1
-        cdef bint truncated
-        cdef float update
+        cdef vector[ScanCell] found
+        cdef ScanStats stats
+        cdef GridView view
         cdef pair[CellMap.iterator, bool] cell
-        cdef float l_hit = tree.getProbHitLog(), l_miss = tree.getProbMissLog()
         cdef float lo = tree.getClampingThresMinLog(), hi = tree.getClampingThresMaxLog()
+        cdef timespec done
+        view.cells = &self._cells
+        view.floor = lo
         with self._lock:
             with nogil:
-                table.reset(<size_t>n * 4)
-                for i in range(n):
-                    if weighted:
-                        w = weights[i]
-                    p = point3d(points[i, 0], points[i, 1], points[i, 2])
-                    truncated = effective_end(o, p, max_range, &end)
-                    if tree.computeRayKeys(o, end, ray):
-                        it = ray.begin()
-                        while it != ray.end():
-                            table.get(pack_key(deref(it))).n_free += w
-                            inc(it)
-                    if not truncated and tree.coordToKeyChecked(p, key):
-                        table.get(pack_key(key)).n_hit += w
+                scan_updates(tree, points, o, max_range, ray_mode, culling, w,
+                             superray_threshold, _fully_free, &view, self._counts,
+                             &self._counts_dirty, found, &stats)
                 if self._cells.empty():
-                    self._cells.reserve(table.size())
-                for slot in range(table.capacity()):
-                    if table.slot(slot).key == KEY_EMPTY:
-                        continue
-                    if ray_mode:
-                        update = <float>(table.slot(slot).n_free * <double>l_miss
-                                         + table.slot(slot).n_hit * <double>l_hit)
-                    else:       # a cell both crossed and hit counts as occupied
-                        update = l_hit if table.slot(slot).n_hit else l_miss
-                    cell = self._cells.insert(Cell(table.slot(slot).key, 0.0))
-                    _apply(&deref(cell.first).second, cell.second, update, lo, hi)
+                    self._cells.reserve(found.size())
+                for j in range(<Py_ssize_t>found.size()):
+                    cell = self._cells.insert(Cell(found[j].key, 0.0))
+                    _apply(&deref(cell.first).second, cell.second, found[j].update, lo, hi)
+                clock_gettime(CLOCK_MONOTONIC, &done)
+        seconds = tuple([_elapsed(stats.clock[k], stats.clock[k + 1]) for k in range(3)]
+                        + [_elapsed(stats.clock[3], done)])
+        return stats.region_cells, found.size(), stats.rays, stats.traversed_cells, seconds
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):

@@ -10,40 +10,26 @@ a per-tree lock serialises the operations on one tree.
 
 cimport cython
 from cython.operator cimport dereference as deref, preincrement as inc
-from libc.math cimport fabs, floor, isfinite, ldexp, sqrt
-from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
+from libc.math cimport floor, isfinite
+from libc.stdint cimport uint8_t, uint32_t, uint64_t
 from libc.string cimport memcpy
-from libcpp cimport bool
 from libcpp.memory cimport unique_ptr
-from libcpp.algorithm cimport sort
 from libcpp.string cimport string
-from libcpp.utility cimport pair
 from libcpp.vector cimport vector
-
-from _keys cimport (
-    KEY_DEPTH as _DEPTH, KEY_EMPTY, KEY_MAX_VAL as _MAX_VAL, CellBox, KeyCounts, KeyTable,
-    RayWalker,
-    effective_end as _effective_end, mark_ends_in_range, mark_in_range, pack_key as _pack,
-    unpack_key as _unpack,
-)
-from liboctomap cimport (
-    KeyRay, OcTree, OcTreeKey, OcTreeNode, Pointcloud, istringstream, key_type,
-    ostringstream, point3d,
-)
-
 from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
+from _keys cimport (
+    KEY_DEPTH as _DEPTH, KEY_MAX_VAL as _MAX_VAL, mark_ends_in_range, mark_in_range,
+    unpack_key as _unpack,
+)
+from _scan cimport ScanCell, ScanStats, scan_updates
+from liboctomap cimport (
+    OcTree, OcTreeKey, OcTreeNode, Pointcloud, istringstream, key_type, ostringstream, point3d,
+)
 
 import threading
 
 import numpy as np
-
-cdef extern from *:
-    int _clz64 "__builtin_clzll"(unsigned long long x) nogil
-
-cdef enum:
-    _MAX_REGION_CELLS = 1 << 28   # larger scan key boxes are not culled (2 x 32 MB of bits)
-    _MAX_DENSE_CELLS = 1 << 24    # up to this, a scan's free counts live in an array (64 MB)
 
 #: Half the number of keys per axis (liboctomap's ``tree_max_val``, 16-level tree).
 TREE_MAX_VAL = _MAX_VAL
@@ -152,151 +138,35 @@ cdef class _OcTree:
         culling was off or the scan's key box was too large to cull.
         """
         cdef OcTree* tree = self._get()
-        cdef Py_ssize_t i, n = points.shape[0]
-        cdef bint weighted = weights is not None
-        if weighted and weights.shape[0] != n:
-            raise ValueError(f"weights must have length {n}, got {weights.shape[0]}")
-        if weighted and superray_threshold > 0:
-            raise ValueError("weights and super rays do not combine")
-        cdef vector[uint32_t] ray_ids, ray_weights     # the rays to traverse, super rays
-        cdef Py_ssize_t r, n_trav = n
+        cdef Py_ssize_t j, n = points.shape[0]
+        cdef const uint32_t* w = NULL
+        if weights is not None:
+            if weights.shape[0] != n:
+                raise ValueError(f"weights must have length {n}, got {weights.shape[0]}")
+            if superray_threshold > 0:
+                raise ValueError("weights and super rays do not combine")
+            w = &weights[0] if n else NULL
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
-        cdef vector[point3d] ends
-        cdef vector[uint8_t] truncated
-        cdef KeyTable table
-        cdef CellBox region
-        cdef OcTreeKey ko, key
-        cdef KeyCounts* entry
-        cdef int lo[3]
-        cdef int hi[3]
-        cdef int axis, max_level = 0, level
-        cdef uint32_t w = 1
-        cdef long region_cells = -1
-        cdef size_t slot, j, updated = 0
-        cdef float l_hit = tree.getProbHitLog(), l_miss = tree.getProbMissLog()
-        cdef timespec t[5]
-        cdef vector[uint64_t] touched         # box indices with a nonzero count
-        cdef uint64_t dims[3]
-        cdef uint64_t idx, box_cells = 1
-        cdef bint dense
-        cdef uint32_t n_free
-        cdef vector[OcTreeKey] end_keys
-        cdef vector[uint8_t] end_ok
-        cdef RayWalker walker
-        cdef vector[uint64_t] back
-        cdef bint more
-        cdef double res = tree.getResolution()
-        cdef int x, y, z
-        cdef long traversed = 0
+        cdef vector[ScanCell] found
         cdef vector[CellUpdate] cells, scratch
-        cdef CellUpdate cell
+        cdef ScanStats stats
+        cdef OcTreeKey key
+        cdef timespec done
         with self._lock:
             with nogil:
-                clock_gettime(CLOCK_MONOTONIC, &t[0])
-                tree.coordToKeyChecked(o, ko)
-                for axis in range(3):
-                    lo[axis] = hi[axis] = ko[axis]
-                ends.resize(n)
-                end_keys.resize(n)
-                end_ok.resize(n)
-                truncated.resize(n)
-                table.reset(<size_t>n // 8)
-                # end cells first: they bound the region and may never join it
-                for i in range(n):
-                    truncated[i] = _effective_end(
-                        o, point3d(points[i, 0], points[i, 1], points[i, 2]), max_range,
-                        &ends[i])
-                    end_ok[i] = tree.coordToKeyChecked(ends[i], key)
-                    end_keys[i] = key
-                    level = 0
-                    for axis in range(3):
-                        lo[axis] = min(lo[axis], <int>key[axis])
-                        hi[axis] = max(hi[axis], <int>key[axis])
-                        level += abs(<int>key[axis] - <int>ko[axis])
-                    max_level = max(max_level, level)
-                    if not truncated[i]:
-                        entry = table.get(_pack(key))
-                        entry.n_hit += weights[i] if weighted else 1
-                clock_gettime(CLOCK_MONOTONIC, &t[1])
-                if superray_threshold > 0:
-                    _super_rays(tree, o, ko, ends, end_keys, truncated, table, superray_threshold,
-                                ray_ids, ray_weights)
-                    n_trav = ray_ids.size()
-                if culling:
-                    region_cells = _build_region(tree, ko, lo, hi, max_level, table, region)
-                clock_gettime(CLOCK_MONOTONIC, &t[2])
-                for axis in range(3):
-                    dims[axis] = <uint64_t>(hi[axis] - lo[axis] + 1)
-                    box_cells *= dims[axis]
-                dense = box_cells <= _MAX_DENSE_CELLS
-                if dense and (self._counts_dirty or self._counts.size() < box_cells):
-                    self._counts.assign(max(box_cells, self._counts.size()), 0)
-                self._counts_dirty = True
-                for r in range(n_trav):
-                    if superray_threshold > 0:
-                        i = ray_ids[r]
-                        w = ray_weights[r]
-                    else:
-                        i = r
-                        if weighted:
-                            w = weights[i]
-                    if not end_ok[i]:
-                        continue        # computeRayKeys's out-of-range check
-                    more = walker.start(res, o, ko, ends[i], end_keys[i])
-                    if more and region_cells > 0:
-                        back.clear()
-                        if walker.walk_back(region, back):
-                            for j in range(back.size()):
-                                key = _unpack(back[j])
-                                _count_free(key[0], key[1], key[2], w, dense, lo, dims,
-                                            self._counts, touched, table)
-                            traversed += back.size()
-                            continue
-                        # the region is closed under stepping toward the origin, so a
-                        # ray's cells in it form a prefix of its traversal
-                        while more and region.inside(walker.key(0), walker.key(1),
-                                                     walker.key(2)) and region.test(
-                                walker.key(0), walker.key(1), walker.key(2)):
-                            more = walker.next()
-                    while more:
-                        _count_free(walker.key(0), walker.key(1), walker.key(2), w, dense, lo,
-                                    dims, self._counts, touched, table)
-                        traversed += 1
-                        more = walker.next()
-                clock_gettime(CLOCK_MONOTONIC, &t[3])
-                # one update per cell: the traversed cells, then end cells no ray crossed
-                cells.reserve(touched.size() + table.size())
-                for j in range(touched.size()):
-                    idx = touched[j]
-                    key = _box_key(idx, lo, dims)
-                    entry = table.find(_pack(key))
-                    cell.code = morton_code(key[0], key[1], key[2])
-                    cell.update = _update_value(self._counts[idx],
-                                                entry.n_hit if entry != NULL else 0,
-                                                ray_mode, l_hit, l_miss)
-                    cells.push_back(cell)
-                for slot in range(table.capacity()):
-                    if table.slot(slot).key == KEY_EMPTY:
-                        continue
-                    key = _unpack(table.slot(slot).key)
-                    n_free = table.slot(slot).n_free
-                    if dense and _in_box(key, lo, dims):
-                        if self._counts[_box_index(key, lo, dims)]:
-                            continue        # collected above
-                        n_free = 0
-                    cell.code = morton_code(key[0], key[1], key[2])
-                    cell.update = _update_value(n_free, table.slot(slot).n_hit, ray_mode,
-                                                l_hit, l_miss)
-                    cells.push_back(cell)
-                for j in range(touched.size()):
-                    self._counts[touched[j]] = 0
-                self._counts_dirty = False
-                updated = cells.size()
+                scan_updates(tree, points, o, max_range, ray_mode, culling, w,
+                             superray_threshold, _fully_free, tree, self._counts,
+                             &self._counts_dirty, found, &stats)
+                cells.resize(found.size())
+                for j in range(<Py_ssize_t>found.size()):
+                    key = _unpack(found[j].key)
+                    cells[j].code = morton_code(key[0], key[1], key[2])
+                    cells[j].update = found[j].update
                 apply_updates(tree[0], cells, scratch)
-                clock_gettime(CLOCK_MONOTONIC, &t[4])
-        seconds = tuple([(t[k + 1].tv_sec - t[k].tv_sec) + 1e-9 * (t[k + 1].tv_nsec - t[k].tv_nsec)
-                         for k in range(4)])
-        return region_cells, updated, n_trav, traversed, seconds
+                clock_gettime(CLOCK_MONOTONIC, &done)
+        seconds = tuple([_elapsed(stats.clock[k], stats.clock[k + 1]) for k in range(3)]
+                        + [_elapsed(stats.clock[3], done)])
+        return stats.region_cells, found.size(), stats.rays, stats.traversed_cells, seconds
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):
@@ -486,333 +356,15 @@ cdef class _OcTree:
             raise ValueError("liboctomap could not read the tree data")
 
 
-cdef inline bint _in_box(const OcTreeKey& key, const int* lo,
-                         const uint64_t* dims) noexcept nogil:
-    return (<uint64_t>(<int>key[0] - lo[0]) < dims[0]
-            and <uint64_t>(<int>key[1] - lo[1]) < dims[1]
-            and <uint64_t>(<int>key[2] - lo[2]) < dims[2])
+cdef bint _fully_free(void* tree, const OcTreeKey& key) noexcept nogil:
+    """FreeTest of an OcTree: the cell is known and at the lower clamping bound."""
+    cdef OcTree* t = <OcTree*>tree
+    cdef OcTreeNode* node = t.search(key, 0)
+    return node != NULL and node.getLogOdds() <= t.getClampingThresMinLog()
 
 
-cdef inline uint64_t _box_index(const OcTreeKey& key, const int* lo,
-                                const uint64_t* dims) noexcept nogil:
-    return ((<uint64_t>(key[2] - lo[2]) * dims[1] + <uint64_t>(key[1] - lo[1])) * dims[0]
-            + <uint64_t>(key[0] - lo[0]))
-
-
-cdef inline OcTreeKey _box_key(uint64_t idx, const int* lo, const uint64_t* dims) noexcept nogil:
-    cdef OcTreeKey key
-    key[0] = <key_type>(lo[0] + idx % dims[0])
-    idx //= dims[0]
-    key[1] = <key_type>(lo[1] + idx % dims[1])
-    key[2] = <key_type>(lo[2] + idx // dims[1])
-    return key
-
-
-cdef inline int _count_free(int kx, int ky, int kz, uint32_t w, bint dense, const int* lo,
-                            const uint64_t* dims, vector[uint32_t]& free_counts,
-                            vector[uint64_t]& touched, KeyTable& table) except -1 nogil:
-    """Count `w` rays through the cell (kx, ky, kz): in the scan's dense box, or the table."""
-    cdef uint64_t x = <uint64_t>(kx - lo[0]), y = <uint64_t>(ky - lo[1]), z = <uint64_t>(kz - lo[2])
-    cdef uint64_t idx
-    cdef OcTreeKey key
-    # liboctomap's traversal may step past the end cell before its length test stops
-    # it: such cells lie outside the box and go to the table
-    if dense and x < dims[0] and y < dims[1] and z < dims[2]:
-        idx = (z * dims[1] + y) * dims[0] + x
-        if free_counts[idx] == 0:
-            touched.push_back(idx)
-        free_counts[idx] += w
-    else:
-        key[0] = <key_type>kx
-        key[1] = <key_type>ky
-        key[2] = <key_type>kz
-        table.get(_pack(key)).n_free += w
-    return 0
-
-
-cdef inline float _update_value(uint32_t n_free, uint32_t n_hit, bint ray_mode, float l_hit,
-                               float l_miss) noexcept nogil:
-    """One cell's update of a scan: liboctomap's insertPointCloud rule, or ray counting."""
-    if ray_mode:
-        return <float>(n_free * <double>l_miss + n_hit * <double>l_hit)
-    return l_hit if n_hit else l_miss
-
-
-cdef inline double _dmin(double a, double b) noexcept nogil:
-    return a if a < b else b
-
-
-cdef inline double _dmax(double a, double b) noexcept nogil:
-    return a if a > b else b
-
-
-cdef struct Crossing:
-    int axis          # the axis whose border the rays of a group cross
-    int other         # the coordinate read at that border
-    double border     # the border's position on `axis`, in metres
-    int key_lo        # lowest key `other` may have there
-    int n_keys        # how many keys `other` may have there
-
-
-cdef int _super_rays(OcTree* tree, const point3d& o, const OcTreeKey& ko,
-                     vector[point3d]& ends, const vector[OcTreeKey]& end_keys,
-                     const vector[uint8_t]& truncated,
-                     KeyTable& table, int threshold, vector[uint32_t]& rays,
-                     vector[uint32_t]& weights) except -1 nogil:
-    """Group the rays of a scan into super rays (Kwon, dissertation §2.3.1-2.3.4).
-
-    Fills `rays` (indices of the rays to traverse) and `weights` (how many rays
-    each stands for). Rays ending in a cell that holds at least `threshold` end
-    points are classified by their *signature*: at every border a ray crosses
-    between the origin's cell and its end cell, the keys of the other
-    coordinates there; only the crossings where the rays into that end cell can
-    differ ("critical", the mapping lines) are evaluated. Equal signatures mean
-    the same traversed cells, so one ray of each class is traversed with the
-    class size as weight.
-
-    Exactness against liboctomap's float traversal: a ray joins a class only
-    when it is *certified* -- at every crossing (critical or not) the other
-    coordinate, and its end point in its cell, clear the nearest cell border by
-    more than a margin several times the error of liboctomap's
-    single-precision ray arithmetic: 2^-19 (length + resolution) for its float
-    direction, plus 2^-21 resolution times the slope |d_b / d_a| for the
-    single-precision half-cell offset of its borders. Its float traversal then
-    equals the exact one. Every other ray is traversed on its own. (A border
-    through the origin is crossed first, at t = 0, by every ray heading that
-    way; the margins of that crossing certify it like any other.)
-    """
-    cdef double res = tree.getResolution(), rf = 1.0 / res
-    cdef double oc[3]
-    cdef double lo[3]
-    cdef double hi[3]
-    cdef double pc[3]
-    cdef Py_ssize_t n = ends.size(), i, j, g, m, first
-    cdef uint32_t n_groups = 0, idx
-    cdef vector[uint32_t] group_of, offsets, order
-    cdef vector[Crossing] crossings
-    cdef vector[pair[uint64_t, uint32_t]] signed_rays
-    cdef Crossing c
-    cdef OcTreeKey key, kv
-    cdef KeyCounts* entry
-    cdef int a, b, step, code_bits, nk, d_a
-    cdef long jj
-    cdef double delta, eb, r, r_min, r_max, r_abs, s, b1, b2, t, y, kb, border, slack
-    cdef double far2
-    cdef double dp[3]
-    cdef double inv[3]
-    cdef uint64_t code
-    cdef bint ok
-    oc[0] = o.x()
-    oc[1] = o.y()
-    oc[2] = o.z()
-    eb = ldexp(res, -21)          # 4 x the single-precision offset of liboctomap's borders
-    # groups of rays by end cell, for the cells with at least `threshold` end points
-    group_of.assign(n, 0)
-    for i in range(n):
-        if truncated[i]:
-            continue
-        entry = table.find(_pack(end_keys[i]))
-        if entry == NULL or entry.n_hit < <uint32_t>threshold:
-            continue
-        if entry.group == 0:
-            n_groups += 1
-            entry.group = n_groups
-        group_of[i] = entry.group
-    offsets.assign(n_groups + 2, 0)
-    for i in range(n):
-        if group_of[i]:
-            offsets[group_of[i] + 1] += 1
-        else:
-            rays.push_back(<uint32_t>i)
-            weights.push_back(1)
-    for g in range(1, n_groups + 2):
-        offsets[g] += offsets[g - 1]
-    order.resize(offsets[n_groups + 1])
-    for i in range(n):
-        if group_of[i]:
-            order[offsets[group_of[i]]] = <uint32_t>i
-            offsets[group_of[i]] += 1
-    # offsets[g] now ends group g (1-based), i.e. starts group g + 1
-    for g in range(1, n_groups + 1):
-        first = offsets[g - 1]
-        kv = end_keys[order[first]]
-        far2 = 0
-        for a in range(3):
-            lo[a] = (<double>kv[a] - _MAX_VAL) * res
-            hi[a] = lo[a] + res
-            far2 += _dmax((lo[a] - oc[a]) ** 2, (hi[a] - oc[a]) ** 2)
-        # 2^-19 (length + res): 4 x the error of liboctomap's float32 ray direction
-        delta = ldexp(sqrt(far2) + res, -19)
-        ok = True
-        crossings.clear()
-        code_bits = 0
-        a = 0
-        while ok and a < 3:
-            d_a = <int>kv[a] - <int>ko[a]
-            if d_a != 0:
-                step = 1 if d_a > 0 else -1
-                for b in range(a + 1, 3):
-                    if kv[b] == ko[b]:
-                        continue     # the rays stay in one b-slab: the end margins certify it
-                    # the slopes d_b / d_a of the rays into the end cell: extreme at corners
-                    r_min = 1e300
-                    r_max = -1e300
-                    for i in range(4):
-                        s = (hi[a] if i & 1 else lo[a]) - oc[a]
-                        if s == 0:
-                            continue   # the origin on the end cell's face: only X_1, at t = 0
-                        r = ((hi[b] if i & 2 else lo[b]) - oc[b]) / s
-                        r_min = _dmin(r_min, r)
-                        r_max = _dmax(r_max, r)
-                    slack = delta + eb * _dmax(fabs(r_min), fabs(r_max))
-                    for jj in range(1, abs(d_a) + 1):
-                        border = (<double>(<int>ko[a] + (jj if step > 0 else 1 - jj))
-                                  - _MAX_VAL) * res
-                        s = border - oc[a]
-                        if s == 0:         # crossed at the origin by every ray
-                            b1 = b2 = oc[b]
-                        elif r_min > r_max:
-                            ok = False     # degenerate end cell: leave the group plain
-                            break
-                        else:
-                            b1 = oc[b] + s * r_min
-                            b2 = oc[b] + s * r_max
-                        c.key_lo = <int>floor((_dmin(b1, b2) - slack) * rf)
-                        nk = <int>floor((_dmax(b1, b2) + slack) * rf) - c.key_lo + 1
-                        if nk == 1:
-                            continue     # every ray of the group has the same key here
-                        code_bits += 64 - _clz64(<uint64_t>(nk - 1))
-                        if code_bits > 62:
-                            ok = False
-                            break
-                        c.axis = a
-                        c.other = b
-                        c.border = border
-                        c.n_keys = nk
-                        crossings.push_back(c)
-                    if not ok:
-                        break
-            a += 1
-        if not ok:
-            for m in range(first, offsets[g]):
-                rays.push_back(order[m])
-                weights.push_back(1)
-            continue
-        signed_rays.clear()
-        for m in range(first, offsets[g]):
-            idx = order[m]
-            pc[0] = ends[idx].x()
-            pc[1] = ends[idx].y()
-            pc[2] = ends[idx].z()
-            ok = True
-            for a in range(3):
-                if _dmin(pc[a] - lo[a], hi[a] - pc[a]) <= delta:
-                    ok = False
-                dp[a] = pc[a] - oc[a]
-                # the rays of a group cross borders of axis a only when dp[a] != 0
-                inv[a] = 1.0 / dp[a] if dp[a] != 0 else 0.0
-            code = 0
-            j = 0
-            while ok and j < <Py_ssize_t>crossings.size():
-                c = crossings[j]
-                r_abs = fabs(dp[c.other] * inv[c.axis])
-                y = oc[c.other] + (c.border - oc[c.axis]) * inv[c.axis] * dp[c.other]
-                kb = floor(y * rf)
-                if (_dmin(y - kb * res, (kb + 1) * res - y) <= delta + eb * r_abs
-                        or kb < c.key_lo or kb >= c.key_lo + c.n_keys):
-                    ok = False
-                else:
-                    code = code * <uint64_t>c.n_keys + <uint64_t>(<int>kb - c.key_lo)
-                j += 1
-            if ok:
-                signed_rays.push_back(pair[uint64_t, uint32_t](code, idx))
-            else:
-                rays.push_back(idx)
-                weights.push_back(1)
-        sort(signed_rays.begin(), signed_rays.end())
-        m = 0
-        while m < <Py_ssize_t>signed_rays.size():
-            j = m
-            while (j < <Py_ssize_t>signed_rays.size()
-                   and signed_rays[j].first == signed_rays[m].first):
-                j += 1
-            rays.push_back(signed_rays[m].second)
-            weights.push_back(<uint32_t>(j - m))
-            m = j
-    return 0
-
-
-cdef inline bint _in_region(const CellBox& region, const OcTreeKey& key) noexcept nogil:
-    return (region.inside(key[0], key[1], key[2])
-            and region.test(key[0], key[1], key[2]))
-
-
-cdef long _build_region(OcTree* tree, const OcTreeKey& ko, const int* lo, const int* hi,
-                        int max_level, const KeyTable& ends, CellBox& region) noexcept nogil:
-    """Grow the scan's culling region (Kwon, dissertation §2.3.5, Alg. 3).
-
-    Breadth first over Manhattan levels from the sensor's cell, inside the key
-    box of the scan: a cell joins when it is fully free (log-odds at the lower
-    clamp), holds no end point of the scan (occgp's exactness rule), and each of
-    its test cells (one step toward the origin on every axis where its key
-    differs from the origin's) is already in. Returns the number of cells, or
-    -1 when the box is too large (no culling).
-    """
-    cdef CellBox seen
-    cdef vector[OcTreeKey] frontier, next_frontier
-    cdef OcTreeKey c, nb, t
-    cdef OcTreeNode* node
-    cdef float floor_log = tree.getClampingThresMinLog()
-    cdef int level, axis, b, d, step
-    cdef size_t j
-    cdef long count = 0
-    cdef bint ok
-    if (not region.reset(lo, hi, _MAX_REGION_CELLS)
-            or not seen.reset(lo, hi, _MAX_REGION_CELLS)):
-        return -1
-    node = tree.search(ko, 0)
-    if node == NULL or node.getLogOdds() > floor_log or ends.contains(_pack(ko)):
-        return 0
-    region.set(ko[0], ko[1], ko[2])
-    seen.set(ko[0], ko[1], ko[2])
-    frontier.push_back(ko)
-    count = 1
-    for level in range(1, max_level + 1):
-        next_frontier.clear()
-        for j in range(frontier.size()):
-            c = frontier[j]
-            for axis in range(3):
-                for d in range(2):
-                    step = 1 if d == 0 else -1
-                    if c[axis] != ko[axis] and (step > 0) != (c[axis] > ko[axis]):
-                        continue            # only away from the origin
-                    nb = c
-                    nb[axis] = <key_type>(<int>c[axis] + step)
-                    if (not seen.inside(nb[0], nb[1], nb[2])
-                            or seen.test(nb[0], nb[1], nb[2])):
-                        continue
-                    seen.set(nb[0], nb[1], nb[2])
-                    ok = True
-                    for b in range(3):      # test cells: one step back toward the origin
-                        if nb[b] == ko[b]:
-                            continue
-                        t = nb
-                        t[b] = <key_type>(<int>nb[b] + (-1 if nb[b] > ko[b] else 1))
-                        if not _in_region(region, t):
-                            ok = False
-                            break
-                    if not ok or ends.contains(_pack(nb)):
-                        continue
-                    node = tree.search(nb, 0)
-                    if node == NULL or node.getLogOdds() > floor_log:
-                        continue
-                    region.set(nb[0], nb[1], nb[2])
-                    next_frontier.push_back(nb)
-                    count += 1
-        if next_frontier.empty():
-            break
-        frontier.swap(next_frontier)
-    return count
+cdef inline double _elapsed(const timespec& a, const timespec& b) noexcept nogil:
+    return (b.tv_sec - a.tv_sec) + 1e-9 * (b.tv_nsec - a.tv_nsec)
 
 
 cdef inline bint _meets(const OcTreeKey& key, unsigned depth, const OcTreeKey& kmin,

@@ -15,9 +15,10 @@ from numpy.typing import ArrayLike, NDArray
 from ._octree import TREE_MAX_VAL
 from ._validation import as_point, as_points, check_probability, check_real
 
-__all__ = ["LogOddsMap", "Leaves", "MODES"]
+__all__ = ["LogOddsMap", "Leaves", "MODES", "METHODS"]
 
 MODES = ("scan", "ray")
+METHODS = ("plain", "culling", "superray", "superray+culling")
 
 
 class Leaves(NamedTuple):
@@ -162,6 +163,29 @@ class LogOddsMap:
         return (occupied, state < 0) if return_unknown else occupied
 
     # ------------------------------------------------------------------ helpers
+    @staticmethod
+    def _check_method(method: str, superray_threshold: int) -> int:
+        """Validate `method` and `superray_threshold`; return the threshold the core
+        takes (0: no super rays)."""
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        if isinstance(superray_threshold, (bool, np.bool_)) or not isinstance(
+                superray_threshold, (int, np.integer)):
+            raise TypeError(f"superray_threshold must be an int, "
+                            f"got {type(superray_threshold).__name__}")
+        if superray_threshold < 1:
+            raise ValueError(f"superray_threshold must be >= 1, got {superray_threshold}")
+        return int(superray_threshold) if method.startswith("superray") else 0
+
+    @staticmethod
+    def _insert_statistics(stats: tuple) -> dict[str, float]:
+        """``last_insert_`` from what a core's scan insertion returns."""
+        region, cells, rays, traversed, seconds = stats
+        return {"rays": rays, "updated_cells": cells, "traversed_cells": traversed,
+                "region_cells": region, "endpoint_seconds": seconds[0],
+                "preprocessing_seconds": seconds[1], "traversal_seconds": seconds[2],
+                "update_seconds": seconds[3]}
+
     def _validated_scan(self, points: ArrayLike, origin: ArrayLike, max_range, mode: str):
         """Check a scan for insertion; return (points, origin, max_range) as the core wants
         them (float32, -1 for no limit), or None for an empty scan."""

@@ -54,6 +54,9 @@ class GridMap(LogOddsMap, _Grid):
         Number of known cells.
     bounds : tuple of ndarray of shape (3,)
         Minimum and maximum corner of the known space (NaN when empty).
+    last_insert_ : dict
+        Statistics of the last :meth:`insert_scan`, as for
+        :attr:`OccupancyOctree.last_insert_`.
 
     See Also
     --------
@@ -92,12 +95,14 @@ class GridMap(LogOddsMap, _Grid):
         *,
         max_range: float | None = None,
         mode: str = "scan",
+        method: str = "plain",
+        superray_threshold: int = 20,
     ) -> "GridMap":
         """Integrate one range scan into the map.
 
         Each ray from `origin` to a point in `points` marks the cells it crosses
         as free and its end cell as occupied, cell for cell as
-        :meth:`OccupancyOctree.insert_scan` does.
+        :meth:`OccupancyOctree.insert_scan` does, with the same methods.
 
         Parameters
         ----------
@@ -116,6 +121,15 @@ class GridMap(LogOddsMap, _Grid):
             as occupied, and every cell gets at most one update. ``"ray"`` counts
             rays: each cell gets ``n_free * l_miss + n_hit * l_hit`` (``n`` = how
             many rays pass through / end in it) and is clamped once.
+        method : {"plain", "culling", "superray", "superray+culling"}, default="plain"
+            How the rays are traversed; every method gives the same map, cell
+            for cell: ``"plain"`` walks every ray, ``"superray"`` groups rays
+            into super rays, ``"culling"`` skips the scan's culling region of
+            fully free cells (grown over this grid's cells) [1]_. See
+            :meth:`OccupancyOctree.insert_scan` for the details.
+        superray_threshold : int, default=20
+            With the super-ray methods, the fewest end points a cell must hold
+            for its rays to be grouped; at least 1.
 
         Returns
         -------
@@ -129,7 +143,8 @@ class GridMap(LogOddsMap, _Grid):
         ValueError
             If `points` is not of shape (n_points, 3), `origin` not of shape
             (3,), either holds NaN or inf or lies outside the key range, or
-            `max_range` or `mode` is invalid. The map is then unchanged.
+            `max_range`, `mode`, `method` or `superray_threshold` is invalid.
+            The map is then unchanged.
 
         Examples
         --------
@@ -139,10 +154,12 @@ class GridMap(LogOddsMap, _Grid):
         >>> m.num_cells        # the cells the ray crosses, and its end cell
         10
         """
+        threshold = self._check_method(method, superray_threshold)
         scan = self._validated_scan(points, origin, max_range, mode)
         if scan is not None:
             pts, org, rng = scan
-            self._insert(pts, org, rng, mode == "ray")
+            self.last_insert_ = self._insert_statistics(self._insert(
+                pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold))
         return self
 
     # ------------------------------------------------------------------ queries

@@ -14,7 +14,6 @@ from ._validation import check_real
 
 __all__ = ["OccupancyOctree", "Leaves"]
 
-METHODS = ("plain", "culling", "superray", "superray+culling")
 
 
 class OccupancyOctree(LogOddsMap, _OcTree):
@@ -188,14 +187,7 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         >>> m.is_occupied([[1.0, 0, 0]]).tolist()
         [True]
         """
-        if method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-        if isinstance(superray_threshold, (bool, np.bool_)) or not isinstance(
-                superray_threshold, (int, np.integer)):
-            raise TypeError(f"superray_threshold must be an int, "
-                            f"got {type(superray_threshold).__name__}")
-        if superray_threshold < 1:
-            raise ValueError(f"superray_threshold must be >= 1, got {superray_threshold}")
+        threshold = self._check_method(method, superray_threshold)
         if not isinstance(discretize, (bool, np.bool_)):
             raise TypeError(f"discretize must be a bool, got {type(discretize).__name__}")
         if discretize and (mode != "scan" or method != "plain"):
@@ -208,14 +200,8 @@ class OccupancyOctree(LogOddsMap, _OcTree):
             self._insert_point_cloud(pts, org, rng, bool(discretize))
             self.last_insert_: dict[str, float] = {"rays": len(pts)}
         else:
-            region, cells, rays, traversed, seconds = self._insert_batch(
-                pts, org, rng, mode == "ray", method.endswith("culling"), None,
-                int(superray_threshold) if method.startswith("superray") else 0)
-            self.last_insert_ = {
-                "rays": rays, "updated_cells": cells, "traversed_cells": traversed,
-                "region_cells": region, "endpoint_seconds": seconds[0],
-                "preprocessing_seconds": seconds[1], "traversal_seconds": seconds[2],
-                "update_seconds": seconds[3]}
+            self.last_insert_ = self._insert_statistics(self._insert_batch(
+                pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold))
         return self
 
     # ------------------------------------------------------------------ queries

@@ -104,12 +104,13 @@ def test_weighted_rays_count_as_copies():
     (points, origin), = random_scans(np.random.default_rng(5), n_scans=1, n_points=30)
     weights = np.random.default_rng(6).integers(1, 6, len(points)).astype(np.uint32)
     weighted = GridMap(0.1)
-    weighted._insert(points.astype(np.float32), origin.astype(np.float32), -1.0, True, weights)
+    weighted._insert(points.astype(np.float32), origin.astype(np.float32), -1.0, True, False,
+                     weights)
     copies = GridMap(0.1).insert_scan(np.repeat(points, weights, axis=0), origin, mode="ray")
     assert_same_cells(grid_values(weighted), grid_values(copies))
     with pytest.raises(ValueError, match="weights must have length 30, got 2"):
         weighted._insert(points.astype(np.float32), origin.astype(np.float32), -1.0, True,
-                         weights[:2])
+                         False, weights[:2])
 
 
 # ---------------------------------------------------------------------- queries
@@ -325,3 +326,41 @@ def test_queries_reject_bad_points(m, method):
 def test_uninitialised_core_raises():
     with pytest.raises(ValueError, match="was not initialised"):
         GridMap.__new__(GridMap).occupancy([[0.0, 0.0, 0.0]])
+
+
+# ---------------------------------------------------------------------- methods
+@pytest.mark.parametrize("resolution", [0.1, 0.4])
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+def test_every_method_gives_the_plain_grid(mode, resolution):
+    """Super rays and the culling region on the grid: the same cells, bit for bit, as
+    the plain method and as the octree (revisits saturate free space for culling)."""
+    from test_culling import room_sequence
+    scans = room_sequence(np.random.default_rng(7), n_scans=8, n_points=1500)
+    maps = {}
+    for method in ("plain", "culling", "superray", "superray+culling"):
+        m = GridMap(resolution)
+        for points, origin in scans:
+            m.insert_scan(points, origin, mode=mode, method=method, superray_threshold=3)
+        maps[method] = grid_values(m)
+        if method == "superray+culling":
+            if resolution == 0.1:    # the last scan's new points lie in 0.4 m cells near it
+                assert m.last_insert_["region_cells"] > (0 if mode == "ray" else -1)
+            else:
+                assert m.last_insert_["rays"] < len(scans[-1][0])   # some rays grouped
+    for method in ("culling", "superray", "superray+culling"):
+        assert_same_cells(maps[method], maps["plain"])
+    octree = OccupancyOctree(resolution)
+    for points, origin in scans:
+        octree.insert_scan(points, origin, mode=mode)
+    octree.expand()
+    assert_same_cells(maps["plain"], leaf_values(octree))
+
+
+def test_grid_method_is_checked():
+    with pytest.raises(ValueError, match="method must be one of"):
+        GridMap(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="fast")
+    with pytest.raises(ValueError, match="superray_threshold must be >= 1, got 0"):
+        GridMap(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="superray",
+                                 superray_threshold=0)
+    with pytest.raises(TypeError, match="superray_threshold must be an int, got float"):
+        GridMap(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], superray_threshold=2.5)
