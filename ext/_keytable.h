@@ -129,22 +129,25 @@ class CellBox {
   }
 
   // The caller checks inside() first.
-  bool test(int x, int y, int z) const {
-    uint64_t i = index(x, y, z);
-    return (bits_[i >> 6] >> (i & 63)) & 1;
-  }
+  bool test(int x, int y, int z) const { return test_index(index(x, y, z)); }
+
+  // By the index of a cell inside the box; stride(axis) steps it by one key on `axis`.
+  bool test_index(uint64_t i) const { return (bits_[i >> 6] >> (i & 63)) & 1; }
+  uint64_t stride(int axis) const { return axis == 0 ? 1 : axis == 1 ? dim_[0] : dim_[0] * dim_[1]; }
 
   void set(int x, int y, int z) {
     uint64_t i = index(x, y, z);
     bits_[i >> 6] |= uint64_t(1) << (i & 63);
   }
 
- private:
+ public:
   uint64_t index(int x, int y, int z) const {
     return (static_cast<uint64_t>(z - lo_[2]) * dim_[1] + static_cast<uint64_t>(y - lo_[1])) *
                dim_[0] +
            static_cast<uint64_t>(x - lo_[0]);
   }
+
+ private:
 
   int lo_[3] = {0, 0, 0};
   uint64_t dim_[3] = {0, 0, 0};

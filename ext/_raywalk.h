@@ -127,37 +127,44 @@ class RayWalker {
     // what the accumulated and the computed crossings can err, both together
     const double margin =
         2.0 * static_cast<double>(most + 3) * std::numeric_limits<double>::epsilon() * largest;
+    // the ray's cells all lie in the box of its end cells, which the region's box holds
+    const uint64_t stride[3] = {region.stride(0), region.stride(1), region.stride(2)};
+    uint64_t index = region.index(key[0], key[1], key[2]);
+    // the crossing into the end cell must come before the ray's end
+    if (std::max(std::max(last[0], last[1]), last[2]) + margin >= static_cast<double>(length_))
+      return false;
     const size_t first = cells.size();
+    long remaining = count[0] + count[1] + count[2];
     bool at_end = true;
-    while (count[0] + count[1] + count[2] > 0) {
+    while (remaining > 0) {
       // the crossing into the current cell: the latest of the three
-      const int dim = last[0] >= last[1] ? (last[0] >= last[2] ? 0 : 2)
-                                         : (last[1] >= last[2] ? 1 : 2);
+      const bool c01 = last[0] >= last[1], c02 = last[0] >= last[2], c12 = last[1] >= last[2];
+      const int dim = c01 ? (c02 ? 0 : 2) : (c12 ? 1 : 2);
       const double entry = last[dim];
       // next() took it as the earliest of the next crossings on the three axes
-      bool ok = !(at_end && entry + margin >= static_cast<double>(length_));
-      for (int i = 0; i < 3; ++i) ok &= (i == dim || next[i] - entry > margin);
-      if (!ok) {
+      const double other = std::min(next[dim == 0 ? 1 : 0], next[dim == 2 ? 1 : 2]);
+      if (!(other - entry > margin)) {
         cells.resize(first);
         return false;
       }
       if (!at_end) {
         // the entry into a cell of the region is certified: the cells before it are in
         // the region, whichever way next() breaks their ties
-        if (region.inside(key[0], key[1], key[2]) && region.test(key[0], key[1], key[2]))
-          return true;
+        if (region.test_index(index)) return true;
         cells.push_back(pack(key));
       }
       at_end = false;
+      --remaining;
       --count[dim];
       key[dim] -= step[dim];
+      if (step[dim] > 0) index -= stride[dim];
+      else index += stride[dim];
       next[dim] = entry;
       last[dim] = count[dim] > 0 ? t0[dim] + static_cast<double>(count[dim] - 1) * dt[dim]
                                  : -std::numeric_limits<double>::infinity();
     }
     // the origin's cell
-    if (!(region.inside(key[0], key[1], key[2]) && region.test(key[0], key[1], key[2])))
-      cells.push_back(pack(key));
+    if (!region.test_index(index)) cells.push_back(pack(key));
     return true;
   }
 
