@@ -10,17 +10,25 @@ Datasets, simulated or read in the same run:
   ``--poses`` nearby sensor positions (the points shifted with the sensor).
 
 For every resolution, every method inserts the same scans in order into one
-map, and the table gives frames per second, the mean pre-processing time
-(super rays, culling region) and update time per scan (ms), the cells updated
-and the rays traversed per scan, and the speed-up over
-liboctomap's ``insertPointCloud`` (``mode="scan"`` rows) or
-``insertPointCloudRays`` (``mode="ray"`` rows), both called from C++ on the
-same points. Every occgp method's map is checked to equal the plain method's,
-leaf for leaf. Times are wall clock, single thread; ratios, not absolute
-times, are what carries over between machines.
+map (an :class:`~occgp.OccupancyOctree`, then a :class:`~occgp.GridMap`), and
+the table gives, per scan: frames per second, the pre-processing time (super
+rays, culling region) and the rest (end points, traversal, map update) in ms,
+the cells traversed (visits that counted a ray), the rays traversed (super rays
+count once) with the points per ray, the unnecessary traversals (visits to
+cells whose update changes nothing: fully free cells no ray ends in; counted in
+a separate, untimed pass) and the speed-up over liboctomap's ``insertPointCloud``
+(``mode="scan"`` rows) or ``insertPointCloudRays`` (``mode="ray"`` rows), both
+called from C++ on the same points, and over the same map's plain method. Every
+method's map is checked to equal the plain method's, leaf for leaf (cell for
+cell). Times are wall clock, single thread; ratios, not absolute times, are
+what carries over between machines.
 
 Run: ``python bench/bench_updates.py [--scans 20] [--resolutions 0.1 0.2 ...]``.
 """
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # idle BLAS threads spin on 2 cores
 
 import argparse
 import multiprocessing
@@ -37,7 +45,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from octomap_reference import build_octomap_insert, time_octomap_sequence, write_scan_bin  # noqa: E402
 
-from occgp import OccupancyOctree  # noqa: E402
+from occgp import GridMap, OccupancyOctree  # noqa: E402
 from occgp.datasets import free_path, read_xyz, simulate_scans  # noqa: E402
 
 DATA = ROOT / ".." / "shared" / "data" / "octomap"
@@ -58,33 +66,45 @@ def scan_dat_poses(n_poses, seed=0):
     return [(scan.points + s, scan.origin + s) for s in shifts]
 
 
-def run_fresh(scans, resolution, mode, method):
+def run_fresh(*args):
     """:func:`run_occgp` in a new process, as the C++ reference runs: a long-lived
     process's fragmented heap slows liboctomap's node allocations, which would blur
     the comparison."""
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
-        return pool.submit(run_occgp, scans, resolution, mode, method).result()
+        return pool.submit(run_occgp, *args).result()
 
 
-def run_occgp(scans, resolution, mode, method):
-    """Insert the scans in order with ``insert_scan``; return the map, per-scan seconds,
-    pre-processing seconds (super rays, culling region), updated cells and traversed rays."""
-    tree = OccupancyOctree(resolution)
+def run_occgp(scans, resolution, kind, mode, method, diagnose=False):
+    """Insert the scans in order with ``insert_scan``; return the map's leaves and the
+    per-scan seconds, pre-processing seconds, traversed cells and rays; with
+    `diagnose`, also the unnecessary traversals per scan (from a second, untimed
+    pass through the same scans)."""
+    cls = OccupancyOctree if kind == "octree" else GridMap
+    m = cls(resolution)
     total, proc, cells, rays = [], [], [], []
     for points, origin in scans:
         t0 = time.perf_counter()
-        tree.insert_scan(points, origin, mode=mode, method=method)
+        m.insert_scan(points, origin, mode=mode, method=method)
         total.append(time.perf_counter() - t0)
-        stats = tree.last_insert_
+        stats = m.last_insert_
         proc.append(stats.get("preprocessing_seconds", 0.0))
-        cells.append(stats.get("updated_cells", 0))
+        cells.append(stats.get("traversed_cells", 0))
         rays.append(stats["rays"])
-    return tree, np.array(total), np.array(proc), np.array(cells), np.array(rays)
+    unnecessary = []
+    if diagnose:
+        d = OccupancyOctree(resolution)
+        threshold = d._check_method(method, 20)
+        for points, origin in scans:
+            unnecessary.append(d._insert_batch(
+                np.asarray(points, np.float32), np.asarray(origin, np.float32), -1.0,
+                mode == "ray", method.endswith("culling"), None, threshold, True)[5])
+    leaves = m.leaves() if kind == "octree" else m.cells()
+    return (leaves, np.array(total), np.array(proc), np.array(cells), np.array(rays),
+            np.array(unnecessary))
 
 
-def same_map(a, b):
-    la, lb = a.leaves(), b.leaves()
+def same_map(la, lb):
     if len(la.sizes) != len(lb.sizes):
         return False
     oa = np.lexsort((la.sizes, *la.centers.T))
@@ -93,35 +113,78 @@ def same_map(a, b):
             and np.array_equal(la.log_odds[oa], lb.log_odds[ob]))
 
 
-def bench_dataset(name, scans, resolutions, exe, tmp):
+def bench_dataset(name, scans, resolutions, exe, tmp, results):
     n_pts = np.mean([len(p) for p, _ in scans])
     print(f"\n== {name}: {len(scans)} scans, {n_pts:,.0f} points per scan ==")
     files = [write_scan_bin(Path(tmp) / f"{name}_{i}.bin", p, o) for i, (p, o) in enumerate(scans)]
-    header = (f"{'res':>5}  {'method':<41}{'FPS':>7}{'proc ms':>9}{'update ms':>11}"
-              f"{'cells/scan':>12}{'rays/scan':>11}{'speed-up':>10}  map")
+    header = (f"{'res':>5}  {'method':<40}{'FPS':>7}{'proc ms':>9}{'rest ms':>9}"
+              f"{'cells/scan':>12}{'rays/scan':>11}{'pts/ray':>8}{'unnec./scan':>13}"
+              f"{'vs lib':>8}{'vs plain':>9}  map")
     print(header)
     print("-" * len(header))
     for res in resolutions:
-        ref = {"scan": time_octomap_sequence(exe, files, res),
-               "ray": time_octomap_sequence(exe, files, res, rays=True)}
+        ref = {"scan": np.sum(time_octomap_sequence(exe, files, res)),
+               "ray": np.sum(time_octomap_sequence(exe, files, res, rays=True))}
         for mode, label in (("scan", "insertPointCloud"), ("ray", "insertPointCloudRays")):
-            t = np.sum(ref[mode])
-            print(f"{res:>5.2f}  {'liboctomap ' + label:<41}{len(files) / t:>7.2f}{'':>9}"
-                  f"{1e3 * t / len(files):>11.1f}{'':>12}{n_pts:>11,.0f}{1.0:>9.2f}x")
-        plain = {}
-        for mode, method in METHODS:
-            tree, total, region, cells, rays = run_fresh(scans, res, mode, method)
-            if method == "plain":
-                plain[mode] = tree
-                same = "(reference)"
-            else:
-                same = "identical" if same_map(tree, plain[mode]) else "DIFFERENT"
-            t = total.sum()
-            proc_ms = f"{1e3 * region.mean():.1f}" if method != "plain" else ""
-            cell_txt = f"{cells.mean():,.0f}" if cells.any() else ""
-            print(f"{res:>5.2f}  {f'occgp octree mode={mode} {method}':<41}{len(scans) / t:>7.2f}"
-                  f"{proc_ms:>9}{1e3 * (t - region.sum()) / len(scans):>11.1f}{cell_txt:>12}"
-                  f"{rays.mean():>11,.0f}{np.sum(ref[mode]) / t:>9.2f}x  {same}")
+            t = ref[mode]
+            print(f"{res:>5.2f}  {'liboctomap ' + label:<40}{len(files) / t:>7.2f}{'':>9}"
+                  f"{1e3 * t / len(files):>9.1f}{'':>12}{n_pts:>11,.0f}{1.0:>8.1f}{'':>13}"
+                  f"{1.0:>7.2f}x")
+        for kind in ("octree", "grid"):
+            plain = {}
+            for mode, method in METHODS:
+                leaves, total, proc, cells, rays, unnec = run_fresh(
+                    scans, res, kind, mode, method, kind == "octree")
+                t = total.sum()
+                if method == "plain":
+                    plain[mode] = leaves, t
+                    same = "(reference)"
+                else:
+                    same = "identical" if same_map(leaves, plain[mode][0]) else "DIFFERENT"
+                results.append(dict(dataset=name, resolution=res, kind=kind, mode=mode,
+                                    method=method, vs_lib=ref[mode] / t,
+                                    vs_plain=plain[mode][1] / t, same=same))
+                proc_ms = f"{1e3 * proc.mean():.1f}" if method != "plain" else ""
+                cell_txt = f"{cells.mean():,.0f}" if cells.any() else ""
+                unnec_txt = f"{unnec.mean():,.0f}" if len(unnec) else ""
+                print(f"{res:>5.2f}  {f'{kind} mode={mode} {method}':<40}{len(scans) / t:>7.2f}"
+                      f"{proc_ms:>9}{1e3 * (t - proc.sum()) / len(scans):>9.1f}{cell_txt:>12}"
+                      f"{rays.mean():>11,.0f}{n_pts / rays.mean():>8.1f}{unnec_txt:>13}"
+                      f"{ref[mode] / t:>7.2f}x{plain[mode][1] / t:>8.2f}x  {same}")
+
+
+TARGETS = [  # (what, dataset, resolution, kind, mode, method, against, at least)
+    ("octree scan superray+culling vs insertPointCloud", "geb079", 0.2, "octree", "scan",
+     "superray+culling", "vs_lib", 3.0),
+    ("octree scan superray+culling vs insertPointCloud", "geb079", 0.1, "octree", "scan",
+     "superray+culling", "vs_lib", 2.0),
+    ("octree ray superray+culling vs insertPointCloudRays", "geb079", 0.2, "octree", "ray",
+     "superray+culling", "vs_lib", 6.0),
+    ("grid scan superray+culling vs grid plain", "geb079", 0.2, "grid", "scan",
+     "superray+culling", "vs_plain", 4.0),
+    ("grid ray superray+culling vs grid plain", "geb079", 0.2, "grid", "ray",
+     "superray+culling", "vs_plain", 4.0),
+]
+
+
+def print_targets(results):
+    print("\n== targets (dense geb079 trajectory, single thread) ==")
+    for what, data, res, kind, mode, method, against, goal in TARGETS:
+        row = [r for r in results if (r["dataset"], r["resolution"], r["kind"], r["mode"],
+                                      r["method"]) == (data, res, kind, mode, method)]
+        if row:
+            got = row[0][against]
+            print(f"{what} at {res} m: {got:.2f}x (target >= {goal}x) "
+                  f"{'met' if got >= goal else 'NOT met'}")
+    lows = [r for r in results if r["dataset"] == "geb079" and r["kind"] == "octree"
+            and r["mode"] == "scan" and r["method"] == "superray+culling"]
+    if lows:
+        worst = min(lows, key=lambda r: r["vs_lib"])
+        print(f"octree scan superray+culling, lowest over resolutions: {worst['vs_lib']:.2f}x "
+              f"at {worst['resolution']} m (target >= 1.0x) "
+              f"{'met' if worst['vs_lib'] >= 1.0 else 'NOT met'}")
+    bad = [r for r in results if r["same"] == "DIFFERENT"]
+    print(f"maps identical to the plain method's: {'all' if not bad else f'{len(bad)} DIFFER'}")
 
 
 def main(argv=None):
@@ -138,12 +201,15 @@ def main(argv=None):
         exe = build_octomap_insert(Path(tmp))
         if exe is None:
             sys.exit("no C++ compiler or liboctomap pkg-config file to build the reference")
+        results = []
         for name in args.datasets:
             scans = (geb079_trajectory(args.scans) if name == "geb079"
                      else scan_dat_poses(args.poses))
-            bench_dataset(name, scans, args.resolutions, exe, tmp)
-    print("\nspeed-up: liboctomap's time over occgp's on the same scans, same run "
-          "(mode=scan rows vs insertPointCloud, mode=ray rows vs insertPointCloudRays).")
+            bench_dataset(name, scans, args.resolutions, exe, tmp, results)
+    print("\nvs lib: liboctomap's time over occgp's on the same scans, same run (mode=scan "
+          "rows vs insertPointCloud, mode=ray rows vs insertPointCloudRays); vs plain: the "
+          "same map's plain method over this one.")
+    print_targets(results)
 
 
 if __name__ == "__main__":

@@ -126,7 +126,7 @@ cdef class _Grid:
     # ------------------------------------------------------------------ updates
     def _insert(self, const float[:, ::1] points, const float[::1] origin, double max_range,
                 bint ray_mode, bint culling=False, const uint32_t[::1] weights=None,
-                int superray_threshold=0):
+                int superray_threshold=0, bint diagnose=False):
         """Insert a scan: one update per cell (see ``scan_updates`` in ``ext/_scan.pxd``).
 
         The cells, their counts and updates are the octree's; each update is
@@ -136,7 +136,7 @@ cdef class _Grid:
         `superray_threshold` > 0 the rays are grouped into super rays first.
 
         Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
-        seconds), seconds = (end points, pre-processing, traversal, update).
+        seconds, unnecessary_traversals) as ``OccupancyOctree``'s ``_insert_batch``.
         """
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t j, n = points.shape[0]
@@ -160,7 +160,7 @@ cdef class _Grid:
             with nogil:
                 scan_updates(tree, points, o, max_range, ray_mode, culling, w,
                              superray_threshold, _fully_free, &view, self._counts,
-                             &self._counts_dirty, found, &stats)
+                             &self._counts_dirty, found, &stats, diagnose)
                 if self._cells.empty():
                     self._cells.reserve(found.size())
                 for j in range(<Py_ssize_t>found.size()):
@@ -169,7 +169,8 @@ cdef class _Grid:
                 clock_gettime(CLOCK_MONOTONIC, &done)
         seconds = tuple([_elapsed(stats.clock[k], stats.clock[k + 1]) for k in range(3)]
                         + [_elapsed(stats.clock[3], done)])
-        return stats.region_cells, found.size(), stats.rays, stats.traversed_cells, seconds
+        return (stats.region_cells, found.size(), stats.rays, stats.traversed_cells, seconds,
+                stats.unnecessary)
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):

@@ -118,7 +118,8 @@ cdef class _OcTree:
 
     def _insert_batch(self, const float[:, ::1] points, const float[::1] origin,
                       double max_range, bint ray_mode, bint culling,
-                      const uint32_t[::1] weights=None, int superray_threshold=0):
+                      const uint32_t[::1] weights=None, int superray_threshold=0,
+                      bint diagnose=False):
         """Insert a scan through occgp's own key table, optionally culled.
 
         Every ray is traversed by liboctomap's ``computeRayKeys``; the cells are
@@ -133,9 +134,10 @@ cdef class _OcTree:
         (see :func:`_super_rays`) and one ray per class is traversed.
 
         Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
-        seconds), seconds = (end points, pre-processing (super rays and
-        culling region), traversal, tree update); region_cells is -1 when
-        culling was off or the scan's key box was too large to cull.
+        seconds, unnecessary_traversals), seconds = (end points, pre-processing
+        (super rays and culling region), traversal, tree update); region_cells
+        is -1 when culling was off or the scan's key box was too large to cull;
+        unnecessary_traversals is -1 unless `diagnose` (slow) asks for it.
         """
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t j, n = points.shape[0]
@@ -156,7 +158,7 @@ cdef class _OcTree:
             with nogil:
                 scan_updates(tree, points, o, max_range, ray_mode, culling, w,
                              superray_threshold, _fully_free, tree, self._counts,
-                             &self._counts_dirty, found, &stats)
+                             &self._counts_dirty, found, &stats, diagnose)
                 cells.resize(found.size())
                 for j in range(<Py_ssize_t>found.size()):
                     key = _unpack(found[j].key)
@@ -166,7 +168,8 @@ cdef class _OcTree:
                 clock_gettime(CLOCK_MONOTONIC, &done)
         seconds = tuple([_elapsed(stats.clock[k], stats.clock[k + 1]) for k in range(3)]
                         + [_elapsed(stats.clock[3], done)])
-        return stats.region_cells, found.size(), stats.rays, stats.traversed_cells, seconds
+        return (stats.region_cells, found.size(), stats.rays, stats.traversed_cells, seconds,
+                stats.unnecessary)
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):

@@ -10,8 +10,6 @@ the map's resolution, so every map finds the cells liboctomap finds.
 
 from libc.math cimport fabs, floor, ldexp, sqrt
 from libc.stdint cimport uint8_t, uint32_t, uint64_t
-from libcpp.algorithm cimport sort
-from libcpp.utility cimport pair
 from libcpp.vector cimport vector
 from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
@@ -42,6 +40,7 @@ cdef struct ScanStats:
     long region_cells      # cells in the culling region; -1 without culling
     long rays              # rays traversed (super rays count once)
     long traversed_cells   # cell visits that counted a ray
+    long unnecessary       # with `diagnose`: visits to cells whose update is a no-op
     timespec clock[4]      # start; end points done; pre-processing done; traversal done
 
 
@@ -97,6 +96,14 @@ cdef inline float _update_value(uint32_t n_free, uint32_t n_hit, bint ray_mode, 
     return l_hit if n_hit else l_miss
 
 
+cdef inline uint64_t _mix(uint64_t k) noexcept nogil:
+    """The murmur3 finaliser: spreads the bits of a signature for hashing."""
+    k ^= k >> 33
+    k *= 0xff51afd7ed558ccdULL
+    k ^= k >> 33
+    return k
+
+
 cdef inline double _dmin(double a, double b) noexcept nogil:
     return a if a < b else b
 
@@ -149,7 +156,9 @@ cdef inline int _super_rays(double res, const point3d& o, const OcTreeKey& ko,
     cdef uint32_t n_groups = 0, idx
     cdef vector[uint32_t] group_of, offsets, order
     cdef vector[Crossing] crossings
-    cdef vector[pair[uint64_t, uint32_t]] signed_rays
+    cdef vector[uint64_t] class_code
+    cdef vector[uint32_t] class_ray
+    cdef size_t cap, h
     cdef Crossing c
     cdef OcTreeKey key, kv
     cdef KeyCounts* entry
@@ -157,6 +166,7 @@ cdef inline int _super_rays(double res, const point3d& o, const OcTreeKey& ko,
     cdef long jj
     cdef double delta, eb, r, r_min, r_max, r_abs, s, b1, b2, t, y, kb, border, slack
     cdef double far2
+    cdef long segments
     cdef double dp[3]
     cdef double inv[3]
     cdef uint64_t code
@@ -252,12 +262,25 @@ cdef inline int _super_rays(double res, const point3d& o, const OcTreeKey& ko,
                     if not ok:
                         break
             a += 1
+        if ok:
+            # each crossing where the rays can take nk keys splits them nk ways: when
+            # that alone leaves fewer rays than classes, grouping cannot pay its cost
+            segments = 1
+            for j in range(<Py_ssize_t>crossings.size()):
+                segments += crossings[j].n_keys - 1
+            if segments >= offsets[g] - first:
+                ok = False
         if not ok:
             for m in range(first, offsets[g]):
                 rays.push_back(order[m])
                 weights.push_back(1)
             continue
-        signed_rays.clear()
+        # the classes: equal signatures, found in a small hash table
+        cap = 16
+        while cap < 2 * (offsets[g] - first):
+            cap <<= 1
+        class_code.assign(cap, KEY_EMPTY)      # signatures have at most 62 bits
+        class_ray.resize(cap)
         for m in range(first, offsets[g]):
             idx = order[m]
             pc[0] = ends[idx].x()
@@ -284,20 +307,19 @@ cdef inline int _super_rays(double res, const point3d& o, const OcTreeKey& ko,
                     code = code * <uint64_t>c.n_keys + <uint64_t>(<int>kb - c.key_lo)
                 j += 1
             if ok:
-                signed_rays.push_back(pair[uint64_t, uint32_t](code, idx))
+                h = _mix(code) & (cap - 1)
+                while class_code[h] != KEY_EMPTY and class_code[h] != code:
+                    h = (h + 1) & (cap - 1)
+                if class_code[h] == code:
+                    weights[class_ray[h]] += 1
+                else:
+                    class_code[h] = code
+                    class_ray[h] = <uint32_t>rays.size()
+                    rays.push_back(idx)
+                    weights.push_back(1)
             else:
                 rays.push_back(idx)
                 weights.push_back(1)
-        sort(signed_rays.begin(), signed_rays.end())
-        m = 0
-        while m < <Py_ssize_t>signed_rays.size():
-            j = m
-            while (j < <Py_ssize_t>signed_rays.size()
-                   and signed_rays[j].first == signed_rays[m].first):
-                j += 1
-            rays.push_back(signed_rays[m].second)
-            weights.push_back(<uint32_t>(j - m))
-            m = j
     return 0
 
 
@@ -375,7 +397,7 @@ cdef inline int scan_updates(
         OcTree* keys, const float[:, ::1] points, const point3d& o, double max_range,
         bint ray_mode, bint culling, const uint32_t* weights, int superray_threshold,
         FreeTest fully_free, void* map, vector[uint32_t]& counts, bint* counts_dirty,
-        vector[ScanCell]& cells, ScanStats* stats) except -1 nogil:
+        vector[ScanCell]& cells, ScanStats* stats, bint diagnose=False) except -1 nogil:
     """Collect one update per cell for a scan (appended to `cells`, keys distinct).
 
     Every ray is traversed as liboctomap's ``computeRayKeys`` traverses it
@@ -390,7 +412,10 @@ cdef inline int scan_updates(
     i counts ``weights[i]`` times. With `superray_threshold` > 0 the rays are
     first grouped into super rays (:func:`_super_rays`) and one ray per class
     is traversed. `counts` is the caller's scratch array, zero between calls
-    unless ``counts_dirty[0]`` (an exception left it dirty).
+    unless ``counts_dirty[0]`` (an exception left it dirty). With `diagnose`
+    (slow), ``stats.unnecessary`` counts the visits of the walked rays to cells
+    whose update changes nothing: fully free cells that no ray ends in (the
+    dissertation's "unnecessary traversals", Table 2.3).
     """
     cdef Py_ssize_t i, n = points.shape[0]
     cdef bint weighted = weights != NULL
@@ -417,12 +442,14 @@ cdef inline int scan_updates(
     cdef vector[uint8_t] end_ok
     cdef RayWalker walker
     cdef vector[uint64_t] back
+    cdef KeyTable visits                  # with diagnose: walked visits per cell
     cdef bint more
     cdef double res = keys.getResolution()
     cdef ScanCell cell
     stats.region_cells = -1
     stats.rays = 0
     stats.traversed_cells = 0
+    stats.unnecessary = -1
     clock_gettime(CLOCK_MONOTONIC, &stats.clock[0])
     keys.coordToKeyChecked(o, ko)
     for axis in range(3):
@@ -482,6 +509,8 @@ cdef inline int scan_updates(
                     key = _unpack(back[j])
                     _count_free(key[0], key[1], key[2], w, dense, lo, dims,
                                 counts, touched, table)
+                    if diagnose:
+                        visits.get(back[j]).n_free += 1
                 stats.traversed_cells += back.size()
                 continue
             # the region is closed under stepping toward the origin, so a
@@ -493,6 +522,11 @@ cdef inline int scan_updates(
         while more:
             _count_free(walker.key(0), walker.key(1), walker.key(2), w, dense, lo,
                         dims, counts, touched, table)
+            if diagnose:
+                key[0] = <key_type>walker.key(0)
+                key[1] = <key_type>walker.key(1)
+                key[2] = <key_type>walker.key(2)
+                visits.get(_pack(key)).n_free += 1
             stats.traversed_cells += 1
             more = walker.next()
     clock_gettime(CLOCK_MONOTONIC, &stats.clock[3])
@@ -524,4 +558,13 @@ cdef inline int scan_updates(
         counts[touched[j]] = 0
     counts_dirty[0] = False
     stats.rays = n_trav
+    if diagnose:
+        stats.unnecessary = 0
+        for slot in range(visits.capacity()):
+            if visits.slot(slot).key == KEY_EMPTY:
+                continue
+            entry = table.find(visits.slot(slot).key)
+            if ((entry == NULL or entry.n_hit == 0)
+                    and fully_free(map, _unpack(visits.slot(slot).key))):
+                stats.unnecessary += visits.slot(slot).n_free
     return 0

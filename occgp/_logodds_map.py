@@ -180,11 +180,14 @@ class LogOddsMap:
     @staticmethod
     def _insert_statistics(stats: tuple) -> dict[str, float]:
         """``last_insert_`` from what a core's scan insertion returns."""
-        region, cells, rays, traversed, seconds = stats
-        return {"rays": rays, "updated_cells": cells, "traversed_cells": traversed,
-                "region_cells": region, "endpoint_seconds": seconds[0],
-                "preprocessing_seconds": seconds[1], "traversal_seconds": seconds[2],
-                "update_seconds": seconds[3]}
+        region, cells, rays, traversed, seconds, unnecessary = stats
+        out = {"rays": rays, "updated_cells": cells, "traversed_cells": traversed,
+               "region_cells": region, "endpoint_seconds": seconds[0],
+               "preprocessing_seconds": seconds[1], "traversal_seconds": seconds[2],
+               "update_seconds": seconds[3]}
+        if unnecessary >= 0:
+            out["unnecessary_traversals"] = unnecessary
+        return out
 
     def _validated_scan(self, points: ArrayLike, origin: ArrayLike, max_range, mode: str):
         """Check a scan for insertion; return (points, origin, max_range) as the core wants

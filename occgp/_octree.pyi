@@ -20,7 +20,8 @@ class _OcTree:
                       max_range: float, ray_mode: bool, culling: bool,
                       weights: NDArray[np.uint32] | None = None,
                       superray_threshold: int = 0,
-                      ) -> tuple[int, int, int, int, tuple[float, float, float, float]]: ...
+                      diagnose: bool = False,
+                      ) -> tuple[int, int, int, int, tuple[float, float, float, float], int]: ...
     def _query(self, points: NDArray[np.float32], what: int) -> NDArray[np.float64]: ...
     def _cast_rays(self, origins: NDArray[np.float32], directions: NDArray[np.float32],
                    ignore_unknown: bool, max_range: NDArray[np.float64],

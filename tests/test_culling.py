@@ -174,3 +174,27 @@ def test_updates_of_a_loaded_tree_equal_liboctomaps(expand):
         maps[method] = m
     for method in METHODS:
         assert_same_leaves(maps[method], maps["reference"])
+
+
+@pytest.mark.parametrize("method", ["plain", "culling"])
+def test_unnecessary_traversals_are_the_visits_of_no_op_cells(method):
+    """The diagnostic count: visits of the walked rays to cells that are fully free
+    before the scan and hold no end point, checked against the Python traversal."""
+    from octomap_reference import logodds32, ray_keys
+    scans = room_sequence(np.random.default_rng(8), n_scans=7, n_points=150)
+    m = build(scans[:-1], 0.2, mode="ray")
+    points, origin = (np.asarray(a, np.float32) for a in scans[-1])
+    floor = logodds32(m.clamping_min)
+    ends = {tuple(k) for k in (np.floor(points / 0.2).astype(int) + 32768).tolist()}
+    expected = 0
+    for p in points:
+        for key in ray_keys(origin, p, 0.2):
+            centre = (np.array(key) - 32768 + 0.5) * 0.2
+            value = m.log_odds([centre])[0]
+            if key not in ends and value <= floor:
+                expected += 1
+    stats = m._insert_batch(points, origin, -1.0, True, method == "culling", diagnose=True)
+    if method == "plain":
+        assert stats[5] == expected > 0
+    else:                           # the region spares most of them
+        assert 0 <= stats[5] < expected / 2
