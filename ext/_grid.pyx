@@ -167,6 +167,8 @@ cdef class _Grid:
                     cell = self._cells.insert(Cell(found[j].key, 0.0))
                     _apply(&deref(cell.first).second, cell.second, found[j].update, lo, hi)
                 clock_gettime(CLOCK_MONOTONIC, &done)
+        if stats.bad_ends:
+            return None
         seconds = tuple([_elapsed(stats.clock[k], stats.clock[k + 1]) for k in range(3)]
                         + [_elapsed(stats.clock[3], done)])
         return (stats.region_cells, found.size(), stats.rays, stats.traversed_cells, seconds,

@@ -138,6 +138,8 @@ cdef class _OcTree:
         (super rays and culling region), traversal, tree update); region_cells
         is -1 when culling was off or the scan's key box was too large to cull;
         unnecessary_traversals is -1 unless `diagnose` (slow) asks for it.
+        Returns None, changing nothing, when a ray's end (after truncation)
+        lies outside the key range.
         """
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t j, n = points.shape[0]
@@ -159,13 +161,16 @@ cdef class _OcTree:
                 scan_updates(tree, points, o, max_range, ray_mode, culling, w,
                              superray_threshold, _fully_free, tree, self._counts,
                              &self._counts_dirty, found, &stats, diagnose)
-                cells.resize(found.size())
-                for j in range(<Py_ssize_t>found.size()):
-                    key = _unpack(found[j].key)
-                    cells[j].code = morton_code(key[0], key[1], key[2])
-                    cells[j].update = found[j].update
-                apply_updates(tree[0], cells, scratch)
+                if not stats.bad_ends:
+                    cells.resize(found.size())
+                    for j in range(<Py_ssize_t>found.size()):
+                        key = _unpack(found[j].key)
+                        cells[j].code = morton_code(key[0], key[1], key[2])
+                        cells[j].update = found[j].update
+                    apply_updates(tree[0], cells, scratch)
                 clock_gettime(CLOCK_MONOTONIC, &done)
+        if stats.bad_ends:
+            return None
         seconds = tuple([_elapsed(stats.clock[k], stats.clock[k + 1]) for k in range(3)]
                         + [_elapsed(stats.clock[3], done)])
         return (stats.region_cells, found.size(), stats.rays, stats.traversed_cells, seconds,

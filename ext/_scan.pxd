@@ -15,7 +15,7 @@ from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 from _keys cimport (
     KEY_EMPTY, KEY_MAX_VAL as _MAX_VAL, CellBox, KeyCounts, KeyTable, RayWalker,
-    effective_end as _effective_end, pack_key as _pack, unpack_key as _unpack,
+    effective_end as _effective_end, in_key_range, pack_key as _pack, unpack_key as _unpack,
 )
 from liboctomap cimport OcTree, OcTreeKey, key_type, point3d
 
@@ -41,6 +41,7 @@ cdef struct ScanStats:
     long rays              # rays traversed (super rays count once)
     long traversed_cells   # cell visits that counted a ray
     long unnecessary       # with `diagnose`: visits to cells whose update is a no-op
+    long bad_ends          # ray ends outside the key range (then nothing is collected)
     timespec clock[4]      # start; end points done; pre-processing done; traversal done
 
 
@@ -412,7 +413,9 @@ cdef inline int scan_updates(
     i counts ``weights[i]`` times. With `superray_threshold` > 0 the rays are
     first grouped into super rays (:func:`_super_rays`) and one ray per class
     is traversed. `counts` is the caller's scratch array, zero between calls
-    unless ``counts_dirty[0]`` (an exception left it dirty). With `diagnose`
+    unless ``counts_dirty[0]`` (an exception left it dirty). When a ray's end
+    (after truncation) lies outside the key range, ``stats.bad_ends`` counts
+    them and nothing is collected. With `diagnose`
     (slow), ``stats.unnecessary`` counts the visits of the walked rays to cells
     whose update changes nothing: fully free cells that no ray ends in (the
     dissertation's "unnecessary traversals", Table 2.3).
@@ -444,12 +447,13 @@ cdef inline int scan_updates(
     cdef vector[uint64_t] back
     cdef KeyTable visits                  # with diagnose: walked visits per cell
     cdef bint more
-    cdef double res = keys.getResolution()
+    cdef double res = keys.getResolution(), rf = 1.0 / res
     cdef ScanCell cell
     stats.region_cells = -1
     stats.rays = 0
     stats.traversed_cells = 0
     stats.unnecessary = -1
+    stats.bad_ends = 0
     clock_gettime(CLOCK_MONOTONIC, &stats.clock[0])
     keys.coordToKeyChecked(o, ko)
     for axis in range(3):
@@ -464,7 +468,13 @@ cdef inline int scan_updates(
         truncated[i] = _effective_end(
             o, point3d(points[i, 0], points[i, 1], points[i, 2]), max_range,
             &ends[i])
-        end_ok[i] = keys.coordToKeyChecked(ends[i], key)
+        # (the range test first: liboctomap's casts huge coordinates to int unchecked)
+        end_ok[i] = (in_key_range(rf, ends[i].x()) and in_key_range(rf, ends[i].y())
+                     and in_key_range(rf, ends[i].z())
+                     and keys.coordToKeyChecked(ends[i], key))
+        if not end_ok[i]:
+            stats.bad_ends += 1
+            continue
         end_keys[i] = key
         level = 0
         for axis in range(3):
@@ -476,6 +486,8 @@ cdef inline int scan_updates(
             entry = table.get(_pack(key))
             entry.n_hit += weights[i] if weighted else 1
     clock_gettime(CLOCK_MONOTONIC, &stats.clock[1])
+    if stats.bad_ends:
+        return 0            # nothing changed: the caller reports the bad rows
     if superray_threshold > 0:
         _super_rays(res, o, ko, ends, end_keys, truncated, table, superray_threshold,
                     ray_ids, ray_weights)

@@ -189,9 +189,12 @@ class LogOddsMap:
             out["unnecessary_traversals"] = unnecessary
         return out
 
-    def _validated_scan(self, points: ArrayLike, origin: ArrayLike, max_range, mode: str):
+    def _validated_scan(self, points: ArrayLike, origin: ArrayLike, max_range, mode: str,
+                        check_ends: bool = True):
         """Check a scan for insertion; return (points, origin, max_range) as the core wants
-        them (float32, -1 for no limit), or None for an empty scan."""
+        them (float32, -1 for no limit), or None for an empty scan. Without `check_ends`
+        the caller's core checks the key range of the ray ends itself (and calls
+        :meth:`_raise_bad_ends` when one is out)."""
         if mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
         rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
@@ -199,11 +202,24 @@ class LogOddsMap:
         org = self._as_float32_origin(origin)
         if len(pts) == 0:
             return None
+        if check_ends:
+            self._raise_bad_ends(pts, org, rng)
+        return pts, org, rng
+
+    def _raise_bad_ends(self, pts: np.ndarray, org: np.ndarray, rng: float) -> None:
+        """Raise ValueError if a ray end (after truncation at `rng`) is out of key range."""
         ok = self._ends_in_range(pts, org, rng)
         if not ok.all():
             self._raise_out_of_range("points", ok, " (after truncation at max_range)"
-                                     if max_range is not None else "")
-        return pts, org, rng
+                                     if rng >= 0 else "")
+
+    def _record_insert(self, stats, pts: np.ndarray, org: np.ndarray, rng: float) -> None:
+        """Set ``last_insert_`` from a core's scan insertion, or raise for bad ray ends
+        (None: the core changed nothing)."""
+        if stats is None:
+            self._raise_bad_ends(pts, org, rng)
+            raise AssertionError("the core reported a ray end out of range")  # unreachable
+        self.last_insert_ = self._insert_statistics(stats)
 
     def _as_float32_points(self, x: ArrayLike, name: str) -> np.ndarray:
         return np.ascontiguousarray(as_points(x, name), dtype=np.float32)

@@ -155,11 +155,12 @@ class GridMap(LogOddsMap, _Grid):
         10
         """
         threshold = self._check_method(method, superray_threshold)
-        scan = self._validated_scan(points, origin, max_range, mode)
+        scan = self._validated_scan(points, origin, max_range, mode, check_ends=False)
         if scan is not None:
             pts, org, rng = scan
-            self.last_insert_ = self._insert_statistics(self._insert(
-                pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold))
+            self._record_insert(self._insert(
+                pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),
+                pts, org, rng)
         return self
 
     # ------------------------------------------------------------------ queries

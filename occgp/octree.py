@@ -192,16 +192,18 @@ class OccupancyOctree(LogOddsMap, _OcTree):
             raise TypeError(f"discretize must be a bool, got {type(discretize).__name__}")
         if discretize and (mode != "scan" or method != "plain"):
             raise ValueError("discretize=True is only defined for mode='scan', method='plain'")
-        scan = self._validated_scan(points, origin, max_range, mode)
+        liboctomap = mode == "scan" and method == "plain"
+        scan = self._validated_scan(points, origin, max_range, mode, check_ends=liboctomap)
         if scan is None:
             return self
         pts, org, rng = scan
-        if mode == "scan" and method == "plain":
+        if liboctomap:
             self._insert_point_cloud(pts, org, rng, bool(discretize))
             self.last_insert_: dict[str, float] = {"rays": len(pts)}
         else:
-            self.last_insert_ = self._insert_statistics(self._insert_batch(
-                pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold))
+            self._record_insert(self._insert_batch(
+                pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),
+                pts, org, rng)
         return self
 
     # ------------------------------------------------------------------ queries

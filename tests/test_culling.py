@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from occgp import OccupancyOctree
+from occgp import GridMap, OccupancyOctree
 from conftest import data_path
 from test_octree import assert_same_leaves, random_scans
 
@@ -198,3 +198,29 @@ def test_unnecessary_traversals_are_the_visits_of_no_op_cells(method):
         assert stats[5] == expected > 0
     else:                           # the region spares most of them
         assert 0 <= stats[5] < expected / 2
+
+
+@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
+@pytest.mark.parametrize("mode, method", [("scan", "culling"), ("ray", "plain"),
+                                          ("ray", "superray+culling"), ("scan", "superray")])
+def test_ray_ends_out_of_range_leave_the_map_unchanged(cls, mode, method):
+    """The compiled pipeline checks the key range of the ray ends before any update."""
+    m = cls(0.1)
+    m.insert_scan([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], [0, 0, 0], mode=mode, method=method)
+    before = m.to_bytes("ot") if cls is OccupancyOctree else m.cells()
+    bad = [[0.5, 0.5, 0.5], [5000.0, 0.0, 0.0], [0.2, 0.2, 0.2]]
+    with pytest.raises(ValueError, match=r"1 of 3 points lie outside the .* key range "
+                                         r".*\(first: row 1\); the map is unchanged"):
+        m.insert_scan(bad, [0, 0, 0], mode=mode, method=method)
+    after = m.to_bytes("ot") if cls is OccupancyOctree else m.cells()
+    if cls is OccupancyOctree:
+        assert after == before
+    else:
+        assert_array_equal_cells(after, before)
+    # a long ray truncated at max_range is fine
+    m.insert_scan(bad, [0, 0, 0], mode=mode, method=method, max_range=10.0)
+
+
+def assert_array_equal_cells(a, b):
+    np.testing.assert_array_equal(a.centers, b.centers)
+    np.testing.assert_array_equal(a.log_odds, b.log_odds)
