@@ -94,7 +94,7 @@ def run_occgp(scans, resolution, kind, mode, method, diagnose=False):
     unnecessary = []
     if diagnose:
         d = OccupancyOctree(resolution)
-        threshold = d._check_method(method, 20)
+        _, threshold = d._check_method(method, 20)
         for points, origin in scans:
             unnecessary.append(d._insert_batch(
                 np.asarray(points, np.float32), np.asarray(origin, np.float32), -1.0,

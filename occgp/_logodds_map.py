@@ -18,7 +18,7 @@ from ._validation import as_point, as_points, check_probability, check_real
 __all__ = ["LogOddsMap", "Leaves", "MODES", "METHODS"]
 
 MODES = ("scan", "ray")
-METHODS = ("plain", "culling", "superray", "superray+culling")
+METHODS = ("auto", "plain", "culling", "superray", "superray+culling")
 
 
 class Leaves(NamedTuple):
@@ -164,9 +164,10 @@ class LogOddsMap:
 
     # ------------------------------------------------------------------ helpers
     @staticmethod
-    def _check_method(method: str, superray_threshold: int) -> int:
-        """Validate `method` and `superray_threshold`; return the threshold the core
-        takes (0: no super rays)."""
+    def _check_method(method: str, superray_threshold: int) -> tuple[str, int]:
+        """Validate `method` and `superray_threshold`; return the method ("auto" chosen:
+        "culling", the fastest on bench/bench_updates.py's trajectories) and the
+        threshold the core takes (0: no super rays)."""
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if isinstance(superray_threshold, (bool, np.bool_)) or not isinstance(
@@ -175,7 +176,9 @@ class LogOddsMap:
                             f"got {type(superray_threshold).__name__}")
         if superray_threshold < 1:
             raise ValueError(f"superray_threshold must be >= 1, got {superray_threshold}")
-        return int(superray_threshold) if method.startswith("superray") else 0
+        if method == "auto":
+            method = "culling"
+        return method, int(superray_threshold) if method.startswith("superray") else 0
 
     @staticmethod
     def _insert_statistics(stats: tuple) -> dict[str, float]:

@@ -95,7 +95,7 @@ class GridMap(LogOddsMap, _Grid):
         *,
         max_range: float | None = None,
         mode: str = "scan",
-        method: str = "plain",
+        method: str = "auto",
         superray_threshold: int = 20,
     ) -> "GridMap":
         """Integrate one range scan into the map.
@@ -121,9 +121,11 @@ class GridMap(LogOddsMap, _Grid):
             as occupied, and every cell gets at most one update. ``"ray"`` counts
             rays: each cell gets ``n_free * l_miss + n_hit * l_hit`` (``n`` = how
             many rays pass through / end in it) and is clamped once.
-        method : {"plain", "culling", "superray", "superray+culling"}, default="plain"
+        method : {"auto", "plain", "culling", "superray", "superray+culling"}, \
+default="auto"
             How the rays are traversed; every method gives the same map, cell
-            for cell: ``"plain"`` walks every ray, ``"superray"`` groups rays
+            for cell: ``"auto"`` is ``"culling"``, ``"plain"`` walks every
+            ray, ``"superray"`` groups rays
             into super rays, ``"culling"`` skips the scan's culling region of
             fully free cells (grown over this grid's cells) [1]_. See
             :meth:`OccupancyOctree.insert_scan` for the details.
@@ -154,7 +156,7 @@ class GridMap(LogOddsMap, _Grid):
         >>> m.num_cells        # the cells the ray crosses, and its end cell
         10
         """
-        threshold = self._check_method(method, superray_threshold)
+        method, threshold = self._check_method(method, superray_threshold)
         scan = self._validated_scan(points, origin, max_range, mode, check_ends=False)
         if scan is not None:
             pts, org, rng = scan

@@ -27,6 +27,8 @@ def room_sequence(rng, n_scans=8, n_points=600):
 
 
 def build(scans, resolution, **kwargs):
+    """Insert `scans` in order; the method is "plain" unless `kwargs` name one."""
+    kwargs.setdefault("method", "plain")
     m = OccupancyOctree(resolution)
     for points, origin in scans:
         m.insert_scan(points, origin, **kwargs)
@@ -96,7 +98,7 @@ def test_culling_rejects_discretize():
     with pytest.raises(ValueError, match="discretize=True is only defined"):
         OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="culling",
                                          discretize=True)
-    with pytest.raises(ValueError, match=r"method must be one of \('plain', 'culling', "):
+    with pytest.raises(ValueError, match=r"method must be one of \('auto', 'plain', 'culling', "):
         OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="fast")
 
 

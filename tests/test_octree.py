@@ -150,9 +150,12 @@ def test_cast_rays():
 
 
 # ---------------------------------------------------------------------- exactness
+@pytest.mark.parametrize("method", ["plain", "auto"])
 @pytest.mark.parametrize("max_range, discretize", [(None, False), (1.2, False), (None, True)])
 def test_scan_mode_equals_liboctomap_insert_point_cloud(octomap_insert_exe, tmp_path,
-                                                         max_range, discretize):
+                                                         max_range, discretize, method):
+    """Against liboctomap's own insertPointCloud, compiled in a separate program: the
+    "plain" method calls it, "auto" (the culling region) is occgp's pipeline."""
     rng = np.random.default_rng(0)
     scans = random_scans(rng, n_scans=4, n_points=300)
     params = dict(prob_hit=0.75, prob_miss=0.35, clamping_min=0.12, clamping_max=0.97)
@@ -161,7 +164,8 @@ def test_scan_mode_equals_liboctomap_insert_point_cloud(octomap_insert_exe, tmp_
                        discretize=discretize, **params), **params)
     m = OccupancyOctree(0.05, **params)
     for points, origin in scans:
-        m.insert_scan(points, origin, max_range=max_range, discretize=discretize)
+        m.insert_scan(points, origin, max_range=max_range, discretize=discretize,
+                      method=method)
     assert ref.num_leaves > 1000
     assert_same_leaves(m, ref)
 
@@ -173,8 +177,9 @@ def test_scan_mode_equals_liboctomap_on_real_scan(octomap_insert_exe, tmp_path):
     points = scan.points[::4]
     ref = OccupancyOctree.from_bytes(
         octomap_insert(octomap_insert_exe, tmp_path, [(points, scan.origin)], 0.2))
-    m = OccupancyOctree(0.2).insert_scan(points, scan.origin)
-    assert_same_leaves(m, ref)
+    for method in ("plain", "auto", "superray+culling"):
+        m = OccupancyOctree(0.2).insert_scan(points, scan.origin, method=method)
+        assert_same_leaves(m, ref)
 
 
 @pytest.mark.parametrize("max_range", [None, 0.9])

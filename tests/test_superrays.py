@@ -27,6 +27,8 @@ def clustered_scan(rng, origin, resolution, n_clusters=25, per_cluster=40, sprea
 
 
 def build(scans, resolution, **kwargs):
+    """Insert `scans` in order; the method is "plain" unless `kwargs` name one."""
+    kwargs.setdefault("method", "plain")
     m = OccupancyOctree(resolution)
     for points, origin in scans:
         m.insert_scan(points, origin, **kwargs)
@@ -139,8 +141,10 @@ def test_last_insert_statistics():
     rng = np.random.default_rng(5)
     origin = np.array([0.33, -0.21, 0.57])
     points = clustered_scan(rng, origin, 0.4, spread=1.5)
-    m = OccupancyOctree(0.4).insert_scan(points, origin)
-    assert m.last_insert_ == {"rays": len(points)}
+    m = OccupancyOctree(0.4).insert_scan(points, origin, method="plain")
+    assert m.last_insert_ == {"rays": len(points)}      # liboctomap's insertPointCloud
+    m.insert_scan(points, origin)                       # "auto": the culling region
+    assert m.last_insert_["region_cells"] >= 0 and m.last_insert_["rays"] == len(points)
     m.insert_scan(points, origin, method="superray+culling", superray_threshold=5)
     stats = m.last_insert_
     assert stats["rays"] < len(points) and stats["updated_cells"] > 0
