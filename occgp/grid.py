@@ -127,7 +127,8 @@ default="auto"
             for cell: ``"auto"`` is ``"culling"``, ``"plain"`` walks every
             ray, ``"superray"`` groups rays
             into super rays, ``"culling"`` skips the scan's culling region of
-            fully free cells (grown over this grid's cells) [1]_. See
+            fully free cells (grown over this grid's cells), after Kwon's
+            dissertation, ch. 2. See
             :meth:`OccupancyOctree.insert_scan` for the details.
         superray_threshold : int, default=20
             With the super-ray methods, the fewest end points a cell must hold
