@@ -125,10 +125,9 @@ class GridMap(LogOddsMap, _Grid):
 default="auto"
             How the rays are traversed; every method gives the same map, cell
             for cell: ``"auto"`` is ``"culling"``, ``"plain"`` walks every
-            ray, ``"superray"`` groups rays
-            into super rays, ``"culling"`` skips the scan's culling region of
-            fully free cells (grown over this grid's cells), after Kwon's
-            dissertation, ch. 2. See
+            ray, ``"superray"`` groups rays into super rays, ``"culling"``
+            skips the scan's culling region of fully free cells (grown over
+            this grid's cells), after Kwon's dissertation, ch. 2. See
             :meth:`OccupancyOctree.insert_scan` for the details.
         superray_threshold : int, default=20
             With the super-ray methods, the fewest end points a cell must hold
