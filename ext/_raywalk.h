@@ -86,8 +86,9 @@ class RayWalker {
   int key(int axis) const { return (axis == 0 ? k0_ : axis == 1 ? k1_ : k2_) & 0xFFFF; }
 
   // The culling region's shortcut (Kwon, dissertation 2.3.5): right after start(),
-  // append to `cells` (packed keys, x in the low bits) the cells of the ray that
-  // lie outside `region`, found walking back from the end cell, and return
+  // append to `cells` the cells of the ray that lie outside `region`, as indices
+  // into the region's box (CellBox::index), found walking back from the end
+  // cell, and return
   // true -- or return false, appending nothing, when that walk cannot be
   // certified to give the cells that next() gives; walk forward then.
   //
@@ -151,7 +152,7 @@ class RayWalker {
         // the entry into a cell of the region is certified: the cells before it are in
         // the region, whichever way next() breaks their ties
         if (region.test_index(index)) return true;
-        cells.push_back(pack(key));
+        cells.push_back(index);
       }
       at_end = false;
       --remaining;
@@ -164,16 +165,11 @@ class RayWalker {
                                  : -std::numeric_limits<double>::infinity();
     }
     // the origin's cell
-    if (!region.test_index(index)) cells.push_back(pack(key));
+    if (!region.test_index(index)) cells.push_back(index);
     return true;
   }
 
  private:
-  static uint64_t pack(const int* key) {
-    return static_cast<uint64_t>(key[0] & 0xFFFF) | (static_cast<uint64_t>(key[1] & 0xFFFF) << 16) |
-           (static_cast<uint64_t>(key[2] & 0xFFFF) << 32);
-  }
-
   static constexpr int kMaxVal = 32768;  // liboctomap's tree_max_val
   int k0_ = 0, k1_ = 0, k2_ = 0;
   int e0_ = 0, e1_ = 0, e2_ = 0;

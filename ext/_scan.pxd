@@ -517,12 +517,17 @@ cdef inline int scan_updates(
         if more and stats.region_cells > 0:
             back.clear()
             if walker.walk_back(region, back):
+                # the region's box is the scan's key box, the one `counts` covers
                 for j in range(back.size()):
-                    key = _unpack(back[j])
-                    _count_free(key[0], key[1], key[2], w, dense, lo, dims,
-                                counts, touched, table)
+                    idx = back[j]
+                    if dense:
+                        if counts[idx] == 0:
+                            touched.push_back(idx)
+                        counts[idx] += w
+                    else:
+                        table.get(_pack(_box_key(idx, lo, dims))).n_free += w
                     if diagnose:
-                        visits.get(back[j]).n_free += 1
+                        visits.get(_pack(_box_key(idx, lo, dims))).n_free += 1
                 stats.traversed_cells += back.size()
                 continue
             # the region is closed under stepping toward the origin, so a
