@@ -15,7 +15,7 @@ from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 from _keys cimport (
     KEY_EMPTY, KEY_MAX_VAL as _MAX_VAL, CellBox, KeyCounts, KeyTable, RayWalker,
-    effective_end as _effective_end, in_key_range, pack_key as _pack, unpack_key as _unpack,
+    effective_end as _effective_end, pack_key as _pack, unpack_key as _unpack,
 )
 from liboctomap cimport OcTree, OcTreeKey, key_type, point3d
 
@@ -95,6 +95,18 @@ cdef inline float _update_value(uint32_t n_free, uint32_t n_hit, bint ray_mode, 
     if ray_mode:
         return <float>(n_free * <double>l_miss + n_hit * <double>l_hit)
     return l_hit if n_hit else l_miss
+
+
+cdef inline bint _key_checked(double resolution_factor, float coordinate,
+                              key_type* key) noexcept nogil:
+    """liboctomap's coordToKeyChecked on one axis, with its arithmetic (floor of the
+    double product, plus 32768); the range is tested on the double first, where
+    liboctomap would cast a huge value to int unchecked."""
+    cdef double scaled = floor(resolution_factor * <double>coordinate)
+    if scaled < -_MAX_VAL or scaled >= _MAX_VAL:
+        return False
+    key[0] = <key_type>(<int>scaled + _MAX_VAL)
+    return True
 
 
 cdef inline uint64_t _mix(uint64_t k) noexcept nogil:
@@ -468,10 +480,9 @@ cdef inline int scan_updates(
         truncated[i] = _effective_end(
             o, point3d(points[i, 0], points[i, 1], points[i, 2]), max_range,
             &ends[i])
-        # (the range test first: liboctomap's casts huge coordinates to int unchecked)
-        end_ok[i] = (in_key_range(rf, ends[i].x()) and in_key_range(rf, ends[i].y())
-                     and in_key_range(rf, ends[i].z())
-                     and keys.coordToKeyChecked(ends[i], key))
+        end_ok[i] = (_key_checked(rf, ends[i].x(), &key[0])
+                     and _key_checked(rf, ends[i].y(), &key[1])
+                     and _key_checked(rf, ends[i].z(), &key[2]))
         if not end_ok[i]:
             stats.bad_ends += 1
             continue
