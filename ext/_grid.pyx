@@ -30,7 +30,7 @@ from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 from liboctomap cimport OcTree, OcTreeKey, point3d
 from _keys cimport KEY_DEPTH, mark_ends_in_range, mark_in_range, pack_key, unpack_key
-from _scan cimport ScanCell, ScanStats, scan_updates
+from _scan cimport ScanCell, ScanStats, scan_result, scan_updates, scan_weights
 
 import threading
 
@@ -50,10 +50,6 @@ cdef bint _fully_free(void* view, const OcTreeKey& key) noexcept nogil:
     cdef GridView* v = <GridView*>view
     cdef CellMap.iterator found = v.cells.find(pack_key(key))
     return found != v.cells.end() and deref(found).second <= v.floor
-
-
-cdef inline double _elapsed(const timespec& a, const timespec& b) noexcept nogil:
-    return (b.tv_sec - a.tv_sec) + 1e-9 * (b.tv_nsec - a.tv_nsec)
 
 
 cdef inline void _apply(float* value, bint created, float update, float lo,
@@ -139,14 +135,8 @@ cdef class _Grid:
         seconds, unnecessary_traversals) as ``OccupancyOctree``'s ``_insert_batch``.
         """
         cdef OcTree* tree = self._get()
-        cdef Py_ssize_t j, n = points.shape[0]
-        cdef const uint32_t* w = NULL
-        if weights is not None:
-            if weights.shape[0] != n:
-                raise ValueError(f"weights must have length {n}, got {weights.shape[0]}")
-            if superray_threshold > 0:
-                raise ValueError("weights and super rays do not combine")
-            w = &weights[0] if n else NULL
+        cdef Py_ssize_t j
+        cdef const uint32_t* w = scan_weights(weights, points.shape[0], superray_threshold)
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
         cdef vector[ScanCell] found
         cdef ScanStats stats
@@ -167,12 +157,7 @@ cdef class _Grid:
                     cell = self._cells.insert(Cell(found[j].key, 0.0))
                     _apply(&deref(cell.first).second, cell.second, found[j].update, lo, hi)
                 clock_gettime(CLOCK_MONOTONIC, &done)
-        if stats.bad_ends:
-            return None
-        seconds = tuple([_elapsed(stats.clock[k], stats.clock[k + 1]) for k in range(3)]
-                        + [_elapsed(stats.clock[3], done)])
-        return (stats.region_cells, found.size(), stats.rays, stats.traversed_cells, seconds,
-                stats.unnecessary)
+        return scan_result(stats, found.size(), done)
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):

@@ -22,7 +22,7 @@ from _keys cimport (
     KEY_DEPTH as _DEPTH, KEY_MAX_VAL as _MAX_VAL, mark_ends_in_range, mark_in_range,
     unpack_key as _unpack,
 )
-from _scan cimport ScanCell, ScanStats, scan_updates
+from _scan cimport ScanCell, ScanStats, scan_result, scan_updates, scan_weights
 from liboctomap cimport (
     OcTree, OcTreeKey, OcTreeNode, Pointcloud, istringstream, key_type, ostringstream, point3d,
 )
@@ -142,14 +142,8 @@ cdef class _OcTree:
         lies outside the key range.
         """
         cdef OcTree* tree = self._get()
-        cdef Py_ssize_t j, n = points.shape[0]
-        cdef const uint32_t* w = NULL
-        if weights is not None:
-            if weights.shape[0] != n:
-                raise ValueError(f"weights must have length {n}, got {weights.shape[0]}")
-            if superray_threshold > 0:
-                raise ValueError("weights and super rays do not combine")
-            w = &weights[0] if n else NULL
+        cdef Py_ssize_t j
+        cdef const uint32_t* w = scan_weights(weights, points.shape[0], superray_threshold)
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
         cdef vector[ScanCell] found
         cdef vector[CellUpdate] cells, scratch
@@ -169,12 +163,7 @@ cdef class _OcTree:
                         cells[j].update = found[j].update
                     apply_updates(tree[0], cells, scratch)
                 clock_gettime(CLOCK_MONOTONIC, &done)
-        if stats.bad_ends:
-            return None
-        seconds = tuple([_elapsed(stats.clock[k], stats.clock[k + 1]) for k in range(3)]
-                        + [_elapsed(stats.clock[3], done)])
-        return (stats.region_cells, found.size(), stats.rays, stats.traversed_cells, seconds,
-                stats.unnecessary)
+        return scan_result(stats, found.size(), done)
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):
@@ -369,10 +358,6 @@ cdef bint _fully_free(void* tree, const OcTreeKey& key) noexcept nogil:
     cdef OcTree* t = <OcTree*>tree
     cdef OcTreeNode* node = t.search(key, 0)
     return node != NULL and node.getLogOdds() <= t.getClampingThresMinLog()
-
-
-cdef inline double _elapsed(const timespec& a, const timespec& b) noexcept nogil:
-    return (b.tv_sec - a.tv_sec) + 1e-9 * (b.tv_nsec - a.tv_nsec)
 
 
 cdef inline bint _meets(const OcTreeKey& key, unsigned depth, const OcTreeKey& kmin,

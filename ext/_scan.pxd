@@ -42,7 +42,7 @@ cdef struct ScanStats:
     long traversed_cells   # cell visits that counted a ray
     long unnecessary       # with `diagnose`: visits to cells whose update is a no-op
     long bad_ends          # ray ends outside the key range (then nothing is collected)
-    timespec clock[4]      # start; end points done; pre-processing done; traversal done
+    timespec clock[5]      # start; end points, super rays, culling region, traversal done
 
 
 cdef inline bint _in_box(const OcTreeKey& key, const int* lo,
@@ -95,6 +95,35 @@ cdef inline float _update_value(uint32_t n_free, uint32_t n_hit, bint ray_mode, 
     if ray_mode:
         return <float>(n_free * <double>l_miss + n_hit * <double>l_hit)
     return l_hit if n_hit else l_miss
+
+
+cdef inline const uint32_t* scan_weights(const uint32_t[::1] weights, Py_ssize_t n,
+                                         int superray_threshold) except? NULL:
+    """The ray weights for :func:`scan_updates` (NULL: none), checked against the scan."""
+    if weights is None:
+        return NULL
+    if weights.shape[0] != n:
+        raise ValueError(f"weights must have length {n}, got {weights.shape[0]}")
+    if superray_threshold > 0:
+        raise ValueError("weights and super rays do not combine")
+    return &weights[0] if n else NULL
+
+
+cdef inline double _elapsed(const timespec& a, const timespec& b) noexcept nogil:
+    return (b.tv_sec - a.tv_sec) + 1e-9 * (b.tv_nsec - a.tv_nsec)
+
+
+cdef inline object scan_result(const ScanStats& stats, size_t updated, const timespec& done):
+    """What the maps' scan insertion returns: (region_cells, updated_cells,
+    traversed_rays, traversed_cells, seconds, unnecessary_traversals), seconds =
+    (end points, super rays, culling region, traversal, map update) with the update
+    ending at `done`; None when a ray end was out of range."""
+    if stats.bad_ends:
+        return None
+    seconds = tuple([_elapsed(stats.clock[k], stats.clock[k + 1]) for k in range(4)]
+                    + [_elapsed(stats.clock[4], done)])
+    return (stats.region_cells, updated, stats.rays, stats.traversed_cells, seconds,
+            stats.unnecessary)
 
 
 cdef inline bint _key_checked(double resolution_factor, float coordinate,
@@ -503,10 +532,11 @@ cdef inline int scan_updates(
         _super_rays(res, o, ko, ends, end_keys, truncated, table, superray_threshold,
                     ray_ids, ray_weights)
         n_trav = ray_ids.size()
+    clock_gettime(CLOCK_MONOTONIC, &stats.clock[2])
     if culling:
         stats.region_cells = _build_region(fully_free, map, ko, lo, hi, max_level, table,
                                               region)
-    clock_gettime(CLOCK_MONOTONIC, &stats.clock[2])
+    clock_gettime(CLOCK_MONOTONIC, &stats.clock[3])
     for axis in range(3):
         dims[axis] = <uint64_t>(hi[axis] - lo[axis] + 1)
         box_cells *= dims[axis]
@@ -557,7 +587,7 @@ cdef inline int scan_updates(
                 visits.get(_pack(key)).n_free += 1
             stats.traversed_cells += 1
             more = walker.next()
-    clock_gettime(CLOCK_MONOTONIC, &stats.clock[3])
+    clock_gettime(CLOCK_MONOTONIC, &stats.clock[4])
     # one update per cell: the traversed cells, then end cells no ray crossed
     cells.reserve(touched.size() + table.size())
     for j in range(touched.size()):

@@ -37,6 +37,11 @@ class LogOddsMap:
 
     #: What the map is called in error messages.
     _kind = "map"
+    #: After a scan where grouping its rays into super rays took longer than the
+    #: traversal it saved, ``method="superray+culling"`` inserts this many scans with
+    #: the culling region alone, then tries super rays again.
+    SUPERRAY_BACKOFF = 8
+    _superray_skip = 0
 
     if TYPE_CHECKING:  # provided by the compiled core the subclass also derives from
         def _setup(self, resolution: float, prob_hit: float, prob_miss: float,
@@ -64,6 +69,7 @@ class LogOddsMap:
         )
         self._params = check_params(params)
         self._setup(*self._params.values())
+        self._superray_skip = 0
 
     # ------------------------------------------------------------------ parameters
     def get_params(self) -> dict:
@@ -177,8 +183,26 @@ class LogOddsMap:
         if superray_threshold < 1:
             raise ValueError(f"superray_threshold must be >= 1, got {superray_threshold}")
         if method == "auto":
-            method = "culling"
+            method = "superray+culling"
         return method, int(superray_threshold) if method.startswith("superray") else 0
+
+    def _adaptive_threshold(self, method: str, threshold: int) -> int:
+        """The super-ray threshold for this scan: 0 while "superray+culling" backs off."""
+        if method == "superray+culling" and self._superray_skip > 0:
+            self._superray_skip -= 1
+            return 0
+        return threshold
+
+    def _learn_superrays(self, method: str, n_points: int) -> None:
+        """After a "superray+culling" scan that grouped rays: back off when the grouping
+        (``superray_seconds``) cost more than the traversal it saved, estimated as the
+        rays it spared times the scan's traversal time per traversed ray."""
+        stats = self.last_insert_
+        if method != "superray+culling" or not stats["superrays"] or stats["rays"] == 0:
+            return
+        saved = (n_points - stats["rays"]) * stats["traversal_seconds"] / stats["rays"]
+        if saved < stats["superray_seconds"]:
+            self._superray_skip = self.SUPERRAY_BACKOFF
 
     @staticmethod
     def _insert_statistics(stats: tuple) -> dict[str, float]:
@@ -186,8 +210,9 @@ class LogOddsMap:
         region, cells, rays, traversed, seconds, unnecessary = stats
         out = {"rays": rays, "updated_cells": cells, "traversed_cells": traversed,
                "region_cells": region, "endpoint_seconds": seconds[0],
-               "preprocessing_seconds": seconds[1], "traversal_seconds": seconds[2],
-               "update_seconds": seconds[3]}
+               "superray_seconds": seconds[1], "region_seconds": seconds[2],
+               "preprocessing_seconds": seconds[1] + seconds[2],
+               "traversal_seconds": seconds[3], "update_seconds": seconds[4]}
         if unnecessary >= 0:
             out["unnecessary_traversals"] = unnecessary
         return out
@@ -216,13 +241,16 @@ class LogOddsMap:
             self._raise_out_of_range("points", ok, " (after truncation at max_range)"
                                      if rng >= 0 else "")
 
-    def _record_insert(self, stats, pts: np.ndarray, org: np.ndarray, rng: float) -> None:
+    def _record_insert(self, stats, pts: np.ndarray, org: np.ndarray, rng: float,
+                       method: str, threshold: int) -> None:
         """Set ``last_insert_`` from a core's scan insertion, or raise for bad ray ends
         (None: the core changed nothing)."""
         if stats is None:
             self._raise_bad_ends(pts, org, rng)
             raise AssertionError("the core reported a ray end out of range")  # unreachable
         self.last_insert_ = self._insert_statistics(stats)
+        self.last_insert_["superrays"] = threshold > 0
+        self._learn_superrays(method, len(pts))
 
     def _as_float32_points(self, x: ArrayLike, name: str) -> np.ndarray:
         return np.ascontiguousarray(as_points(x, name), dtype=np.float32)

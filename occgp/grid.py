@@ -124,7 +124,8 @@ class GridMap(LogOddsMap, _Grid):
         method : {"auto", "plain", "culling", "superray", "superray+culling"}, \
 default="auto"
             How the rays are traversed; every method gives the same map, cell
-            for cell: ``"auto"`` is ``"culling"``, ``"plain"`` walks every
+            for cell: ``"auto"`` is ``"superray+culling"``, which backs off
+            from super rays while they do not pay; ``"plain"`` walks every
             ray, ``"superray"`` groups rays into super rays, ``"culling"``
             skips the scan's culling region of fully free cells (grown over
             this grid's cells), after Kwon's dissertation, ch. 2. See
@@ -160,9 +161,10 @@ default="auto"
         scan = self._validated_scan(points, origin, max_range, mode, check_ends=False)
         if scan is not None:
             pts, org, rng = scan
+            threshold = self._adaptive_threshold(method, threshold)
             self._record_insert(self._insert(
                 pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),
-                pts, org, rng)
+                pts, org, rng, method, threshold)
         return self
 
     # ------------------------------------------------------------------ queries

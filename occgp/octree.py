@@ -60,10 +60,12 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         rays count once), and, for the methods occgp implements itself,
         ``updated_cells``, ``traversed_cells`` (cell visits that counted a
         ray: those the culling region spares are not walked or not counted),
-        ``region_cells`` (-1 without culling) and the seconds spent on the
-        end points, on pre-processing (super rays and culling region), on
-        traversal and on the tree update: ``endpoint_seconds``,
-        ``preprocessing_seconds``, ``traversal_seconds``, ``update_seconds``.
+        ``region_cells`` (-1 without culling), ``superrays`` (whether rays
+        were grouped) and the seconds spent on the end points, on super rays,
+        on the culling region, on traversal and on the tree update:
+        ``endpoint_seconds``, ``superray_seconds``, ``region_seconds``
+        (``preprocessing_seconds`` is their sum), ``traversal_seconds``,
+        ``update_seconds``.
 
     See Also
     --------
@@ -137,9 +139,8 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         method : {"auto", "plain", "culling", "superray", "superray+culling"}, \
 default="auto"
             How the rays are traversed; every method gives the same map, bit for
-            bit. ``"auto"`` is ``"culling"`` (``"plain"`` with `discretize`),
-            the fastest on ``bench/bench_updates.py``'s dense trajectories at
-            0.1-0.4 m. ``"plain"`` traverses every ray in full (with
+            bit. ``"auto"`` is ``"superray+culling"`` (``"plain"`` with
+            `discretize`). ``"plain"`` traverses every ray in full (with
             ``mode="scan"`` it is liboctomap's ``insertPointCloud`` itself;
             otherwise occgp's traversal, which visits the cells
             ``computeRayKeys`` visits, and one-pass tree update). ``"superray"``
@@ -159,9 +160,12 @@ default="auto"
             ray is walked back from its end until it enters the region (when
             the walk can be certified to give liboctomap's cells; forward
             otherwise). It pays off once the map has saturated free space, e.g.
-            along a trajectory. ``"superray+culling"`` does both. Groups whose
-            rays the mapping lines split into more classes than they have rays
-            are not grouped.
+            along a trajectory. ``"superray+culling"`` does both, and adapts:
+            after a scan whose grouping took longer than the traversal it saved
+            (as measured in that scan), the next :attr:`SUPERRAY_BACKOFF` scans
+            use the culling region alone (the map is the same either way). In
+            every super-ray method, cells whose rays the mapping lines split
+            into more classes than they have rays are not grouped.
         superray_threshold : int, default=20
             With the super-ray methods, the fewest end points a cell must hold
             for its rays to be grouped; at least 1.
@@ -212,9 +216,10 @@ default="auto"
             self._insert_point_cloud(pts, org, rng, bool(discretize))
             self.last_insert_: dict[str, float] = {"rays": len(pts)}
         else:
+            threshold = self._adaptive_threshold(method, threshold)
             self._record_insert(self._insert_batch(
                 pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),
-                pts, org, rng)
+                pts, org, rng, method, threshold)
         return self
 
     # ------------------------------------------------------------------ queries

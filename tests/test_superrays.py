@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from occgp import OccupancyOctree
+from occgp import GridMap, OccupancyOctree
 from test_octree import assert_same_leaves
 
 METHODS = ["superray", "superray+culling"]
@@ -143,11 +143,33 @@ def test_last_insert_statistics():
     points = clustered_scan(rng, origin, 0.4, spread=1.5)
     m = OccupancyOctree(0.4).insert_scan(points, origin, method="plain")
     assert m.last_insert_ == {"rays": len(points)}      # liboctomap's insertPointCloud
-    m.insert_scan(points, origin)                       # "auto": the culling region
-    assert m.last_insert_["region_cells"] >= 0 and m.last_insert_["rays"] == len(points)
+    m.insert_scan(points, origin)                       # "auto": super rays + culling
+    assert m.last_insert_["superrays"] and m.last_insert_["rays"] < len(points)
+    assert m.last_insert_["region_cells"] >= 0
     m.insert_scan(points, origin, method="superray+culling", superray_threshold=5)
     stats = m.last_insert_
     assert stats["rays"] < len(points) and stats["updated_cells"] > 0
     assert stats["region_cells"] >= 0 and stats["traversed_cells"] > 0
     for phase in ("endpoint", "preprocessing", "traversal", "update"):
         assert stats[f"{phase}_seconds"] >= 0
+
+
+@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
+def test_superray_culling_backs_off_when_grouping_does_not_pay(cls):
+    """A threshold no cell reaches groups nothing: the grouping time bought no saved
+    traversal, so the next SUPERRAY_BACKOFF scans skip it, then it is tried again."""
+    rng = np.random.default_rng(9)
+    origin = np.array([0.33, -0.21, 0.57])
+    points = clustered_scan(rng, origin, 0.4, spread=1.5)
+    m = cls(0.4)
+    used = []
+    for _ in range(cls.SUPERRAY_BACKOFF + 2):
+        m.insert_scan(points, origin, method="superray+culling",
+                      superray_threshold=10 * len(points))
+        used.append(m.last_insert_["superrays"])
+        assert m.last_insert_["rays"] == len(points)
+    assert used == [True] + [False] * cls.SUPERRAY_BACKOFF + [True]
+    # explicit "superray" never backs off
+    m.insert_scan(points, origin, method="superray", superray_threshold=10 * len(points))
+    m.insert_scan(points, origin, method="superray", superray_threshold=10 * len(points))
+    assert m.last_insert_["superrays"]
