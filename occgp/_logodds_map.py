@@ -39,9 +39,11 @@ class LogOddsMap:
     _kind = "map"
     #: After a scan where grouping its rays into super rays took longer than the
     #: traversal it saved, ``method="superray+culling"`` inserts this many scans with
-    #: the culling region alone, then tries super rays again.
+    #: the culling region alone, then tries super rays again; each further such scan
+    #: in a row doubles the pause, up to 8 times this.
     SUPERRAY_BACKOFF = 8
     _superray_skip = 0
+    _superray_pause = SUPERRAY_BACKOFF
 
     if TYPE_CHECKING:  # provided by the compiled core the subclass also derives from
         def _setup(self, resolution: float, prob_hit: float, prob_miss: float,
@@ -70,6 +72,7 @@ class LogOddsMap:
         self._params = check_params(params)
         self._setup(*self._params.values())
         self._superray_skip = 0
+        self._superray_pause = self.SUPERRAY_BACKOFF
 
     # ------------------------------------------------------------------ parameters
     def get_params(self) -> dict:
@@ -202,7 +205,10 @@ class LogOddsMap:
             return
         saved = (n_points - stats["rays"]) * stats["traversal_seconds"] / stats["rays"]
         if saved < stats["superray_seconds"]:
-            self._superray_skip = self.SUPERRAY_BACKOFF
+            self._superray_skip = self._superray_pause
+            self._superray_pause = min(2 * self._superray_pause, 8 * self.SUPERRAY_BACKOFF)
+        else:
+            self._superray_pause = self.SUPERRAY_BACKOFF
 
     @staticmethod
     def _insert_statistics(stats: tuple) -> dict[str, float]:

@@ -163,7 +163,8 @@ default="auto"
             along a trajectory. ``"superray+culling"`` does both, and adapts:
             after a scan whose grouping took longer than the traversal it saved
             (as measured in that scan), the next :attr:`SUPERRAY_BACKOFF` scans
-            use the culling region alone (the map is the same either way). In
+            use the culling region alone, twice as many after each further such
+            scan in a row (the map is the same either way). In
             every super-ray method, cells whose rays the mapping lines split
             into more classes than they have rays are not grouped.
         superray_threshold : int, default=20

@@ -157,18 +157,22 @@ def test_last_insert_statistics():
 @pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
 def test_superray_culling_backs_off_when_grouping_does_not_pay(cls):
     """A threshold no cell reaches groups nothing: the grouping time bought no saved
-    traversal, so the next SUPERRAY_BACKOFF scans skip it, then it is tried again."""
+    traversal, so the next SUPERRAY_BACKOFF scans skip it, then it is tried again
+    (and after another such try, skipped twice as long)."""
     rng = np.random.default_rng(9)
     origin = np.array([0.33, -0.21, 0.57])
     points = clustered_scan(rng, origin, 0.4, spread=1.5)
     m = cls(0.4)
     used = []
-    for _ in range(cls.SUPERRAY_BACKOFF + 2):
+    pause = cls.SUPERRAY_BACKOFF
+    for _ in range(3 * pause + 4):
         m.insert_scan(points, origin, method="superray+culling",
                       superray_threshold=10 * len(points))
         used.append(m.last_insert_["superrays"])
         assert m.last_insert_["rays"] == len(points)
-    assert used == [True] + [False] * cls.SUPERRAY_BACKOFF + [True]
+    # each failed try in a row doubles the pause
+    assert used == ([True] + [False] * pause + [True] + [False] * 2 * pause + [True]
+                    + [False] * (len(used) - 3 * pause - 3))
     # explicit "superray" never backs off
     m.insert_scan(points, origin, method="superray", superray_threshold=10 * len(points))
     m.insert_scan(points, origin, method="superray", superray_threshold=10 * len(points))
