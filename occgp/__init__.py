@@ -1,6 +1,7 @@
 """occgp: occupancy mapping from range sensors.
 
-The OctoMap octree under a numpy API (:class:`OccupancyOctree`), synthetic
+The OctoMap octree under a numpy API (:class:`OccupancyOctree`), kernel
+inference on cells (:class:`BGKMap`), synthetic
 scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
 (:mod:`occgp.metrics`, :mod:`occgp.evaluation`) for every mapping method.
 """
@@ -8,9 +9,10 @@ scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
 import logging
 
 from .grid import GridMap
+from .kernel import BGKMap
 from .octree import Leaves, OccupancyOctree
 
 __version__ = "0.1.0.dev0"
-__all__ = ["OccupancyOctree", "GridMap", "Leaves", "__version__"]
+__all__ = ["OccupancyOctree", "GridMap", "Leaves", "BGKMap", "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())

@@ -1,0 +1,213 @@
+# cython: language_level=3
+# distutils: language = c++
+"""Compiled core of the kernel-inference maps (:mod:`occgp.kernel`): Beta posteriors on cells.
+
+Every cell of edge ``resolution`` holds the evidence of the samples whose kernel
+support reaches its centre: alpha (occupied) and beta (free), the prior not
+included. A sample at x with label y in [0, 1], support ellipsoid
+``{c : (c - x)^T P (c - x) < 1}`` (P the inverse of the bandwidth matrix H) and
+weight w adds ``w k(r) y`` to alpha and ``w k(r) (1 - y)`` to beta of every cell
+whose centre c lies inside, with ``r = sqrt((c - x)^T P (c - x))`` and k the
+sparse kernel of Melkumyan and Ramos (times ``sf2``). Cells are keyed like
+liboctomap's: ``floor(x / resolution) + 32768`` per axis, centre
+``(key - 32768 + 0.5) * resolution``.
+
+Nothing here validates user input: :mod:`occgp.kernel` checks every array first.
+The loops run without the GIL; a per-map lock serialises operations on one map.
+"""
+
+cimport cython
+from cython.operator cimport dereference as deref, preincrement as inc
+from libc.math cimport M_PI, ceil, cos, floor, isnan, sin, sqrt
+from libc.stdint cimport uint16_t, uint64_t
+from libcpp.unordered_map cimport unordered_map
+from libcpp.utility cimport pair
+from libcpp.vector cimport vector
+
+import threading
+
+import numpy as np
+
+cdef enum:
+    _MAX_VAL = 32768        # half the number of keys per axis, as liboctomap's 16-bit keys
+
+
+cdef struct Beta:
+    double alpha
+    double beta
+
+
+ctypedef unordered_map[uint64_t, Beta] BetaMap
+
+
+cdef inline double _sparse(double r) noexcept nogil:
+    """The sparse kernel at normalised distance r (0 for r >= 1; rounding just below 1,
+    where it vanishes to fifth order, is clamped at 0 as la3dm clamps it)."""
+    cdef double k
+    if r >= 1.0:
+        return 0.0
+    k = (2.0 + cos(2.0 * M_PI * r)) * (1.0 - r) / 3.0 + sin(2.0 * M_PI * r) / (2.0 * M_PI)
+    return k if k > 0.0 else 0.0
+
+
+cdef inline uint64_t _pack(long kx, long ky, long kz) noexcept nogil:
+    return (<uint64_t>kx) | ((<uint64_t>ky) << 16) | ((<uint64_t>kz) << 32)
+
+
+def sparse_kernel(const double[::1] r):
+    """The sparse kernel ``((2 + cos 2 pi r)(1 - r)) / 3 + sin(2 pi r) / (2 pi)`` for
+    r < 1, 0 beyond (Melkumyan and Ramos, 2009), element-wise."""
+    out = np.empty(r.shape[0])
+    cdef double[::1] o = out
+    cdef Py_ssize_t i
+    with nogil:
+        for i in range(r.shape[0]):
+            o[i] = _sparse(r[i] if r[i] >= 0 else -r[i])
+    return out
+
+
+@cython.auto_pickle(False)
+cdef class _KernelCells:
+    """Beta evidence on hashed cells. Use :class:`occgp.BGKMap` or :class:`occgp.AKIMap`."""
+
+    cdef BetaMap _cells
+    cdef double _res
+    cdef object _lock
+
+    def __cinit__(self, *args, **kwargs):
+        self._lock = threading.Lock()
+        self._res = 0.0
+
+    def _setup(self, double resolution):
+        with self._lock:
+            self._cells.clear()
+            self._res = resolution
+
+    def _accumulate(self, const double[:, ::1] samples, const double[::1] labels,
+                    const double[:, :, ::1] precision, const double[:, ::1] extent,
+                    const double[::1] weights, double sf2):
+        """Add the evidence of each sample to the cells its support reaches.
+
+        `precision[i]` is the inverse bandwidth matrix of sample i, `extent[i]`
+        the half-size of its support's bounding box per axis (metres),
+        `weights[i]` its weight. Returns the number of (sample, cell) updates.
+        """
+        cdef Py_ssize_t i, n = samples.shape[0]
+        cdef long kx, ky, kz
+        cdef long lo[3]
+        cdef long hi[3]
+        cdef int a
+        cdef double d[3]
+        cdef double r2, k, y, res = self._res
+        cdef long updates = 0
+        cdef Beta* cell
+        with self._lock:
+            with nogil:
+                for i in range(n):
+                    for a in range(3):
+                        # the keys whose centre (key - MAX + 0.5) res lies in the box
+                        lo[a] = <long>ceil((samples[i, a] - extent[i, a]) / res - 0.5) + _MAX_VAL
+                        hi[a] = <long>floor((samples[i, a] + extent[i, a]) / res - 0.5) + _MAX_VAL
+                        lo[a] = max(lo[a], 0)
+                        hi[a] = min(hi[a], 2 * _MAX_VAL - 1)
+                    y = labels[i]
+                    for kz in range(lo[2], hi[2] + 1):
+                        d[2] = (<double>(kz - _MAX_VAL) + 0.5) * res - samples[i, 2]
+                        for ky in range(lo[1], hi[1] + 1):
+                            d[1] = (<double>(ky - _MAX_VAL) + 0.5) * res - samples[i, 1]
+                            for kx in range(lo[0], hi[0] + 1):
+                                d[0] = (<double>(kx - _MAX_VAL) + 0.5) * res - samples[i, 0]
+                                r2 = 0.0
+                                for a in range(3):
+                                    r2 += d[a] * (precision[i, a, 0] * d[0]
+                                                  + precision[i, a, 1] * d[1]
+                                                  + precision[i, a, 2] * d[2])
+                                if not r2 < 1.0:
+                                    continue
+                                k = sf2 * weights[i] * _sparse(sqrt(r2))
+                                if k <= 0.0:
+                                    continue
+                                cell = &self._cells[_pack(kx, ky, kz)]
+                                cell.alpha += k * y
+                                cell.beta += k * (1.0 - y)
+                                updates += 1
+        return updates
+
+    def _query(self, const double[:, ::1] points, double prior, int what):
+        """Per point: 0 -> posterior mean of occupancy, 1 -> its variance (NaN where no
+        kernel ever reached the point's cell)."""
+        cdef Py_ssize_t i, n = points.shape[0]
+        out = np.full(n, np.nan)
+        cdef double[::1] o = out
+        cdef long key[3]
+        cdef int a
+        cdef bint inside
+        cdef double s, res = self._res, al, be
+        cdef BetaMap.iterator found
+        with self._lock:
+            with nogil:
+                for i in range(n):
+                    inside = True
+                    for a in range(3):
+                        s = floor(points[i, a] / res)
+                        if not (s >= -_MAX_VAL and s < _MAX_VAL):
+                            inside = False
+                            break
+                        key[a] = <long>s + _MAX_VAL
+                    if not inside:
+                        continue
+                    found = self._cells.find(_pack(key[0], key[1], key[2]))
+                    if found == self._cells.end():
+                        continue
+                    al = deref(found).second.alpha + prior
+                    be = deref(found).second.beta + prior
+                    if what == 0:
+                        o[i] = al / (al + be)
+                    else:
+                        o[i] = al * be / ((al + be) * (al + be) * (al + be + 1.0))
+        return out
+
+    def _cells_arrays(self):
+        """(keys uint16 (n, 3), alpha, beta) of every cell, in no particular order."""
+        cdef Py_ssize_t n, j = 0
+        cdef BetaMap.iterator it
+        with self._lock:
+            n = self._cells.size()
+            keys = np.empty((n, 3), dtype=np.uint16)
+            alpha = np.empty(n)
+            beta = np.empty(n)
+            if n:
+                self._fill(keys, alpha, beta)
+        return keys, alpha, beta
+
+    cdef void _fill(self, uint16_t[:, ::1] keys, double[::1] alpha, double[::1] beta) noexcept:
+        cdef BetaMap.iterator it = self._cells.begin()
+        cdef Py_ssize_t j = 0
+        cdef uint64_t packed
+        with nogil:
+            while it != self._cells.end():
+                packed = deref(it).first
+                keys[j, 0] = <uint16_t>(packed & 0xFFFF)
+                keys[j, 1] = <uint16_t>((packed >> 16) & 0xFFFF)
+                keys[j, 2] = <uint16_t>((packed >> 32) & 0xFFFF)
+                alpha[j] = deref(it).second.alpha
+                beta[j] = deref(it).second.beta
+                j += 1
+                inc(it)
+
+    def _set_cells(self, const uint16_t[:, ::1] keys, const double[::1] alpha,
+                   const double[::1] beta):
+        """Replace the cells (for unpickling)."""
+        cdef Py_ssize_t j
+        cdef Beta b
+        with self._lock:
+            self._cells.clear()
+            with nogil:
+                self._cells.reserve(keys.shape[0])
+                for j in range(keys.shape[0]):
+                    b.alpha = alpha[j]
+                    b.beta = beta[j]
+                    self._cells[_pack(keys[j, 0], keys[j, 1], keys[j, 2])] = b
+
+    def _num_cells(self):
+        return self._cells.size()

@@ -1,0 +1,157 @@
+"""Kernel inference on cells: the sparse kernel, BGK's samples and its alpha / beta."""
+
+import pickle
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from occgp import BGKMap
+from occgp.kernel import sparse_kernel, voxel_centroids
+
+
+def wall_scan(n=41, x=2.0):
+    return np.column_stack([np.full(n, x), np.linspace(-1, 1, n), np.zeros(n)]), np.zeros(3)
+
+
+# ---------------------------------------------------------------------- kernel
+def test_sparse_kernel_values_and_support():
+    r = np.linspace(0, 1.5, 151)
+    k = sparse_kernel(r)
+    assert k[0] == 1.0
+    assert np.all(k[r >= 1] == 0)
+    assert np.all(k[r < 1] > 0) and np.all(np.diff(k[r <= 1]) <= 0)     # decreasing
+    assert np.all(sparse_kernel(np.linspace(0.999, 1.0, 1001)) >= 0)    # clamped at 0
+    expected = (2 + np.cos(2 * np.pi * r)) * (1 - r) / 3 + np.sin(2 * np.pi * r) / (2 * np.pi)
+    assert_allclose(k[r < 1], expected[r < 1], rtol=1e-14)
+    assert_allclose(sparse_kernel(np.array([1 - 1e-9])), [0.0], atol=1e-15)  # continuous
+
+
+def test_voxel_centroids():
+    pts = np.array([[0.01, 0.01, 0.01], [0.03, 0.05, 0.07], [0.25, 0.0, 0.0]])
+    c = voxel_centroids(pts, 0.1)
+    assert_allclose(c, [[0.02, 0.03, 0.04], [0.25, 0.0, 0.0]])
+    assert voxel_centroids(np.empty((0, 3)), 0.1).shape == (0, 3)
+
+
+# ---------------------------------------------------------------------- BGK
+def test_bgk_training_data_follows_la3dm():
+    """Hits reduced to centroids, free samples every free_resolution metres (d < length)
+    along each beam and the origin; beams longer than max_range dropped whole."""
+    m = BGKMap(0.1, free_resolution=0.5, max_range=3.0)
+    points = np.array([[1.22, 0.0, 0.0], [1.24, 0.0, 0.0], [0.0, 5.0, 0.0]])
+    samples, labels = m.training_data(points, [0.0, 0.0, 0.0])
+    hits = samples[labels == 1]
+    frees = samples[labels == 0]
+    assert_allclose(hits, [[1.23, 0.0, 0.0]])                   # one centroid, long beam gone
+    assert_allclose(np.sort(frees[:, 0]), [0.0, 0.5, 1.0])       # origin, 0.5, 1.0 (< 1.23)
+    assert_allclose(frees[:, 1:], 0.0)
+
+
+def slow_bgk(samples, labels, resolution, ell, sf2=1.0):
+    """Cell key -> (alpha, beta) by looping over every sample and cell in Python."""
+    cells = {}
+    for x, y in zip(samples, labels):
+        lo = np.ceil((x - ell) / resolution - 0.5).astype(int)
+        hi = np.floor((x + ell) / resolution - 0.5).astype(int)
+        for kx in range(lo[0], hi[0] + 1):
+            for ky in range(lo[1], hi[1] + 1):
+                for kz in range(lo[2], hi[2] + 1):
+                    c = (np.array([kx, ky, kz]) + 0.5) * resolution
+                    r2 = np.sum((c - x) ** 2) / ell ** 2
+                    if r2 >= 1:
+                        continue
+                    r = np.sqrt(r2)
+                    k = sf2 * ((2 + np.cos(2 * np.pi * r)) * (1 - r) / 3
+                               + np.sin(2 * np.pi * r) / (2 * np.pi))
+                    if k <= 0:          # rounding where the kernel vanishes, as la3dm clamps
+                        continue
+                    a, b = cells.get((kx, ky, kz), (0.0, 0.0))
+                    cells[(kx, ky, kz)] = (a + k * y, b + k * (1 - y))
+    return cells
+
+
+def test_bgk_alpha_beta_equal_a_slow_reference():
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-1, 1, (60, 3)) + [2.0, 0.0, 0.5]
+    origin = np.array([0.1, -0.2, 0.3])
+    m = BGKMap(0.1, ell=0.25, sf2=0.8).update(points, origin)
+    samples, labels = m.training_data(points, origin)
+    ref = slow_bgk(samples, labels, 0.1, 0.25, 0.8)
+    cells = m.cells()
+    keys = np.round(cells.centers / 0.1 - 0.5).astype(int)
+    got = {tuple(k): (a - m.prior, b - m.prior) for k, a, b in zip(keys.tolist(), cells.alpha,
+                                                                   cells.beta)}
+    assert got.keys() == ref.keys()
+    for key, (a, b) in ref.items():
+        assert_allclose(got[key], (a, b), rtol=1e-12, atol=1e-15)
+
+
+def test_bgk_map_marks_wall_occupied_and_free_space_free():
+    points, origin = wall_scan()
+    m = BGKMap(0.1).update(points, origin)
+    # (beams a little longer than 2 m put a free sample just before the wall: BGK's blur)
+    wall_p = m.occupancy(points)
+    assert np.all(wall_p > 0.5) and np.mean(wall_p) > 0.8
+    assert m.occupancy([[0.5, 0.0, 0.0]])[0] < 0.1
+    assert np.isnan(m.occupancy([[5.0, 5.0, 5.0]])[0])                  # unknown
+    assert m.is_occupied([[2.0, 0.0, 0.0], [0.5, 0, 0], [5, 5, 5]]).tolist() == [True, False,
+                                                                             False]
+    var = m.variance(points[20:21])[0]
+    p = m.occupancy(points[20:21])[0]
+    assert 0 < var < p * (1 - p)
+
+
+def test_bgk_evidence_adds_up_over_scans():
+    points, origin = wall_scan()
+    once = BGKMap(0.1).update(points, origin)
+    twice = BGKMap(0.1).update(points, origin).update(points, origin)
+    a1, a2 = once.cells(), twice.cells()
+    assert_array_equal(a1.centers, a2.centers)
+    assert_allclose(a2.alpha - twice.prior, 2 * (a1.alpha - once.prior), rtol=1e-12)
+
+
+def test_empty_scan_is_a_no_op_and_one_point_works():
+    m = BGKMap(0.1)
+    assert m.update(np.empty((0, 3)), [0, 0, 0]) is m and m.num_cells == 0
+    m.update([[1.0, 0.0, 0.0]], [0, 0, 0])
+    assert m.num_cells > 0 and m.occupancy([[1.0, 0.0, 0.0]])[0] > 0.5
+
+
+def test_pickle_keeps_every_cell():
+    points, origin = wall_scan()
+    m = BGKMap(0.1, ell=0.3).update(points, origin)
+    back = pickle.loads(pickle.dumps(m))
+    assert back.get_params() == m.get_params()
+    for a, b in zip(m.cells(), back.cells()):
+        assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    (dict(resolution=0.0), ValueError, r"resolution must lie in \(0.0, inf\), got 0.0"),
+    (dict(ell=-1.0), ValueError, "ell must lie in"),
+    (dict(sf2="1"), TypeError, "sf2 must be a real number, got str"),
+    (dict(free_resolution=np.nan), ValueError, "free_resolution must lie in"),
+    (dict(prior=0.0), ValueError, "prior must lie in"),
+    (dict(max_range=0.0), ValueError, "max_range must lie in"),
+])
+def test_bad_parameters_are_rejected(kwargs, exc, match):
+    with pytest.raises(exc, match=match):
+        BGKMap(**kwargs)
+
+
+@pytest.mark.parametrize("points, origin, exc, match", [
+    (np.zeros((3, 2)), [0, 0, 0], ValueError, r"points must have shape \(n_points, 3\)"),
+    ([[np.nan, 0, 0]], [0, 0, 0], ValueError, "points must be finite"),
+    ([[1.0, 0, 0]], [0, 0], ValueError, r"origin must have shape \(3,\)"),
+    ([["a", "b", "c"]], [0, 0, 0], TypeError, "points must hold real numbers"),
+    ([[1e6, 0, 0]], [0, 0, 0], ValueError, "1 of 1 points lie outside the map's key range"),
+])
+def test_bad_scans_leave_the_map_unchanged(points, origin, exc, match):
+    wall, o = wall_scan()
+    m = BGKMap(0.1).update(wall, o)
+    before = m.cells()
+    with pytest.raises(exc, match=match):
+        m.update(points, origin)
+    after = m.cells()
+    assert_array_equal(before.alpha, after.alpha)
