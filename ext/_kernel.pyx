@@ -30,6 +30,7 @@ import numpy as np
 
 cdef enum:
     _MAX_VAL = 32768        # half the number of keys per axis, as liboctomap's 16-bit keys
+    _MAX_DENSE = 1 << 22    # up to this many cells, an update accumulates in a dense box
 
 
 cdef struct Beta:
@@ -54,6 +55,16 @@ cdef inline uint64_t _pack(long kx, long ky, long kz) noexcept nogil:
     return (<uint64_t>kx) | ((<uint64_t>ky) << 16) | ((<uint64_t>kz) << 32)
 
 
+cdef inline void _support_keys(const double[:, ::1] samples, const double[:, ::1] extent,
+                               Py_ssize_t i, double res, long* lo, long* hi) noexcept nogil:
+    """The keys whose centre ``(key - 32768 + 0.5) res`` lies in sample i's support box."""
+    cdef int a
+    for a in range(3):
+        lo[a] = max(<long>ceil((samples[i, a] - extent[i, a]) / res - 0.5) + _MAX_VAL, 0)
+        hi[a] = min(<long>floor((samples[i, a] + extent[i, a]) / res - 0.5) + _MAX_VAL,
+                    2 * _MAX_VAL - 1)
+
+
 def sparse_kernel(const double[::1] r):
     """The sparse kernel ``((2 + cos 2 pi r)(1 - r)) / 3 + sin(2 pi r) / (2 pi)`` for
     r < 1, 0 beyond (Melkumyan and Ramos, 2009), element-wise."""
@@ -73,6 +84,9 @@ cdef class _KernelCells:
     cdef BetaMap _cells
     cdef double _res
     cdef object _lock
+    cdef vector[Beta] _box          # an update's evidence over its key box, zero between
+    cdef vector[uint64_t] _touched  # box indices with evidence
+    cdef bint _box_dirty            # an exception left _box / _touched non-zero
 
     def __cinit__(self, *args, **kwargs):
         self._lock = threading.Lock()
@@ -90,31 +104,57 @@ cdef class _KernelCells:
 
         `precision[i]` is the inverse bandwidth matrix of sample i, `extent[i]`
         the half-size of its support's bounding box per axis (metres),
-        `weights[i]` its weight. Returns the number of (sample, cell) updates.
+        `weights[i]` its weight. The evidence is first summed over the update's
+        key box (a dense array, when the box has at most 2^22 cells), then
+        added to the hashed cells once per cell. Returns the number of
+        (sample, cell) contributions.
         """
         cdef Py_ssize_t i, n = samples.shape[0]
         cdef long kx, ky, kz
         cdef long lo[3]
         cdef long hi[3]
+        cdef long box_lo[3]
+        cdef long box_hi[3]
+        cdef uint64_t dims[3]
+        cdef uint64_t idx, row, box_cells = 1
         cdef int a
         cdef double d[3]
         cdef double r2, k, y, res = self._res
         cdef long updates = 0
+        cdef bint dense
         cdef Beta* cell
+        cdef size_t j
+        if n == 0:
+            return 0
         with self._lock:
             with nogil:
+                for a in range(3):
+                    box_lo[a] = 2 * _MAX_VAL
+                    box_hi[a] = -1
                 for i in range(n):
+                    _support_keys(samples, extent, i, res, lo, hi)
                     for a in range(3):
-                        # the keys whose centre (key - MAX + 0.5) res lies in the box
-                        lo[a] = <long>ceil((samples[i, a] - extent[i, a]) / res - 0.5) + _MAX_VAL
-                        hi[a] = <long>floor((samples[i, a] + extent[i, a]) / res - 0.5) + _MAX_VAL
-                        lo[a] = max(lo[a], 0)
-                        hi[a] = min(hi[a], 2 * _MAX_VAL - 1)
+                        box_lo[a] = min(box_lo[a], lo[a])
+                        box_hi[a] = max(box_hi[a], hi[a])
+                for a in range(3):
+                    dims[a] = <uint64_t>max(box_hi[a] - box_lo[a] + 1, 0)
+                    box_cells *= dims[a]
+                dense = 0 < box_cells <= _MAX_DENSE
+                if self._box_dirty:
+                    self._box.assign(self._box.size(), Beta(0.0, 0.0))
+                    self._touched.clear()
+                if dense and self._box.size() < box_cells:
+                    self._box.resize(box_cells)
+                self._box_dirty = True
+                for i in range(n):
+                    _support_keys(samples, extent, i, res, lo, hi)
                     y = labels[i]
                     for kz in range(lo[2], hi[2] + 1):
                         d[2] = (<double>(kz - _MAX_VAL) + 0.5) * res - samples[i, 2]
                         for ky in range(lo[1], hi[1] + 1):
                             d[1] = (<double>(ky - _MAX_VAL) + 0.5) * res - samples[i, 1]
+                            row = ((<uint64_t>(kz - box_lo[2]) * dims[1]
+                                    + <uint64_t>(ky - box_lo[1])) * dims[0])
                             for kx in range(lo[0], hi[0] + 1):
                                 d[0] = (<double>(kx - _MAX_VAL) + 0.5) * res - samples[i, 0]
                                 r2 = 0.0
@@ -127,10 +167,28 @@ cdef class _KernelCells:
                                 k = sf2 * weights[i] * _sparse(sqrt(r2))
                                 if k <= 0.0:
                                     continue
-                                cell = &self._cells[_pack(kx, ky, kz)]
+                                if dense:
+                                    idx = row + <uint64_t>(kx - box_lo[0])
+                                    cell = &self._box[idx]
+                                    if cell.alpha == 0.0 and cell.beta == 0.0:
+                                        self._touched.push_back(idx)
+                                else:
+                                    cell = &self._cells[_pack(kx, ky, kz)]
                                 cell.alpha += k * y
                                 cell.beta += k * (1.0 - y)
                                 updates += 1
+                for j in range(self._touched.size()):
+                    idx = self._touched[j]
+                    kx = box_lo[0] + <long>(idx % dims[0])
+                    ky = box_lo[1] + <long>((idx // dims[0]) % dims[1])
+                    kz = box_lo[2] + <long>(idx // (dims[0] * dims[1]))
+                    cell = &self._cells[_pack(kx, ky, kz)]
+                    cell.alpha += self._box[idx].alpha
+                    cell.beta += self._box[idx].beta
+                    self._box[idx].alpha = 0.0
+                    self._box[idx].beta = 0.0
+                self._touched.clear()
+                self._box_dirty = False
         return updates
 
     def _query(self, const double[:, ::1] points, double prior, int what):
