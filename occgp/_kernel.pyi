@@ -4,6 +4,7 @@ from numpy.typing import NDArray
 from typing_extensions import disjoint_base
 
 def sparse_kernel(r: NDArray[np.float64]) -> NDArray[np.float64]: ...
+def kernel_from_table(r2: NDArray[np.float64]) -> NDArray[np.float64]: ...
 
 @disjoint_base
 class _KernelCells:

@@ -27,6 +27,14 @@ def test_sparse_kernel_values_and_support():
     assert_allclose(sparse_kernel(np.array([1 - 1e-9])), [0.0], atol=1e-15)  # continuous
 
 
+def test_tabulated_kernel_is_within_3e_8_of_the_formula():
+    from occgp._kernel import kernel_from_table
+    r2 = np.concatenate([np.linspace(0, 1, 200_001)[:-1],
+                         np.random.default_rng(0).uniform(0, 1, 100_000)])
+    assert np.max(np.abs(kernel_from_table(r2) - sparse_kernel(np.sqrt(r2)))) < 3e-8
+    assert np.all(kernel_from_table(r2) >= 0)
+
+
 def test_voxel_centroids():
     pts = np.array([[0.01, 0.01, 0.01], [0.03, 0.05, 0.07], [0.25, 0.0, 0.0]])
     c = voxel_centroids(pts, 0.1)
@@ -82,9 +90,14 @@ def test_bgk_alpha_beta_equal_a_slow_reference():
     keys = np.round(cells.centers / 0.1 - 0.5).astype(int)
     got = {tuple(k): (a - m.prior, b - m.prior) for k, a, b in zip(keys.tolist(), cells.alpha,
                                                                    cells.beta)}
-    assert got.keys() == ref.keys()
-    for key, (a, b) in ref.items():
-        assert_allclose(got[key], (a, b), rtol=1e-12, atol=1e-15)
+    # the same cells (up to those the kernel reaches with under 1e-12, where rounding
+    # decides), the same evidence up to the kernel table's 3e-8
+    big = {k for k, (a, b) in ref.items() if a + b > 1e-12}
+    assert big <= got.keys()
+    assert {k for k, (a, b) in got.items() if a + b > 1e-12} <= ref.keys()
+    assert len(big) > 1000
+    for key in big:
+        assert_allclose(got[key], ref[key], rtol=0, atol=1e-7 * 60)
 
 
 def test_bgk_map_marks_wall_occupied_and_free_space_free():
