@@ -9,7 +9,8 @@ included. A sample at x with label y in [0, 1], support ellipsoid
 weight w adds ``w k(r) y`` to alpha and ``w k(r) (1 - y)`` to beta of every cell
 whose centre c lies inside, with ``r = sqrt((c - x)^T P (c - x))`` and k the
 sparse kernel of Melkumyan and Ramos (times ``sf2``; tabulated in r^2, within
-3e-8 of the formula). Cells are keyed like
+3e-8 of the formula). Cells live in an open-addressing table of 16-byte slots
+(packed key, float32 alpha and beta, as la3dm stores them), keyed like
 liboctomap's: ``floor(x / resolution) + 32768`` per axis, centre
 ``(key - 32768 + 0.5) * resolution``.
 
@@ -21,8 +22,6 @@ cimport cython
 from cython.operator cimport dereference as deref, preincrement as inc
 from libc.math cimport M_PI, ceil, cos, floor, isnan, sin, sqrt
 from libc.stdint cimport uint16_t, uint64_t
-from libcpp.unordered_map cimport unordered_map
-from libcpp.utility cimport pair
 from libcpp.vector cimport vector
 
 import threading
@@ -39,7 +38,22 @@ cdef struct Beta:
     double beta
 
 
-ctypedef unordered_map[uint64_t, Beta] BetaMap
+cdef extern from "_keytable.h" namespace "occgp" nogil:
+    cdef cppclass BetaCell:       # 16 bytes: packed key, float alpha, float beta
+        uint64_t key
+        float alpha
+        float beta
+
+    cdef cppclass BetaTable:      # packed key -> BetaCell, open addressing
+        BetaTable() except +
+        void reset(size_t expected) except +
+        BetaCell* get(uint64_t key) except +
+        BetaCell* find(uint64_t key)
+        size_t size()
+        size_t capacity() const
+        const BetaCell& slot(size_t i) const
+
+    const uint64_t EMPTY_KEY "occgp::kEmptyKey"
 
 
 cdef inline double _sparse(double r) noexcept nogil:
@@ -118,7 +132,7 @@ def sparse_kernel(const double[::1] r):
 cdef class _KernelCells:
     """Beta evidence on hashed cells. Use :class:`occgp.BGKMap` or :class:`occgp.AKIMap`."""
 
-    cdef BetaMap _cells
+    cdef BetaTable _cells
     cdef double _res
     cdef object _lock
     cdef vector[Beta] _box          # an update's evidence over its key box, zero between
@@ -131,7 +145,7 @@ cdef class _KernelCells:
 
     def _setup(self, double resolution):
         with self._lock:
-            self._cells.clear()
+            self._cells.reset(16)
             self._res = resolution
 
     def _accumulate(self, const double[:, ::1] samples, const double[::1] labels,
@@ -160,6 +174,7 @@ cdef class _KernelCells:
         cdef long updates = 0, row_lo, row_hi
         cdef bint dense
         cdef Beta* cell
+        cdef BetaCell* stored
         cdef size_t j
         if n == 0:
             return 0
@@ -226,19 +241,21 @@ cdef class _KernelCells:
                                     cell = &self._box[idx]
                                     if cell.alpha == 0.0 and cell.beta == 0.0:
                                         self._touched.push_back(idx)
+                                    cell.alpha += k * y
+                                    cell.beta += k * (1.0 - y)
                                 else:
-                                    cell = &self._cells[_pack(kx, ky, kz)]
-                                cell.alpha += k * y
-                                cell.beta += k * (1.0 - y)
+                                    stored = self._cells.get(_pack(kx, ky, kz))
+                                    stored.alpha += <float>(k * y)
+                                    stored.beta += <float>(k * (1.0 - y))
                                 updates += 1
                 for j in range(self._touched.size()):
                     idx = self._touched[j]
                     kx = box_lo[0] + <long>(idx % dims[0])
                     ky = box_lo[1] + <long>((idx // dims[0]) % dims[1])
                     kz = box_lo[2] + <long>(idx // (dims[0] * dims[1]))
-                    cell = &self._cells[_pack(kx, ky, kz)]
-                    cell.alpha += self._box[idx].alpha
-                    cell.beta += self._box[idx].beta
+                    stored = self._cells.get(_pack(kx, ky, kz))
+                    stored.alpha += <float>self._box[idx].alpha
+                    stored.beta += <float>self._box[idx].beta
                     self._box[idx].alpha = 0.0
                     self._box[idx].beta = 0.0
                 self._touched.clear()
@@ -255,7 +272,7 @@ cdef class _KernelCells:
         cdef int a
         cdef bint inside
         cdef double s, res = self._res, al, be
-        cdef BetaMap.iterator found
+        cdef BetaCell* found
         with self._lock:
             with nogil:
                 for i in range(n):
@@ -269,10 +286,10 @@ cdef class _KernelCells:
                     if not inside:
                         continue
                     found = self._cells.find(_pack(key[0], key[1], key[2]))
-                    if found == self._cells.end():
+                    if found == NULL:
                         continue
-                    al = deref(found).second.alpha + prior
-                    be = deref(found).second.beta + prior
+                    al = found.alpha + prior
+                    be = found.beta + prior
                     if what == 0:
                         o[i] = al / (al + be)
                     else:
@@ -281,8 +298,7 @@ cdef class _KernelCells:
 
     def _cells_arrays(self):
         """(keys uint16 (n, 3), alpha, beta) of every cell, in no particular order."""
-        cdef Py_ssize_t n, j = 0
-        cdef BetaMap.iterator it
+        cdef Py_ssize_t n
         with self._lock:
             n = self._cells.size()
             keys = np.empty((n, 3), dtype=np.uint16)
@@ -293,33 +309,33 @@ cdef class _KernelCells:
         return keys, alpha, beta
 
     cdef void _fill(self, uint16_t[:, ::1] keys, double[::1] alpha, double[::1] beta) noexcept:
-        cdef BetaMap.iterator it = self._cells.begin()
         cdef Py_ssize_t j = 0
+        cdef size_t slot
         cdef uint64_t packed
         with nogil:
-            while it != self._cells.end():
-                packed = deref(it).first
+            for slot in range(self._cells.capacity()):
+                packed = self._cells.slot(slot).key
+                if packed == EMPTY_KEY:
+                    continue
                 keys[j, 0] = <uint16_t>(packed & 0xFFFF)
                 keys[j, 1] = <uint16_t>((packed >> 16) & 0xFFFF)
                 keys[j, 2] = <uint16_t>((packed >> 32) & 0xFFFF)
-                alpha[j] = deref(it).second.alpha
-                beta[j] = deref(it).second.beta
+                alpha[j] = self._cells.slot(slot).alpha
+                beta[j] = self._cells.slot(slot).beta
                 j += 1
-                inc(it)
 
     def _set_cells(self, const uint16_t[:, ::1] keys, const double[::1] alpha,
                    const double[::1] beta):
         """Replace the cells (for unpickling)."""
         cdef Py_ssize_t j
-        cdef Beta b
+        cdef BetaCell* stored
         with self._lock:
-            self._cells.clear()
+            self._cells.reset(keys.shape[0])
             with nogil:
-                self._cells.reserve(keys.shape[0])
                 for j in range(keys.shape[0]):
-                    b.alpha = alpha[j]
-                    b.beta = beta[j]
-                    self._cells[_pack(keys[j, 0], keys[j, 1], keys[j, 2])] = b
+                    stored = self._cells.get(_pack(keys[j, 0], keys[j, 1], keys[j, 2]))
+                    stored.alpha = <float>alpha[j]
+                    stored.beta = <float>beta[j]
 
     def _num_cells(self):
         return self._cells.size()

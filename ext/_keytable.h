@@ -1,8 +1,11 @@
-// Small containers for occgp's scan updates (used from ext/_octree.pyx).
+// Small containers for occgp's compiled maps (used from ext/_scan.pxd, ext/_kernel.pyx).
 //
-// KeyTable: open-addressing hash table from a packed octree key (3 x 16 bits) to
-//   the number of rays that pass through the cell and that end in it. Replaces
-//   liboctomap's std::tr1 unordered sets, which dominate the cost of a scan update.
+// KeyMap<Slot>: open-addressing hash table from a packed key (3 x 16 bits) to the
+//   rest of a Slot (a struct whose first member is `uint64_t key`), 16-24 bytes a
+//   slot, linear probing, at most half full.
+//   KeyTable = KeyMap<KeyCounts>: the rays that pass through a cell and end in it
+//   during one scan (replaces liboctomap's std::tr1 unordered sets).
+//   BetaTable = KeyMap<BetaCell>: the Beta evidence of the kernel maps' cells.
 // CellBox: a bitset over a box of keys (the culling region of one scan).
 #ifndef OCCGP_KEYTABLE_H
 #define OCCGP_KEYTABLE_H
@@ -20,27 +23,37 @@ struct KeyCounts {
   uint32_t group;   // super rays: 1 + the index of the cell's group of end points, or 0
 };
 
-class KeyTable {
- public:
-  static constexpr uint64_t kEmpty = ~uint64_t(0);
+// The Beta evidence of a kernel map's cell (the prior not included).
+struct BetaCell {
+  uint64_t key;
+  float alpha;  // occupied evidence
+  float beta;   // free evidence
+};
 
-  KeyTable() { reset(1024); }
+constexpr uint64_t kEmptyKey = ~uint64_t(0);
+
+template <class Slot>
+class KeyMap {
+ public:
+  static constexpr uint64_t kEmpty = kEmptyKey;
+
+  KeyMap() { reset(1024); }
 
   // Drop every entry; keep room for about `expected` keys.
   void reset(size_t expected) {
     size_t cap = 16;
     while (cap < 2 * expected) cap <<= 1;
-    slots_.assign(cap, KeyCounts{kEmpty, 0, 0, 0});
+    slots_.assign(cap, empty_slot());
     mask_ = cap - 1;
     size_ = 0;
   }
 
-  // The entry of `key`, inserted with zero counts when absent.
-  KeyCounts* get(uint64_t key) {
+  // The entry of `key`, inserted with a zero payload when absent.
+  Slot* get(uint64_t key) {
     if (2 * (size_ + 1) > slots_.size()) grow();
     size_t i = hash(key) & mask_;
     while (true) {
-      KeyCounts& s = slots_[i];
+      Slot& s = slots_[i];
       if (s.key == key) return &s;
       if (s.key == kEmpty) {
         s.key = key;
@@ -52,10 +65,10 @@ class KeyTable {
   }
 
   // The entry of `key`, or nullptr when absent.
-  KeyCounts* find(uint64_t key) {
+  Slot* find(uint64_t key) {
     size_t i = hash(key) & mask_;
     while (true) {
-      KeyCounts& s = slots_[i];
+      Slot& s = slots_[i];
       if (s.key == key) return &s;
       if (s.key == kEmpty) return nullptr;
       i = (i + 1) & mask_;
@@ -74,7 +87,7 @@ class KeyTable {
 
   size_t size() const { return size_; }
   size_t capacity() const { return slots_.size(); }
-  const KeyCounts& slot(size_t i) const { return slots_[i]; }
+  const Slot& slot(size_t i) const { return slots_[i]; }
 
  private:
   static size_t hash(uint64_t k) {  // murmur3 finaliser
@@ -84,12 +97,18 @@ class KeyTable {
     return static_cast<size_t>(k);
   }
 
+  static Slot empty_slot() {
+    Slot s{};
+    s.key = kEmpty;
+    return s;
+  }
+
   void grow() {
-    std::vector<KeyCounts> old;
+    std::vector<Slot> old;
     old.swap(slots_);
-    slots_.assign(old.size() * 2, KeyCounts{kEmpty, 0, 0, 0});
+    slots_.assign(old.size() * 2, empty_slot());
     mask_ = slots_.size() - 1;
-    for (const KeyCounts& s : old) {
+    for (const Slot& s : old) {
       if (s.key == kEmpty) continue;
       size_t i = hash(s.key) & mask_;
       while (slots_[i].key != kEmpty) i = (i + 1) & mask_;
@@ -97,10 +116,13 @@ class KeyTable {
     }
   }
 
-  std::vector<KeyCounts> slots_;
+  std::vector<Slot> slots_;
   size_t mask_ = 0;
   size_t size_ = 0;
 };
+
+using KeyTable = KeyMap<KeyCounts>;
+using BetaTable = KeyMap<BetaCell>;
 
 // A bitset over the keys lo[a] <= k[a] <= hi[a].
 class CellBox {
