@@ -11,7 +11,7 @@ a per-tree lock serialises the operations on one tree.
 cimport cython
 from cython.operator cimport dereference as deref, preincrement as inc
 from libc.math cimport floor, isfinite
-from libc.stdint cimport uint8_t, uint32_t, uint64_t
+from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
 from libc.string cimport memcpy
 from libcpp.memory cimport unique_ptr
 from libcpp.string cimport string
@@ -164,6 +164,19 @@ cdef class _OcTree:
                     apply_updates(tree[0], cells, scratch)
                 clock_gettime(CLOCK_MONOTONIC, &done)
         return scan_result(stats, found.size(), done)
+
+    def _set_values(self, const uint16_t[:, ::1] keys, const float[::1] log_odds):
+        """Set each finest cell's log-odds (liboctomap's setNodeValue, which clamps to the
+        tree's bounds), then re-evaluate the inner nodes and prune."""
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t i
+        with self._lock:
+            with nogil:
+                for i in range(keys.shape[0]):
+                    tree.setNodeValue(OcTreeKey(keys[i, 0], keys[i, 1], keys[i, 2]),
+                                      log_odds[i], True)
+                tree.updateInnerOccupancy()
+                tree.prune()
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):

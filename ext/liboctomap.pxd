@@ -107,6 +107,9 @@ cdef extern from "octomap/octomap.h" namespace "octomap" nogil:
         # updates
         void insertPointCloud(const Pointcloud& scan, const point3d& sensor_origin,
                               double maxrange, bool lazy_eval, bool discretize) except +
+        OcTreeNode* setNodeValue(const OcTreeKey& key, float log_odds_value,
+                                 bool lazy_eval) except +
+        void updateInnerOccupancy() except +
         OcTreeNode* updateNode(const OcTreeKey& key, float log_odds_update,
                                bool lazy_eval) except +
         bool computeRayKeys(const point3d& origin, const point3d& end,

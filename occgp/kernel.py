@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._kernel import _KernelCells, sparse_kernel
+from .octree import OccupancyOctree
 from ._validation import as_point, as_points, check_real
 
 __all__ = ["BGKMap", "KernelCells", "sparse_kernel", "voxel_centroids"]
@@ -97,6 +98,21 @@ class _KernelMap(_KernelCells):
     def num_cells(self) -> int:
         """Number of cells any kernel reached."""
         return int(self._num_cells())
+
+    def to_octree(self, *, clamping_min: float = 0.001,
+                  clamping_max: float = 0.999) -> OccupancyOctree:
+        """An :class:`~occgp.OccupancyOctree` of the same resolution holding each cell's
+        posterior mean as log-odds (float32, within the clamping bounds given), pruned,
+        so that ``.bt`` / ``.ot`` export and OctoMap's viewers work. Cells no kernel
+        reached stay unknown."""
+        tree = OccupancyOctree(self.resolution, clamping_min=clamping_min,
+                               clamping_max=clamping_max)
+        keys, alpha, beta = self._cells_arrays()
+        if len(keys):
+            p = (alpha + self.prior) / (alpha + beta + 2 * self.prior)
+            log_odds = np.log(p) - np.log1p(-p)
+            tree._set_values(np.ascontiguousarray(keys), log_odds.astype(np.float32))
+        return tree
 
     def __reduce__(self):
         keys, alpha, beta = self._cells_arrays()

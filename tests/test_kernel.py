@@ -168,3 +168,18 @@ def test_bad_scans_leave_the_map_unchanged(points, origin, exc, match):
         m.update(points, origin)
     after = m.cells()
     assert_array_equal(before.alpha, after.alpha)
+
+
+def test_to_octree_holds_the_posterior_means(tmp_path):
+    points, origin = wall_scan()
+    m = BGKMap(0.1).update(points, origin)
+    tree = m.to_octree()
+    cells = m.cells()
+    p = cells.alpha / (cells.alpha + cells.beta)
+    got = tree.occupancy(cells.centers)
+    assert_allclose(got, np.clip(p, 0.001, 0.999), rtol=1e-5)
+    assert np.isnan(tree.occupancy([[5.0, 5.0, 5.0]])[0])
+    tree.save(tmp_path / "bgk.bt")                              # OctoMap's viewers read it
+    from occgp import OccupancyOctree
+    back = OccupancyOctree.load(tmp_path / "bgk.bt")
+    assert_array_equal(back.is_occupied(cells.centers), tree.is_occupied(cells.centers))
