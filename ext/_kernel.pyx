@@ -170,7 +170,7 @@ cdef class _KernelCells:
         cdef uint64_t idx, row, box_cells = 1
         cdef int a
         cdef double d[3]
-        cdef double r2, k, y, res = self._res, qb, qc, disc
+        cdef double r2, k, y, res = self._res, qb, qc, disc, p00
         cdef long updates = 0, row_lo, row_hi
         cdef bint dense
         cdef Beta* cell
@@ -224,13 +224,10 @@ cdef class _KernelCells:
                             row_hi = min(hi[0], <long>ceil(
                                 (samples[i, 0] + (-qb + disc) / precision[i, 0, 0]) / res
                                 - 0.5) + _MAX_VAL)
+                            p00 = precision[i, 0, 0]
                             for kx in range(row_lo, row_hi + 1):
                                 d[0] = (<double>(kx - _MAX_VAL) + 0.5) * res - samples[i, 0]
-                                r2 = 0.0
-                                for a in range(3):
-                                    r2 += d[a] * (precision[i, a, 0] * d[0]
-                                                  + precision[i, a, 1] * d[1]
-                                                  + precision[i, a, 2] * d[2])
+                                r2 = (p00 * d[0] + 2.0 * qb) * d[0] + qc
                                 if not r2 < 1.0:
                                     continue
                                 k = sf2 * weights[i] * _kernel_r2(r2)
