@@ -29,7 +29,9 @@ from libcpp.vector cimport vector
 from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 from liboctomap cimport OcTree, OcTreeKey, point3d
-from _keys cimport KEY_DEPTH, mark_ends_in_range, mark_in_range, pack_key, unpack_key
+from _keys cimport (
+    KEY_DEPTH, ends_in_range_mask, in_range_mask, pack_key, set_sensor_model, unpack_key,
+)
 from _scan cimport ScanCell, ScanStats, scan_result, scan_updates, scan_weights
 
 import threading
@@ -92,32 +94,18 @@ cdef class _Grid:
             self._cells.clear()
             self._key_tree.reset(new OcTree(resolution))
             tree = self._key_tree.get()
-            tree.setProbHit(prob_hit)
-            tree.setProbMiss(prob_miss)
-            tree.setClampingThresMin(clamping_min)
-            tree.setClampingThresMax(clamping_max)
-            tree.setOccupancyThres(occupancy_threshold)
+            set_sensor_model(tree, prob_hit, prob_miss, clamping_min, clamping_max,
+                             occupancy_threshold)
 
     # ------------------------------------------------------------------ key range
     def _in_range(self, const float[:, ::1] points):
         """Boolean mask: which rows of `points` have a valid key on every axis."""
-        cdef double rf = 1.0 / self._get().getResolution()
-        out = np.empty(points.shape[0], dtype=np.bool_)
-        cdef uint8_t[::1] ok = out.view(np.uint8)
-        with nogil:
-            mark_in_range(rf, points, ok)
-        return out
+        return in_range_mask(1.0 / self._get().getResolution(), points)
 
     def _ends_in_range(self, const float[:, ::1] points, const float[::1] origin,
                        double max_range):
         """Like :meth:`_in_range` for the ray ends after truncation at `max_range` (< 0: none)."""
-        cdef double rf = 1.0 / self._get().getResolution()
-        cdef point3d o = point3d(origin[0], origin[1], origin[2])
-        out = np.empty(points.shape[0], dtype=np.bool_)
-        cdef uint8_t[::1] ok = out.view(np.uint8)
-        with nogil:
-            mark_ends_in_range(rf, points, o, max_range, ok)
-        return out
+        return ends_in_range_mask(1.0 / self._get().getResolution(), points, origin, max_range)
 
     # ------------------------------------------------------------------ updates
     def _insert(self, const float[:, ::1] points, const float[::1] origin, double max_range,

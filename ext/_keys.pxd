@@ -10,7 +10,7 @@ from libc.math cimport floor
 from libc.stdint cimport uint8_t, uint32_t, uint64_t
 from libcpp.vector cimport vector
 
-from liboctomap cimport OcTreeKey, key_type, point3d
+from liboctomap cimport OcTree, OcTreeKey, key_type, point3d
 
 
 cdef extern from "_keytable.h" namespace "occgp" nogil:
@@ -105,3 +105,36 @@ cdef inline void mark_ends_in_range(double resolution_factor, const float[:, ::1
         ok[i] = (in_key_range(resolution_factor, end.x())
                  and in_key_range(resolution_factor, end.y())
                  and in_key_range(resolution_factor, end.z()))
+
+
+cdef inline void set_sensor_model(OcTree* tree, double prob_hit, double prob_miss,
+                                  double clamping_min, double clamping_max,
+                                  double occupancy_threshold) noexcept nogil:
+    """The sensor model and thresholds of a map, as probabilities (validated by the caller)."""
+    tree.setProbHit(prob_hit)
+    tree.setProbMiss(prob_miss)
+    tree.setClampingThresMin(clamping_min)
+    tree.setClampingThresMax(clamping_max)
+    tree.setOccupancyThres(occupancy_threshold)
+
+
+cdef inline object in_range_mask(double resolution_factor, const float[:, ::1] points):
+    """Boolean array: which rows of `points` have a valid key on every axis."""
+    import numpy as np
+    out = np.empty(points.shape[0], dtype=np.bool_)
+    cdef uint8_t[::1] ok = out.view(np.uint8)
+    with nogil:
+        mark_in_range(resolution_factor, points, ok)
+    return out
+
+
+cdef inline object ends_in_range_mask(double resolution_factor, const float[:, ::1] points,
+                                      const float[::1] origin, double max_range):
+    """Like :func:`in_range_mask` for the ray ends after truncation at `max_range` (< 0: none)."""
+    import numpy as np
+    cdef point3d o = point3d(origin[0], origin[1], origin[2])
+    out = np.empty(points.shape[0], dtype=np.bool_)
+    cdef uint8_t[::1] ok = out.view(np.uint8)
+    with nogil:
+        mark_ends_in_range(resolution_factor, points, o, max_range, ok)
+    return out

@@ -13,6 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from occgp import GridMap, OccupancyOctree
+from test_culling import build
 from test_octree import assert_same_leaves
 
 METHODS = ["superray", "superray+culling"]
@@ -24,15 +25,6 @@ def clustered_scan(rng, origin, resolution, n_clusters=25, per_cluster=40, sprea
     cells = np.floor(centers / resolution)
     pts = (cells[:, None, :] + rng.uniform(0, 1, (n_clusters, per_cluster, 3))) * resolution
     return pts.reshape(-1, 3)
-
-
-def build(scans, resolution, **kwargs):
-    """Insert `scans` in order; the method is "plain" unless `kwargs` name one."""
-    kwargs.setdefault("method", "plain")
-    m = OccupancyOctree(resolution)
-    for points, origin in scans:
-        m.insert_scan(points, origin, **kwargs)
-    return m
 
 
 def check_all_methods(scans, resolution, threshold=5, max_range=None):
