@@ -16,6 +16,7 @@ from Cython.Build import cythonize
 from setuptools import Extension, setup
 
 HERE = Path(__file__).resolve().parent
+OPENMP_MODULES = {"_kernel"}
 
 
 def pkgconfig(package):
@@ -57,6 +58,8 @@ def extensions():
     }
     exts = []
     for pyx in sorted((HERE / "ext").glob("_*.pyx")):
+        # the kernel maps run their per-sample loops on OpenMP threads (n_jobs)
+        omp = ["-fopenmp"] if pyx.stem in OPENMP_MODULES else []
         exts.append(
             Extension(
                 f"occgp.{pyx.stem}",
@@ -68,7 +71,8 @@ def extensions():
                 library_dirs=libdirs,
                 libraries=libs,
                 runtime_library_dirs=libdirs,
-                extra_compile_args=["-std=c++17", "-O3", "-ffp-contract=off", *extra],
+                extra_compile_args=["-std=c++17", "-O3", "-ffp-contract=off", *omp, *extra],
+                extra_link_args=omp,
                 define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
             )
         )

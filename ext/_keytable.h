@@ -5,7 +5,7 @@
 //   slot, linear probing, at most half full.
 //   KeyTable = KeyMap<KeyCounts>: the rays that pass through a cell and end in it
 //   during one scan (replaces liboctomap's std::tr1 unordered sets).
-//   BetaTable = KeyMap<BetaCell>: the Beta evidence of the kernel maps' cells.
+//   KeyMap<BlockSlot> indexes the kernel maps' blocks of cells (_beta_blocks.h).
 // CellBox: a bitset over a box of keys (the culling region of one scan).
 #ifndef OCCGP_KEYTABLE_H
 #define OCCGP_KEYTABLE_H
@@ -21,13 +21,6 @@ struct KeyCounts {
   uint32_t n_free;  // rays passing through the cell
   uint32_t n_hit;   // rays ending in the cell
   uint32_t group;   // super rays: 1 + the index of the cell's group of end points, or 0
-};
-
-// The Beta evidence of a kernel map's cell (the prior not included).
-struct BetaCell {
-  uint64_t key;
-  float alpha;  // occupied evidence
-  float beta;   // free evidence
 };
 
 constexpr uint64_t kEmptyKey = ~uint64_t(0);
@@ -78,7 +71,7 @@ class KeyMap {
   bool contains(uint64_t key) const {
     size_t i = hash(key) & mask_;
     while (true) {
-      const KeyCounts& s = slots_[i];
+      const Slot& s = slots_[i];
       if (s.key == key) return true;
       if (s.key == kEmpty) return false;
       i = (i + 1) & mask_;
@@ -122,7 +115,6 @@ class KeyMap {
 };
 
 using KeyTable = KeyMap<KeyCounts>;
-using BetaTable = KeyMap<BetaCell>;
 
 // A bitset over the keys lo[a] <= k[a] <= hi[a].
 class CellBox {

@@ -9,10 +9,10 @@ scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
 import logging
 
 from .grid import GridMap
-from .kernel import BGKMap
+from .kernel import AKIMap, BGKMap
 from .octree import Leaves, OccupancyOctree
 
 __version__ = "0.1.0.dev0"
-__all__ = ["OccupancyOctree", "GridMap", "Leaves", "BGKMap", "__version__"]
+__all__ = ["OccupancyOctree", "GridMap", "Leaves", "AKIMap", "BGKMap", "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())
