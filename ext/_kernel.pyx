@@ -64,10 +64,6 @@ cdef extern from "_beta_blocks.h" namespace "occgp" nogil:
     const uint64_t EMPTY_KEY "occgp::kEmptyKey"
 
 
-cdef extern from *:
-    int _popcount "__builtin_popcountll"(unsigned long long) nogil
-
-
 cdef inline uint64_t _block_key(long kx, long ky, long kz) noexcept nogil:
     return (<uint64_t>(kx >> 2)) | ((<uint64_t>(ky >> 2)) << 16) | ((<uint64_t>(kz >> 2)) << 32)
 
@@ -153,7 +149,7 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
     cdef long lo[3]
     cdef long hi[3]
     cdef long kx, ky, kz, row_lo, row_hi, bx
-    cdef double d0, d1, d2, qb, qc, disc, p00, r2, k, y, wk
+    cdef double d0, d1, d2, qb, qc, disc, p00, r2, dr, ddr, k, y, wk
     cdef const double* x
     cdef const double* p
     cdef uint64_t row, brow
@@ -170,6 +166,7 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
         y = labels[i]
         wk = sf2 * weights[i]
         p00 = p[0]
+        ddr = 2.0 * p00 * res * res
         for kz in range(max(lo[2], za), min(hi[2], zb - 1) + 1):
             d2 = (<double>(kz - _MAX_VAL) + 0.5) * res - x[2]
             for ky in range(lo[1], hi[1] + 1):
@@ -194,18 +191,21 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
                          + <uint64_t>((ky - org[1]) >> 2)) * <uint64_t>bdx)
                 for bx in range((row_lo - org[0]) >> 2, ((row_hi - org[0]) >> 2) + 1):
                     touched[brow + <uint64_t>bx] = 1
+                # r2 along the row by second differences: r2(d0 + res) = r2 + dr,
+                # dr(d0 + res) = dr + 2 p00 res^2
+                d0 = (<double>(row_lo - _MAX_VAL) + 0.5) * res - x[0]
+                r2 = (p00 * d0 + 2.0 * qb) * d0 + qc
+                dr = (2.0 * p00 * d0 + 2.0 * qb + p00 * res) * res
+                cell = box + row + <uint64_t>(row_lo - org[0])
                 for kx in range(row_lo, row_hi + 1):
-                    d0 = (<double>(kx - _MAX_VAL) + 0.5) * res - x[0]
-                    r2 = (p00 * d0 + 2.0 * qb) * d0 + qc
-                    if not r2 < 1.0:
-                        continue
-                    k = wk * _kernel_r2(r2)
-                    if k <= 0.0:
-                        continue
-                    cell = &box[row + <uint64_t>(kx - org[0])]
-                    cell.alpha += k * y
-                    cell.beta += k * (1.0 - y)
-                    updates += 1
+                    if r2 < 1.0:
+                        k = wk * _kernel_r2(r2)
+                        cell.alpha += k * y
+                        cell.beta += k * (1.0 - y)
+                        updates += 1
+                    r2 += dr
+                    dr += ddr
+                    cell += 1
     return updates
 
 
@@ -287,8 +287,11 @@ cdef class _KernelCells:
         cdef long updates
         if n == 0:
             return 0
-        # samples by height, so each slab's samples are near in memory
-        order_arr = np.argsort(np.asarray(samples)[:, 2], kind="stable").astype(np.int64)
+        # samples in the order of their cells (z, then y, then x): consecutive samples
+        # then write to the same rows of the slab, which stay in cache
+        cell = np.floor(np.asarray(samples) / self._res).astype(np.int64)
+        cell -= cell.min(axis=0)
+        order_arr = np.lexsort((cell[:, 0], cell[:, 1], cell[:, 2])).astype(np.int64)
         cdef const int64_t[::1] order = order_arr
         with self._lock:
             with nogil:
@@ -316,7 +319,6 @@ cdef class _KernelCells:
         cdef uint64_t cells_in_slab, nblocks, b, bkey
         cdef vector[long] splits
         cdef vector[long] counts
-        cdef vector[uint64_t] touched_ids
         cdef vector[size_t] block_ids
         cdef BetaBlocks* cells = &self._cells
         cdef Beta* box
@@ -375,25 +377,23 @@ cdef class _KernelCells:
                         xs, labels, ps, es, ws, order, n, sf2, res,
                         za, zb, slab, dims, box, touched)
                     updates += upd
-            # blocks with evidence: created serially, then filled in parallel
+            # blocks with evidence: created serially, then filled in parallel, one
+            # layer of blocks per task, reading the slab row by row
             nblocks = <uint64_t>((z1 - z0) * layer) >> 6
-            touched_ids.clear()
-            block_ids.clear()
+            block_ids.assign(nblocks, <size_t>-1)
             for b in range(nblocks):
                 if touched[b]:
-                    touched_ids.push_back(b)
+                    touched[b] = 0
                     bz = <long>(b // <uint64_t>((dims[0] >> 2) * (dims[1] >> 2)))
                     bkey = _block_key(
                         org[0] + 4 * <long>(b % <uint64_t>(dims[0] >> 2)),
                         org[1] + 4 * <long>((b // <uint64_t>(dims[0] >> 2))
                                             % <uint64_t>(dims[1] >> 2)),
                         z0 + 4 * bz)
-                    block_ids.push_back(cells.get_index(bkey))
+                    block_ids[b] = cells.get_index(bkey)
             new_cells = 0
-            for i in prange(<Py_ssize_t>touched_ids.size(), num_threads=nt,
-                            schedule="static"):
-                new_cells += _merge_block(cells.block(block_ids[i]), box, touched,
-                                          touched_ids[i], dims)
+            for i in prange((z1 - z0) >> 2, num_threads=nt, schedule="dynamic"):
+                new_cells += _merge_layer(cells, box, &block_ids[0], i, dims)
             cells.add_cells(new_cells)
             z0 = z1
         self._box_dirty = False
@@ -511,29 +511,38 @@ cdef void _balanced_splits(const vector[long]& counts, int nt, vector[long]& spl
         t += 1
 
 
-cdef long _merge_block(BetaBlock* blk, Beta* box, uint8_t* touched, uint64_t b,
+cdef long _merge_layer(BetaBlocks* cells, Beta* box, const size_t* block_ids, long bz,
                        const long* dims) noexcept nogil:
-    """Add the evidence of the box's block b to `blk`, zeroing it there; returns the
-    number of cells newly reached."""
-    cdef long bdx = dims[0] >> 2, bdy = dims[1] >> 2
-    cdef long bx = <long>(b % <uint64_t>bdx), by = <long>((b // <uint64_t>bdx) % <uint64_t>bdy)
-    cdef long bz = <long>(b // <uint64_t>(bdx * bdy))
-    cdef int c
-    cdef uint64_t idx, before = blk.mask
+    """Add the evidence of the slab's layer bz of 4x4x4 blocks to the map's blocks
+    (`block_ids[b]`: the map's index of the slab's block b, or -1), zeroing it in the
+    slab; returns the number of cells newly reached."""
+    cdef long bdx = dims[0] >> 2, bdy = dims[1] >> 2, kz, ky, bx
+    cdef int c, cx
+    cdef size_t bid
+    cdef long fresh = 0
     cdef Beta* cell
-    for c in range(64):
-        idx = ((<uint64_t>(4 * bz + (c >> 4)) * <uint64_t>dims[1]
-                + <uint64_t>(4 * by + ((c >> 2) & 3))) * <uint64_t>dims[0]
-               + <uint64_t>(4 * bx + (c & 3)))
-        cell = &box[idx]
-        if cell.alpha != 0.0 or cell.beta != 0.0:
-            blk.alpha[c] += <float>cell.alpha
-            blk.beta[c] += <float>cell.beta
-            blk.mask |= (<uint64_t>1) << c
-            cell.alpha = 0.0
-            cell.beta = 0.0
-    touched[b] = 0
-    return _popcount(blk.mask) - _popcount(before)
+    cdef BetaBlock* blk
+    for kz in range(4 * bz, 4 * bz + 4):
+        for ky in range(dims[1]):
+            cell = box + (<uint64_t>kz * <uint64_t>dims[1] + <uint64_t>ky) * <uint64_t>dims[0]
+            for bx in range(bdx):
+                bid = block_ids[(bz * bdy + (ky >> 2)) * bdx + bx]
+                if bid == <size_t>-1:
+                    cell += 4
+                    continue
+                blk = cells.block(bid)
+                c = ((ky & 3) << 2) | ((kz & 3) << 4)
+                for cx in range(4):
+                    if cell.alpha != 0.0 or cell.beta != 0.0:
+                        blk.alpha[c + cx] += <float>cell.alpha
+                        blk.beta[c + cx] += <float>cell.beta
+                        if not (blk.mask >> (c + cx)) & 1:
+                            blk.mask |= (<uint64_t>1) << (c + cx)
+                            fresh += 1
+                        cell.alpha = 0.0
+                        cell.beta = 0.0
+                    cell += 1
+    return fresh
 
 # ----------------------------------------------------------------------------------------
 # AKIMap's adaptive bandwidths (Kwon et al.; dissertation §3.3.3)
@@ -657,6 +666,30 @@ cdef double _scale_descent(const double* r2, const double* target, int m, double
     return c
 
 
+cdef inline void _set_bandwidth(const double* h, Py_ssize_t i, double* precision,
+                                double* extent, double* weight) noexcept nogil:
+    """Sample i's kernel from its bandwidth matrix h (symmetric positive definite, row
+    major): precision h^-1, support half-extents sqrt(h_aa), weight |h|^-1/2."""
+    cdef double inv[9]
+    cdef double det
+    cdef int a
+    inv[0] = h[4] * h[8] - h[5] * h[7]
+    inv[1] = h[2] * h[7] - h[1] * h[8]
+    inv[2] = h[1] * h[5] - h[2] * h[4]
+    inv[4] = h[0] * h[8] - h[2] * h[6]
+    inv[5] = h[2] * h[3] - h[0] * h[5]
+    inv[8] = h[0] * h[4] - h[1] * h[3]
+    inv[3] = inv[1]
+    inv[6] = inv[2]
+    inv[7] = inv[5]
+    det = h[0] * inv[0] + h[1] * inv[3] + h[2] * inv[6]
+    for a in range(9):
+        precision[9 * i + a] = inv[a] / det
+    for a in range(3):
+        extent[3 * i + a] = sqrt(h[4 * a])
+    weight[i] = 1.0 / sqrt(det)
+
+
 cdef inline long _cell_find(const int64_t* keys, long n, int64_t key) noexcept nogil:
     """Index of `key` in the sorted array `keys`, or -1."""
     cdef long lo = 0, hi = n, mid
@@ -671,7 +704,7 @@ cdef inline long _cell_find(const int64_t* keys, long n, int64_t key) noexcept n
 
 cdef void _bandwidth_one(
         Py_ssize_t i, const double* x, const uint8_t* labels, const double* origin,
-        double res, double radius_max, double max_range, bint published,
+        double res, double radius_max, double max_range, bint published, double floor2,
         double cell, const int64_t* grid_lo, const int64_t* grid_dims,
         const int64_t* cell_keys, long n_cells, const int64_t* cell_start,
         const int64_t* order, double* buf, double* precision, double* extent,
@@ -728,13 +761,12 @@ cdef void _bandwidth_one(
                             for b in range(3):
                                 sig[3 * a + b] += d[a] * d[b]
     n_same[i] = same
-    if same <= 2:               # isotropic fallback: H = res^2 I
+    if same <= 2:               # isotropic fallback: H = res^2 I (+ floor^2 I)
         for a in range(9):
-            precision[9 * i + a] = 0.0
+            sig[a] = 0.0
         for a in range(3):
-            precision[9 * i + 4 * a] = 1.0 / (res * res)
-            extent[3 * i + a] = res
-        weight[i] = 1.0 / (res * res * res)
+            sig[4 * a] = res * res + floor2
+        _set_bandwidth(sig, i, precision, extent, weight)
         scale[i] = 1.0
         return
     for a in range(9):
@@ -782,20 +814,27 @@ cdef void _bandwidth_one(
             c = _scale_descent(buf + 2 * k, buf + 3 * k, k, lo_scale, w0)
         else:
             c = _scale_minimise(buf + 2 * k, buf + 3 * k, k, lo_scale)
-    for a in range(9):
-        precision[9 * i + a] = inv[a] / (c * c)
-    for a in range(3):
-        extent[3 * i + a] = c * sqrt(sig[4 * a])
-    weight[i] = w0 / (c * c * c)
+    if floor2 > 0.0:            # H = c^2 Sigma + floor^2 I
+        for a in range(9):
+            sig[a] *= c * c
+        for a in range(3):
+            sig[4 * a] += floor2
+        _set_bandwidth(sig, i, precision, extent, weight)
+    else:
+        for a in range(9):
+            precision[9 * i + a] = inv[a] / (c * c)
+        for a in range(3):
+            extent[3 * i + a] = c * sqrt(sig[4 * a])
+        weight[i] = w0 / (c * c * c)
     scale[i] = c
 
 
 def _akimap_bandwidths(const double[:, ::1] samples, const uint8_t[::1] labels,
                        const double[::1] origin, double res, double radius_max,
-                       double max_range, bint published, int n_threads):
+                       double max_range, bint published, double floor, int n_threads):
     """Per sample: precision (inverse bandwidth, (n, 3, 3)), support half-extents (n, 3),
-    weight |H|^-1/2, the length-scale factor c (H = c^2 Sigma) and the number of
-    same-label samples in its search ball (itself included)."""
+    weight |H|^-1/2, the length-scale factor c (H = c^2 Sigma + floor^2 I) and the
+    number of same-label samples in its search ball (itself included)."""
     cdef Py_ssize_t n = samples.shape[0], i
     precision = np.empty((n, 3, 3))
     extent = np.empty((n, 3))
@@ -830,7 +869,7 @@ def _akimap_bandwidths(const double[:, ::1] samples, const uint8_t[::1] labels,
     with nogil:
         for i in prange(n, schedule="dynamic", chunksize=64, num_threads=n_threads):
             _bandwidth_one(i, &samples[0, 0], &labels[0], &origin[0], res, radius_max,
-                           max_range, published, cell, &lo_v[0], &dims_v[0],
+                           max_range, published, floor * floor, cell, &lo_v[0], &dims_v[0],
                            &keys_v[0], n_cells, &start_v[0], &order_v[0],
                            &buf[threadid(), 0],
                            &p_v[0, 0, 0], &e_v[0, 0], &w_v[0], &s_v[0], &n_v[0])
