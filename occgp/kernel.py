@@ -156,6 +156,12 @@ class _KernelMap(_KernelCells):
         """Number of cells any kernel reached."""
         return int(self._num_cells())
 
+    @property
+    def memory_bytes(self) -> int:
+        """Bytes the cells take: blocks of 4 x 4 x 4 cells (float32 alpha and beta and
+        a mask of the reached cells, 520 bytes) and their hash index."""
+        return int(self._memory_bytes())
+
     def to_octree(self, *, clamping_min: float = 0.001,
                   clamping_max: float = 0.999) -> OccupancyOctree:
         """An :class:`~occgp.OccupancyOctree` of the same resolution holding each cell's
@@ -171,15 +177,21 @@ class _KernelMap(_KernelCells):
             tree._set_values(np.ascontiguousarray(keys), log_odds.astype(np.float32))
         return tree
 
+    def _extra_state(self) -> dict:
+        return {}
+
     def __reduce__(self):
         keys, alpha, beta = self._cells_arrays()
-        return _restore, (type(self), self.get_params(), keys, alpha, beta)
+        return _restore, (type(self), self.get_params(), keys, alpha, beta,
+                          self._extra_state())
 
 
-def _restore(cls, params, keys, alpha, beta):
+def _restore(cls, params, keys, alpha, beta, extra=None):
     m = cls(**params)
     m._set_cells(np.ascontiguousarray(keys), np.ascontiguousarray(alpha),
                  np.ascontiguousarray(beta))
+    for name, value in (extra or {}).items():
+        setattr(m, name, value)
     return m
 
 
@@ -470,6 +482,10 @@ class AKIMap(_KernelMap):
     def __repr__(self) -> str:
         return (f"AKIMap(resolution={self.resolution!r}, variant={self.variant!r}, "
                 f"num_cells={self.num_cells})")
+
+    def _extra_state(self) -> dict:
+        # the generator where it stands, so a restored map draws what this one would
+        return {"_rng": self._rng, "last_bandwidths_": self.last_bandwidths_}
 
     @property
     def floor_(self) -> float:

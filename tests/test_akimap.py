@@ -1,0 +1,358 @@
+"""AKIMap: samples, bandwidths (covariance, fallback, Eq. 3.7 scale), evidence, API."""
+
+import pickle
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from occgp import AKIMap, BGKMap
+from occgp.kernel import sparse_kernel
+
+
+def wall_scan(ny=21, nz=11, x=2.0):
+    y, z = np.meshgrid(np.linspace(-1, 1, ny), np.linspace(-0.5, 0.5, nz))
+    return np.column_stack([np.full(y.size, x), y.ravel(), z.ravel()]), np.zeros(3)
+
+
+def neighbours(samples, labels, i, origin, res, big_r=0.5, sensor_range=8.0):
+    """Indices of the samples within sample i's search radius (brute force)."""
+    d = np.linalg.norm(samples[i] - origin)
+    radius = min((big_r - res) / sensor_range * d + res, big_r)
+    near = np.flatnonzero(np.sum((samples - samples[i]) ** 2, axis=1) <= radius ** 2)
+    return near[labels[near] == labels[i]], near[labels[near] != labels[i]]
+
+
+def loss(c, r2, target):
+    """Eq. 3.7 up to the constant |Sigma|^-1/2 / 2, for H = c^2 Sigma."""
+    k = sparse_kernel(np.sqrt(r2) / c)
+    return np.sum((target - k) ** 2) / c ** 3
+
+
+# ---------------------------------------------------------------------- samples
+def test_training_data_follows_the_reference_sampling():
+    """End points one per cell (the first), then one random free point in each
+    free_sample_distance interval starting half a distance from the origin; cells
+    already holding a sample take none."""
+    m = AKIMap(0.1, random_state=0)
+    points = np.array([[2.02, 0.0, 0.0], [2.04, 0.0, 0.0], [0.0, 1.3, 0.0]])
+    samples, labels = m.training_data(points, [0.0, 0.0, 0.0])
+    hits, frees = samples[labels == 1], samples[labels == 0]
+    assert_array_equal(hits, points[[0, 2]])                    # first point of the cell
+    assert_array_equal(frees[0], [0, 0, 0])                     # the origin
+    along_x = frees[1:][frees[1:, 1] == 0][:, 0]
+    along_y = frees[1:][frees[1:, 0] == 0][:, 1]
+    # beam of 2.02 m: intervals [0.25, 0.75), [0.75, 1.25), [1.25, 1.75), [1.75, 2.25)
+    assert len(along_x) in (3, 4) and np.all(along_x < 2.02)
+    assert_array_equal(np.floor((along_x - 0.25) / 0.5), np.arange(len(along_x)))
+    assert np.all((along_y >= 0.25) & (along_y < 1.3))
+    keys = np.floor(samples / 0.1)
+    assert len(np.unique(keys, axis=0)) == len(samples)        # one sample per cell
+
+
+def test_random_state_makes_samples_and_maps_reproducible():
+    points, origin = wall_scan()
+    a = AKIMap(0.1, random_state=3).update(points, origin)
+    b = AKIMap(0.1, random_state=3).update(points, origin)
+    c = AKIMap(0.1, random_state=4).update(points, origin)
+    for x, y in zip(a.cells(), b.cells()):
+        assert_array_equal(x, y)
+    assert not np.array_equal(a.cells().alpha, c.cells().alpha) or \
+        a.num_cells != c.num_cells
+    gen = AKIMap(0.1, random_state=np.random.default_rng(3)).update(points, origin)
+    assert_array_equal(gen.cells().beta, a.cells().beta)
+
+
+def test_threads_give_the_same_map():
+    points, origin = wall_scan(41, 21)
+    one = AKIMap(0.05, random_state=1, n_jobs=1).update(points, origin)
+    two = AKIMap(0.05, random_state=1, n_jobs=2).update(points, origin)
+    for x, y in zip(one.cells(), two.cells()):
+        assert_array_equal(x, y)
+    bgk1 = BGKMap(0.05, n_jobs=1).update(points, origin)
+    bgk2 = BGKMap(0.05, n_jobs=-1).update(points, origin)
+    for x, y in zip(bgk1.cells(), bgk2.cells()):
+        assert_array_equal(x, y)
+
+
+# ---------------------------------------------------------------------- bandwidths
+@pytest.mark.parametrize("variant", ["published", "occgp"])
+def test_plane_covariance_has_the_normal_as_smallest_eigenvector(variant):
+    rng = np.random.default_rng(0)
+    normal = np.array([0.3, -0.2, 1.0])
+    normal /= np.linalg.norm(normal)
+    u = np.cross(normal, [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    ab = rng.uniform(-0.4, 0.4, (300, 2))
+    samples = ab[:, :1] * u + ab[:, 1:] * v + [5.0, 0.0, 0.0]
+    labels = np.ones(len(samples))
+    m = AKIMap(0.05, variant=variant)
+    bw = m.bandwidths(samples, labels, [0.0, 0.0, 0.0])
+    central = np.flatnonzero(np.all(np.abs(ab) < 0.15, axis=1))
+    assert len(central) > 20 and np.all(bw.n_same[central] > 10)
+    for i in central:
+        w, vec = np.linalg.eigh(np.linalg.inv(bw.precision[i]))
+        assert abs(vec[:, 0] @ normal) > 0.99
+        assert w[0] < 0.9 * w[1]
+
+
+def test_isotropic_fallback_with_at_most_two_same_label_neighbours():
+    samples = np.array([[2.0, 0.0, 0.0], [2.02, 0.0, 0.0], [4.0, 0.0, 0.0],
+                        [4.01, 0.01, 0.0], [4.02, 0.0, 0.01], [3.0, 0.0, 0.0]])
+    labels = np.array([1, 1, 1, 1, 1, 0])
+    published = AKIMap(0.05, variant="published").bandwidths(samples, labels, [0, 0, 0])
+    assert_array_equal(published.n_same, [2, 2, 3, 3, 3, 1])
+    for i in (0, 1, 5):
+        assert_allclose(published.precision[i], np.eye(3) / 0.05 ** 2)
+        assert_allclose(published.extent[i], 0.05)
+        assert_allclose(published.weight[i], 0.05 ** -3)
+    assert not np.allclose(published.precision[2], np.eye(3) / 0.05 ** 2)
+    floored = AKIMap(0.05).bandwidths(samples, labels, [0, 0, 0])       # f = 0.15
+    h = 0.05 ** 2 + 0.15 ** 2
+    assert_allclose(floored.precision[0], np.eye(3) / h)
+    assert_allclose(floored.weight[0], h ** -1.5)
+
+
+def scene_samples():
+    """Occupied samples on a wall and free samples in front of it, as one scan gives."""
+    points, origin = wall_scan(31, 16)
+    m = AKIMap(0.05, random_state=0)
+    samples, labels = m.training_data(points, origin)
+    return samples, labels, origin
+
+
+@pytest.mark.parametrize("variant", ["published", "occgp"])
+def test_covariance_and_scale_against_a_direct_computation(variant):
+    """Sigma = scatter of the same-label neighbours about the sample / (n - 2) + 0.001 I;
+    the scale lies in [res / sqrt(lambda_max), 1] and does not raise Eq. 3.7 above its
+    value at 1."""
+    samples, labels, origin = scene_samples()
+    res = 0.05
+    bw = AKIMap(res, variant=variant, bandwidth_floor=0.0).bandwidths(samples, labels,
+                                                                      origin)
+    rng = np.random.default_rng(1)
+    checked = lowered = 0
+    for i in rng.choice(len(samples), 300, replace=False):
+        same, other = neighbours(samples, labels, i, origin, res)
+        assert bw.n_same[i] == len(same)
+        if len(same) <= 2:
+            continue
+        d = samples[same] - samples[i]
+        sigma = d.T @ d / (len(same) - 2) + 0.001 * np.eye(3)
+        c = bw.scale[i]
+        inv = np.linalg.inv(sigma)
+        assert_allclose(bw.precision[i] * c ** 2, inv, rtol=1e-9, atol=1e-12 * np.abs(inv).max())
+        assert_allclose(bw.weight[i], np.linalg.det(sigma) ** -0.5 / c ** 3, rtol=1e-9)
+        lo = res / np.sqrt(np.linalg.eigvalsh(sigma)[-1])
+        assert min(lo, 1.0) * (1 - 1e-7) <= c <= 1.0
+        inv = np.linalg.inv(sigma)
+        both = np.concatenate([same, other])
+        dd = samples[both] - samples[i]
+        r2 = np.einsum("ni,ij,nj->n", dd, inv, dd)
+        inside = r2 < 1
+        target = np.where(np.arange(len(both)) < len(same), sparse_kernel(np.sqrt(r2)), 0.0)
+        assert loss(c, r2[inside], target[inside]) <= loss(1.0, r2[inside],
+                                                           target[inside]) * (1 + 1e-6)
+        checked += 1
+        lowered += c < 1
+    assert checked > 100 and lowered > 5
+
+
+def test_occgp_minimiser_is_never_worse_than_a_fine_grid_by_much():
+    samples, labels, origin = scene_samples()
+    res = 0.05
+    bw = AKIMap(res, bandwidth_floor=0.0).bandwidths(samples, labels, origin)
+    for i in np.flatnonzero(bw.scale < 1)[:60]:
+        same, other = neighbours(samples, labels, i, origin, res)
+        d = samples[same] - samples[i]
+        sigma = d.T @ d / (len(same) - 2) + 0.001 * np.eye(3)
+        both = np.concatenate([same, other])
+        dd = samples[both] - samples[i]
+        r2 = np.einsum("ni,ij,nj->n", dd, np.linalg.inv(sigma), dd)
+        inside = r2 < 1
+        target = np.where(np.arange(len(both)) < len(same), sparse_kernel(np.sqrt(r2)), 0.0)
+        lo = res / np.sqrt(np.linalg.eigvalsh(sigma)[-1])
+        grid = np.geomspace(lo, 1.0, 2000)
+        best = min(loss(c, r2[inside], target[inside]) for c in grid)
+        assert loss(bw.scale[i], r2[inside], target[inside]) <= best * 1.02 + 1e-12
+
+
+# ---------------------------------------------------------------------- evidence
+def slow_akimap(samples, labels, origin, res, big_r=0.5, sensor_range=8.0):
+    """The published AKIMap update in plain Python: neighbours, covariance, the reference
+    code's gradient descent, and alpha / beta over every cell in each support box."""
+    n = len(samples)
+    precisions, weights = [], []
+    for i in range(n):
+        same, other = neighbours(samples, labels, i, origin, res, big_r, sensor_range)
+        if len(same) <= 2:
+            precisions.append(np.eye(3) / res ** 2)
+            weights.append(res ** -3.0)
+            continue
+        d = samples[same] - samples[i]
+        sigma = d.T @ d / (len(same) - 2) + 0.001 * np.eye(3)
+        inv = np.linalg.inv(sigma)
+        w0 = np.linalg.det(sigma) ** -0.5
+        both = np.concatenate([other, same])
+        dd = samples[both] - samples[i]
+        r = np.sqrt(np.einsum("ni,ij,nj->n", dd, inv, dd))
+        is_same = np.arange(len(both)) >= len(other)
+        keep = r < 1
+        r, is_same = r[keep], is_same[keep]
+        c = 1.0
+        lo = res / np.sqrt(np.linalg.eigvalsh(sigma)[-1])
+        if (~is_same).any() and lo < 1:
+            target = np.where(is_same, sparse_kernel(r), 0.0)
+            for epoch in range(1, 101):
+                rs = r / c
+                rot = 2 * np.pi * rs
+                k = np.maximum((2 + np.cos(rot)) * (1 - rs) / 3 + np.sin(rot) / (2 * np.pi), 0)
+                kg = ((1 - rs) * rot * np.sin(rot) / (3 * c) + (np.cos(rot) + 2) * rs / (3 * c)
+                      - rs * np.cos(rot) / c)
+                err = target - k
+                w = w0 / c ** 3
+                grad = -1.5 * w / c * np.sum(err ** 2) - w * np.sum(err * kg)
+                new_c = min(1.0, max(c - 0.01 * grad / epoch, lo))
+                if abs(grad) < 1e-3 or abs(0.5 * w * np.sum(err ** 2)) < 1e-3 or \
+                        abs(c - new_c) < 1e-3:
+                    break
+                c = new_c
+        precisions.append(inv / c ** 2)
+        weights.append(w0 / c ** 3)
+    cells = {}
+    for x, y, p, w in zip(samples, labels, precisions, weights):
+        ext = np.sqrt(np.diag(np.linalg.inv(p)))
+        lo = np.ceil((x - ext) / res - 0.5).astype(int)
+        hi = np.floor((x + ext) / res - 0.5).astype(int)
+        for kx in range(lo[0], hi[0] + 1):
+            for ky in range(lo[1], hi[1] + 1):
+                for kz in range(lo[2], hi[2] + 1):
+                    dc = (np.array([kx, ky, kz]) + 0.5) * res - x
+                    r2 = dc @ p @ dc
+                    if r2 >= 1:
+                        continue
+                    k = w * sparse_kernel(np.array([np.sqrt(r2)]))[0]
+                    if k <= 0:
+                        continue
+                    a, b = cells.get((kx, ky, kz), (0.0, 0.0))
+                    cells[(kx, ky, kz)] = (a + k * y, b + k * (1 - y))
+    return cells
+
+
+def test_published_alpha_beta_equal_a_slow_reference():
+    rng = np.random.default_rng(2)
+    y, z = np.meshgrid(np.linspace(-0.3, 0.3, 7), np.linspace(-0.2, 0.2, 5))
+    points = np.column_stack([np.full(y.size, 1.2), y.ravel(), z.ravel()])
+    points += rng.normal(0, 0.01, points.shape)
+    origin = np.array([0.0, 0.05, 0.0])
+    m = AKIMap(0.1, variant="published", random_state=5)
+    samples, labels = m.training_data(points, origin)
+    m = AKIMap(0.1, variant="published", random_state=5).update(points, origin)
+    ref = slow_akimap(samples, labels, origin, 0.1)
+    cells = m.cells()
+    keys = np.round(cells.centers / 0.1 - 0.5).astype(int)
+    got = {tuple(k): (a - m.prior, b - m.prior)
+           for k, a, b in zip(keys.tolist(), cells.alpha, cells.beta)}
+    scale = max(a + b for a, b in ref.values())
+    big = {k for k, (a, b) in ref.items() if a + b > 1e-9 * scale}
+    assert big <= got.keys() and len(big) > 50
+    assert {k for k, (a, b) in got.items() if a + b > 1e-9 * scale} <= ref.keys()
+    for key in big:
+        assert_allclose(got[key], ref[key], rtol=2e-6, atol=1e-7 * scale)
+
+
+def test_wall_is_occupied_and_the_space_before_it_free():
+    points, origin = wall_scan(x=2.05)                          # on the cell centres
+    for variant in AKIMap.VARIANTS:
+        m = AKIMap(0.1, variant=variant, random_state=0).update(points, origin)
+        assert np.mean(m.occupancy(points) > 0.5) > 0.9
+        assert m.occupancy([[1.0, 0.0, 0.0]])[0] < 0.5
+        assert np.isnan(m.occupancy([[5.0, 5.0, 5.0]])[0])
+        assert m.memory_bytes / m.num_cells < 64
+
+
+def test_bandwidth_floor_keeps_a_flat_wall_between_cell_centres():
+    """A wall on a cell boundary: the published flat kernels (thickness sqrt(0.001) m)
+    miss the centres 5 cm away; the floor's do not."""
+    points, origin = wall_scan(x=2.0)
+    published = AKIMap(0.1, variant="published", random_state=0).update(points, origin)
+    occgp = AKIMap(0.1, random_state=0).update(points, origin)
+    assert np.mean(published.occupancy(points) > 0.5) < 0.2
+    assert np.mean(occgp.occupancy(points) > 0.5) > 0.9
+
+
+def test_empty_scan_is_a_no_op_and_one_point_works():
+    m = AKIMap(0.1, random_state=0)
+    assert m.update(np.empty((0, 3)), [0, 0, 0]) is m and m.num_cells == 0
+    assert m.last_bandwidths_ is None
+    m.update([[1.0, 0.0, 0.0]], [0, 0, 0])
+    assert m.num_cells > 0 and m.occupancy([[1.0, 0.0, 0.0]])[0] > 0.5
+    assert np.all(m.last_bandwidths_.n_same <= 2)           # every kernel isotropic
+
+
+def test_pickle_keeps_cells_and_the_random_stream():
+    points, origin = wall_scan()
+    m = AKIMap(0.1, random_state=0).update(points, origin)
+    back = pickle.loads(pickle.dumps(m))
+    assert back.get_params() == m.get_params()
+    for a, b in zip(m.cells(), back.cells()):
+        assert_array_equal(a, b)
+    m.update(points + [0.5, 0, 0], origin)
+    back.update(points + [0.5, 0, 0], origin)
+    for a, b in zip(m.cells(), back.cells()):
+        assert_array_equal(a, b)
+
+
+def test_to_octree_of_akimap(tmp_path):
+    points, origin = wall_scan()
+    m = AKIMap(0.1, random_state=0).update(points, origin)
+    tree = m.to_octree()
+    cells = m.cells()
+    p = cells.alpha / (cells.alpha + cells.beta)
+    assert_allclose(tree.occupancy(cells.centers), np.clip(p, 0.001, 0.999), rtol=1e-5)
+    tree.save(tmp_path / "akimap.bt")
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    (dict(resolution=-0.1), ValueError, "resolution must lie in"),
+    (dict(free_sample_distance=0.0), ValueError, "free_sample_distance must lie in"),
+    (dict(max_search_range=np.inf), ValueError, "max_search_range must lie in"),
+    (dict(sensor_range="8"), TypeError, "sensor_range must be a real number"),
+    (dict(variant="paper"), ValueError, r"variant must be one of \('occgp', 'published'\)"),
+    (dict(bandwidth_floor=-0.1), ValueError, "bandwidth_floor must lie in"),
+    (dict(random_state=-1), TypeError, "random_state must be None, a non-negative int"),
+    (dict(random_state=1.5), TypeError, "random_state must be None"),
+    (dict(n_jobs=0), ValueError, "n_jobs must be None, a positive int"),
+    (dict(n_jobs=2.0), ValueError, "n_jobs must be None"),
+])
+def test_bad_parameters_are_rejected(kwargs, exc, match):
+    with pytest.raises(exc, match=match):
+        AKIMap(**kwargs)
+
+
+@pytest.mark.parametrize("points, origin, exc, match", [
+    (np.zeros((3, 2)), [0, 0, 0], ValueError, r"points must have shape \(n_points, 3\)"),
+    ([[np.inf, 0, 0]], [0, 0, 0], ValueError, "points must be finite"),
+    ([[1.0, 0, 0]], [0, 0, np.nan], ValueError, "origin must be finite"),
+    ([["a", "b", "c"]], [0, 0, 0], TypeError, "points must hold real numbers"),
+    ([[1.0, 0, 0]], [4000.0, 0, 0], ValueError, "1 of 1 origin lie outside the map's key"),
+])
+def test_bad_scans_leave_the_map_unchanged(points, origin, exc, match):
+    wall, o = wall_scan()
+    m = AKIMap(0.1, random_state=0).update(wall, o)
+    before = m.cells()
+    with pytest.raises(exc, match=match):
+        m.update(points, origin)
+    after = m.cells()
+    assert_array_equal(before.alpha, after.alpha)
+    assert_array_equal(before.beta, after.beta)
+
+
+@pytest.mark.parametrize("samples, labels, match", [
+    (np.zeros((2, 3)), [1, 2], "labels must be 0 .free. or 1 .occupied."),
+    (np.zeros((2, 3)), [1], r"labels must have shape \(2,\)"),
+])
+def test_bad_bandwidth_input(samples, labels, match):
+    with pytest.raises(ValueError, match=match):
+        AKIMap(0.1).bandwidths(samples, labels, [0, 0, 0])
