@@ -9,10 +9,15 @@ included. A sample at x with label y in [0, 1], support ellipsoid
 weight w adds ``w k(r) y`` to alpha and ``w k(r) (1 - y)`` to beta of every cell
 whose centre c lies inside, with ``r = sqrt((c - x)^T P (c - x))`` and k the
 sparse kernel of Melkumyan and Ramos (times ``sf2``; tabulated in r^2, within
-3e-8 of the formula). Cells live in an open-addressing table of 16-byte slots
-(packed key, float32 alpha and beta, as la3dm stores them), keyed like
-liboctomap's: ``floor(x / resolution) + 32768`` per axis, centre
-``(key - 32768 + 0.5) * resolution``.
+3e-8 of the formula). Cells are keyed like liboctomap's: ``floor(x / resolution)
++ 32768`` per axis, centre ``(key - 32768 + 0.5) * resolution``, and stored in
+hashed blocks of 4 x 4 x 4 cells with float32 alpha and beta (``_beta_blocks.h``).
+
+AKIMap's bandwidths (:func:`_akimap_bandwidths`) are computed per sample on
+OpenMP threads; an update's evidence is summed in double precision over dense
+slabs of its key box, each slab's block rows split among the threads (every cell
+is summed by one thread, in sample order: the map does not depend on the number
+of threads), then added to the blocks once per cell.
 
 Nothing here validates user input: :mod:`occgp.kernel` checks every array first.
 The loops run without the GIL; a per-map lock serialises operations on one map.

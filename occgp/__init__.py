@@ -1,7 +1,7 @@
 """occgp: occupancy mapping from range sensors.
 
 The OctoMap octree under a numpy API (:class:`OccupancyOctree`), kernel
-inference on cells (:class:`BGKMap`), synthetic
+inference on cells (:class:`BGKMap`, :class:`AKIMap`), synthetic
 scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
 (:mod:`occgp.metrics`, :mod:`occgp.evaluation`) for every mapping method.
 """

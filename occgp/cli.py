@@ -1,4 +1,13 @@
-"""The ``occgp`` command line: ``occgp demo`` (the main job) and ``occgp map``."""
+"""The ``occgp`` command line: ``occgp demo`` (the main job) and ``occgp map``.
+
+``occgp demo`` maps the synthetic structured room with every mapping method
+(:func:`mapping_methods`: the octree and the grid in scan and ray mode, BGK,
+and AKIMap in both variants), prints their scores and writes ``map.bt`` and
+figures. ``occgp map`` builds a map from scan files with ``--method octree``
+(the default), ``bgk`` (:class:`~occgp.BGKMap`) or ``akimap``
+(:class:`~occgp.AKIMap`) and writes it as an OctoMap ``.bt`` or ``.ot`` file
+(a kernel map through its :meth:`~occgp.BGKMap.to_octree`).
+"""
 
 from __future__ import annotations
 
@@ -10,10 +19,15 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from ._validation import check_real
 from .grid import GridMap
+from .kernel import AKIMap, BGKMap
 from .octree import OccupancyOctree
 
-__all__ = ["main", "demo", "map_scans"]
+__all__ = ["main", "demo", "map_scans", "mapping_methods"]
+
+# the maps `occgp map` can build (--method); each is written as an octree
+_MAP_METHODS = ("octree", "bgk", "akimap")
 
 
 class _RayModeOctree(OccupancyOctree):
@@ -31,12 +45,33 @@ class _RayModeGrid(GridMap):
 
 
 def mapping_methods(resolution: float) -> dict:
-    """Every mapping method occgp has, as name → factory of an empty map."""
+    """Every mapping method of ``occgp demo``, as name → factory of an empty map.
+
+    The octree and the grid in scan and ray mode, :class:`~occgp.BGKMap`
+    ("BGK") and :class:`~occgp.AKIMap` in its two variants ("AKIMap",
+    "AKIMap (published)"); the kernel maps use every core and AKIMap draws its
+    free samples with ``random_state=0``.
+
+    Parameters
+    ----------
+    resolution : float
+        Cell size of every map, in metres.
+
+    Returns
+    -------
+    methods : dict of str to callable
+        Each factory returns a new, empty map with ``insert_scan(points, origin)``
+        and ``occupancy(points)``.
+    """
     return {
         "octree (scan)": lambda: OccupancyOctree(resolution),
         "octree (ray)": lambda: _RayModeOctree(resolution),
         "grid (scan)": lambda: GridMap(resolution),
         "grid (ray)": lambda: _RayModeGrid(resolution),
+        "BGK": lambda: BGKMap(resolution, n_jobs=-1),
+        "AKIMap": lambda: AKIMap(resolution, random_state=0, n_jobs=-1),
+        "AKIMap (published)": lambda: AKIMap(resolution, variant="published", random_state=0,
+                                             n_jobs=-1),
     }
 
 
@@ -47,9 +82,10 @@ def demo(outdir: str | Path = "demo_out", *, resolution: float = 0.1, seed: int 
     The room (10 x 7 x 2 m) is scanned like the la3dm data set (4 poses x 3
     scans x 3500 points). Each scan is split by the held-out protocol: 80% of
     its points build the maps, the held-out 20% give occupied test points and,
-    on their rays, free test points. Prints a table (AUC, MSE, accuracies,
-    update time) and writes ``map.bt`` (the scan-mode octree),
-    ``slice.png`` (a horizontal slice of each map) and ``roc.png`` to
+    on their rays, free test points. The methods are those of
+    :func:`mapping_methods`. Prints a table (AUC, MSE, accuracies, update
+    time) and writes ``map.bt`` (the scan-mode octree), ``slice.png`` (a
+    horizontal slice of each map beside the ground truth) and ``roc.png`` to
     `outdir`.
 
     Returns
@@ -72,7 +108,7 @@ def demo(outdir: str | Path = "demo_out", *, resolution: float = 0.1, seed: int 
     rows = compare_methods(mapping_methods(resolution), train, test, progress=progress)
     print(format_table(rows), file=out)
 
-    rows[0].map.save(outdir / "map.bt")
+    next(r for r in rows if r.method == "octree (scan)").map.save(outdir / "map.bt")
     _plot_slice(rows, scene, train, outdir / "slice.png")
     _plot_roc(rows, test, outdir / "roc.png")
     print(f"wrote {outdir / 'map.bt'}, {outdir / 'slice.png'}, {outdir / 'roc.png'}", file=out)
@@ -93,19 +129,26 @@ def _plot_slice(rows, scene, scans, path: Path, z: float | None = None) -> None:
     truth = scene.occupancy(q).reshape(gx.shape)
     panels = [("ground truth", truth.astype(float))]
     panels += [(r.method, r.map.occupancy(q).reshape(gx.shape)) for r in rows]
-    fig = Figure(figsize=(4.2 * len(panels), 3.6), layout="constrained")
-    axes = fig.subplots(1, len(panels))
+    # up to 4 panels in a row, in as few rows as that allows
+    nrows = -(-len(panels) // 4)
+    ncols = -(-len(panels) // nrows)
+    fig = Figure(figsize=(4.2 * ncols, 3.6 * nrows), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False)
     cmap = _cmap()
-    for ax, (title, img) in zip(np.atleast_1d(axes), panels):
+    for ax in axes.flat[len(panels):]:
+        ax.set_axis_off()
+    for ax, (title, img) in zip(axes.flat, panels):
         im = ax.imshow(img, origin="lower", extent=(lo[0], hi[0], lo[1], hi[1]),
                        cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
         ax.set_title(title)
         ax.set_xlabel("x [m]")
         ax.set_aspect("equal")
-    np.atleast_1d(axes)[0].set_ylabel("y [m]")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("y [m]")
     for s in scans:
-        np.atleast_1d(axes)[0].plot(*s.origin[:2], "r^", ms=6)
-    fig.colorbar(im, ax=axes, shrink=0.8, label="p(occupied); grey: unknown")
+        axes[0, 0].plot(*s.origin[:2], "r^", ms=6)
+    fig.colorbar(im, ax=axes, shrink=0.8 / nrows ** 0.5,
+                 label="p(occupied); grey: unknown")
     fig.suptitle(f"horizontal slice at z = {z:.2f} m")
     fig.savefig(path, dpi=110)
 
@@ -121,7 +164,7 @@ def _plot_roc(rows, test, path: Path) -> None:
 
     from .metrics import roc_curve
 
-    fig = Figure(figsize=(4.5, 4.2), layout="constrained")
+    fig = Figure(figsize=(5.2, 4.8), layout="constrained")
     ax = fig.subplots()
     for r in rows:
         fpr, tpr, _ = roc_curve(test.labels, r.map.occupancy(test.points))
@@ -130,17 +173,56 @@ def _plot_roc(rows, test, path: Path) -> None:
     ax.set_xlabel("false positive rate")
     ax.set_ylabel("true positive rate")
     ax.set_title("ROC on held-out test points")
-    ax.legend(loc="lower right")
+    ax.legend(loc="lower right", fontsize="small")
     fig.savefig(path, dpi=110)
 
 
-def map_scans(paths, output: str | Path, *, resolution: float = 0.1, mode: str = "scan",
-              max_range: float | None = None, progress: bool | None = None, out=None):
-    """Build an octree from scan files and save it (``.bt`` or ``.ot``).
+def map_scans(paths, output: str | Path, *, resolution: float = 0.1, method: str = "octree",
+              mode: str | None = None, max_range: float | None = None,
+              progress: bool | None = None, out=None):
+    """Build a map from scan files and save it as an OctoMap file (``.bt`` or ``.ot``).
+
+    Parameters
+    ----------
+    paths : sequence of str or path-like
+        Scan files or folders, read with :func:`occgp.datasets.read_scans`.
+    output : str or path-like
+        The map file; its suffix, ``.bt`` or ``.ot``, gives the format.
+    resolution : float, default=0.1
+        Cell size in metres.
+    method : {"octree", "bgk", "akimap"}, default="octree"
+        The map: :class:`~occgp.OccupancyOctree`, :class:`~occgp.BGKMap` or
+        :class:`~occgp.AKIMap` (``random_state=0``). The kernel maps use every
+        core and are written through their ``to_octree()``: each cell holds its
+        posterior mean as log-odds (a ``.bt`` file keeps only whether it is
+        above 0.5); cells no kernel reached stay unknown.
+    mode : {"scan", "ray"}, default=None
+        The octree's update mode (None: ``"scan"``); only for ``method="octree"``.
+    max_range : float, default=None
+        Range limit in metres; None means none (and BGKMap's own 8 m for
+        ``method="bgk"``). The octree inserts longer beams up to `max_range` as
+        free space only; BGK drops them whole (its ``max_range``); AKIMap gets
+        only the end points within `max_range` of the sensor.
+    progress : bool, default=None
+        Show a progress bar (None: only on a terminal).
+    out : file-like, default=None
+        Where the summary line goes (None: standard output).
 
     Returns
     -------
-    tree : OccupancyOctree
+    map : OccupancyOctree, BGKMap or AKIMap
+        The map built.
+
+    Raises
+    ------
+    ValueError
+        If `output` does not end in ``.bt`` or ``.ot``, `method` or `mode` is
+        not one of the choices (or `mode` is given with a kernel map),
+        `max_range` is not positive, or no scan is found.
+    TypeError
+        If `max_range` is not a real number.
+    OSError
+        If a scan file cannot be read or the output cannot be written.
     """
     from tqdm.auto import tqdm
 
@@ -150,20 +232,52 @@ def map_scans(paths, output: str | Path, *, resolution: float = 0.1, mode: str =
     output = Path(output)
     if output.suffix not in (".bt", ".ot"):
         raise ValueError(f"output must end in .bt or .ot, got {str(output)!r}")
+    if method not in _MAP_METHODS:
+        raise ValueError(f"method must be one of {_MAP_METHODS}, got {method!r}")
+    if mode is not None and method != "octree":
+        raise ValueError(f"mode applies to method='octree' only, got mode={mode!r} with "
+                         f"method={method!r}")
+    if max_range is not None:
+        max_range = check_real(max_range, "max_range", low=0.0)
+    if method == "octree":
+        mapper = OccupancyOctree(resolution)
+        mode = "scan" if mode is None else mode
+
+        def insert(points, origin):
+            mapper.insert_scan(points, origin, max_range=max_range, mode=mode)
+    else:
+        if method == "bgk":
+            mapper = BGKMap(resolution, n_jobs=-1) if max_range is None else \
+                BGKMap(resolution, max_range=max_range, n_jobs=-1)
+        else:
+            mapper = AKIMap(resolution, random_state=0, n_jobs=-1)
+
+        def insert(points, origin):
+            if method == "akimap" and max_range is not None:
+                points = np.asarray(points, dtype=np.float64)
+                near = np.linalg.norm(points - np.asarray(origin, dtype=np.float64),
+                                      axis=1) <= max_range
+                points = points[near]
+            mapper.update(points, origin)
     scans = [scan for path in paths for scan in read_scans(path)]
     if not scans:
         raise ValueError("no scans found in " + ", ".join(map(str, paths)))
-    tree = OccupancyOctree(resolution)
     t0 = time.perf_counter()
     for scan in tqdm(scans, desc="inserting scans", unit="scan",
                      disable=None if progress is None else not progress):
-        tree.insert_scan(scan.points, scan.origin, max_range=max_range, mode=mode)
+        insert(scan.points, scan.origin)
     seconds = time.perf_counter() - t0
-    tree.save(output)
     n = sum(len(s.points) for s in scans)
-    print(f"{len(scans)} scans, {n:,} points → {tree.num_leaves:,} leaves in {seconds:.2f} s; "
-          f"wrote {output}", file=out)
-    return tree
+    if method == "octree":
+        mapper.save(output)
+        built = f"{mapper.num_leaves:,} leaves"
+    else:
+        tree = mapper.to_octree()
+        tree.save(output)
+        built = f"{mapper.num_cells:,} cells ({tree.num_leaves:,} octree leaves)"
+    print(f"{len(scans)} scans, {n:,} points → {built} in {seconds:.2f} s; wrote {output}",
+          file=out)
+    return mapper
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -179,13 +293,21 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-progress", action="store_true")
 
-    p = sub.add_parser("map", help="build an octree from scan files (.pcd, .bin, .graph, "
-                       "x y z text, or a folder of .pcd)")
+    p = sub.add_parser("map", help="build a map from scan files (.pcd, .bin, .graph, "
+                       "x y z text, or a folder of .pcd) and write it as an OctoMap file")
     p.add_argument("scans", nargs="+", help="scan files or folders")
     p.add_argument("-o", "--output", required=True, help="the map file (.bt or .ot)")
     p.add_argument("--resolution", type=float, default=0.1, help="cell size in metres")
-    p.add_argument("--mode", choices=["scan", "ray"], default="scan")
-    p.add_argument("--max-range", type=float, default=None)
+    p.add_argument("--method", choices=_MAP_METHODS, default="octree",
+                   help="octree: OctoMap log-odds; bgk: BGK kernel inference; akimap: "
+                   "adaptive kernel inference; a kernel map is written as an octree of "
+                   "its posterior means (default: %(default)s)")
+    p.add_argument("--mode", choices=["scan", "ray"], default=None,
+                   help="the octree's update mode (default: scan; --method octree only)")
+    p.add_argument("--max-range", type=float, default=None,
+                   help="range limit in metres: octree: longer beams are free space up to "
+                   "it; bgk: longer beams are dropped (default: 8); akimap: end points "
+                   "farther from the sensor are dropped (default: no limit)")
     p.add_argument("--no-progress", action="store_true")
     return parser
 
@@ -197,8 +319,9 @@ def main(argv=None) -> int:
         if args.command == "demo":
             demo(args.output, resolution=args.resolution, seed=args.seed, progress=progress)
         else:
-            map_scans(args.scans, args.output, resolution=args.resolution, mode=args.mode,
-                      max_range=args.max_range, progress=progress)
+            map_scans(args.scans, args.output, resolution=args.resolution,
+                      method=args.method, mode=args.mode, max_range=args.max_range,
+                      progress=progress)
     except (ValueError, TypeError, OSError) as exc:
         print(f"occgp {args.command}: error: {exc}", file=sys.stderr)
         return 1
