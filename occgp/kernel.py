@@ -125,6 +125,48 @@ class _KernelMap(_KernelCells):
                     f"(first: row {int(np.flatnonzero(bad)[0])}); the map is unchanged")
         return pts, org
 
+    n_jobs: int | None
+
+    def _training_data(self, pts, org):
+        """(samples (n, 3), labels (n,)) of a validated scan."""
+        raise NotImplementedError
+
+    def _kernels(self, samples, labels, org):
+        """(precision (n, 3, 3), extent (n, 3), weights (n,), sf2) of the samples."""
+        raise NotImplementedError
+
+    def update(self, points: ArrayLike, origin: ArrayLike):
+        """Add one scan's evidence; return self.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            End points of the beams in the world frame, in metres. An empty scan
+            changes nothing.
+        origin : array-like of shape (3,)
+            Sensor position, in metres.
+
+        Raises
+        ------
+        TypeError
+            If `points` or `origin` does not hold real numbers.
+        ValueError
+            If their shapes are wrong, they hold NaN or inf, or lie outside the
+            key range; the map is then unchanged.
+        """
+        pts, org = self._validated_scan(points, origin)
+        samples, labels = self._training_data(pts, org)
+        if len(samples):
+            precision, extent, weights, sf2 = self._kernels(samples, labels, org)
+            self._accumulate(np.ascontiguousarray(samples), labels, precision, extent,
+                             weights, sf2, _threads(self.n_jobs))
+        return self
+
+    # evaluation harness protocol: maps take scans through insert_scan
+    def insert_scan(self, points: ArrayLike, origin: ArrayLike):
+        """Alias of :meth:`update`, for :mod:`occgp.evaluation`."""
+        return self.update(points, origin)
+
     # ------------------------------------------------------------------ queries
     def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
         """Posterior mean of occupancy, alpha / (alpha + beta), at each point's cell.
@@ -311,39 +353,10 @@ class BGKMap(_KernelMap):
         labels = np.concatenate([np.ones(len(hits)), np.zeros(len(frees))])
         return samples, labels
 
-    def update(self, points: ArrayLike, origin: ArrayLike) -> "BGKMap":
-        """Add one scan's evidence; return self.
-
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            End points of the beams in the world frame, in metres. An empty scan
-            changes nothing.
-        origin : array-like of shape (3,)
-            Sensor position, in metres.
-
-        Raises
-        ------
-        TypeError
-            If `points` or `origin` does not hold real numbers.
-        ValueError
-            If their shapes are wrong, they hold NaN or inf, or lie outside the
-            key range; the map is then unchanged.
-        """
-        pts, org = self._validated_scan(points, origin)
-        samples, labels = self._training_data(pts, org)
-        if len(samples):
-            n = len(samples)
-            precision = np.broadcast_to(np.eye(3) / self.ell ** 2, (n, 3, 3)).copy()
-            extent = np.full((n, 3), self.ell)
-            self._accumulate(np.ascontiguousarray(samples), labels, precision, extent,
-                             np.ones(n), self.sf2, _threads(self.n_jobs))
-        return self
-
-    # evaluation harness protocol: maps take scans through insert_scan
-    def insert_scan(self, points: ArrayLike, origin: ArrayLike) -> "BGKMap":
-        """Alias of :meth:`update`, for :mod:`occgp.evaluation`."""
-        return self.update(points, origin)
+    def _kernels(self, samples, labels, org):
+        n = len(samples)
+        precision = np.broadcast_to(np.eye(3) / self.ell ** 2, (n, 3, 3)).copy()
+        return precision, np.full((n, 3), self.ell), np.ones(n), self.sf2
 
 
 class AKIMap(_KernelMap):
@@ -559,34 +572,7 @@ class AKIMap(_KernelMap):
                                  _threads(self.n_jobs))
         return Bandwidths(*out)
 
-    def update(self, points: ArrayLike, origin: ArrayLike) -> "AKIMap":
-        """Add one scan's evidence; return self.
-
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            End points of the beams in the world frame, in metres. An empty scan
-            changes nothing.
-        origin : array-like of shape (3,)
-            Sensor position, in metres.
-
-        Raises
-        ------
-        TypeError
-            If `points` or `origin` does not hold real numbers.
-        ValueError
-            If their shapes are wrong, they hold NaN or inf, or lie outside the
-            key range; the map is then unchanged.
-        """
-        pts, org = self._validated_scan(points, origin)
-        samples, labels = self._training_data(pts, org)
-        if len(samples):
-            bw = self._bandwidths(samples, labels, org)
-            self._accumulate(samples, labels, bw.precision, bw.extent, bw.weight, 1.0,
-                             _threads(self.n_jobs))
-            self.last_bandwidths_ = bw
-        return self
-
-    def insert_scan(self, points: ArrayLike, origin: ArrayLike) -> "AKIMap":
-        """Alias of :meth:`update`, for :mod:`occgp.evaluation`."""
-        return self.update(points, origin)
+    def _kernels(self, samples, labels, org):
+        bw = self._bandwidths(samples, labels, org)
+        self.last_bandwidths_ = bw
+        return bw.precision, bw.extent, bw.weight, 1.0
