@@ -47,3 +47,14 @@ templates_path = []
 exclude_patterns = ["_build", "gen_modules/backreferences/*.examples"]
 html_theme = "pydata_sphinx_theme"
 html_title = f"occgp {release}"
+
+
+def _skip_metadata_requests(app, what, name, obj, skip, options):
+    """Skip scikit-learn's generated ``set_*_request`` methods (metadata routing)."""
+    if name.startswith("set_") and name.endswith("_request"):
+        return True
+    return None
+
+
+def setup(app):
+    app.connect("autodoc-skip-member", _skip_metadata_requests)

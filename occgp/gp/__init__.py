@@ -1,0 +1,30 @@
+"""Gaussian-process occupancy maps.
+
+* kernels with ARD length scales and log-space hyper-parameters
+  (:class:`SquaredExponential`, :class:`Matern32`, :class:`SparseKernel`);
+* integral kernels between points and line segments (:func:`integral_kernel`)
+  with adaptive-order quadrature (:class:`ClenshawCurtis`, :class:`Simpson`);
+* :class:`GPOMIK`, the GP occupancy map with integral kernels (one
+  factorised covariance for all queries, Cholesky updates, spatial cells, KL
+  active sampling), and :class:`GPOM`, the earlier map with a local GP per
+  query; both turn the latent GP into probabilities by PLSC
+  (:func:`fit_plsc`);
+* the log-odds :class:`OccupancyGrid` baseline and :func:`predict_grid`.
+"""
+
+from ._gpom import GPOM
+from ._gpomik import GPOMIK
+from ._grid import OccupancyGrid, grid_points, predict_grid
+from ._integral import integral_kernel
+from ._kernels import Matern32, SparseKernel, SquaredExponential
+from ._observations import Observations, observations_from_scans
+from ._plsc import fit_plsc, loo_predictions, plsc_proba
+from ._quadrature import ClenshawCurtis, Simpson, clenshaw_curtis, simpson
+
+__all__ = [
+    "SquaredExponential", "Matern32", "SparseKernel",
+    "integral_kernel", "ClenshawCurtis", "Simpson", "clenshaw_curtis", "simpson",
+    "GPOMIK", "GPOM", "OccupancyGrid", "grid_points", "predict_grid",
+    "Observations", "observations_from_scans",
+    "loo_predictions", "fit_plsc", "plsc_proba",
+]

@@ -1,0 +1,441 @@
+"""GPOMIK: Gaussian-process occupancy maps with integral kernels (O'Callaghan & Ramos)."""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+import scipy.linalg as sl
+from numpy.typing import ArrayLike, NDArray
+from sklearn.base import BaseEstimator
+from sklearn.utils.validation import check_is_fitted
+
+from .._validation import as_points, check_real
+from ..kernel import _check_n_jobs, _threads
+from ._gpr import factorise, jitter_for, optimize_hyperparameters, solve_lower
+from ._integral import _check_kernel, _check_quadrature, _covariance
+from ._kernels import SquaredExponential
+from ._observations import Observations, make_observations
+from ._plsc import fit_plsc, loo_predictions, plsc_proba
+
+__all__ = ["GPOMIK"]
+
+#: Edge of the query tiles of predict, in length scales.
+_TILE = 8.0
+
+
+def _segment_distance(x, A, B):
+    """Distance from point `x` to each segment A[i]-B[i] (points when A[i] == B[i])."""
+    d = B - A
+    dd = np.einsum("ij,ij->i", d, d)
+    t = np.clip(np.einsum("ij,ij->i", x - A, d) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+    return np.linalg.norm(A + t[:, None] * d - x, axis=1)
+
+
+class _Cell:
+    """One local GP: its observations, Cholesky factor and ``alpha = K^-1 y``."""
+
+    def __init__(self, obs: Observations, L, alpha):
+        self.obs = obs
+        self.L = L
+        self.alpha = alpha
+        self.kinv = None  # K^-1, computed by the first predict that needs it
+
+    @property
+    def size(self) -> int:
+        return len(self.obs.y)
+
+    def bounds(self, margin):
+        pts = np.vstack([self.obs.starts, self.obs.ends])
+        return pts.min(axis=0) - margin, pts.max(axis=0) + margin
+
+
+def _spatial_groups(anchors, max_size):
+    """Split indices into groups of at most `max_size` by median bisection of `anchors`."""
+    todo, done = [np.arange(len(anchors))], []
+    while todo:
+        idx = todo.pop()
+        if len(idx) <= max_size:
+            done.append(idx)
+            continue
+        pts = anchors[idx]
+        axis = int(np.argmax(np.ptp(pts, axis=0)))
+        order = idx[np.argsort(pts[:, axis], kind="stable")]
+        half = len(order) // 2
+        todo += [order[half:], order[:half]]
+    return done
+
+
+class GPOMIK(BaseEstimator):
+    """Gaussian-process occupancy map with integral kernels (GPOMIK).
+
+    Laser returns are point observations of the latent occupancy (target +1);
+    each beam is one segment observation, the integral of the latent function
+    along it (target ``-length``: free all along). One covariance matrix over
+    all observations serves every query: it is factorised once, grown by
+    Cholesky updates as observations arrive (:meth:`update`), and split into a
+    new local model for a new spatial cell when it reaches `max_cell_size`.
+    A probabilistic least-squares classifier (PLSC) maps the latent mean and
+    variance to a probability of occupancy.
+
+    Parameters
+    ----------
+    kernel : SquaredExponential, Matern32 or SparseKernel, default=None
+        Covariance of the latent function; None means
+        ``SquaredExponential(1.0, 1.0)``. Its hyper-parameters are the
+        starting point of the optimiser; the kernel passed is not modified.
+    noise : float, default=0.01
+        Noise variance of every observation (starting point when optimised).
+    noise_bounds : pair of float, default=(1e-4, 1.0)
+        Bounds of the noise variance during optimisation.
+    quadrature : {"clenshaw-curtis", "simpson"}, ClenshawCurtis or Simpson, \
+default="clenshaw-curtis"
+        Rule for the segment integrals without closed form.
+    optimizer : bool, default=True
+        Fit the hyper-parameters by maximising the log marginal likelihood
+        (L-BFGS-B in log space).
+    n_restarts : int, default=2
+        Extra optimiser starts, drawn log-uniformly within the bounds.
+    max_optimize : int, default=1000
+        Hyper-parameters and PLSC are fitted on a random subset of at most
+        this many observations.
+    max_cell_size : int or None, default=2000
+        Most observations in one local model. :meth:`fit` splits larger sets
+        into spatial cells by median bisection; :meth:`update` starts a new
+        cell once the newest one is full. None: one model, no limit.
+    kl_threshold : float or None, default=None
+        Active sampling in :meth:`update`: an observation whose KL divergence
+        between the predictive distributions at its location after and before
+        adding it is below this is rejected. None accepts every observation.
+    random_state : int, Generator or None, default=None
+        Seeds the optimiser restarts and the subset of `max_optimize`.
+    n_jobs : int, default=None
+        Threads for the kernel matrices (None: 1; -1: every core).
+
+    Attributes
+    ----------
+    kernel_ : kernel
+        The fitted kernel.
+    noise_ : float
+        The fitted noise variance.
+    jitter_ : float
+        Added to the diagonal with the noise: ``1e-10 * mean(diag K)`` of the
+        fitted training set.
+    log_marginal_likelihood_value_ : float
+        At the fitted hyper-parameters, on the optimisation subset.
+    plsc_ : tuple of float
+        PLSC's ``(a, b)``.
+    cells_ : list
+        The local models; each has ``obs`` (its :class:`Observations`), ``L``
+        and ``alpha``.
+    n_dims_ : int
+        Dimension of the inputs.
+    n_accepted_, n_rejected_ : int
+        Observations accepted into and rejected from the model (``fit``
+        accepts all of its).
+
+    References
+    ----------
+    S. O'Callaghan, F. Ramos, "Continuous occupancy mapping with integral
+    kernels", AAAI 2011.
+
+    Examples
+    --------
+    A wall at x = 2 seen by five beams from the origin:
+
+    >>> import numpy as np
+    >>> from occgp.gp import GPOMIK
+    >>> y = np.linspace(-1, 1, 5)
+    >>> hits = np.column_stack([np.full(5, 2.0), y])
+    >>> m = GPOMIK(optimizer=False).fit(hits, np.zeros((5, 2)), hits)
+    >>> p = m.predict_proba([[2.0, 0.0], [1.0, 0.0]])
+    >>> bool(p[0] > 0.5 > p[1])
+    True
+    """
+
+    def __init__(self, kernel=None, *, noise=0.01, noise_bounds=(1e-4, 1.0),
+                 quadrature="clenshaw-curtis", optimizer=True, n_restarts=2, max_optimize=1000,
+                 max_cell_size=2000, kl_threshold=None, random_state=None, n_jobs=None):
+        self.kernel = kernel
+        self.noise = noise
+        self.noise_bounds = noise_bounds
+        self.quadrature = quadrature
+        self.optimizer = optimizer
+        self.n_restarts = n_restarts
+        self.max_optimize = max_optimize
+        self.max_cell_size = max_cell_size
+        self.kl_threshold = kl_threshold
+        self.random_state = random_state
+        self.n_jobs = n_jobs
+
+    # ------------------------------------------------------------ parameters
+    def _check_params(self):
+        kernel = SquaredExponential() if self.kernel is None else _check_kernel(self.kernel)
+        kernel = type(kernel)(**kernel.get_params())
+        kernel._checked()
+        noise = check_real(self.noise, "noise", low=0.0)
+        lo, hi = (check_real(b, "noise_bounds", low=0.0) for b in self.noise_bounds)
+        if not lo < hi:
+            raise ValueError(f"noise_bounds must satisfy low < high, got {self.noise_bounds!r}")
+        for name in ("n_restarts", "max_optimize"):
+            value = getattr(self, name)
+            low = 0 if name == "n_restarts" else 2
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
+                raise ValueError(f"{name} must be an int >= {low}, got {value!r}")
+        if self.max_cell_size is not None and (
+                isinstance(self.max_cell_size, bool)
+                or not isinstance(self.max_cell_size, numbers.Integral) or self.max_cell_size < 1):
+            raise ValueError(f"max_cell_size must be None or an int >= 1, got {self.max_cell_size!r}")
+        if self.kl_threshold is not None:
+            check_real(self.kl_threshold, "kl_threshold", low=0.0, low_open=False)
+        return kernel, noise, (lo, hi)
+
+    # ------------------------------------------------------------------- fit
+    def fit(self, hits: ArrayLike | None, segment_starts: ArrayLike | None,
+            segment_ends: ArrayLike | None) -> "GPOMIK":
+        """Fit the hyper-parameters and PLSC, and factorise the model.
+
+        Parameters
+        ----------
+        hits : array-like of shape (n_hits, D) or None
+            Laser returns (occupied), D in 1..3.
+        segment_starts, segment_ends : array-like of shape (n_beams, D) or None
+            Beams, from the sensor to the return or to the maximum range
+            (free). A zero-length beam counts as one free point.
+
+        Returns
+        -------
+        self : GPOMIK
+
+        Raises
+        ------
+        ValueError
+            On NaN or inf, wrong shapes, inconsistent dimensions, missing
+            class (PLSC needs hits and beams) or invalid parameters.
+        TypeError
+            On non-numeric input or a kernel that is not one of occgp.gp's.
+        """
+        kernel, noise, noise_bounds = self._check_params()
+        quadrature = _check_quadrature(self.quadrature)
+        n_threads = _threads(_check_n_jobs(self.n_jobs))
+        obs = make_observations(hits, segment_starts, segment_ends)
+        if not ((obs.labels > 0).any() and (obs.labels < 0).any()):
+            raise ValueError("GPOMIK needs both hits and beams to fit its classifier, got "
+                             f"{int((obs.labels > 0).sum())} hits and "
+                             f"{int((obs.labels < 0).sum())} beams")
+        rng = np.random.default_rng(self.random_state)
+        subset = obs
+        if len(obs.y) > self.max_optimize:
+            subset = obs.take(np.sort(rng.choice(len(obs.y), self.max_optimize, replace=False)))
+        lml = np.nan
+        if self.optimizer:
+            kernel, noise, lml = optimize_hyperparameters(
+                kernel, noise, noise_bounds, subset.starts, subset.ends, subset.y, quadrature,
+                n_restarts=self.n_restarts, rng=rng, n_threads=n_threads)
+        K_sub = _covariance(kernel, quadrature, subset.starts, subset.ends, n_threads=n_threads)
+        self.jitter_ = jitter_for(K_sub)
+        L, _ = factorise(kernel, quadrature, noise, subset.starts, subset.ends, subset.y,
+                         n_threads, self.jitter_)
+        mu, var = loo_predictions(L, subset.y)
+        scale = np.where(subset.lengths > 0, subset.lengths, 1.0)    # per unit length
+        self.plsc_ = fit_plsc(mu / scale, var / scale ** 2, subset.labels)
+        self.kernel_, self.noise_ = kernel, noise
+        self.log_marginal_likelihood_value_ = lml
+        self.n_dims_ = obs.starts.shape[1]
+        self._quadrature, self._n_threads = quadrature, n_threads
+        self.cells_ = []
+        self._add_cells(obs)
+        self.n_accepted_, self.n_rejected_ = len(obs.y), 0
+        return self
+
+    def _factorised_cell(self, obs):
+        L, alpha = factorise(self.kernel_, self._quadrature, self.noise_, obs.starts, obs.ends,
+                             obs.y, self._n_threads, self.jitter_)
+        return _Cell(obs, L, alpha)
+
+    def _add_cells(self, obs):
+        size = len(obs.y) if self.max_cell_size is None else self.max_cell_size
+        for idx in _spatial_groups(obs.anchors, max(size, 1)):
+            self.cells_.append(self._factorised_cell(obs.take(idx)))
+
+    # ---------------------------------------------------------------- update
+    def _cross(self, obs_a, obs_b):
+        return _covariance(self.kernel_, self._quadrature, obs_a.starts, obs_a.ends,
+                           obs_b.starts, obs_b.ends, n_threads=self._n_threads)
+
+    def _extend(self, cell, new):
+        """Cholesky update of Eq. 11–13: append `new` to `cell`."""
+        K12 = self._cross(cell.obs, new)
+        K22 = _covariance(self.kernel_, self._quadrature, new.starts, new.ends,
+                          n_threads=self._n_threads)
+        K22[np.diag_indices_from(K22)] += self.noise_ + self.jitter_
+        S12 = sl.solve_triangular(cell.L, K12, lower=True, check_finite=False)
+        S22 = sl.cholesky(K22 - S12.T @ S12, lower=True, check_finite=False)
+        n, m = cell.size, new.y.shape[0]
+        L = np.zeros((n + m, n + m))
+        L[:n, :n] = cell.L
+        L[n:, :n] = S12.T
+        L[n:, n:] = S22
+        obs = Observations(*(np.concatenate([a, b]) for a, b in zip(cell.obs, new)))
+        # forward solution L^-1 y grows by one block; one backward solve gives alpha
+        z_old = sl.solve_triangular(cell.L, cell.obs.y, lower=True, check_finite=False)
+        z_new = sl.solve_triangular(S22, new.y - S12.T @ z_old, lower=True, check_finite=False)
+        alpha = solve_lower(L, obs.y, np.r_[z_old, z_new])
+        return _Cell(obs, L, alpha)
+
+    def kl_divergence(self, hits=None, segment_starts=None, segment_ends=None):
+        """KL divergence that adding each observation would bring to the newest cell.
+
+        For observation ``j`` with latent prediction ``N(mu, var)`` before it
+        is added and ``N(mu', var')`` after (conditioning on its target with
+        the noise variance): ``KL(after || before) = log(sqrt(var / var')) +
+        (var' + (mu' - mu)**2) / (2 var) - 1/2``. For a beam, the latent is
+        the integral along it. Hits come first, then beams, in input order.
+
+        Returns
+        -------
+        kl : ndarray of shape (n_hits + n_beams,)
+        """
+        check_is_fitted(self, "cells_")
+        new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
+        return self._kl(self.cells_[-1], new)
+
+    def _kl(self, cell, new):
+        K12 = self._cross(cell.obs, new)
+        prior = np.diag(_covariance(self.kernel_, self._quadrature, new.starts, new.ends,
+                                    n_threads=self._n_threads)).copy()
+        v = sl.solve_triangular(cell.L, K12, lower=True, check_finite=False)
+        mu = K12.T @ cell.alpha
+        var = np.maximum(prior - np.einsum("ij,ij->j", v, v), 1e-300)
+        noise = self.noise_ + self.jitter_
+        var_after = var * noise / (var + noise)
+        shift = var / (var + noise) * (new.y - mu)
+        return 0.5 * (np.log(var / var_after) + (var_after + shift ** 2) / var - 1.0)
+
+    def update(self, hits: ArrayLike | None = None, segment_starts: ArrayLike | None = None,
+               segment_ends: ArrayLike | None = None) -> "GPOMIK":
+        """Add observations by Cholesky updates, with active sampling.
+
+        With `kl_threshold` set, observations whose KL divergence (see
+        :meth:`kl_divergence`, against the model before this call) is below
+        it are rejected. The accepted ones join the newest cell, its factor
+        grown by Eq. 11–13 of the paper (``O(n^2)`` instead of ``O(n^3)``);
+        past `max_cell_size` the rest start new cells (split spatially when
+        more than one cell's worth). Hyper-parameters and PLSC stay as
+        fitted.
+
+        Parameters
+        ----------
+        hits : array-like of shape (n_hits, D), default=None
+        segment_starts, segment_ends : array-like of shape (n_beams, D), default=None
+
+        Returns
+        -------
+        self : GPOMIK
+
+        Raises
+        ------
+        ValueError, TypeError
+            As :meth:`fit`; the model is then unchanged.
+        """
+        check_is_fitted(self, "cells_")
+        new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
+        if self.kl_threshold is not None and len(new.y):
+            keep = self._kl(self.cells_[-1], new) >= float(self.kl_threshold)
+            self.n_rejected_ += int((~keep).sum())
+            new = new.take(keep)
+        self.n_accepted_ += len(new.y)
+        if not len(new.y):
+            return self
+        room = len(new.y) if self.max_cell_size is None else self.max_cell_size - self.cells_[-1].size
+        if room > 0:
+            head = new.take(slice(0, room))
+            self.cells_[-1] = self._extend(self.cells_[-1], head)
+            new = new.take(slice(room, None))
+        if len(new.y):
+            self._add_cells(new)
+        return self
+
+    # --------------------------------------------------------------- predict
+    def _check_X(self, X):
+        check_is_fitted(self, "cells_")
+        return as_points(X, "X", self.n_dims_)
+
+    def _predict_cell(self, cell, X, return_var):
+        """Mean (and variance) of one cell at `X`, tile by tile.
+
+        Queries are grouped into square tiles of two length scales; a tile
+        only meets the observations that come within the kernel's cutoff of
+        it (the entries of the others are exactly 0 in the cross-covariance),
+        so each tile solves a small dense problem: ``mean = k_S . alpha_S``
+        and ``var = k(x, x) - k_S^T [K^-1]_SS k_S``.
+        """
+        mean = np.empty(len(X))
+        var = np.empty(len(X)) if return_var else None
+        if not len(X):
+            return mean, var
+        inv = self.kernel_.inverse_length_scales(self.n_dims_)
+        reach = np.sqrt(type(self.kernel_).cutoff2)
+        if return_var and cell.kinv is None:
+            Linv = sl.solve_triangular(cell.L, np.eye(cell.size), lower=True, check_finite=False)
+            cell.kinv = Linv.T @ Linv
+        Xs, A, B = X * inv, cell.obs.starts * inv, cell.obs.ends * inv
+        keys = np.floor(Xs / _TILE).astype(np.int64)
+        _, tile_of, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+        order = np.argsort(tile_of.ravel(), kind="stable")
+        bounds = np.r_[0, np.cumsum(counts)]
+        half_diag = 0.5 * _TILE * np.sqrt(self.n_dims_)
+        prior = float(self.kernel_.variance)
+        for t in range(len(counts)):
+            q = order[bounds[t]:bounds[t + 1]]
+            centre = (keys[q[0]] + 0.5) * _TILE
+            near = np.flatnonzero(_segment_distance(centre, A, B) <= reach + half_diag)
+            Ks = _covariance(self.kernel_, self._quadrature, X[q], X[q],
+                             cell.obs.starts[near], cell.obs.ends[near], n_threads=self._n_threads)
+            mean[q] = Ks @ cell.alpha[near]
+            if return_var:
+                quad = np.einsum("ij,ij->i", Ks @ cell.kinv[np.ix_(near, near)], Ks)
+                var[q] = np.maximum(prior - quad, 0.0)
+        return mean, var
+
+    def predict(self, X: ArrayLike, return_var: bool = False):
+        """Latent mean (and variance) of the occupancy function at points `X`.
+
+        With several cells, each query is answered by the cell with the
+        smallest variance among those whose box (its observations' extent
+        plus three length scales) holds it; a query in no box gets the prior
+        (mean 0, variance of the kernel).
+
+        Parameters
+        ----------
+        X : array-like of shape (n_queries, D)
+        return_var : bool, default=False
+
+        Returns
+        -------
+        mean : ndarray of shape (n_queries,)
+        var : ndarray of shape (n_queries,)
+            Only with `return_var`.
+        """
+        X = self._check_X(X)
+        if len(self.cells_) == 1:
+            mean, var = self._predict_cell(self.cells_[0], X, return_var)
+            return (mean, var) if return_var else mean
+        prior = float(self.kernel_.variance)
+        mean, best = np.zeros(len(X)), np.full(len(X), prior)
+        margin = 3.0 / self.kernel_.inverse_length_scales(self.n_dims_)
+        for cell in self.cells_:
+            lo, hi = cell.bounds(margin)
+            inside = np.flatnonzero(np.all((X >= lo) & (X <= hi), axis=1))
+            if not len(inside):
+                continue
+            m, v = self._predict_cell(cell, X[inside], True)
+            better = v < best[inside]
+            mean[inside[better]], best[inside[better]] = m[better], v[better]
+        return (mean, best) if return_var else mean
+
+    def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
+        """Probability of occupancy at points `X` (PLSC), shape (n_queries,)."""
+        mean, var = self.predict(X, return_var=True)
+        a, b = self.plsc_
+        return plsc_proba(mean, var, a, b)

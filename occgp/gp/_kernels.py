@@ -1,0 +1,312 @@
+"""Stationary covariance functions with ARD length scales and log-space hyper-parameters.
+
+Each kernel is ``k(x, x') = variance * f(s)`` with ``s`` the squared distance
+scaled by the length scales, ``s = sum_d ((x_d - x'_d) / l_d) ** 2``. The
+profile ``f`` is all the integral kernels (:mod:`occgp.gp._integral`) need;
+the compiled core evaluates the same profiles.
+
+Hyper-parameters live in log space, ``theta = log([variance, *length_scale])``
+(one length scale, or one per input dimension for ARD), with box bounds in log
+space; gradients of a kernel matrix are with respect to ``theta``.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["SquaredExponential", "Matern32", "SparseKernel"]
+
+_SQRT3 = np.sqrt(3.0)
+_TWO_PI = 2.0 * np.pi
+
+
+def _check_bounds(bounds, name):
+    try:
+        lo, hi = (float(b) for b in bounds)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a pair (low, high) of positive numbers, got {bounds!r}")
+    if not (0 < lo < hi < np.inf):
+        raise ValueError(f"{name} must satisfy 0 < low < high < inf, got {bounds!r}")
+    return lo, hi
+
+
+class _Stationary:
+    """Base of the stationary kernels: ``variance * f(s)``.
+
+    Subclasses set ``kind`` (the compiled core's id), ``name`` and implement
+    ``_profile(s)`` and ``_gradient_factor(s) = -2 f'(s)``.
+    """
+
+    kind = -1
+    name = ""
+    #: Squared scaled distance beyond which the kernel is treated as exactly 0
+    #: (below 1e-18 of the variance; the compact sparse kernel vanishes at 1).
+    cutoff2 = np.inf
+
+    def __init__(self, variance: float = 1.0, length_scale: ArrayLike = 1.0, *,
+                 variance_bounds=(1e-3, 1e3), length_scale_bounds=(1e-2, 1e2)):
+        self.variance = variance
+        self.length_scale = length_scale
+        self.variance_bounds = variance_bounds
+        self.length_scale_bounds = length_scale_bounds
+
+    # -------------------------------------------------------------- parameters
+    def _checked(self):
+        if isinstance(self.variance, bool) or not isinstance(self.variance, numbers.Real):
+            raise TypeError(f"variance must be a real number, got {type(self.variance).__name__}")
+        variance = float(self.variance)
+        if not (0 < variance < np.inf):
+            raise ValueError(f"variance must be positive and finite, got {self.variance!r}")
+        ls = np.asarray(self.length_scale)
+        if ls.dtype.kind not in "iuf":
+            raise TypeError(f"length_scale must hold real numbers, got dtype {ls.dtype}")
+        ls = np.atleast_1d(ls.astype(np.float64))
+        if ls.ndim != 1 or not (np.isfinite(ls).all() and (ls > 0).all()):
+            raise ValueError(
+                f"length_scale must be a positive number or a 1-D array of them, got {self.length_scale!r}")
+        _check_bounds(self.variance_bounds, "variance_bounds")
+        _check_bounds(self.length_scale_bounds, "length_scale_bounds")
+        return variance, ls
+
+    @property
+    def anisotropic(self) -> bool:
+        """Whether there is one length scale per input dimension (ARD)."""
+        return np.ndim(self.length_scale) > 0 and np.size(self.length_scale) > 1
+
+    @property
+    def n_theta(self) -> int:
+        """Number of hyper-parameters: the variance and the length scales."""
+        return 1 + int(np.size(self.length_scale))
+
+    @property
+    def theta(self) -> NDArray[np.float64]:
+        """``log([variance, *length_scale])``, shape (n_theta,)."""
+        variance, ls = self._checked()
+        return np.log(np.r_[variance, ls])
+
+    @property
+    def bounds(self) -> NDArray[np.float64]:
+        """Log-space bounds of :attr:`theta`, shape (n_theta, 2)."""
+        self._checked()
+        rows = [_check_bounds(self.variance_bounds, "variance_bounds")]
+        rows += [_check_bounds(self.length_scale_bounds, "length_scale_bounds")] * (self.n_theta - 1)
+        return np.log(np.array(rows, dtype=np.float64))
+
+    @property
+    def hyperparameter_names(self) -> list[str]:
+        """Names of the entries of :attr:`theta`."""
+        if self.n_theta == 2:
+            return ["log_variance", "log_length_scale"]
+        return ["log_variance"] + [f"log_length_scale_{d}" for d in range(self.n_theta - 1)]
+
+    def with_theta(self, theta: ArrayLike):
+        """A copy of the kernel with hyper-parameters ``exp(theta)``."""
+        theta = np.asarray(theta, dtype=np.float64)
+        if theta.shape != (self.n_theta,) or not np.isfinite(theta).all():
+            raise ValueError(f"theta must be a finite array of shape ({self.n_theta},), got {theta!r}")
+        ls = np.exp(theta[1:])
+        return type(self)(float(np.exp(theta[0])), ls if self.anisotropic else float(ls[0]),
+                          variance_bounds=self.variance_bounds,
+                          length_scale_bounds=self.length_scale_bounds)
+
+    def get_params(self, deep: bool = True) -> dict:
+        """The constructor arguments (scikit-learn's estimator protocol)."""
+        return {"variance": self.variance, "length_scale": self.length_scale,
+                "variance_bounds": self.variance_bounds,
+                "length_scale_bounds": self.length_scale_bounds}
+
+    def set_params(self, **params):
+        """Set constructor arguments; returns self."""
+        valid = self.get_params()
+        for key, value in params.items():
+            if key not in valid:
+                raise ValueError(f"invalid parameter {key!r} for {type(self).__name__}")
+            setattr(self, key, value)
+        return self
+
+    def __repr__(self):
+        ls = np.asarray(self.length_scale)
+        ls_txt = f"{float(ls):.4g}" if ls.ndim == 0 else np.array2string(ls, precision=4)
+        return f"{type(self).__name__}(variance={float(self.variance):.4g}, length_scale={ls_txt})"
+
+    def __eq__(self, other):
+        return (type(self) is type(other)
+                and float(self.variance) == float(other.variance)
+                and np.array_equal(np.atleast_1d(self.length_scale), np.atleast_1d(other.length_scale)))
+
+    __hash__ = None  # mutable, like scikit-learn estimators
+
+    # ----------------------------------------------------------------- values
+    def inverse_length_scales(self, n_dims: int) -> NDArray[np.float64]:
+        """``1 / length_scale`` broadcast to `n_dims` entries, shape (n_dims,)."""
+        _, ls = self._checked()
+        if ls.size == 1:
+            ls = np.full(n_dims, ls[0])
+        elif ls.size != n_dims:
+            raise ValueError(
+                f"length_scale has {ls.size} entries but the inputs have {n_dims} dimensions")
+        return 1.0 / ls
+
+    def profile(self, s: ArrayLike) -> NDArray[np.float64]:
+        """The kernel as a function of the squared scaled distance, divided by the variance."""
+        return self._profile(np.asarray(s, dtype=np.float64))
+
+    def gradient_factor(self, s: ArrayLike) -> NDArray[np.float64]:
+        """``-2 f'(s)``: ``dk/dlog(l_d) = variance * gradient_factor(s) * (dx_d / l_d) ** 2``."""
+        return self._gradient_factor(np.asarray(s, dtype=np.float64))
+
+    def __call__(self, X: ArrayLike, Y: ArrayLike | None = None, eval_gradient: bool = False):
+        """Kernel matrix between the rows of `X` and `Y` (default `X`).
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples_X, n_features)
+        Y : array-like of shape (n_samples_Y, n_features), default=None
+        eval_gradient : bool, default=False
+            Also return the gradient with respect to :attr:`theta` (only when
+            `Y` is None).
+
+        Returns
+        -------
+        K : ndarray of shape (n_samples_X, n_samples_Y)
+        K_gradient : ndarray of shape (n_samples_X, n_samples_X, n_theta)
+            Only when `eval_gradient` is True.
+        """
+        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
+        if eval_gradient and Y is not None:
+            raise ValueError("eval_gradient is only supported when Y is None")
+        Y = X if Y is None else np.atleast_2d(np.asarray(Y, dtype=np.float64))
+        if X.ndim != 2 or Y.ndim != 2 or X.shape[1] != Y.shape[1]:
+            raise ValueError(f"X and Y must be 2-D with the same number of columns, got "
+                             f"{X.shape} and {Y.shape}")
+        variance, _ = self._checked()
+        inv = self.inverse_length_scales(X.shape[1])
+        diff = (X[:, None, :] - Y[None, :, :]) * inv
+        s = np.einsum("ijd,ijd->ij", diff, diff)
+        K = variance * self._profile(s)
+        if not eval_gradient:
+            return K
+        g = variance * self._gradient_factor(s)
+        per_dim = g[:, :, None] * diff ** 2
+        if not self.anisotropic:
+            per_dim = per_dim.sum(axis=2, keepdims=True)
+        return K, np.concatenate([K[:, :, None], per_dim], axis=2)
+
+    def diag(self, X: ArrayLike) -> NDArray[np.float64]:
+        """``k(x, x)`` for each row of `X` (the variance), shape (n_samples,)."""
+        variance, _ = self._checked()
+        return np.full(np.atleast_2d(X).shape[0], variance)
+
+
+class SquaredExponential(_Stationary):
+    """Squared exponential kernel ``variance * exp(-s / 2)``, optionally ARD.
+
+    ``s = sum_d ((x_d - x'_d) / l_d) ** 2``. Its line integral against a point
+    has a closed form (erf), which the integral kernels use.
+
+    Parameters
+    ----------
+    variance : float, default=1.0
+        Signal variance ``sigma_f ** 2``.
+    length_scale : float or array-like of shape (n_features,), default=1.0
+        One length scale, or one per input dimension (ARD).
+    variance_bounds, length_scale_bounds : pair of float
+        Bounds used when hyper-parameters are fitted (default ``(1e-3, 1e3)``
+        and ``(1e-2, 1e2)``).
+
+    Examples
+    --------
+    >>> k = SquaredExponential(2.0, 0.5)
+    >>> k([[0.0, 0.0], [0.5, 0.0]]).round(4).tolist()
+    [[2.0, 1.2131], [1.2131, 2.0]]
+    >>> k.theta.round(4).tolist()
+    [0.6931, -0.6931]
+    """
+
+    kind = 0
+    name = "squared_exponential"
+    cutoff2 = 84.0  # exp(-42) < 1e-18
+
+    def _profile(self, s):
+        return np.exp(-0.5 * s)
+
+    def _gradient_factor(self, s):
+        return np.exp(-0.5 * s)
+
+
+class Matern32(_Stationary):
+    """Matérn kernel with smoothness 3/2: ``variance * (1 + sqrt(3) r) exp(-sqrt(3) r)``.
+
+    ``r = sqrt(s)``, the scaled distance. Once differentiable: its integrals
+    are computed by quadrature split at the closest point.
+
+    Parameters
+    ----------
+    variance : float, default=1.0
+    length_scale : float or array-like of shape (n_features,), default=1.0
+    variance_bounds, length_scale_bounds : pair of float
+
+    Examples
+    --------
+    >>> round(float(Matern32()([[0.0]], [[1.0]])[0, 0]), 6)
+    0.483358
+    """
+
+    kind = 1
+    name = "matern32"
+    cutoff2 = 27.0 ** 2  # (1 + sqrt(3) 27) exp(-sqrt(3) 27) < 1e-18
+
+    def _profile(self, s):
+        e = _SQRT3 * np.sqrt(s)
+        return (1.0 + e) * np.exp(-e)
+
+    def _gradient_factor(self, s):
+        return 3.0 * np.exp(-_SQRT3 * np.sqrt(s))
+
+
+class SparseKernel(_Stationary):
+    """The compactly supported kernel of Melkumyan & Ramos (2009).
+
+    ``variance * ((2 + cos(2 pi r)) / 3 * (1 - r) + sin(2 pi r) / (2 pi))``
+    for ``r < 1`` and 0 beyond, ``r = sqrt(s)``: the length scale is the
+    support radius. Positive semi-definite in up to three dimensions.
+
+    Parameters
+    ----------
+    variance : float, default=1.0
+    length_scale : float or array-like of shape (n_features,), default=1.0
+    variance_bounds, length_scale_bounds : pair of float
+
+    References
+    ----------
+    A. Melkumyan, F. Ramos, "A sparse covariance function for exact Gaussian
+    process inference in large datasets", IJCAI 2009.
+
+    Examples
+    --------
+    >>> SparseKernel(length_scale=2.0)([[0.0]], [[0.0], [1.0], [2.0]]).round(4).tolist()
+    [[1.0, 0.1667, 0.0]]
+    """
+
+    kind = 2
+    name = "sparse"
+    cutoff2 = 1.0
+
+    def _profile(self, s):
+        r = np.sqrt(s)
+        inside = r < 1.0
+        r = np.where(inside, r, 1.0)
+        val = (2.0 + np.cos(_TWO_PI * r)) / 3.0 * (1.0 - r) + np.sin(_TWO_PI * r) / _TWO_PI
+        return np.where(inside, val, 0.0)
+
+    def _gradient_factor(self, s):
+        r = np.sqrt(s)
+        inside = r < 1.0
+        small = r < 1e-4
+        rr = np.where(inside & ~small, r, 0.5)
+        val = ((_TWO_PI / 3.0) * np.sin(_TWO_PI * rr) * (1.0 - rr)
+               - (2.0 / 3.0) * (np.cos(_TWO_PI * rr) - 1.0)) / rr
+        return np.where(inside, np.where(small, 4.0 * np.pi ** 2 / 3.0, val), 0.0)
