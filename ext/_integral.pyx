@@ -39,6 +39,8 @@ cdef enum:
 
 cdef double SQRT3 = sqrt(3.0)
 cdef double TWO_PI = 2.0 * M_PI
+cdef double SQRT_HALF = sqrt(0.5)
+cdef double SQRT_HALF_PI = sqrt(0.5 * M_PI)
 
 # 5-point Gauss-Legendre on [0, 1]
 cdef double GL5_X[5]
@@ -166,7 +168,7 @@ cdef void _segment_point(const Kern* k, const Rule* rule, const double* c,
         dperp2 = e - b * b / a
         if dperp2 < 0.0:
             dperp2 = 0.0
-        sq = sqrt(0.5 * a)
+        sq = SQRT_HALF * L
         zlo = -sq * m
         zhi = sq * (1.0 - m)
         if zlo >= 0.0:
@@ -176,7 +178,7 @@ cdef void _segment_point(const Kern* k, const Rule* rule, const double* c,
         else:
             diff = erf(zhi) - erf(zlo)
         G = exp(-0.5 * dperp2)
-        M0 = G * sqrt(M_PI / (2.0 * a)) * diff
+        M0 = G * (SQRT_HALF_PI / L) * diff
         acc[0] += M0
         if k.grad:
             # q_d(t) = h_d + u v_d with u = t - m and h the foot of x on the line
@@ -480,3 +482,58 @@ def observation_covariance(int kind, double cutoff2, const double[:, ::1] A1, co
     with nogil:
         for i in prange(n1, schedule="dynamic", num_threads=n_threads):
             _row(&k, &rule, i, A1, V1, len1, A2, V2, len2, same, out, grad)
+
+
+cdef void _tile(const Kern* k, const Rule* rule, Py_ssize_t t, const double[:, ::1] X,
+                const double[:, ::1] A2, const double[:, ::1] V2, const double[::1] len2,
+                const Py_ssize_t[::1] rows, const Py_ssize_t[::1] row_ptr,
+                const Py_ssize_t[::1] cols, const Py_ssize_t[::1] col_ptr,
+                const Py_ssize_t[::1] out_ptr, double[::1] out) noexcept nogil:
+    cdef double acc[1 + MAXD]
+    cdef double zero[MAXD]
+    cdef Py_ssize_t a, b, i, j, n_cols = col_ptr[t + 1] - col_ptr[t]
+    cdef Py_ssize_t base = out_ptr[t]
+    cdef int d
+    for d in range(MAXD):
+        zero[d] = 0.0
+    for a in range(row_ptr[t + 1] - row_ptr[t]):
+        i = rows[row_ptr[t] + a]
+        for b in range(n_cols):
+            j = cols[col_ptr[t] + b]
+            _entry(k, rule, &X[i, 0], zero, 0.0, &A2[j, 0], &V2[j, 0], len2[j], acc)
+            out[base + a * n_cols + b] = acc[0]
+
+
+def tile_covariance(int kind, double cutoff2, const double[:, ::1] X,
+                    const double[:, ::1] A2, const double[:, ::1] V2, const double[::1] len2,
+                    const Py_ssize_t[::1] rows, const Py_ssize_t[::1] row_ptr,
+                    const Py_ssize_t[::1] cols, const Py_ssize_t[::1] col_ptr,
+                    const Py_ssize_t[::1] out_ptr, const double[::1] nodes,
+                    const double[::1] weights, const Py_ssize_t[::1] offsets,
+                    const double[::1] reach, double[::1] out, int n_threads):
+    """Covariances / variance between query points and observations, tile by tile.
+
+    Tile t pairs the scaled queries ``X[rows[row_ptr[t]:row_ptr[t+1]]]`` with the
+    observations ``cols[col_ptr[t]:col_ptr[t+1]]``; its block, row-major, is
+    stored in ``out`` from ``out_ptr[t]``. One parallel region for all tiles.
+    """
+    cdef Kern k
+    cdef Rule rule
+    cdef Py_ssize_t t, n_tiles = row_ptr.shape[0] - 1
+    cdef int dim = X.shape[1]
+    if not 1 <= dim <= MAXD or A2.shape[1] != dim:
+        raise ValueError(f"inputs must have 1 to {MAXD} matching dimensions")
+    k.kind = kind
+    k.dim = dim
+    k.cutoff2 = cutoff2
+    k.grad = False
+    rule.nodes = &nodes[0]
+    rule.weights = &weights[0]
+    rule.offsets = &offsets[0]
+    rule.reach = &reach[0]
+    rule.n_orders = reach.shape[0]
+    if n_tiles <= 0:
+        return
+    with nogil:
+        for t in prange(n_tiles, schedule="dynamic", num_threads=n_threads):
+            _tile(&k, &rule, t, X, A2, V2, len2, rows, row_ptr, cols, col_ptr, out_ptr, out)

@@ -10,6 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
+from .. import _integral
 from .._validation import as_points, check_real
 from ..kernel import _check_n_jobs, _threads
 from ._gpr import factorise, jitter_for, optimize_hyperparameters, solve_lower
@@ -21,7 +22,9 @@ from ._plsc import fit_plsc, loo_predictions, plsc_proba
 __all__ = ["GPOMIK"]
 
 #: Edge of the query tiles of predict, in length scales.
-_TILE = 8.0
+_TILE = 4.0
+#: Most cross-covariance entries computed in one call of predict (64 MB).
+_BLOCK_ENTRIES = 8_000_000
 
 
 def _segment_distance(x, A, B):
@@ -48,6 +51,13 @@ class _Cell:
     def bounds(self, margin):
         pts = np.vstack([self.obs.starts, self.obs.ends])
         return pts.min(axis=0) - margin, pts.max(axis=0) + margin
+
+
+def _check_int(value, name, low):
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
+    if value < low:
+        raise ValueError(f"{name} must be >= {low}, got {value!r}")
 
 
 def _spatial_groups(anchors, max_size):
@@ -174,18 +184,17 @@ default="clenshaw-curtis"
         kernel = type(kernel)(**kernel.get_params())
         kernel._checked()
         noise = check_real(self.noise, "noise", low=0.0)
+        if not isinstance(self.noise_bounds, (tuple, list, np.ndarray)):
+            raise TypeError(f"noise_bounds must be a pair (low, high), got {self.noise_bounds!r}")
+        if len(self.noise_bounds) != 2:
+            raise ValueError(f"noise_bounds must be a pair (low, high), got {self.noise_bounds!r}")
         lo, hi = (check_real(b, "noise_bounds", low=0.0) for b in self.noise_bounds)
         if not lo < hi:
             raise ValueError(f"noise_bounds must satisfy low < high, got {self.noise_bounds!r}")
-        for name in ("n_restarts", "max_optimize"):
-            value = getattr(self, name)
-            low = 0 if name == "n_restarts" else 2
-            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
-                raise ValueError(f"{name} must be an int >= {low}, got {value!r}")
-        if self.max_cell_size is not None and (
-                isinstance(self.max_cell_size, bool)
-                or not isinstance(self.max_cell_size, numbers.Integral) or self.max_cell_size < 1):
-            raise ValueError(f"max_cell_size must be None or an int >= 1, got {self.max_cell_size!r}")
+        _check_int(self.n_restarts, "n_restarts", 0)
+        _check_int(self.max_optimize, "max_optimize", 2)
+        if self.max_cell_size is not None:
+            _check_int(self.max_cell_size, "max_cell_size", 1)
         if self.kl_threshold is not None:
             check_real(self.kl_threshold, "kl_threshold", low=0.0, low_open=False)
         return kernel, noise, (lo, hi)
@@ -364,38 +373,56 @@ default="clenshaw-curtis"
     def _predict_cell(self, cell, X, return_var):
         """Mean (and variance) of one cell at `X`, tile by tile.
 
-        Queries are grouped into square tiles of two length scales; a tile
+        Queries are grouped into square tiles of `_TILE` (4) length scales; a tile
         only meets the observations that come within the kernel's cutoff of
-        it (the entries of the others are exactly 0 in the cross-covariance),
-        so each tile solves a small dense problem: ``mean = k_S . alpha_S``
-        and ``var = k(x, x) - k_S^T [K^-1]_SS k_S``.
+        it (the other entries of its cross-covariance are exactly 0), so each
+        tile solves a small dense problem: ``mean = k_S . alpha_S`` and
+        ``var = k(x, x) - k_S^T [K^-1]_SS k_S``. The blocks of many tiles are
+        computed in one parallel call, then the products run tile by tile.
         """
         mean = np.empty(len(X))
         var = np.empty(len(X)) if return_var else None
         if not len(X):
             return mean, var
-        inv = self.kernel_.inverse_length_scales(self.n_dims_)
-        reach = np.sqrt(type(self.kernel_).cutoff2)
+        kernel = self.kernel_
+        inv = kernel.inverse_length_scales(self.n_dims_)
+        reach = np.sqrt(type(kernel).cutoff2)
         if return_var and cell.kinv is None:
             Linv = sl.solve_triangular(cell.L, np.eye(cell.size), lower=True, check_finite=False)
             cell.kinv = Linv.T @ Linv
-        Xs, A, B = X * inv, cell.obs.starts * inv, cell.obs.ends * inv
+        Xs = np.ascontiguousarray(X * inv)
+        A = np.ascontiguousarray(cell.obs.starts * inv)
+        V = np.ascontiguousarray((cell.obs.ends - cell.obs.starts) * inv)
+        lengths = np.ascontiguousarray(cell.obs.lengths)
         keys = np.floor(Xs / _TILE).astype(np.int64)
         _, tile_of, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-        order = np.argsort(tile_of.ravel(), kind="stable")
-        bounds = np.r_[0, np.cumsum(counts)]
+        rows = np.argsort(tile_of.ravel(), kind="stable").astype(np.intp)
+        row_ptr = np.r_[0, np.cumsum(counts)].astype(np.intp)
         half_diag = 0.5 * _TILE * np.sqrt(self.n_dims_)
-        prior = float(self.kernel_.variance)
-        for t in range(len(counts)):
-            q = order[bounds[t]:bounds[t + 1]]
-            centre = (keys[q[0]] + 0.5) * _TILE
-            near = np.flatnonzero(_segment_distance(centre, A, B) <= reach + half_diag)
-            Ks = _covariance(self.kernel_, self._quadrature, X[q], X[q],
-                             cell.obs.starts[near], cell.obs.ends[near], n_threads=self._n_threads)
-            mean[q] = Ks @ cell.alpha[near]
-            if return_var:
-                quad = np.einsum("ij,ij->i", Ks @ cell.kinv[np.ix_(near, near)], Ks)
-                var[q] = np.maximum(prior - quad, 0.0)
+        near = [np.flatnonzero(_segment_distance((keys[rows[row_ptr[t]]] + 0.5) * _TILE, A, A + V)
+                               <= reach + half_diag) for t in range(len(counts))]
+        sizes = counts * np.array([len(n) for n in near])
+        nodes, weights, offsets, q_reach = self._quadrature.table(kernel)
+        prior, variance = float(kernel.variance), float(kernel.variance)
+        t0 = 0
+        while t0 < len(counts):  # chunks of tiles whose blocks fit in _BLOCK_ENTRIES
+            t1 = t0 + max(1, int(np.searchsorted(np.cumsum(sizes[t0:]), _BLOCK_ENTRIES)))
+            cols = np.concatenate(near[t0:t1]).astype(np.intp)
+            col_ptr = np.r_[0, np.cumsum([len(n) for n in near[t0:t1]])].astype(np.intp)
+            out_ptr = np.r_[0, np.cumsum(sizes[t0:t1])].astype(np.intp)
+            out = np.empty(int(out_ptr[-1]))
+            _integral.tile_covariance(
+                type(kernel).kind, float(type(kernel).cutoff2), Xs, A, V, lengths,
+                rows[row_ptr[t0]:row_ptr[t1]], row_ptr[t0:t1 + 1] - row_ptr[t0], cols, col_ptr,
+                out_ptr, nodes, weights, offsets, q_reach, out, self._n_threads)
+            for t in range(t0, t1):
+                q = rows[row_ptr[t]:row_ptr[t + 1]]
+                Ks = variance * out[out_ptr[t - t0]:out_ptr[t - t0 + 1]].reshape(len(q), -1)
+                mean[q] = Ks @ cell.alpha[near[t]]
+                if return_var:
+                    quad = np.einsum("ij,ij->i", Ks @ cell.kinv[np.ix_(near[t], near[t])], Ks)
+                    var[q] = np.maximum(prior - quad, 0.0)
+            t0 = t1
         return mean, var
 
     def predict(self, X: ArrayLike, return_var: bool = False):

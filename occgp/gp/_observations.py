@@ -7,7 +7,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import as_points
+from .._validation import as_point, as_points
 from ._integral import as_segments
 
 __all__ = ["Observations", "observations_from_scans", "make_observations"]
@@ -97,16 +97,18 @@ def observations_from_scans(scans) -> tuple[NDArray[np.float64], NDArray[np.floa
     ((34, 2), (34, 2), 2)
     """
     hits, starts, ends = [], [], []
+    dim = None
     for i, scan in enumerate(scans):
-        if hasattr(scan, "hit") and hasattr(scan, "end_points"):
-            end = np.asarray(scan.end_points, dtype=np.float64)
-            hits.append(end[np.asarray(scan.hit, dtype=bool)])
-            origin = np.asarray(scan.origin, dtype=np.float64)
-        else:
-            points, origin = scan[0], scan[1]
-            end = as_points(points, f"scans[{i}].points", np.shape(points)[-1])
-            origin = np.asarray(origin, dtype=np.float64)
-            hits.append(end)
+        laser = hasattr(scan, "hit") and hasattr(scan, "end_points")
+        points = scan.end_points if laser else scan[0]
+        if dim is None:
+            dim = np.shape(points)[-1] if np.ndim(points) == 2 else -1
+            if not 1 <= dim <= 3:
+                raise ValueError(f"scans[{i}] points must have shape (n_points, D) with D in "
+                                 f"1..3, got {np.shape(points)}")
+        end = as_points(points, f"scans[{i}].points", dim)
+        origin = as_point(scan.origin if laser else scan[1], f"scans[{i}].origin", dim)
+        hits.append(end[np.asarray(scan.hit, dtype=bool)] if laser else end)
         starts.append(np.broadcast_to(origin, end.shape))
         ends.append(end)
     if not ends:
