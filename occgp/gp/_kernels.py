@@ -272,7 +272,10 @@ class SparseKernel(_Stationary):
 
     ``variance * ((2 + cos(2 pi r)) / 3 * (1 - r) + sin(2 pi r) / (2 pi))``
     for ``r < 1`` and 0 beyond, ``r = sqrt(s)``: the length scale is the
-    support radius. Positive semi-definite in up to three dimensions.
+    support radius. Positive definite in one dimension; this isotropic form
+    in two and three dimensions is only nearly so (dense random points give
+    eigenvalues down to about -5e-6 times the trace), which the noise
+    variance on the diagonal covers.
 
     Parameters
     ----------
