@@ -271,6 +271,32 @@ def test_kl_active_sampling_rejects_a_duplicate_and_accepts_a_new_hit():
     assert m.n_rejected_ == 2 and m.n_accepted_ == 14
 
 
+def test_kl_sampling_sees_earlier_observations_of_the_same_batch():
+    hits, starts, ends = wall()
+    m = GPOMIK(optimizer=False, kl_threshold=0.5, max_cell_size=None).fit(hits, starts, ends)
+    kl = m.kl_divergence([[6.0, 5.0], [6.0, 5.0]])
+    assert kl[0] > 0.5 > kl[1]                          # the second copy adds nothing
+    m.update([[6.0, 5.0], [6.0, 5.0], [-5.0, 5.0]])
+    assert m.n_rejected_ == 1 and m.cells_[0].size == 14
+    # the sequential predictions equal those of a model that took the earlier ones
+    m2 = GPOMIK(optimizer=False, max_cell_size=None).fit(hits, starts, ends)
+    m2.update([[6.0, 5.0]])
+    both = GPOMIK(optimizer=False, max_cell_size=None).fit(hits, starts, ends)
+    seq = both.kl_divergence([[6.0, 5.0], [4.0, 4.0]])[1]
+    assert_allclose(seq, m2.kl_divergence([[4.0, 4.0]])[0], rtol=1e-8)
+
+
+def test_kl_sampling_asks_older_cells_too():
+    hits, starts, ends = wall()
+    far_hits = hits + [20.0, 0.0]
+    m = GPOMIK(optimizer=False, kl_threshold=0.5, max_cell_size=12)
+    m.fit(np.vstack([hits, far_hits]), np.vstack([starts, starts + [20.0, 0.0]]),
+          np.vstack([ends, ends + [20.0, 0.0]]))
+    assert len(m.cells_) >= 2
+    # each half of the data is known to one cell: duplicates anywhere are rejected
+    assert (m.kl_divergence(np.vstack([hits[:2], far_hits[:2]])) < 0.5).all()
+
+
 def test_kl_divergence_is_non_negative():
     rng = np.random.default_rng(0)
     hits, starts, ends = wall()

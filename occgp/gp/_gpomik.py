@@ -53,6 +53,13 @@ class _Cell:
         return pts.min(axis=0) - margin, pts.max(axis=0) + margin
 
 
+def _kl_gain(var, mu, y, noise):
+    """KL(after || before) of a latent N(mu, var) conditioned on target y with `noise`."""
+    var_after = var * noise / (var + noise)
+    shift = var / (var + noise) * (y - mu)
+    return 0.5 * (np.log(var / var_after) + (var_after + shift ** 2) / var - 1.0)
+
+
 def _check_int(value, name, low):
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise TypeError(f"{name} must be an int, got {type(value).__name__}")
@@ -293,13 +300,18 @@ default="clenshaw-curtis"
         return _Cell(obs, L, alpha)
 
     def kl_divergence(self, hits=None, segment_starts=None, segment_ends=None):
-        """KL divergence that adding each observation would bring to the newest cell.
+        """KL divergence that adding each observation would bring to the map.
 
-        For observation ``j`` with latent prediction ``N(mu, var)`` before it
-        is added and ``N(mu', var')`` after (conditioning on its target with
-        the noise variance): ``KL(after || before) = log(sqrt(var / var')) +
+        Observations are taken in order (hits first, then beams, each in
+        input order). For observation ``j`` with latent prediction
+        ``N(mu, var)`` given the map and the observations before it in this
+        batch, and ``N(mu', var')`` after conditioning on its target with the
+        noise variance: ``KL(after || before) = log(sqrt(var / var')) +
         (var' + (mu' - mu)**2) / (2 var) - 1/2``. For a beam, the latent is
-        the integral along it. Hits come first, then beams, in input order.
+        the integral along it. The newest cell conditions on the batch too
+        (one Cholesky factor of the batch's predictive covariance gives every
+        sequential prediction at once); an older cell whose box holds the
+        observation gives its own divergence, and the smallest one counts.
 
         Returns
         -------
@@ -307,31 +319,51 @@ default="clenshaw-curtis"
         """
         check_is_fitted(self, "cells_")
         new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
-        return self._kl(self.cells_[-1], new)
+        return self._kl(new)
 
-    def _kl(self, cell, new):
-        K12 = self._cross(cell.obs, new)
+    def _kl(self, new):
+        noise = self.noise_ + self.jitter_
         prior = np.diag(_covariance(self.kernel_, self._quadrature, new.starts, new.ends,
                                     n_threads=self._n_threads)).copy()
-        v = sl.solve_triangular(cell.L, K12, lower=True, check_finite=False)
-        mu = K12.T @ cell.alpha
-        var = np.maximum(prior - np.einsum("ij,ij->j", v, v), 1e-300)
-        noise = self.noise_ + self.jitter_
-        var_after = var * noise / (var + noise)
-        shift = var / (var + noise) * (new.y - mu)
-        return 0.5 * (np.log(var / var_after) + (var_after + shift ** 2) / var - 1.0)
+        margin = 3.0 / self.kernel_.inverse_length_scales(self.n_dims_)
+        kl = np.full(len(new.y), np.inf)
+        for i, cell in enumerate(self.cells_):
+            newest = i == len(self.cells_) - 1
+            if newest:
+                take = np.arange(len(new.y))
+            else:
+                lo, hi = cell.bounds(margin)
+                take = np.flatnonzero(np.all((new.anchors >= lo) & (new.anchors <= hi), axis=1))
+                if not len(take):
+                    continue
+            sub = new.take(take)
+            K12 = self._cross(cell.obs, sub)
+            S12 = sl.solve_triangular(cell.L, K12, lower=True, check_finite=False)
+            mu = K12.T @ cell.alpha
+            if newest:  # y_j given the cell and y_<j: one factor of the batch's covariance
+                C = _covariance(self.kernel_, self._quadrature, sub.starts, sub.ends,
+                                n_threads=self._n_threads) - S12.T @ S12
+                C[np.diag_indices_from(C)] += noise
+                Lc = sl.cholesky(C, lower=True, check_finite=False)
+                z = sl.solve_triangular(Lc, sub.y - mu, lower=True, check_finite=False)
+                d = np.diag(Lc)
+                mu, var = sub.y - d * z, d * d - noise
+            else:
+                var = prior[take] - np.einsum("ij,ij->j", S12, S12)
+            kl[take] = np.minimum(kl[take], _kl_gain(np.maximum(var, 1e-300), mu, sub.y, noise))
+        return kl
 
     def update(self, hits: ArrayLike | None = None, segment_starts: ArrayLike | None = None,
                segment_ends: ArrayLike | None = None) -> "GPOMIK":
         """Add observations by Cholesky updates, with active sampling.
 
         With `kl_threshold` set, observations whose KL divergence (see
-        :meth:`kl_divergence`, against the model before this call) is below
-        it are rejected. The accepted ones join the newest cell, its factor
-        grown by Eq. 11–13 of the paper (``O(n^2)`` instead of ``O(n^3)``);
-        past `max_cell_size` the rest start new cells (split spatially when
-        more than one cell's worth). Hyper-parameters and PLSC stay as
-        fitted.
+        :meth:`kl_divergence`: given the map and the earlier observations of
+        this call) is below it are rejected. The accepted ones join the newest
+        cell, its factor grown by Eq. 11–13 of the paper (``O(n^2)`` instead
+        of ``O(n^3)``); past `max_cell_size` the rest start new cells (split
+        spatially when more than one cell's worth). Hyper-parameters and PLSC
+        stay as fitted.
 
         Parameters
         ----------
@@ -350,7 +382,7 @@ default="clenshaw-curtis"
         check_is_fitted(self, "cells_")
         new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
         if self.kl_threshold is not None and len(new.y):
-            keep = self._kl(self.cells_[-1], new) >= float(self.kl_threshold)
+            keep = self._kl(new) >= float(self.kl_threshold)
             self.n_rejected_ += int((~keep).sum())
             new = new.take(keep)
         self.n_accepted_ += len(new.y)
