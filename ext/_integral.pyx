@@ -115,18 +115,27 @@ cdef inline void _add_node(const Kern* k, const double* c, const double* v, doub
             acc[1 + d] += g * q[d] * q[d]
 
 
+cdef inline Py_ssize_t _pick_order(const Rule* rule, double scaled_len,
+                                   Py_ssize_t* n_panels) noexcept nogil:
+    """The lowest order whose reach covers `scaled_len`; panels of the highest beyond."""
+    cdef Py_ssize_t o = 0
+    while o < rule.n_orders - 1 and rule.reach[o] < scaled_len:
+        o += 1
+    n_panels[0] = 1
+    if rule.reach[o] < scaled_len:
+        n_panels[0] = <Py_ssize_t>ceil(scaled_len / rule.reach[o])
+    return o
+
+
 cdef inline void _quad_piece(const Kern* k, const Rule* rule, const double* c,
                              const double* v, double t0, double t1, double scaled_len,
                              double* acc) noexcept nogil:
     """Integrate over t in [t0, t1] (a piece of scaled length `scaled_len`)."""
-    cdef Py_ssize_t o = 0, i, p, n_panels = 1, lo, hi
+    cdef Py_ssize_t o, i, p, n_panels, lo, hi
     cdef double width, h
     if t1 <= t0:
         return
-    while o < rule.n_orders - 1 and rule.reach[o] < scaled_len:
-        o += 1
-    if rule.reach[o] < scaled_len:
-        n_panels = <Py_ssize_t>ceil(scaled_len / rule.reach[o])
+    o = _pick_order(rule, scaled_len, &n_panels)
     lo = rule.offsets[o]
     hi = rule.offsets[o + 1]
     width = (t1 - t0) / n_panels
@@ -348,12 +357,7 @@ cdef void _segment_segment(const Kern* k, const Rule* rule, const double* Ao,
         t1 = cuts[piece + 1]
         if t1 <= t0:
             continue
-        o = 0
-        n_panels = 1
-        while o < rule.n_orders - 1 and rule.reach[o] < Lo * (t1 - t0):
-            o += 1
-        if rule.reach[o] < Lo * (t1 - t0):
-            n_panels = <Py_ssize_t>ceil(Lo * (t1 - t0) / rule.reach[o])
+        o = _pick_order(rule, Lo * (t1 - t0), &n_panels)
         lo = rule.offsets[o]
         hi = rule.offsets[o + 1]
         width = (t1 - t0) / n_panels
