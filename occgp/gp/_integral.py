@@ -11,7 +11,7 @@ closed forms for the squared exponential, adaptive quadrature otherwise.
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from .. import _integral
 from .._validation import as_points
