@@ -279,12 +279,18 @@ default="clenshaw-curtis"
         return _covariance(self.kernel_, self._quadrature, obs_a.starts, obs_a.ends,
                            obs_b.starts, obs_b.ends, n_threads=self._n_threads)
 
-    def _extend(self, cell, new):
-        """Cholesky update of Eq. 11–13: append `new` to `cell`."""
-        K12 = self._cross(cell.obs, new)
-        K22 = _covariance(self.kernel_, self._quadrature, new.starts, new.ends,
-                          n_threads=self._n_threads)
-        K22[np.diag_indices_from(K22)] += self.noise_ + self.jitter_
+    def _extend(self, cell, new, K12=None, K22=None):
+        """Cholesky update of Eq. 11–13: append `new` to `cell`.
+
+        `K12` (cell x new) and `K22` (new x new, without noise) are computed
+        unless given.
+        """
+        if K12 is None:
+            K12 = self._cross(cell.obs, new)
+        if K22 is None:
+            K22 = _covariance(self.kernel_, self._quadrature, new.starts, new.ends,
+                              n_threads=self._n_threads)
+        K22 = K22 + (self.noise_ + self.jitter_) * np.eye(len(K22))
         S12 = sl.solve_triangular(cell.L, K12, lower=True, check_finite=False)
         S22 = sl.cholesky(K22 - S12.T @ S12, lower=True, check_finite=False)
         n, m = cell.size, new.y.shape[0]
@@ -319,12 +325,14 @@ default="clenshaw-curtis"
         """
         check_is_fitted(self, "cells_")
         new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
-        return self._kl(new)
+        return self._kl(new)[0]
 
     def _kl(self, new):
+        """KL gains of `new`, and the newest cell's blocks K12 and K22 (no noise)."""
         noise = self.noise_ + self.jitter_
-        prior = np.diag(_covariance(self.kernel_, self._quadrature, new.starts, new.ends,
-                                    n_threads=self._n_threads)).copy()
+        K22 = _covariance(self.kernel_, self._quadrature, new.starts, new.ends,
+                          n_threads=self._n_threads)
+        prior = np.diag(K22)
         margin = 3.0 / self.kernel_.inverse_length_scales(self.n_dims_)
         kl = np.full(len(new.y), np.inf)
         for i, cell in enumerate(self.cells_):
@@ -341,8 +349,8 @@ default="clenshaw-curtis"
             S12 = sl.solve_triangular(cell.L, K12, lower=True, check_finite=False)
             mu = K12.T @ cell.alpha
             if newest:  # y_j given the cell and y_<j: one factor of the batch's covariance
-                C = _covariance(self.kernel_, self._quadrature, sub.starts, sub.ends,
-                                n_threads=self._n_threads) - S12.T @ S12
+                K12_newest = K12
+                C = K22 - S12.T @ S12
                 C[np.diag_indices_from(C)] += noise
                 Lc = sl.cholesky(C, lower=True, check_finite=False)
                 z = sl.solve_triangular(Lc, sub.y - mu, lower=True, check_finite=False)
@@ -351,7 +359,7 @@ default="clenshaw-curtis"
             else:
                 var = prior[take] - np.einsum("ij,ij->j", S12, S12)
             kl[take] = np.minimum(kl[take], _kl_gain(np.maximum(var, 1e-300), mu, sub.y, noise))
-        return kl
+        return kl, K12_newest, K22
 
     def update(self, hits: ArrayLike | None = None, segment_starts: ArrayLike | None = None,
                segment_ends: ArrayLike | None = None) -> "GPOMIK":
@@ -381,18 +389,23 @@ default="clenshaw-curtis"
         """
         check_is_fitted(self, "cells_")
         new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
+        keep = np.arange(len(new.y))
+        K12 = K22 = None
         if self.kl_threshold is not None and len(new.y):
-            keep = self._kl(new) >= float(self.kl_threshold)
-            self.n_rejected_ += int((~keep).sum())
-            new = new.take(keep)
-        self.n_accepted_ += len(new.y)
-        if not len(new.y):
+            kl, K12, K22 = self._kl(new)  # the blocks serve the Cholesky update below
+            keep = np.flatnonzero(kl >= float(self.kl_threshold))
+            self.n_rejected_ += len(new.y) - len(keep)
+        self.n_accepted_ += len(keep)
+        if not len(keep):
             return self
-        room = len(new.y) if self.max_cell_size is None else self.max_cell_size - self.cells_[-1].size
+        room = len(keep) if self.max_cell_size is None else self.max_cell_size - self.cells_[-1].size
         if room > 0:
-            head = new.take(slice(0, room))
-            self.cells_[-1] = self._extend(self.cells_[-1], head)
-            new = new.take(slice(room, None))
+            head = keep[:room]
+            self.cells_[-1] = self._extend(
+                self.cells_[-1], new.take(head), None if K12 is None else K12[:, head],
+                None if K22 is None else K22[np.ix_(head, head)])
+            keep = keep[room:]
+        new = new.take(keep)
         if len(new.y):
             self._add_cells(new)
         return self
