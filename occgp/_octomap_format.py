@@ -11,6 +11,8 @@ liboctomap sees it.
 
 from __future__ import annotations
 
+import math
+import re
 from typing import NamedTuple
 
 BINARY_HEADER = "# Octomap OcTree binary file"
@@ -44,7 +46,9 @@ def parse_header(data: bytes, source: str = "data") -> Header:
     ------
     ValueError
         If the first line is not an OctoMap header, a field is missing or
-        malformed, or the ``data`` line never comes.
+        malformed (``size`` not a non-negative integer, ``res`` not a
+        positive finite number), the ``data`` line never comes, or the
+        node count is more than the data block can hold.
     """
     first_end = data.find(b"\n")
     first = data[: first_end if first_end >= 0 else 64].decode("ascii", "replace").rstrip("\r")
@@ -75,15 +79,29 @@ def parse_header(data: bytes, source: str = "data") -> Header:
     missing = [k for k in ("id", "size", "res") if k not in fields]
     if missing:
         raise ValueError(f"{source}: header lacks the field(s) {', '.join(missing)}")
+    if not re.fullmatch(r"[0-9]{1,20}", fields["size"]):
+        raise ValueError(
+            f"{source}: malformed header: size must be a node count (a non-negative integer), "
+            f"got {fields['size'][:40]!r}"
+        )
+    size = int(fields["size"])
     try:
-        size = int(fields["size"])
         resolution = float(fields["res"])
     except ValueError:
         raise ValueError(
-            f"{source}: malformed header: size {fields['size']!r}, res {fields['res']!r}"
+            f"{source}: malformed header: res must be a number, got {fields['res'][:40]!r}"
         ) from None
-    if size < 0:
-        raise ValueError(f"{source}: header size must be >= 0, got {size}")
-    if not resolution > 0 or resolution == float("inf"):
-        raise ValueError(f"{source}: header resolution must be positive, got {resolution}")
+    if not 0 < resolution < math.inf:
+        raise ValueError(
+            f"{source}: header resolution must be positive and finite, got {resolution}"
+        )
+    # a .bt block spends 2 bytes on each node with children (8 children at most);
+    # a .ot block 5 bytes on every node
+    n_bytes = len(data) - pos
+    most = 1 + 4 * n_bytes if binary else n_bytes // 5
+    if size > most:
+        raise ValueError(
+            f"{source}: corrupt header: it announces {size} nodes, but the {n_bytes} data "
+            f"bytes hold at most {most}"
+        )
     return Header(binary, fields["id"], size, resolution, pos)

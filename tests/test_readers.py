@@ -301,9 +301,119 @@ def test_missing_file_raises_oserror(tmp_path, reader, name):
         reader(tmp_path / name)
 
 
-def test_readers_reject_non_path():
-    with pytest.raises(TypeError, match="path must be a str or os.PathLike"):
-        read_pcd(3)
+@pytest.mark.parametrize(
+    "reader", [read_pcd, read_kitti_bin, read_scan_graph, read_xyz, read_scan_log, read_scans,
+               load_scan_folder],
+)
+@pytest.mark.parametrize("bad, name", [(3, "int"), (b"a.pcd", "bytes"), (None, "NoneType")])
+def test_readers_reject_non_path(reader, bad, name):
+    with pytest.raises(TypeError, match=f"path must be str or os.PathLike, got {name}"):
+        reader(bad)
+
+
+def test_readers_reject_nul_in_path():
+    with pytest.raises(ValueError, match="path must not contain a NUL character"):
+        read_xyz("a\0b.xyz")
+
+
+def test_writers_reject_bad_arguments(tmp_path):
+    with pytest.raises(TypeError, match="path must be str or os.PathLike, got int"):
+        write_pcd(5, np.zeros((1, 3)))
+    with pytest.raises(TypeError, match="data must be a str"):
+        write_pcd(tmp_path / "a.pcd", np.zeros((1, 3)), data=1)
+    with pytest.raises(TypeError, match="fields must be a dict"):
+        write_pcd(tmp_path / "a.pcd", np.zeros((1, 3)), fields=[1, 2])
+    with pytest.raises(ValueError, match="dtype must be float32 or float64, got 'float16x'"):
+        write_pcd(tmp_path / "a.pcd", np.zeros((1, 3)), dtype="float16x")
+    with pytest.raises(ValueError, match=r"origin must be finite"):
+        write_pcd(tmp_path / "a.pcd", np.zeros((1, 3)), origin=[np.nan, 0, 0])
+    with pytest.raises(TypeError, match="points must be an array of numbers, got str"):
+        write_pcd(tmp_path / "a.pcd", "points")
+    with pytest.raises(TypeError, match="scans must be a sequence .* got int"):
+        write_scan_graph(tmp_path / "a.graph", 5)
+    with pytest.raises(TypeError, match=r"scans\[0\] must be a Scan or a \(points, origin\) pair"):
+        write_scan_graph(tmp_path / "a.graph", [5])
+    with pytest.raises(ValueError, match=r"scans\[0\].origin must be finite"):
+        write_scan_graph(tmp_path / "a.graph", [(np.zeros((1, 3)), [0, np.inf, 0])])
+    with pytest.raises(ValueError, match=r"scans\[1\].points must be finite"):
+        write_scan_graph(tmp_path / "a.graph", [(np.zeros((1, 3)), np.zeros(3)),
+                                                (np.full((1, 3), np.nan), np.zeros(3))])
+    assert not (tmp_path / "a.graph").exists()
+    write_scan_graph(tmp_path / "g.graph", (Scan(np.ones((2, 3)), np.zeros(3)) for _ in range(2)))
+    assert len(read_scan_graph(tmp_path / "g.graph")) == 2
+
+
+@pytest.mark.parametrize("reader", [read_kitti_bin, read_xyz])
+@pytest.mark.parametrize(
+    "origin, exc, match",
+    [([np.nan, 0, 0], ValueError, r"origin must be finite \(no NaN or inf\), got \[nan, 0.0, 0.0\]"),
+     ([0, np.inf, 0], ValueError, r"origin must be finite"),
+     ([0, 0], ValueError, r"origin must have shape \(3,\), got \(2,\)"),
+     ("abc", TypeError, "origin must be an array of numbers, got str"),
+     ({"x": 1}, TypeError, "origin must be an array of numbers, got dict"),
+     ([[0, 0], [1]], ValueError, "origin must be an array of numbers")],
+)
+def test_readers_reject_bad_origin(tmp_path, reader, origin, exc, match):
+    np.zeros((2, 4), np.float32).tofile(tmp_path / "s.bin")
+    (tmp_path / "s.xyz").write_text("1 2 3\n")
+    name = "s.bin" if reader is read_kitti_bin else "s.xyz"
+    with pytest.raises(exc, match=match):
+        reader(tmp_path / name, origin=origin)
+
+
+def test_read_pcd_rejects_non_bool_return_fields(tmp_path):
+    write_pcd(tmp_path / "a.pcd", np.zeros((1, 3)))
+    with pytest.raises(TypeError, match="return_fields must be a bool, got str"):
+        read_pcd(tmp_path / "a.pcd", return_fields="yes")
+
+
+def test_load_scan_folder_rejects_bad_pattern(tmp_path):
+    write_pcd(tmp_path / "a.pcd", np.zeros((1, 3)))
+    with pytest.raises(TypeError, match="pattern must be a str or None, got int"):
+        load_scan_folder(tmp_path, 5)
+    with pytest.raises(ValueError, match="pattern must be a non-empty glob relative to the folder"):
+        load_scan_folder(tmp_path, "")
+    with pytest.raises(ValueError, match="pattern must be a non-empty glob relative to the folder"):
+        load_scan_folder(tmp_path, "/etc/*.pcd")
+
+
+def test_non_finite_points_are_dropped_and_logged(tmp_path, caplog):
+    bad = np.array([[1, 2, 3, 0], [np.nan, 0, 0, 0], [0, np.inf, 0, 0], [4, 5, 6, 0]], np.float32)
+    bad.tofile(tmp_path / "k.bin")
+    (tmp_path / "t.xyz").write_text("1 2 3\nnan 1 1\n4 5 6\n1 1e999 1\n")
+    (tmp_path / "l.log").write_text("NODE 0 0 0 0 0 0\n1 2 3\ninf 0 0\n4 5 6\n")
+    write_scan_graph(tmp_path / "g.graph", [Scan(np.array([[1.0, 2, 3], [4, 5, 6]]), np.zeros(3))])
+    raw = bytearray((tmp_path / "g.graph").read_bytes())
+    raw[12:20] = struct.pack("<d", np.nan)  # x of the first point
+    (tmp_path / "g.graph").write_bytes(bytes(raw))
+    write_pcd(tmp_path / "p.pcd", np.array([[1.0, 2, 3], [np.nan, 0, 0], [4, 5, 6]]))
+    expect = {"k.bin": 2, "t.xyz": 2, "l.log": 1, "g.graph": 1, "p.pcd": 1}
+    for name, dropped in expect.items():
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="occgp"):
+            scan = read_scans(tmp_path / name)[0]
+        assert np.isfinite(scan.points).all()
+        assert len(scan.points) >= 1
+        assert f"dropped {dropped} of" in caplog.text and name in caplog.text
+    assert_array_equal(read_xyz(tmp_path / "t.xyz").points, [[1, 2, 3], [4, 5, 6]])
+    assert_array_equal(read_kitti_bin(tmp_path / "k.bin").points, [[1, 2, 3], [4, 5, 6]])
+
+
+def test_scan_graph_transform_overflow_is_dropped(tmp_path):
+    raw = _graph_bytes([[1e308, 0, 0], [1.0, 0, 0]], [1e308, 0, 0], [1, 0, 0, 0])
+    (tmp_path / "o.graph").write_bytes(raw)
+    assert_array_equal(read_scan_graph(tmp_path / "o.graph")[0].points, [[1e308 + 1, 0, 0]])
+
+
+def test_scan_graph_rejects_non_finite_pose(tmp_path):
+    (tmp_path / "a.graph").write_bytes(_graph_bytes([[1.0, 0, 0]], [np.nan, 0, 0], [1, 0, 0, 0]))
+    with pytest.raises(ValueError, match=r"a.graph: .*node 0 has a non-finite position"):
+        read_scan_graph(tmp_path / "a.graph")
+    (tmp_path / "b.graph").write_bytes(_graph_bytes([[1.0, 0, 0]], [0, 0, 0], [0, 0, 0, 0]))
+    with pytest.raises(ValueError, match=r"b.graph: .*node 0 has quaternion \[0.0, 0.0, 0.0, 0.0\]"):
+        read_scan_graph(tmp_path / "b.graph")
+    (tmp_path / "c.graph").write_bytes(_graph_bytes([[1.0, 0, 0]], [0, 0, 0], [1e300, 0, 0, 1e300]))
+    assert_allclose(read_scan_graph(tmp_path / "c.graph")[0].points, [[0, 1, 0]], atol=1e-12)
 
 
 def test_read_scans_dispatch(tmp_path, cloud):
@@ -345,8 +455,81 @@ def test_kitti_bin_round_trip_and_truncation(tmp_path, cloud):
     assert_allclose(scan.points, points, rtol=1e-6, atol=1e-6)
     assert_array_equal(scan.origin, [1, 2, 3])
     (tmp_path / "t.bin").write_bytes(rec.tobytes()[:-5])
-    with pytest.raises(ValueError, match="795 bytes is not a multiple of 16"):
+    with pytest.raises(ValueError, match=r"t.bin: size 795 bytes is not a multiple of 16, the "
+                                         r"size of a record \(KITTI: float32 x y z reflectance\)"):
         read_kitti_bin(tmp_path / "t.bin")
+
+
+def _nuscenes_records(n):
+    rng = np.random.default_rng(0)
+    rec = np.empty((n, 5), np.float32)
+    rec[:, :3] = rng.uniform(-50, 50, (n, 3))
+    rec[:, 3] = rng.uniform(0, 255, n)
+    rec[:, 4] = np.arange(n) % 32
+    return rec
+
+
+def test_nuscenes_pcd_bin_is_read_by_its_name(tmp_path):
+    rec = _nuscenes_records(34688)  # 693,760 bytes: a multiple of 16 and of 20
+    assert rec.nbytes == 693760 and rec.nbytes % 16 == 0
+    path = tmp_path / "n015-2018-07-24-11-22-45+0800__LIDAR_TOP__1532402927647951.pcd.bin"
+    rec.tofile(path)
+    for scans in ([read_kitti_bin(path)], read_scans(path), load_scan_folder(tmp_path, None),
+                  load_scan_folder(tmp_path, "*.bin")):
+        assert len(scans) == 1
+        assert_array_equal(scans[0].points, rec[:, :3].astype(np.float64))
+    # the same bytes read as KITTI would give 43,360 wrong points
+    assert len(read_kitti_bin(path, fields="kitti").points) == 43360
+    assert len(read_kitti_bin(path, fields=4).points) == 43360
+
+
+def test_bin_fields_argument(tmp_path):
+    rec = _nuscenes_records(7)
+    rec.tofile(tmp_path / "a.bin")  # 140 bytes: a multiple of 20, not of 16
+    with pytest.raises(ValueError, match=r"a.bin: size 140 bytes is not a multiple of 16.*"
+                                         r"pass fields=5"):
+        read_kitti_bin(tmp_path / "a.bin")
+    with pytest.raises(ValueError, match="pass fields=5"):
+        read_scans(tmp_path / "a.bin")
+    for fields in (5, "nuscenes", "NuScenes", np.int64(5)):
+        assert_array_equal(read_kitti_bin(tmp_path / "a.bin", fields=fields).points, rec[:, :3])
+    assert_array_equal(read_scans(tmp_path / "a.bin", fields=5)[0].points, rec[:, :3])
+    assert_array_equal(load_scan_folder(tmp_path, "*.bin", fields=5)[0].points, rec[:, :3])
+    xyz = rec[:, :3].copy()
+    xyz.tofile(tmp_path / "b.bin")
+    assert_array_equal(read_kitti_bin(tmp_path / "b.bin", fields=3).points, xyz)
+    layout = np.dtype([("t", "<u4"), ("x", "<f8"), ("y", "<f8"), ("z", "<f8")])
+    table = np.zeros(3, layout)
+    table["x"], table["y"], table["z"] = [1, 2, 3], [4, 5, 6], [7, 8, 9]
+    table.tofile(tmp_path / "c.bin")
+    assert_array_equal(read_kitti_bin(tmp_path / "c.bin", fields=layout).points,
+                       [[1, 4, 7], [2, 5, 8], [3, 6, 9]])
+    rec.tofile(tmp_path / "d.pcd.bin")
+    (tmp_path / "d.pcd.bin").write_bytes((tmp_path / "d.pcd.bin").read_bytes()[:-12])
+    with pytest.raises(ValueError, match=r"d.pcd.bin: size 128 bytes is not a multiple of 20.*"
+                                         r"nuScenes.*pass fields=4"):
+        read_kitti_bin(tmp_path / "d.pcd.bin")
+
+
+@pytest.mark.parametrize(
+    "fields, exc, match",
+    [(2, ValueError, "fields must be between 3 and 1024 float32 fields per record.*got 2"),
+     (10**9, ValueError, "fields must be between 3 and 1024"),
+     ("velodyne", ValueError, r"fields must be .* one of \['kitti', 'nuscenes'\], got 'velodyne'"),
+     (True, TypeError, "fields must be None, an int .* got bool"),
+     (4.0, TypeError, "fields must be None, an int .* got float"),
+     (np.dtype("<f4"), ValueError, "fields as a dtype must be a record dtype with fields x, y"),
+     (np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "S4")]), ValueError,
+      "the field 'z' must be a scalar number type")],
+)
+def test_bin_fields_rejects_bad_values(tmp_path, fields, exc, match):
+    np.zeros((2, 4), np.float32).tofile(tmp_path / "s.bin")
+    with pytest.raises(exc, match=match):
+        read_kitti_bin(tmp_path / "s.bin", fields=fields)
+    with pytest.raises(exc, match=match):
+        read_scans(tmp_path / "s.bin", fields=fields)
+    with pytest.raises(exc, match=match):
+        load_scan_folder(tmp_path, "*.bin", fields=fields)
 
 
 # --------------------------------------------------------------------------- #
@@ -446,9 +629,6 @@ def test_xyz_malformed_and_corrupt(tmp_path):
     (tmp_path / "b.xyz").write_text("1 2 3\n4 x 6\n")
     with pytest.raises(ValueError, match="line 2"):
         read_xyz(tmp_path / "b.xyz")
-    (tmp_path / "c.xyz").write_text("1 2 3\nnan 1 1\n")
-    with pytest.raises(ValueError, match="point 1 .* not finite"):
-        read_xyz(tmp_path / "c.xyz")
     raw = bz2.compress(b"1 2 3\n" * 100)
     (tmp_path / "d.xyz.bz2").write_bytes(raw[:-10])
     with pytest.raises(ValueError, match="corrupt or truncated bz2 stream"):
@@ -475,3 +655,87 @@ def test_scan_log_poses_and_errors(tmp_path):
     path.write_text("NODE 0 0 0 0 0 0\n1 2\n")
     with pytest.raises(ValueError, match="line 2"):
         read_scan_log(path)
+
+
+@pytest.mark.parametrize("suffix", [".gz", ".bz2", ".xz"])
+@pytest.mark.parametrize("damage", ["flip", "truncate", "garbage"])
+def test_corrupt_compressed_text_is_a_value_error(tmp_path, suffix, damage):
+    import lzma
+    compress = {".gz": gzip.compress, ".bz2": bz2.compress, ".xz": lzma.compress}[suffix]
+    raw = bytearray(compress(b"1 2 3\n4 5 6\n" * 50))
+    if damage == "flip":
+        raw[len(raw) // 2] ^= 0xFF  # gzip: zlib.error "invalid ..." before the fix
+        raw[len(raw) // 2 + 1] ^= 0x55
+    elif damage == "truncate":
+        raw = raw[: len(raw) // 2]
+    else:
+        raw = bytearray(b"this is not compressed")
+    path = tmp_path / f"s.xyz{suffix}"
+    path.write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match=rf"s.xyz{suffix}: corrupt or truncated {suffix[1:]}"):
+        read_xyz(path)
+    with pytest.raises(ValueError, match=rf"s.xyz{suffix}: corrupt or truncated"):
+        read_scans(path)
+
+
+def test_gzip_bad_deflate_block_was_zlib_error(tmp_path):
+    raw = bytearray(gzip.compress(b"1 2 3\n" * 10))
+    raw[10] = 0xFF  # first byte of the deflate stream: an invalid block type
+    (tmp_path / "s.xyz.gz").write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match=r"s.xyz.gz: corrupt or truncated gz stream"):
+        read_xyz(tmp_path / "s.xyz.gz")
+
+
+def test_pcd_ascii_integer_out_of_range(tmp_path):
+    text = ("FIELDS x y z ring\nSIZE 4 4 4 1\nTYPE F F F U\nCOUNT 1 1 1 1\nPOINTS 1\n"
+            "DATA ascii\n1 2 3 300\n")
+    (tmp_path / "r.pcd").write_text(text)
+    with pytest.raises(ValueError, match=r"r.pcd: PCD ascii data holds a value outside \[0, 255\]"):
+        read_pcd(tmp_path / "r.pcd")
+
+
+# --------------------------------------------------------------------------- #
+# OctoMap .bt / .ot headers
+# --------------------------------------------------------------------------- #
+def _tree_bytes(fmt):
+    from occgp import OccupancyOctree
+
+    tree = OccupancyOctree(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0.5]], [0, 0, 0])
+    return tree.to_bytes(fmt)
+
+
+@pytest.mark.parametrize("fmt", ["bt", "ot"])
+@pytest.mark.parametrize(
+    "old, new, match",
+    [(b"res 0.1", b"res nan", "header resolution must be positive and finite, got nan"),
+     (b"res 0.1", b"res inf", "header resolution must be positive and finite, got inf"),
+     (b"res 0.1", b"res -0.1", "header resolution must be positive and finite, got -0.1"),
+     (b"res 0.1", b"res 1e-400", "header resolution must be positive and finite, got 0.0"),
+     (b"res 0.1", b"res x", "res must be a number, got 'x'"),
+     (b"size ", b"size -", r"size must be a node count \(a non-negative integer\), got '-\d+'"),
+     (b"size ", b"size 1_", r"size must be a node count"),
+     (b"size ", b"size 99999999999999", r"announces 99999999999999\d* nodes, but the \d+ data"),
+     (b"size ", b"size 9" * 30, r"size must be a node count"),
+     (b"res 0.1\n", b"", "header lacks the field"),
+     (b"data\n", b"dat\n", r"truncated header \(no 'data' line\)"),
+     (b"id OcTree", b"id ColorOcTree", "holds a 'ColorOcTree' tree")],
+)
+def test_octomap_header_rejects_bad_fields(fmt, old, new, match):
+    from occgp import OccupancyOctree
+
+    data = _tree_bytes(fmt)
+    assert old in data
+    with pytest.raises(ValueError, match=match):
+        OccupancyOctree.from_bytes(data.replace(old, new, 1))
+
+
+@pytest.mark.parametrize("fmt", ["bt", "ot"])
+def test_octomap_truncated_header_and_data(fmt):
+    from occgp import OccupancyOctree
+
+    data = _tree_bytes(fmt)
+    end = data.index(b"data\n") + 5
+    for cut in (0, 10, 40, end - 3, end, end + 1, len(data) - 1):
+        with pytest.raises(ValueError, match="data|header|not an OctoMap file"):
+            OccupancyOctree.from_bytes(data[:cut])
+    assert OccupancyOctree.from_bytes(data).num_nodes > 0

@@ -5,7 +5,10 @@ import errno
 import gzip
 import lzma
 import os
+import zlib
 from pathlib import Path
+
+import numpy as np
 
 __all__ = ["as_path", "read_bytes", "read_maybe_compressed"]
 
@@ -13,9 +16,21 @@ __all__ = ["as_path", "read_bytes", "read_maybe_compressed"]
 def as_path(path, name="path") -> Path:
     """Coerce a str / os.PathLike to :class:`~pathlib.Path` (TypeError otherwise)."""
     try:
-        return Path(os.fspath(path))
+        path = os.fspath(path)
     except TypeError:
-        raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}") from None
+        raise TypeError(f"{name} must be str or os.PathLike, got {type(path).__name__}") from None
+    if not isinstance(path, str):
+        raise TypeError(f"{name} must be str or os.PathLike, got {type(path).__name__}")
+    if "\0" in path:
+        raise ValueError(f"{name} must not contain a NUL character, got {path!r}")
+    return Path(path)
+
+
+def check_bool(value, name):
+    """Return `value` if it is a bool (numpy's too), else raise a TypeError naming it."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a bool, got {type(value).__name__}")
+    return bool(value)
 
 
 def _check_file(path: Path) -> None:
@@ -45,5 +60,5 @@ def read_maybe_compressed(path) -> bytes:
         return raw
     try:
         return openers[suffix](raw)
-    except (OSError, EOFError, ValueError, lzma.LZMAError) as exc:
+    except (OSError, EOFError, ValueError, zlib.error, lzma.LZMAError) as exc:
         raise ValueError(f"{path}: corrupt or truncated {suffix[1:]} stream ({exc})") from None

@@ -14,8 +14,8 @@ import struct
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._fileio import as_path, read_bytes
-from ._scan import _make_scan
+from ._fileio import as_path, check_bool, read_bytes
+from ._scan import Scan, _drop_non_finite, _make_scan
 
 __all__ = ["read_pcd", "write_pcd", "lzf_decompress", "lzf_compress_literal"]
 
@@ -289,7 +289,14 @@ def _columns_ascii(body, names, dtypes, counts, n_points, path):
         if dt.kind in "iu":
             if not np.isfinite(block).all() or np.any(block != np.round(block)):
                 raise ValueError(f"{path}: PCD ascii data holds non-integers in an integer field")
-        out.append(block.astype(dt.newbyteorder("=")))
+            info = np.iinfo(dt)
+            if block.size and (block.min() < info.min or block.max() > info.max):
+                raise ValueError(
+                    f"{path}: PCD ascii data holds a value outside [{info.min}, {info.max}] "
+                    f"in a field of type {dt.name}"
+                )
+        with np.errstate(over="ignore"):  # beyond float32's range -> inf, as in PCL
+            out.append(block.astype(dt.newbyteorder("=")))
     return out
 
 
@@ -351,7 +358,8 @@ def read_pcd(path, *, return_fields: bool = False):
     translation as the sensor origin (as in the la3dm data sets). A
     ``VIEWPOINT`` rotation other than identity is ignored: the points stay as
     stored. Points with a non-finite x, y or z (the NaN holes of organised
-    clouds) are dropped.
+    clouds) are dropped, and their number logged on the ``"occgp"`` logger
+    (PCL's habit).
 
     Parameters
     ----------
@@ -376,6 +384,9 @@ def read_pcd(path, *, return_fields: bool = False):
         If the header is malformed (unknown entry, inconsistent FIELDS /
         SIZE / TYPE / COUNT, unsupported type, no x / y / z) or the data is
         truncated or corrupt; the message names the file and the problem.
+    TypeError
+        If `path` is not a str or os.PathLike, or `return_fields` is not a
+        bool.
 
     Notes
     -----
@@ -392,6 +403,7 @@ def read_pcd(path, *, return_fields: bool = False):
     ([[1.0, 2.0, 3.0]], [0.0, 0.0, 0.5])
     """
     path = as_path(path)
+    check_bool(return_fields, "return_fields")
     raw = read_bytes(path)
     header, pos = _parse_header(raw, path)
     names, dtypes, counts, n_points, origin, encoding = _layout(header, path)
@@ -403,7 +415,7 @@ def read_pcd(path, *, return_fields: bool = False):
         cols = _columns_compressed(raw, pos, dtypes, counts, n_points, path)
     xyz = np.column_stack([cols[names.index(a)][:, 0].astype(np.float64) for a in "xyz"])
     keep = np.isfinite(xyz).all(axis=1)
-    scan = _make_scan(xyz[keep] if not keep.all() else xyz, origin)
+    scan = Scan(_drop_non_finite(xyz, path), origin)
     if not return_fields:
         return scan
     fields = {}
@@ -448,7 +460,11 @@ def write_pcd(
     Raises
     ------
     ValueError
-        For bad shapes, an unknown `data` or an unsupported field dtype.
+        For bad shapes, non-finite `origin`, an unknown `data` or `dtype`,
+        or an unsupported field dtype.
+    TypeError
+        If `path` is not a str or os.PathLike, `data` is not a str, or
+        `fields` is not a dict.
     OSError
         If the file cannot be written.
 
@@ -462,10 +478,18 @@ def write_pcd(
     [0, 1, 2, 3]
     """
     path = as_path(path)
+    if not isinstance(data, str):
+        raise TypeError(f"data must be a str, one of {_ENCODINGS}, got {type(data).__name__}")
     if data not in _ENCODINGS:
         raise ValueError(f"data must be one of {_ENCODINGS}, got {data!r}")
+    if fields is not None and not isinstance(fields, dict):
+        raise TypeError(f"fields must be a dict of name -> array or None, got "
+                        f"{type(fields).__name__}")
     scan = _make_scan(points, np.zeros(3) if origin is None else origin)
-    dtype = np.dtype(dtype)
+    try:
+        dtype = np.dtype(dtype)
+    except TypeError:
+        raise ValueError(f"dtype must be float32 or float64, got {dtype!r}") from None
     if dtype not in (np.float32, np.float64):
         raise ValueError(f"dtype must be float32 or float64, got {dtype}")
     n = len(scan.points)

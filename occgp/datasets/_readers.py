@@ -10,6 +10,7 @@ truncated content.
 """
 
 import io
+import os
 import re
 import struct
 import warnings
@@ -19,10 +20,10 @@ from numpy.typing import ArrayLike
 
 from ._fileio import as_path, read_bytes, read_maybe_compressed
 from ._pcd import read_pcd
-from ._scan import Scan, _make_scan
+from ._scan import Scan, _drop_non_finite, _make_scan, check_origin
 
 __all__ = [
-    "read_kitti_bin", "read_scan_graph", "write_scan_graph", "read_xyz", "read_scan_log",
+    "BIN_LAYOUTS", "read_kitti_bin", "read_scan_graph", "write_scan_graph", "read_xyz", "read_scan_log",
     "load_scan_folder", "read_scans",
 ]
 
@@ -31,8 +32,13 @@ _COMPRESSED = (".bz2", ".gz", ".xz")
 
 
 def _quat_to_matrix(q):
-    """Rotation matrix of the unit quaternion ``(w, x, y, z)`` (normalised first)."""
+    """Rotation matrix of the unit quaternion ``(w, x, y, z)`` (normalised first).
+
+    `q` must be finite and non-zero; it is scaled by its largest component
+    first, so that no square overflows.
+    """
     q = np.asarray(q, dtype=np.float64)
+    q = q / np.max(np.abs(q))
     q = q / np.linalg.norm(q)
     w, x, y, z = q
     return np.array([
@@ -55,16 +61,86 @@ def _euler_to_matrix(roll, pitch, yaw):
 
 
 # --------------------------------------------------------------------------- #
-# KITTI
+# KITTI / nuScenes .bin
 # --------------------------------------------------------------------------- #
-def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Scan:
-    """Read a KITTI Velodyne scan: float32 records ``x y z reflectance``.
+#: Named record layouts of :func:`read_kitti_bin`: name -> (float32 fields, description).
+BIN_LAYOUTS = {
+    "kitti": (4, "KITTI: float32 x y z reflectance"),
+    "nuscenes": (5, "nuScenes: float32 x y z intensity ring_index"),
+}
+_MAX_BIN_FIELDS = 1024
+
+
+def _bin_record(fields, path):
+    """Return (record dtype with fields x, y, z, description) for :func:`read_kitti_bin`."""
+    if fields is None:
+        fields = "nuscenes" if path.name.lower().endswith(".pcd.bin") else "kitti"
+    if isinstance(fields, str):
+        key = fields.lower()
+        if key not in BIN_LAYOUTS:
+            raise ValueError(
+                f"fields must be a number of float32 fields, a numpy record dtype or one of "
+                f"{sorted(BIN_LAYOUTS)}, got {fields!r}"
+            )
+        fields, what = BIN_LAYOUTS[key]
+    elif isinstance(fields, np.dtype):
+        if fields.names is None or not {"x", "y", "z"} <= set(fields.names):
+            raise ValueError(f"fields as a dtype must be a record dtype with fields x, y and z, "
+                             f"got {fields}")
+        for axis in "xyz":
+            sub = fields.fields[axis][0]
+            if sub.kind not in "fiu" or sub.shape != ():
+                raise ValueError(
+                    f"fields: the field {axis!r} must be a scalar number type, got {sub}"
+                )
+        if fields.itemsize == 0:
+            raise ValueError(f"fields: the record dtype {fields} has size 0")
+        return fields, f"records of dtype {fields}"
+    elif isinstance(fields, (int, np.integer)) and not isinstance(fields, (bool, np.bool_)):
+        fields = int(fields)
+        if not 3 <= fields <= _MAX_BIN_FIELDS:
+            raise ValueError(
+                f"fields must be between 3 and {_MAX_BIN_FIELDS} float32 fields per record "
+                f"(x y z first), got {fields}"
+            )
+        what = next((d for n, d in BIN_LAYOUTS.values() if n == fields),
+                    f"{fields} float32 fields, x y z first")
+    else:
+        raise TypeError(
+            "fields must be None, an int (float32 fields per record), a layout name "
+            f"({', '.join(sorted(BIN_LAYOUTS))}) or a numpy record dtype, got "
+            f"{type(fields).__name__}"
+        )
+    names = ["x", "y", "z"] + [f"f{k}" for k in range(3, fields)]
+    return np.dtype({"names": names, "formats": ["<f4"] * fields}), what
+
+
+def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0), *, fields=None) -> Scan:
+    """Read a KITTI or nuScenes lidar scan: packed records whose first fields are x y z.
+
+    KITTI Velodyne files (``*.bin``) hold float32 ``x y z reflectance``
+    records (16 bytes); nuScenes files (``*.pcd.bin``, binary despite the
+    name) hold float32 ``x y z intensity ring_index`` records (20 bytes). The
+    layout is chosen by the file name unless `fields` says otherwise; a name
+    cannot be told from the size alone (34,688 nuScenes points are 693,760
+    bytes, a multiple of 16 too). Points with a NaN or inf coordinate are
+    dropped, and their number logged on the ``"occgp"`` logger (PCL's
+    habit).
 
     Parameters
     ----------
     path : str or os.PathLike
     origin : array-like of shape (3,), default=(0, 0, 0)
-        Sensor origin (KITTI points are in the sensor frame).
+        Sensor origin (KITTI and nuScenes points are in the sensor frame).
+        Must be finite.
+    fields : int, str or numpy.dtype, optional
+        The record layout. None (default) picks ``"nuscenes"`` for names
+        ending in ``.pcd.bin`` and ``"kitti"`` otherwise. A name:
+        ``"kitti"`` (4 float32) or ``"nuscenes"`` (5 float32). An int
+        ``n`` (3 to 1024): records of ``n`` little-endian float32 values,
+        x y z first (e.g. ``fields=3`` for bare ``x y z``). A numpy record
+        dtype with fields ``x``, ``y`` and ``z`` for any other layout, e.g.
+        ``np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("t", "<u4")])``.
 
     Returns
     -------
@@ -75,25 +151,48 @@ def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Scan:
     OSError
         If the file is missing or unreadable.
     ValueError
-        If its size is not a multiple of 16 bytes (truncated file).
+        If the file size is not a whole number of records (the message
+        gives the file, its size and the record size, and suggests
+        ``fields=5`` when a KITTI-named file fits nuScenes' layout), if
+        `fields` is not a known layout, or `origin` is not of shape (3,)
+        or not finite.
+    TypeError
+        If `path`, `origin` or `fields` has a wrong type.
 
     Examples
     --------
     >>> import tempfile, os
-    >>> path = os.path.join(tempfile.mkdtemp(), "000000.bin")
+    >>> folder = tempfile.mkdtemp()
+    >>> path = os.path.join(folder, "000000.bin")
     >>> np.array([[1, 2, 3, 0.5]], dtype=np.float32).tofile(path)
+    >>> read_kitti_bin(path).points.tolist()
+    [[1.0, 2.0, 3.0]]
+    >>> path = os.path.join(folder, "n008__LIDAR_TOP__1533151603547590.pcd.bin")
+    >>> np.array([[1, 2, 3, 7, 31]], dtype=np.float32).tofile(path)
     >>> read_kitti_bin(path).points.tolist()
     [[1.0, 2.0, 3.0]]
     """
     path = as_path(path)
+    origin = check_origin(origin)
+    record, what = _bin_record(fields, path)
     raw = read_bytes(path)
-    if len(raw) % 16:
+    if len(raw) % record.itemsize:
+        hint = ""
+        if fields is None and record.itemsize == 16 and len(raw) % 20 == 0:
+            hint = ("; it is a whole number of nuScenes records: pass fields=5 (or 'nuscenes'), "
+                    "or name the file *.pcd.bin")
+        elif fields is None and record.itemsize == 20 and len(raw) % 16 == 0:
+            hint = "; it is a whole number of KITTI records: pass fields=4 (or 'kitti')"
         raise ValueError(
-            f"{path}: KITTI .bin size {len(raw)} bytes is not a multiple of 16 "
-            "(float32 x y z reflectance records); the file is truncated or not a KITTI scan"
+            f"{path}: size {len(raw)} bytes is not a multiple of {record.itemsize}, the size of "
+            f"a record ({what}); the file is truncated or has another layout{hint}"
         )
-    data = np.frombuffer(raw, dtype="<f4").reshape(-1, 4)
-    return _make_scan(data[:, :3].astype(np.float64), origin)
+    data = np.frombuffer(raw, dtype=record)
+    points = np.empty((len(data), 3))
+    with np.errstate(over="ignore", invalid="ignore"):
+        for k, axis in enumerate("xyz"):
+            points[:, k] = data[axis]
+    return Scan(_drop_non_finite(points, path), origin)
 
 
 # --------------------------------------------------------------------------- #
@@ -134,7 +233,9 @@ def read_scan_graph(path) -> list:
     Quaternion = int32 4 + float64 w x y z) and a uint32 id; then uint32 edge
     count and the edges (uint32 ids, Pose6D, float64 weight). Node points
     are in the sensor frame; they are returned in the world frame,
-    ``R(q) p + t``, with origin ``t``.
+    ``R(q) p + t``, with origin ``t``. Points with a NaN or inf coordinate
+    (stored so, or overflowing in the transform) are dropped, and their
+    number logged on the ``"occgp"`` logger (PCL's habit).
 
     Parameters
     ----------
@@ -150,8 +251,11 @@ def read_scan_graph(path) -> list:
         If the file is missing or unreadable.
     ValueError
         If the file is truncated (the message gives the bytes expected and
-        found), has trailing bytes, or its Vector3 / Quaternion tags are
-        not 3 / 4.
+        found), has trailing bytes, its Vector3 / Quaternion tags are not
+        3 / 4, a quaternion is zero or not finite, or a node position is
+        not finite.
+    TypeError
+        If `path` is not a str or os.PathLike.
 
     Examples
     --------
@@ -174,12 +278,18 @@ def read_scan_graph(path) -> list:
             raise ValueError(f"{path}: malformed ScanGraph: a point of node {i} is not tagged 3")
         if pose["tn"] != 3 or pose["qn"] != 4:
             raise ValueError(f"{path}: malformed ScanGraph: bad pose tags in node {i}")
-        q = pose["q"]
-        if not np.all(np.isfinite(q)) or np.linalg.norm(q) == 0:
+        q, t = pose["q"], pose["t"]
+        if not np.all(np.isfinite(q)) or not np.any(q):
             raise ValueError(f"{path}: malformed ScanGraph: node {i} has quaternion {q.tolist()}")
+        if not np.all(np.isfinite(t)):
+            raise ValueError(
+                f"{path}: malformed ScanGraph: node {i} has a non-finite position (origin) "
+                f"{t.tolist()}"
+            )
         rotation = _quat_to_matrix(q)
-        points = block["xyz"] @ rotation.T + pose["t"]
-        scans.append(_make_scan(points, pose["t"].copy()))
+        with np.errstate(over="ignore", invalid="ignore"):
+            points = block["xyz"] @ rotation.T + t
+        scans.append(Scan(_drop_non_finite(points, f"{path} node {i}"), t.copy()))
     n_edges = cur.uint32("the edge count")
     edges = cur.take(_EDGE, n_edges, f"{n_edges} edges")
     if n_edges and (np.any(edges["pose"]["tn"] != 3) or np.any(edges["pose"]["qn"] != 4)):
@@ -207,7 +317,10 @@ def write_scan_graph(path, scans) -> None:
     Raises
     ------
     ValueError
-        If a scan has bad shapes.
+        If a scan has bad shapes or non-finite points or origin.
+    TypeError
+        If `path` is not a str or os.PathLike, or `scans` is not a sequence
+        of Scan or (points, origin) pairs.
     OSError
         If the file cannot be written.
 
@@ -220,9 +333,29 @@ def write_scan_graph(path, scans) -> None:
     220
     """
     path = as_path(path)
-    chunks = [struct.pack("<I", len(scans))]
+    if isinstance(scans, (str, bytes, np.ndarray)) or not hasattr(scans, "__iter__"):
+        raise TypeError(
+            f"scans must be a sequence of Scan or (points, origin) pairs, got {type(scans).__name__}"
+        )
+    scans = list(scans)
+    checked = []
     for i, scan in enumerate(scans):
-        points, origin = _make_scan(*scan, source=f"scans[{i}].points")
+        try:
+            points, origin = scan
+        except (TypeError, ValueError):
+            raise TypeError(
+                f"scans[{i}] must be a Scan or a (points, origin) pair, got {type(scan).__name__}"
+            ) from None
+        points, origin = _make_scan(points, origin, source=f"scans[{i}].points",
+                                    origin_name=f"scans[{i}].origin")
+        if not np.isfinite(points).all():
+            raise ValueError(f"scans[{i}].points must be finite (no NaN or inf)")
+        if len(points) >= 2**32:
+            raise ValueError(f"scans[{i}].points has {len(points)} points; a ScanGraph node "
+                             "holds fewer than 2**32")
+        checked.append((points, origin))
+    chunks = [struct.pack("<I", len(checked))]
+    for i, (points, origin) in enumerate(checked):
         block = np.zeros(len(points), dtype=_POINT)
         block["n"] = 3
         block["xyz"] = points - origin
@@ -273,9 +406,6 @@ def _parse_xyz(text, path, first_line=1):
             raise ValueError(f"{path}: malformed point data: {_bad_line(text, first_line) or exc}")
     if table.size == 0:
         return np.empty((0, 3))
-    if not np.isfinite(table).all():
-        row = int(np.argmax(~np.isfinite(table).all(axis=1)))
-        raise ValueError(f"{path}: point {row} (counting from 0) is not finite (NaN or inf)")
     return table
 
 
@@ -284,13 +414,15 @@ def read_xyz(path, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Scan:
 
     Extra columns are ignored, ``#`` comments and blank lines skipped;
     ``.bz2``, ``.gz`` and ``.xz`` files are decompressed transparently
-    (by suffix).
+    (by suffix). Points with a NaN or inf coordinate (``nan``, ``inf``,
+    ``1e999``) are dropped, and their number logged on the ``"occgp"``
+    logger (PCL's habit).
 
     Parameters
     ----------
     path : str or os.PathLike
     origin : array-like of shape (3,), default=(0, 0, 0)
-        Sensor origin.
+        Sensor origin. Must be finite.
 
     Returns
     -------
@@ -302,8 +434,11 @@ def read_xyz(path, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Scan:
         If the file is missing or unreadable.
     ValueError
         For a malformed line (with its line number where numpy reports
-        it), non-finite values, a corrupt compressed stream, or ``NODE``
-        lines (an OctoMap scan log: use :func:`read_scan_log`).
+        it), a corrupt compressed stream, ``NODE`` lines (an OctoMap scan
+        log: use :func:`read_scan_log`), or an `origin` not of shape (3,)
+        or not finite.
+    TypeError
+        If `path` or `origin` has a wrong type.
 
     Examples
     --------
@@ -315,13 +450,14 @@ def read_xyz(path, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Scan:
     [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]
     """
     path = as_path(path)
+    origin = check_origin(origin)
     text = _text_of(path)
     if re.search(r"^\s*NODE\b", text, flags=re.MULTILINE):
         raise ValueError(
             f"{path}: contains NODE lines (an OctoMap scan log with poses); "
             "read it with read_scan_log"
         )
-    return _make_scan(_parse_xyz(text, path), origin)
+    return Scan(_drop_non_finite(_parse_xyz(text, path), path), origin)
 
 
 def read_scan_log(path) -> list:
@@ -331,7 +467,12 @@ def read_scan_log(path) -> list:
     angles in radians, rotation ``Rz(yaw) Ry(pitch) Rx(roll)``) followed by
     its points in the sensor frame, one ``x y z`` per line. Points are
     returned in the world frame. Compressed files are handled as in
-    :func:`read_xyz`.
+    :func:`read_xyz`, and so are points with a NaN or inf coordinate
+    (dropped, their number logged).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
 
     Returns
     -------
@@ -342,7 +483,10 @@ def read_scan_log(path) -> list:
     OSError
         If the file is missing or unreadable.
     ValueError
-        If a point comes before the first NODE line, or a line is malformed.
+        If a point comes before the first NODE line, or a line is malformed
+        (a NODE pose must be six finite numbers).
+    TypeError
+        If `path` is not a str or os.PathLike.
 
     Examples
     --------
@@ -379,8 +523,9 @@ def _scan_log_from_text(text, path):
         stop = starts[k + 1] if k + 1 < len(starts) else len(lines)
         local = _parse_xyz("\n".join(lines[start + 1:stop]), path, first_line=start + 2)
         t = np.array(pose[:3])
-        points = local @ _euler_to_matrix(*pose[3:]).T + t
-        scans.append(_make_scan(points, t))
+        with np.errstate(over="ignore", invalid="ignore"):
+            points = local @ _euler_to_matrix(*pose[3:]).T + t
+        scans.append(Scan(_drop_non_finite(points, f"{path} NODE on line {start + 1}"), t))
     return scans
 
 
@@ -410,7 +555,7 @@ def _kind(path):
     return None
 
 
-def load_scan_folder(path, pattern: str | None = "*.pcd") -> list:
+def load_scan_folder(path, pattern: str | None = "*.pcd", *, fields=None) -> list:
     """Read a folder of scan files (la3dm style), in natural file-name order.
 
     Files are sorted by the numbers in their names (``scan_2`` before
@@ -421,8 +566,12 @@ def load_scan_folder(path, pattern: str | None = "*.pcd") -> list:
     path : str or os.PathLike
         The folder.
     pattern : str or None, optional
-        Glob pattern of the files to read (default ``"*.pcd"``); None reads every file with a
-        supported suffix (see :func:`read_scans`).
+        Glob pattern of the files to read (default ``"*.pcd"``), relative to
+        the folder; None reads every file with a supported suffix (see
+        :func:`read_scans`).
+    fields : int, str or numpy.dtype, optional
+        Record layout of the ``.bin`` files, passed to
+        :func:`read_kitti_bin` (default: by file name).
 
     Returns
     -------
@@ -433,7 +582,11 @@ def load_scan_folder(path, pattern: str | None = "*.pcd") -> list:
     OSError
         If the folder is missing or not a directory.
     ValueError
-        If no file matches, or a file is malformed.
+        If no file matches, `pattern` is empty or absolute, or a file is
+        malformed.
+    TypeError
+        If `path` is not a str or os.PathLike, or `pattern` is not a str
+        or None.
 
     Examples
     --------
@@ -446,6 +599,12 @@ def load_scan_folder(path, pattern: str | None = "*.pcd") -> list:
     [np.float64(1.0), np.float64(2.0), np.float64(10.0)]
     """
     folder = as_path(path)
+    if pattern is not None and not isinstance(pattern, str):
+        raise TypeError(f"pattern must be a str or None, got {type(pattern).__name__}")
+    if pattern is not None and (not pattern or os.path.isabs(pattern) or "\0" in pattern):
+        raise ValueError(f"pattern must be a non-empty glob relative to the folder, got {pattern!r}")
+    if fields is not None:
+        _bin_record(fields, folder)  # check it before reading anything
     if not folder.exists():
         raise FileNotFoundError(2, "no such directory", str(folder))
     if not folder.is_dir():
@@ -453,24 +612,27 @@ def load_scan_folder(path, pattern: str | None = "*.pcd") -> list:
     if pattern is None:
         files = [p for p in folder.iterdir() if p.is_file() and _kind(p) is not None]
     else:
-        files = [p for p in folder.glob(pattern) if p.is_file()]
+        try:
+            files = [p for p in folder.glob(pattern) if p.is_file()]
+        except (ValueError, NotImplementedError) as exc:
+            raise ValueError(f"pattern {pattern!r} is not a valid glob ({exc})") from None
     if not files:
         what = "supported scan files" if pattern is None else f"files matching {pattern!r}"
         raise ValueError(f"{folder}: no {what} in the folder")
     scans = []
     for f in sorted(files, key=_natural_key):
-        scans.extend(read_scans(f))
+        scans.extend(read_scans(f, fields=fields))
     return scans
 
 
-def read_scans(path) -> list:
+def read_scans(path, *, fields=None) -> list:
     """Read scans from a file or folder, choosing the reader by suffix.
 
     ==============================================  ==========================
     suffix                                          reader
     ==============================================  ==========================
     ``.pcd``                                        :func:`read_pcd`
-    ``.bin``                                        :func:`read_kitti_bin`
+    ``.bin`` (KITTI), ``.pcd.bin`` (nuScenes)       :func:`read_kitti_bin`
     ``.graph``                                      :func:`read_scan_graph`
     ``.xyz .txt .dat .log`` (+ ``.bz2 .gz .xz``)    :func:`read_xyz`, or
                                                     :func:`read_scan_log` if
@@ -478,6 +640,17 @@ def read_scans(path) -> list:
     a directory                                     :func:`load_scan_folder`
                                                     (every supported file)
     ==============================================  ==========================
+
+    nuScenes' ``*.pcd.bin`` files are binary records, not PCD: they go to
+    :func:`read_kitti_bin` with its nuScenes layout.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A scan file or a folder of them.
+    fields : int, str or numpy.dtype, optional
+        Record layout of ``.bin`` files (see :func:`read_kitti_bin`);
+        default: by file name.
 
     Returns
     -------
@@ -489,6 +662,8 @@ def read_scans(path) -> list:
         If the path does not exist or cannot be read.
     ValueError
         For an unsupported suffix or malformed content.
+    TypeError
+        If `path` is not a str or os.PathLike, or `fields` has a wrong type.
 
     Examples
     --------
@@ -500,22 +675,24 @@ def read_scans(path) -> list:
     1
     """
     path = as_path(path)
+    if fields is not None:
+        _bin_record(fields, path)  # check it whatever the file
     if path.is_dir():
-        return load_scan_folder(path, pattern=None)
+        return load_scan_folder(path, pattern=None, fields=fields)
     if not path.exists():
         raise FileNotFoundError(2, "no such file or directory", str(path))
     kind = _kind(path)
     if kind == "pcd":
         return [read_pcd(path)]
     if kind == "bin":
-        return [read_kitti_bin(path)]
+        return [read_kitti_bin(path, fields=fields)]
     if kind == "graph":
         return read_scan_graph(path)
     if kind == "text":
         text = _text_of(path)
         if re.search(r"^\s*NODE\b", text, flags=re.MULTILINE):
             return _scan_log_from_text(text, path)
-        return [_make_scan(_parse_xyz(text, path), np.zeros(3))]
+        return [Scan(_drop_non_finite(_parse_xyz(text, path), path), np.zeros(3))]
     raise ValueError(
         f"{path}: unsupported scan file suffix {''.join(path.suffixes)!r}; expected .pcd, "
         ".bin, .graph, .xyz/.txt/.dat/.log (optionally .bz2/.gz/.xz) or a directory"
