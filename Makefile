@@ -47,3 +47,14 @@ clean:
 
 distclean: clean
 	rm -rf $(VENV) *.egg-info
+
+# Long fuzz campaign of the readers and loaders (tools/fuzz.py): FUZZ_CASES seeded
+# mutation cases per reader, then as many coverage-guided atheris runs where atheris
+# installs (the seeded generator alone otherwise). Prints a table; fails on any
+# crash, hang or unclear exception.
+FUZZ_CASES ?= 10000
+FUZZ_JOBS  ?= 2
+.PHONY: fuzz
+fuzz: $(STAMP)
+	-$(PY) -m pip install -q atheris || echo "atheris does not install here: the seeded generator runs alone"
+	$(PY) tools/fuzz.py --cases $(FUZZ_CASES) --jobs $(FUZZ_JOBS) --atheris-runs $(FUZZ_CASES)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 TOOL = Path(__file__).resolve().parents[1] / "tools" / "fuzz.py"
-CASES = 150  # per reader: 15 readers, ~2 ms a case, in two child processes
+CASES = 300  # per reader: 15 readers, ~2 ms a case, in two child processes
 
 
 @pytest.fixture(scope="module")

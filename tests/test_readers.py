@@ -251,6 +251,7 @@ _GOOD = {
         ({"HEIGHT": "COLOR 1"}, "unknown PCD header entry 'COLOR'"),
         ({"DATA": ""}, "no DATA line"),
         ({"COUNT": "COUNT 1 1 2"}, "'z' must have COUNT 1"),
+        ({"COUNT": "COUNT 1 1 0"}, "'z' has COUNT 0, expected 1 to 1048576"),
     ],
 )
 def test_pcd_malformed_header(tmp_path, change, match):
@@ -739,3 +740,15 @@ def test_octomap_truncated_header_and_data(fmt):
         with pytest.raises(ValueError, match="data|header|not an OctoMap file"):
             OccupancyOctree.from_bytes(data[:cut])
     assert OccupancyOctree.from_bytes(data).num_nodes > 0
+
+
+@pytest.mark.parametrize("data", ["ascii", "binary", "binary_compressed"])
+@pytest.mark.parametrize("count", [2**20 + 1, 2**32, 10**20])
+def test_pcd_absurd_count_of_an_empty_cloud(tmp_path, data, count):
+    # numpy raised "invalid shape in fixed-type tuple" (naming nothing) for binary data
+    header = (f"FIELDS x y z i\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 {count}\nWIDTH 0\n"
+              f"HEIGHT 1\nPOINTS 0\nDATA {data}\n").encode()
+    body = bytes(8) if data == "binary_compressed" else b""
+    (tmp_path / "c.pcd").write_bytes(header + body)
+    with pytest.raises(ValueError, match=rf"c.pcd: field 'i' has COUNT {count}, expected 1 to"):
+        read_pcd(tmp_path / "c.pcd")

@@ -87,7 +87,8 @@ def _pcd_seeds(data):
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "s.pcd"
         for k, (n, dtype, extra) in enumerate([(40, "float32", True), (12, "float64", False),
-                                               (25, "float32", False), (0, "float32", False)]):
+                                               (25, "float32", False), (0, "float32", False),
+                                               (0, "float64", True), (1, "float32", True)]):
             points, origin = _cloud(rng, n)
             fields = None
             if extra:
@@ -898,7 +899,9 @@ def format_finding(f, seed=0):
 def _atheris_main(name, runs, corpus, counts_path, timeout):
     import atheris
 
-    with atheris.instrument_imports():
+    import numpy  # noqa: F401 - imported (uninstrumented) first
+
+    with atheris.instrument_imports(include=["occgp"]):
         import occgp  # noqa: F401
         import occgp.datasets  # noqa: F401
     import warnings
@@ -937,8 +940,8 @@ def _atheris_main(name, runs, corpus, counts_path, timeout):
 
     corpus = Path(corpus)
     corpus.mkdir(parents=True, exist_ok=True)
-    for k, seed_data in enumerate(reader.seeds()):
-        data = seed_data[1] if isinstance(seed_data, tuple) else seed_data
+    seeds = readers()["kitti_bin"].seeds() if isinstance(reader, FolderReader) else reader.seeds()
+    for k, data in enumerate(seeds):
         (corpus / f"seed{k}").write_bytes(data)
     args = [sys.argv[0], f"-runs={runs}", f"-timeout={int(timeout)}", "-rss_limit_mb=6144",
             "-max_len=65536", f"-artifact_prefix={corpus.parent}/", "-print_final_stats=0",
@@ -974,10 +977,9 @@ def run_atheris(names, runs, timeout, jobs):
             log.close()
             c = json.loads(counts.read_text()) if counts.exists() else dict.fromkeys(OUTCOMES, 0)
             text = (root / f"{name}.log").read_text("utf-8", "replace")
-            crash = proc.returncode != 0 and "unclear outcome" not in text \
-                and "Timeout" not in text and "timeout" not in text
-            hang = proc.returncode != 0 and ("Timeout" in text or "timeout" in text)
+            hang = proc.returncode != 0 and "libFuzzer: timeout" in text
             unclear = proc.returncode != 0 and "unclear outcome" in text
+            crash = proc.returncode != 0 and not hang and not unclear
             c["crash"] += int(crash)
             c["hang"] += int(hang)
             c["unclear"] += int(unclear)

@@ -1,7 +1,7 @@
 """PCD (Point Cloud Data, PCL) reading and writing, with an LZF codec.
 
 Supports PCD v0.5 - v0.7 headers, any FIELDS / SIZE / TYPE / COUNT layout
-(types F of size 4 / 8, I and U of size 1 / 2 / 4 / 8, COUNT >= 1) and the
+(types F of size 4 / 8, I and U of size 1 / 2 / 4 / 8, COUNT 1 to 2**20) and the
 three DATA encodings: ``ascii``, ``binary`` (row-major, packed) and
 ``binary_compressed`` (LZF-compressed, field-major). Binary data is read
 little-endian.
@@ -27,6 +27,7 @@ _TYPES = {
 _KEYS = {"VERSION", "FIELDS", "COLUMNS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT",
          "VIEWPOINT", "POINTS", "DATA"}
 _ENCODINGS = ("ascii", "binary", "binary_compressed")
+_MAX_COUNT = 2**20  # values per field and point (PCL's descriptors hold a few hundred)
 
 
 # --------------------------------------------------------------------------- #
@@ -203,8 +204,10 @@ def _layout(header, path):
                 f"{path}: field {name!r} has unsupported TYPE {t} with SIZE {s} "
                 "(expected F 4/8, I or U 1/2/4/8)"
             )
-        if c < 1:
-            raise ValueError(f"{path}: field {name!r} has COUNT {c}, expected >= 1")
+        if not 1 <= c <= _MAX_COUNT:
+            raise ValueError(
+                f"{path}: field {name!r} has COUNT {c}, expected 1 to {_MAX_COUNT}"
+            )
         dtypes.append(np.dtype(_TYPES[t, s]))
     for axis in "xyz":
         if axis not in names:
