@@ -160,7 +160,7 @@ default="auto"
         method, threshold = self._check_method(method, superray_threshold)
         scan = self._validated_scan(points, origin, max_range, mode, check_ends=False)
         if scan is not None:
-            pts, org, rng = scan
+            pts, org, rng, _ = scan
             threshold = self._adaptive_threshold(method, threshold)
             self._record_insert(self._insert(
                 pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),

@@ -19,6 +19,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sklearn import metrics as _skm
 
+from ._validation import check_real
+
 __all__ = [
     "roc_curve",
     "roc_auc",
@@ -271,15 +273,8 @@ def accuracy(
 
 
 def _check_threshold(threshold):
-    try:
-        value = float(threshold)
-    except (TypeError, ValueError):
-        raise TypeError(
-            f"threshold must be a real number, got {type(threshold).__name__}"
-        ) from None
-    if not 0.0 <= value <= 1.0:
-        raise ValueError(f"threshold must be in [0, 1], got {threshold!r}")
-    return value
+    return check_real(threshold, "threshold", low=0.0, high=1.0, low_open=False,
+                      high_open=False)
 
 
 def _accuracy(labels, probs, threshold):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 import os
 
 import numpy as np
@@ -9,8 +10,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import _octomap_format as fmt
 from ._logodds_map import Leaves, LogOddsMap
-from ._octree import _check_binary_data, _check_full_data, _OcTree
-from ._validation import check_real
+from ._octree import KEYRAY_CELLS, _check_binary_data, _check_full_data, _OcTree
+from ._validation import as_numeric, as_points, check_real, check_resolution
 
 __all__ = ["OccupancyOctree", "Leaves"]
 
@@ -212,15 +213,25 @@ default="auto"
         scan = self._validated_scan(points, origin, max_range, mode, check_ends=liboctomap)
         if scan is None:
             return self
-        pts, org, rng = scan
+        pts, org, rng, cells = scan
         if liboctomap:
-            self._insert_point_cloud(pts, org, rng, bool(discretize))
-            self.last_insert_: dict[str, float] = {"rays": len(pts)}
-        else:
-            threshold = self._adaptive_threshold(method, threshold)
-            self._record_insert(self._insert_batch(
-                pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),
-                pts, org, rng, method, threshold)
+            if discretize and not self._in_range(pts).all():
+                # liboctomap discretises before it truncates, with unchecked keys
+                self._raise_out_of_range("points", self._in_range(pts),
+                                         " (with discretize=True, before truncation)")
+            if cells.max() <= KEYRAY_CELLS:
+                self._insert_point_cloud(pts, org, rng, bool(discretize))
+                self.last_insert_: dict[str, float] = {"rays": len(pts)}
+                return self
+            # a ray too long for liboctomap's key buffer (KEYRAY_CELLS): occgp's
+            # traversal visits the cells computeRayKeys visits, and gives the map
+            # insertPointCloud would give with a buffer large enough
+            if discretize:
+                pts = _discretized(pts, self.resolution)
+        threshold = self._adaptive_threshold(method, threshold)
+        self._record_insert(self._insert_batch(
+            pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),
+            pts, org, rng, method, threshold)
         return self
 
     # ------------------------------------------------------------------ queries
@@ -263,19 +274,18 @@ default="auto"
         >>> hits.tolist(), ends.round(2).tolist()
         ([True], [[1.05, 0.05, 0.05]])
         """
-        dirs = self._as_float32_points(directions, "directions")
+        dirs = _as_float32_directions(directions)
         n = len(dirs)
-        org_arr = np.asarray(origins)
+        if not isinstance(ignore_unknown, (bool, np.bool_)):
+            raise TypeError(f"ignore_unknown must be a bool, got {type(ignore_unknown).__name__}")
+        org_arr = as_numeric(origins, "origins")
         if org_arr.ndim == 1:
-            orgs = np.repeat(self._as_float32_origin(origins, "origins")[None], n, axis=0)
+            orgs = np.repeat(self._as_float32_origin(org_arr, "origins")[None], n, axis=0)
         else:
-            orgs = self._as_float32_points(origins, "origins")
+            orgs = self._as_float32_points(org_arr, "origins")
             if len(orgs) != n:
                 raise ValueError(f"origins must have shape (3,) or ({n}, 3) to match "
                                  f"directions, got {orgs.shape}")
-        if n and not (np.abs(dirs) > 0).any(axis=1).all():
-            zero = int(np.count_nonzero(~(np.abs(dirs) > 0).any(axis=1)))
-            raise ValueError(f"directions must be non-zero, got {zero} zero vectors")
         ok = self._in_range(orgs)
         if not ok.all():
             self._raise_out_of_range("origins", ok, "")
@@ -283,16 +293,21 @@ default="auto"
             ranges = np.full(n, -1.0)
             if ignore_unknown:
                 ranges = self._distance_past_bounds(orgs)
+        elif isinstance(max_range, (numbers.Real, np.floating, np.integer)):
+            ranges = np.full(n, check_real(max_range, "max_range", low=0.0))
         else:
-            ranges = np.asarray(max_range, dtype=np.float64)
-            if ranges.ndim == 0:
-                check_real(float(ranges), "max_range", low=0.0)
-                ranges = np.full(n, float(ranges))
-            elif ranges.shape != (n,):
+            ranges = np.asarray(max_range)
+            if ranges.dtype.kind not in "iuf" or ranges.ndim == 0:
+                raise TypeError(f"max_range must be a real number or an array of them, "
+                                f"got {type(max_range).__name__} of dtype {ranges.dtype}")
+            if ranges.shape != (n,):
                 raise ValueError(f"max_range must be a scalar or of shape ({n},), "
                                  f"got {ranges.shape}")
-            elif not (np.isfinite(ranges) & (ranges > 0)).all():
+            ranges = ranges.astype(np.float64)
+            if not (np.isfinite(ranges) & (ranges > 0)).all():
                 raise ValueError("max_range must be positive and finite")
+        # no ray travels farther than the key range's diagonal (castRay stops there)
+        ranges = np.minimum(ranges, 2 * np.sqrt(3) * (self.key_range[1] - self.key_range[0]))
         return self._cast_rays(orgs, dirs, bool(ignore_unknown), np.ascontiguousarray(ranges))
 
     def _distance_past_bounds(self, origins: np.ndarray) -> np.ndarray:
@@ -480,6 +495,10 @@ default="auto"
         if header.tree_type != "OcTree":
             raise ValueError(f"{source} holds a {header.tree_type!r} tree; only 'OcTree' "
                              "(occupancy) files can be read")
+        try:
+            check_resolution(header.resolution)
+        except ValueError as exc:
+            raise ValueError(f"{source}: the header's {exc}") from None
         tree = cls(header.resolution, **params)
         if header.size == 0:
             return tree
@@ -505,6 +524,32 @@ default="auto"
 def _rebuild(cls, params: dict, data: bytes) -> OccupancyOctree:
     """Unpickle: the header stores the resolution with full precision (repr)."""
     return cls.from_bytes(data, **{k: v for k, v in params.items() if k != "resolution"})
+
+
+def _as_float32_directions(directions: ArrayLike) -> np.ndarray:
+    """Ray directions for liboctomap's ``castRay``, which normalises them in single
+    precision: rows whose float squared length would overflow or underflow (e.g. 1e39,
+    or 1e-30) are normalised in double precision first; the others are passed as given."""
+    d64 = as_points(directions, "directions")
+    zero = ~(d64 != 0).any(axis=1)
+    if zero.any():
+        raise ValueError(f"directions must be non-zero, got {int(zero.sum())} zero vectors "
+                         f"(first: row {int(np.flatnonzero(zero)[0])})")
+    with np.errstate(over="ignore", under="ignore"):
+        d = d64.astype(np.float32)
+        nsq = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
+    bad = ~((nsq >= np.finfo(np.float32).tiny) & np.isfinite(nsq))
+    if bad.any():
+        u = d64[bad] / np.abs(d64[bad]).max(axis=1, keepdims=True)
+        d[bad] = u / np.linalg.norm(u, axis=1, keepdims=True)
+    return np.ascontiguousarray(d)
+
+
+def _discretized(points: np.ndarray, resolution: float) -> np.ndarray:
+    """liboctomap's ``discretize``: the centre of each distinct cell holding a point."""
+    keys = np.floor(points.astype(np.float64) * (1.0 / resolution))
+    keys = np.unique(keys, axis=0)
+    return np.ascontiguousarray((keys + 0.5) * resolution, dtype=np.float32)
 
 
 def _check_format(format: str) -> str:
