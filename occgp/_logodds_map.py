@@ -14,7 +14,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._octree import TREE_MAX_VAL
 from ._validation import (
-    as_point, as_points, check_int, check_probability, check_real, check_resolution,
+    as_point, as_points, check_bool, check_choice, check_int, check_probability, check_real,
+    check_resolution,
 )
 
 __all__ = ["LogOddsMap", "Leaves", "MODES", "METHODS"]
@@ -175,6 +176,7 @@ class LogOddsMap:
         >>> occ.tolist(), unk.tolist()
         ([True, False, False], [False, False, True])
         """
+        return_unknown = check_bool(return_unknown, "return_unknown")
         state = self._query(self._as_float32_points(points, "points"), 2)
         occupied = state == 1
         return (occupied, state < 0) if return_unknown else occupied
@@ -185,8 +187,7 @@ class LogOddsMap:
         """Validate `method` and `superray_threshold`; return the method ("auto" chosen:
         "culling", the fastest on bench/bench_updates.py's trajectories) and the
         threshold the core takes (0: no super rays)."""
-        if method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        method = check_choice(method, "method", METHODS)
         superray_threshold = check_int(superray_threshold, "superray_threshold", low=1,
                                        high=2**31 - 1)
         if method == "auto":
@@ -234,8 +235,7 @@ class LogOddsMap:
         None for an empty scan. Without `check_ends` the caller's core checks the ray ends
         itself (and calls :meth:`_raise_bad_ends` when one is out of range or cannot be
         walked), and cells is None."""
-        if not isinstance(mode, str) or mode not in MODES:
-            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+        mode = check_choice(mode, "mode", MODES)
         rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
         pts64 = as_points(points, "points")
         org = self._as_float32_origin(origin)

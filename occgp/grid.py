@@ -7,6 +7,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._grid import _Grid
 from ._logodds_map import Leaves, LogOddsMap
+from ._validation import check_bool
 
 __all__ = ["GridMap"]
 
@@ -189,7 +190,7 @@ default="auto"
         >>> centers.round(2).tolist(), sizes.round(2).tolist()
         ([[0.55, 0.05, 0.05]], [0.1])
         """
-        _, centers, values = self._cells_sorted(bool(occupied_only))
+        _, centers, values = self._cells_sorted(check_bool(occupied_only, "occupied_only"))
         return Leaves(centers, np.full(len(values), self.resolution), values)
 
     # ------------------------------------------------------------------ structure

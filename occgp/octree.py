@@ -9,9 +9,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _octomap_format as fmt
-from ._logodds_map import Leaves, LogOddsMap
+from ._logodds_map import MODES, Leaves, LogOddsMap
 from ._octree import KEYRAY_CELLS, _check_binary_data, _check_full_data, _OcTree
-from ._validation import as_numeric, as_points, check_real, check_resolution
+from ._validation import (
+    as_numeric, as_path, as_points, check_bool, check_choice, check_real, check_resolution,
+)
 
 __all__ = ["OccupancyOctree", "Leaves"]
 
@@ -203,10 +205,11 @@ default="auto"
         >>> m.is_occupied([[1.0, 0, 0]]).tolist()
         [True]
         """
-        if not isinstance(discretize, (bool, np.bool_)):
-            raise TypeError(f"discretize must be a bool, got {type(discretize).__name__}")
+        discretize = check_bool(discretize, "discretize")
+        mode = check_choice(mode, "mode", MODES)
         method, threshold = self._check_method(
-            "plain" if method == "auto" and discretize else method, superray_threshold)
+            "plain" if discretize and isinstance(method, str) and method == "auto" else method,
+            superray_threshold)
         if discretize and (mode != "scan" or method != "plain"):
             raise ValueError("discretize=True is only defined for mode='scan', method='plain'")
         liboctomap = mode == "scan" and method == "plain"
@@ -276,8 +279,7 @@ default="auto"
         """
         dirs = _as_float32_directions(directions)
         n = len(dirs)
-        if not isinstance(ignore_unknown, (bool, np.bool_)):
-            raise TypeError(f"ignore_unknown must be a bool, got {type(ignore_unknown).__name__}")
+        ignore_unknown = check_bool(ignore_unknown, "ignore_unknown")
         org_arr = as_numeric(origins, "origins")
         if org_arr.ndim == 1:
             orgs = np.repeat(self._as_float32_origin(org_arr, "origins")[None], n, axis=0)
@@ -296,7 +298,10 @@ default="auto"
         elif isinstance(max_range, (numbers.Real, np.floating, np.integer)):
             ranges = np.full(n, check_real(max_range, "max_range", low=0.0))
         else:
-            ranges = np.asarray(max_range)
+            try:
+                ranges = np.asarray(max_range)
+            except ValueError:  # ragged
+                ranges = np.array(None)
             if ranges.dtype.kind not in "iuf" or ranges.ndim == 0:
                 raise TypeError(f"max_range must be a real number or an array of them, "
                                 f"got {type(max_range).__name__} of dtype {ranges.dtype}")
@@ -342,10 +347,9 @@ default="auto"
         >>> centers.round(2).tolist(), sizes.round(2).tolist()
         ([[0.55, 0.05, 0.05]], [0.1])
         """
+        occupied_only = check_bool(occupied_only, "occupied_only")
         if bbox is not None:
-            box = np.asarray(bbox)
-            if box.dtype.kind not in "iuf":
-                raise TypeError(f"bbox must hold real numbers, got dtype {box.dtype}")
+            box = as_numeric(bbox, "bbox")
             if box.shape != (2, 3):
                 raise ValueError(f"bbox must have shape (2, 3) (min and max corner), "
                                  f"got {box.shape}")
@@ -353,8 +357,8 @@ default="auto"
             if np.isnan(box).any() or (box[0] > box[1]).any():
                 raise ValueError(f"bbox must have min <= max on every axis, got {box.tolist()}")
             box = np.clip(box, *(np.array(self.key_range) * [1, 1 - 1e-12]))
-            return Leaves(*self._leaves(bool(occupied_only), box))
-        return Leaves(*self._leaves(bool(occupied_only)))
+            return Leaves(*self._leaves(occupied_only, box))
+        return Leaves(*self._leaves(occupied_only))
 
     # ------------------------------------------------------------------ structure
     @property
@@ -457,7 +461,7 @@ default="auto"
         -------
         self : OccupancyOctree
         """
-        path = os.fspath(path)
+        path = os.fspath(as_path(path))
         if format is None:
             format = os.path.splitext(path)[1].lstrip(".").lower()
             if format not in fmt.FORMATS:
@@ -484,7 +488,7 @@ default="auto"
         ValueError
             If it is not an OcTree file, or is truncated or corrupt.
         """
-        path = os.fspath(path)
+        path = os.fspath(as_path(path))
         with open(path, "rb") as f:
             data = f.read()
         return cls._from_data(data, path, params)
@@ -553,6 +557,4 @@ def _discretized(points: np.ndarray, resolution: float) -> np.ndarray:
 
 
 def _check_format(format: str) -> str:
-    if format not in fmt.FORMATS:
-        raise ValueError(f"format must be one of {fmt.FORMATS}, got {format!r}")
-    return format
+    return check_choice(format, "format", fmt.FORMATS)

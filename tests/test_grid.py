@@ -364,5 +364,5 @@ def test_grid_method_is_checked():
     with pytest.raises(ValueError, match=r"superray_threshold must lie in \[1, 2147483647\], got 0"):
         GridMap(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="superray",
                                  superray_threshold=0)
-    with pytest.raises(TypeError, match="superray_threshold must be an int, got float"):
+    with pytest.raises(TypeError, match="superray_threshold must be a positive int, got float"):
         GridMap(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], superray_threshold=2.5)

@@ -121,8 +121,8 @@ def test_superrays_property(resolution, origin_kind, snap, threshold, seed):
     (0, ValueError, r"superray_threshold must lie in \[1, 2147483647\], got 0"),
     (2**31, ValueError, r"superray_threshold must lie in \[1, 2147483647\], got 2147483648"),
     (-3, ValueError, r"superray_threshold must lie in \[1, "),
-    (2.5, TypeError, "superray_threshold must be an int, got float"),
-    (True, TypeError, "superray_threshold must be an int, got bool"),
+    (2.5, TypeError, "superray_threshold must be a positive int, got float"),
+    (True, TypeError, "superray_threshold must be a positive int, got bool"),
 ])
 def test_superray_threshold_is_checked(bad, err, match):
     with pytest.raises(err, match=match):
