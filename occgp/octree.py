@@ -36,7 +36,9 @@ class OccupancyOctree(LogOddsMap, _OcTree):
     Parameters
     ----------
     resolution : float
-        Edge length of the smallest cells, in metres. Must be positive.
+        Edge length of the smallest cells, in metres. Must lie in ``[1e-15, 1e14]``:
+        the range where liboctomap's single-precision ray traversal is sound
+        (see the user guide's notes on single precision).
     prob_hit : float, default=0.7
         Probability that a cell is occupied given a ray ends in it; in (0.5, 1).
     prob_miss : float, default=0.4
@@ -130,7 +132,8 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         max_range : float, default=None
             Rays longer than this are truncated: the cells up to `max_range`
             are marked free and the end cell is not marked occupied. None means
-            no limit.
+            no limit. Points may then lie beyond the key range, or beyond float
+            range: their rays are cut at `max_range` all the same.
         mode : {"scan", "ray"}, default="scan"
             ``"scan"`` is liboctomap's ``insertPointCloud``: the scan's sets of
             free and occupied cells are computed first, a cell in both counts as
@@ -189,7 +192,10 @@ default="auto"
             If `points` or `origin` does not hold real numbers.
         ValueError
             If `points` is not of shape (n_points, 3), `origin` not of shape
-            (3,), either holds NaN or inf or lies outside the key range, or
+            (3,), either holds NaN or inf or lies outside the key range (after
+            truncation at `max_range`), a ray is shorter than 1.1e-19 m yet
+            crosses a cell border (too short for the single-precision
+            traversal), or
             `max_range`, `mode` or `discretize` is invalid. The map is then
             unchanged.
 
