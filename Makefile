@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.occgp-installed
 EXTRAS ?= test
 BUILD_INPUTS := setup.py pyproject.toml $(wildcard ext/*.pyx ext/*.pxd ext/*.h)
 
-.PHONY: all demo test bench docs system venv install clean distclean
+.PHONY: all demo test bench docs asan soak system venv install clean distclean
 
 all: test
 
@@ -37,6 +37,14 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/bench_octree.py
+
+# the extensions built with AddressSanitizer + UBSan (build/asan), the test suite under them
+asan: $(STAMP)
+	PY=$(PY) bash tools/asan.sh
+
+# >= 1,000 scans into one map: resident memory and time per scan in blocks
+soak: $(STAMP)
+	$(PY) bench/bench_soak.py
 
 docs: $(STAMP)
 	$(PY) -m pip install -q -e ".[docs]" --no-build-isolation

@@ -30,7 +30,7 @@ from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 from liboctomap cimport OcTree, OcTreeKey, point3d
 from _keys cimport (
-    KEY_DEPTH, ends_in_range_mask, in_range_mask, pack_key, set_sensor_model, unpack_key,
+    KEY_DEPTH, ray_codes, in_range_mask, pack_key, set_sensor_model, unpack_key,
 )
 from _scan cimport ScanCell, ScanStats, scan_result, scan_updates, scan_weights
 
@@ -102,10 +102,11 @@ cdef class _Grid:
         """Boolean mask: which rows of `points` have a valid key on every axis."""
         return in_range_mask(1.0 / self._get().getResolution(), points)
 
-    def _ends_in_range(self, const float[:, ::1] points, const float[::1] origin,
-                       double max_range):
-        """Like :meth:`_in_range` for the ray ends after truncation at `max_range` (< 0: none)."""
-        return ends_in_range_mask(1.0 / self._get().getResolution(), points, origin, max_range)
+    def _check_rays(self, const float[:, ::1] points, const float[::1] origin,
+                    double max_range):
+        """(codes, cells) of the rays after truncation at `max_range` (< 0: none): see
+        ``mark_rays`` in ``ext/_keys.pxd``."""
+        return ray_codes(1.0 / self._get().getResolution(), points, origin, max_range)
 
     # ------------------------------------------------------------------ updates
     def _insert(self, const float[:, ::1] points, const float[::1] origin, double max_range,

@@ -6,8 +6,9 @@ its own: ``from _keys cimport pack_key, KeyTable, ...``. The arithmetic is
 liboctomap's, so every map that uses it finds the same cells as its ``OcTree``.
 """
 
+from libc.float cimport FLT_MAX, FLT_MIN
 from libc.math cimport floor
-from libc.stdint cimport uint8_t, uint32_t, uint64_t
+from libc.stdint cimport int64_t, uint8_t, uint32_t, uint64_t
 from libcpp.vector cimport vector
 
 from liboctomap cimport OcTree, OcTreeKey, key_type, point3d
@@ -93,18 +94,57 @@ cdef inline void mark_in_range(double resolution_factor, const float[:, ::1] poi
                  and in_key_range(resolution_factor, points[i, 2]))
 
 
-cdef inline void mark_ends_in_range(double resolution_factor, const float[:, ::1] points,
-                                    const point3d& origin, double max_range,
-                                    uint8_t[::1] ok) noexcept nogil:
-    """Like :func:`mark_in_range` for the ray ends after truncation at `max_range`."""
+cdef enum:
+    RAY_OK = 0              # the ray's end is in range and the traversal can walk it
+    RAY_OUT_OF_RANGE = 1    # its end (after truncation) has no valid key
+    RAY_TOO_SHORT = 2       # it crosses a cell border but is too short to walk
+    # liboctomap's KeyRay holds 100000 keys and computeRayKeys does not check it (an
+    # assert, off in release builds): a ray may walk at most this many cells there
+    KEYRAY_SAFE_CELLS = 99990
+
+
+cdef inline bint walkable(const point3d& origin, const point3d& end) noexcept nogil:
+    """Whether liboctomap's traversal (computeRayKeys, RayWalker) of a ray between two
+    different cells ends: it divides the direction by the length computed from float
+    squares, which must be a normal, finite float (an infinite length leaves a zero
+    direction, a zero one an infinite direction, and the walk then never stops)."""
+    cdef point3d d = end - origin
+    cdef float nsq = d.x() * d.x() + d.y() * d.y() + d.z() * d.z()
+    return nsq >= FLT_MIN and nsq <= FLT_MAX
+
+
+cdef inline void mark_rays(double resolution_factor, const float[:, ::1] points,
+                           point3d origin, double max_range, uint8_t[::1] code,
+                           int64_t[::1] cells) noexcept nogil:
+    """Per ray (after truncation at `max_range`; < 0: none): its RAY_* code and the
+    Manhattan distance between the keys of its ends (an upper bound, up to 3, of the
+    cells its traversal visits); -1 when its end is out of range."""
     cdef Py_ssize_t i
+    cdef int axis
     cdef point3d end
+    cdef int64_t key_o[3]
+    cdef int64_t key_e[3]
+    cdef int64_t n
+    key_o[0] = <int64_t>floor(resolution_factor * <double>origin.x())
+    key_o[1] = <int64_t>floor(resolution_factor * <double>origin.y())
+    key_o[2] = <int64_t>floor(resolution_factor * <double>origin.z())
     for i in range(points.shape[0]):
         effective_end(origin, point3d(points[i, 0], points[i, 1], points[i, 2]), max_range,
                       &end)
-        ok[i] = (in_key_range(resolution_factor, end.x())
-                 and in_key_range(resolution_factor, end.y())
-                 and in_key_range(resolution_factor, end.z()))
+        cells[i] = -1
+        if not (in_key_range(resolution_factor, end.x())
+                and in_key_range(resolution_factor, end.y())
+                and in_key_range(resolution_factor, end.z())):
+            code[i] = RAY_OUT_OF_RANGE
+            continue
+        key_e[0] = <int64_t>floor(resolution_factor * <double>end.x())
+        key_e[1] = <int64_t>floor(resolution_factor * <double>end.y())
+        key_e[2] = <int64_t>floor(resolution_factor * <double>end.z())
+        n = 0
+        for axis in range(3):
+            n += key_e[axis] - key_o[axis] if key_e[axis] >= key_o[axis] else key_o[axis] - key_e[axis]
+        cells[i] = n
+        code[i] = RAY_OK if n == 0 or walkable(origin, end) else RAY_TOO_SHORT
 
 
 cdef inline void set_sensor_model(OcTree* tree, double prob_hit, double prob_miss,
@@ -128,13 +168,15 @@ cdef inline object in_range_mask(double resolution_factor, const float[:, ::1] p
     return out
 
 
-cdef inline object ends_in_range_mask(double resolution_factor, const float[:, ::1] points,
-                                      const float[::1] origin, double max_range):
-    """Like :func:`in_range_mask` for the ray ends after truncation at `max_range` (< 0: none)."""
+cdef inline object ray_codes(double resolution_factor, const float[:, ::1] points,
+                            const float[::1] origin, double max_range):
+    """(codes, cells): see :func:`mark_rays`; codes uint8, cells int64."""
     import numpy as np
     cdef point3d o = point3d(origin[0], origin[1], origin[2])
-    out = np.empty(points.shape[0], dtype=np.bool_)
-    cdef uint8_t[::1] ok = out.view(np.uint8)
+    codes = np.empty(points.shape[0], dtype=np.uint8)
+    cells = np.empty(points.shape[0], dtype=np.int64)
+    cdef uint8_t[::1] c = codes
+    cdef int64_t[::1] m = cells
     with nogil:
-        mark_ends_in_range(resolution_factor, points, o, max_range, ok)
-    return out
+        mark_rays(resolution_factor, points, o, max_range, c, m)
+    return codes, cells

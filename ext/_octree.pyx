@@ -19,7 +19,7 @@ from libcpp.vector cimport vector
 from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 from _keys cimport (
-    KEY_DEPTH as _DEPTH, KEY_MAX_VAL as _MAX_VAL, ends_in_range_mask, in_range_mask,
+    KEY_DEPTH as _DEPTH, KEY_MAX_VAL as _MAX_VAL, KEYRAY_SAFE_CELLS, ray_codes, in_range_mask,
     set_sensor_model, unpack_key as _unpack,
 )
 from _scan cimport ScanCell, ScanStats, scan_result, scan_updates, scan_weights
@@ -35,6 +35,8 @@ import numpy as np
 TREE_MAX_VAL = _MAX_VAL
 #: Depth of the tree: leaves at this depth have the size of the resolution.
 TREE_DEPTH = _DEPTH
+#: The most cells a ray may cross for liboctomap's insertPointCloud (its KeyRay buffer).
+KEYRAY_CELLS = KEYRAY_SAFE_CELLS
 
 
 cdef extern from "_octree_batch.h" namespace "occgp" nogil:
@@ -82,10 +84,11 @@ cdef class _OcTree:
         """Boolean mask: which rows of `points` have a valid key on every axis."""
         return in_range_mask(1.0 / self._get().getResolution(), points)
 
-    def _ends_in_range(self, const float[:, ::1] points, const float[::1] origin,
-                       double max_range):
-        """Like :meth:`_in_range` for the ray ends after truncation at `max_range` (< 0: none)."""
-        return ends_in_range_mask(1.0 / self._get().getResolution(), points, origin, max_range)
+    def _check_rays(self, const float[:, ::1] points, const float[::1] origin,
+                    double max_range):
+        """(codes, cells) of the rays after truncation at `max_range` (< 0: none): see
+        ``mark_rays`` in ``ext/_keys.pxd``."""
+        return ray_codes(1.0 / self._get().getResolution(), points, origin, max_range)
 
     # ------------------------------------------------------------------ updates
     def _insert_point_cloud(self, const float[:, ::1] points, const float[::1] origin,

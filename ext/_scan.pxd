@@ -16,6 +16,7 @@ from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 from _keys cimport (
     KEY_EMPTY, KEY_MAX_VAL as _MAX_VAL, CellBox, KeyCounts, KeyTable, RayWalker,
     effective_end as _effective_end, pack_key as _pack, unpack_key as _unpack,
+    walkable as _walkable,
 )
 from liboctomap cimport OcTree, OcTreeKey, key_type, point3d
 
@@ -512,6 +513,8 @@ cdef inline int scan_updates(
         end_ok[i] = (_key_checked(rf, ends[i].x(), &key[0])
                      and _key_checked(rf, ends[i].y(), &key[1])
                      and _key_checked(rf, ends[i].z(), &key[2]))
+        if end_ok[i] and not (key == ko) and not _walkable(o, ends[i]):
+            end_ok[i] = False   # a ray too short to walk: the caller reports it
         if not end_ok[i]:
             stats.bad_ends += 1
             continue

@@ -2,7 +2,7 @@
 
 :class:`occgp.OccupancyOctree` and :class:`occgp.GridMap` put this class in
 front of their compiled cores, which provide ``_setup``, ``_in_range``,
-``_ends_in_range`` and ``_query`` with the same meaning.
+``_check_rays`` and ``_query`` with the same meaning.
 """
 
 from __future__ import annotations
@@ -13,11 +13,20 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._octree import TREE_MAX_VAL
-from ._validation import as_point, as_points, check_probability, check_real
+from ._validation import (
+    as_point, as_points, check_bool, check_choice, check_int, check_probability, check_real,
+    check_resolution,
+)
 
 __all__ = ["LogOddsMap", "Leaves", "MODES", "METHODS"]
 
 MODES = ("scan", "ray")
+# codes of the compiled cores' _check_rays (ext/_keys.pxd)
+_RAY_OUT_OF_RANGE, _RAY_TOO_SHORT = 1, 2
+#: Rays between two cells whose float squared length is below FLT_MIN cannot be walked.
+_SHORTEST_RAY = float(np.sqrt(np.finfo(np.float32).tiny))
+#: Longest ray whose float squared length is finite.
+_LONGEST_RAY = float(np.sqrt(np.finfo(np.float32).max))
 METHODS = ("auto", "plain", "culling", "superray", "superray+culling")
 
 
@@ -50,8 +59,8 @@ class LogOddsMap:
                    clamping_min: float, clamping_max: float,
                    occupancy_threshold: float) -> None: ...
         def _in_range(self, points: NDArray[np.float32]) -> NDArray[np.bool_]: ...
-        def _ends_in_range(self, points: NDArray[np.float32], origin: NDArray[np.float32],
-                           max_range: float) -> NDArray[np.bool_]: ...
+        def _check_rays(self, points: NDArray[np.float32], origin: NDArray[np.float32],
+                        max_range: float) -> tuple[NDArray[np.uint8], NDArray[np.int64]]: ...
         def _query(self, points: NDArray[np.float32], what: int) -> Any: ...
 
     def __init__(
@@ -167,6 +176,7 @@ class LogOddsMap:
         >>> occ.tolist(), unk.tolist()
         ([True, False, False], [False, False, True])
         """
+        return_unknown = check_bool(return_unknown, "return_unknown")
         state = self._query(self._as_float32_points(points, "points"), 2)
         occupied = state == 1
         return (occupied, state < 0) if return_unknown else occupied
@@ -177,14 +187,9 @@ class LogOddsMap:
         """Validate `method` and `superray_threshold`; return the method ("auto" chosen:
         "culling", the fastest on bench/bench_updates.py's trajectories) and the
         threshold the core takes (0: no super rays)."""
-        if method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-        if isinstance(superray_threshold, (bool, np.bool_)) or not isinstance(
-                superray_threshold, (int, np.integer)):
-            raise TypeError(f"superray_threshold must be an int, "
-                            f"got {type(superray_threshold).__name__}")
-        if superray_threshold < 1:
-            raise ValueError(f"superray_threshold must be >= 1, got {superray_threshold}")
+        method = check_choice(method, "method", METHODS)
+        superray_threshold = check_int(superray_threshold, "superray_threshold", low=1,
+                                       high=2**31 - 1)
         if method == "auto":
             method = "superray+culling"
         return method, int(superray_threshold) if method.startswith("superray") else 0
@@ -225,27 +230,40 @@ class LogOddsMap:
 
     def _validated_scan(self, points: ArrayLike, origin: ArrayLike, max_range, mode: str,
                         check_ends: bool = True):
-        """Check a scan for insertion; return (points, origin, max_range) as the core wants
-        them (float32, -1 for no limit), or None for an empty scan. Without `check_ends`
-        the caller's core checks the key range of the ray ends itself (and calls
-        :meth:`_raise_bad_ends` when one is out)."""
-        if mode not in MODES:
-            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+        """Check a scan for insertion; return (points, origin, max_range, cells) as the
+        core wants them (float32, -1 for no limit; cells: see :meth:`_raise_bad_ends`), or
+        None for an empty scan. Without `check_ends` the caller's core checks the ray ends
+        itself (and calls :meth:`_raise_bad_ends` when one is out of range or cannot be
+        walked), and cells is None."""
+        mode = check_choice(mode, "mode", MODES)
         rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
-        pts = self._as_float32_points(points, "points")
+        pts64 = as_points(points, "points")
         org = self._as_float32_origin(origin)
+        with np.errstate(over="ignore"):
+            pts = pts64.astype(np.float32)
         if len(pts) == 0:
             return None
-        if check_ends:
-            self._raise_bad_ends(pts, org, rng)
-        return pts, org, rng
+        if rng >= 0:
+            pts = _cut_far_rays(pts64, pts, org, rng)
+        cells = self._raise_bad_ends(pts, org, rng) if check_ends else None
+        return pts, org, rng, cells
 
-    def _raise_bad_ends(self, pts: np.ndarray, org: np.ndarray, rng: float) -> None:
-        """Raise ValueError if a ray end (after truncation at `rng`) is out of key range."""
-        ok = self._ends_in_range(pts, org, rng)
-        if not ok.all():
-            self._raise_out_of_range("points", ok, " (after truncation at max_range)"
-                                     if rng >= 0 else "")
+    def _raise_bad_ends(self, pts: np.ndarray, org: np.ndarray, rng: float) -> np.ndarray:
+        """Raise ValueError if a ray end (after truncation at `rng`) is out of key range,
+        or a ray is too short for the single-precision traversal to walk it; otherwise
+        return each ray's key distance (a bound on the cells it crosses)."""
+        codes, cells = self._check_rays(pts, org, rng)
+        if (codes == _RAY_OUT_OF_RANGE).any():
+            self._raise_out_of_range("points", codes != _RAY_OUT_OF_RANGE,
+                                     " (after truncation at max_range)" if rng >= 0 else "")
+        if (codes == _RAY_TOO_SHORT).any():
+            bad = np.flatnonzero(codes == _RAY_TOO_SHORT)
+            raise ValueError(
+                f"{len(bad)} of {len(codes)} rays from origin to points are shorter than "
+                f"{_SHORTEST_RAY:.2g} m yet cross a cell border (first: row {int(bad[0])}): "
+                "liboctomap's single-precision traversal cannot walk them; the map is "
+                "unchanged")
+        return cells
 
     def _record_insert(self, stats, pts: np.ndarray, org: np.ndarray, rng: float,
                        method: str, threshold: int) -> None:
@@ -259,10 +277,13 @@ class LogOddsMap:
         self._learn_superrays(method, len(pts))
 
     def _as_float32_points(self, x: ArrayLike, name: str) -> np.ndarray:
-        return np.ascontiguousarray(as_points(x, name), dtype=np.float32)
+        # beyond float range is beyond every key range: inf, which no key holds
+        with np.errstate(over="ignore"):
+            return np.ascontiguousarray(as_points(x, name), dtype=np.float32)
 
     def _as_float32_origin(self, x: ArrayLike, name: str = "origin") -> np.ndarray:
-        org = np.ascontiguousarray(as_point(x, name), dtype=np.float32)
+        with np.errstate(over="ignore"):
+            org = np.ascontiguousarray(as_point(x, name), dtype=np.float32)
         if not self._in_range(org[None]).all():
             lo, hi = self.key_range
             raise ValueError(f"{name} {org.tolist()} lies outside the {self._kind}'s key range "
@@ -282,7 +303,7 @@ class LogOddsMap:
 def check_params(params: dict) -> dict:
     """Validate a log-odds map's parameters; return them as floats."""
     out = dict(params)
-    out["resolution"] = check_real(params["resolution"], "resolution", low=0.0)
+    out["resolution"] = check_resolution(params["resolution"])
     out["prob_hit"] = check_real(params["prob_hit"], "prob_hit", low=0.5, high=1.0)
     out["prob_miss"] = check_real(params["prob_miss"], "prob_miss", low=0.0, high=0.5)
     out["clamping_min"] = check_real(params["clamping_min"], "clamping_min", low=0.0, high=0.5)
@@ -290,3 +311,34 @@ def check_params(params: dict) -> dict:
     out["occupancy_threshold"] = check_probability(params["occupancy_threshold"],
                                                    "occupancy_threshold")
     return out
+
+
+def _cut_far_rays(pts64: np.ndarray, pts: np.ndarray, org: np.ndarray, rng: float) -> np.ndarray:
+    """Make rays to far points cut at `rng` as they should be.
+
+    liboctomap truncates a ray at ``max_range`` along ``(p - origin).normalized()``, in
+    single precision: a point so far (over ~1.8e19 m, or beyond float range) that its
+    squared distance overflows gives a zero direction, and the ray would vanish. Those
+    points (only those: every other ray keeps liboctomap's arithmetic) are moved, in
+    double precision, onto their ray at twice `rng`, where the truncation gives the cut
+    the ray should have. When twice `rng` is itself that far, the cut end lies beyond
+    every key range, and the point is left to be reported out of range.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        d = pts - org
+        nsq = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
+    far = ~np.isfinite(nsq)
+    if not far.any():
+        return pts
+    delta = pts64[far] - org.astype(np.float64)
+    scale = np.abs(delta).max(axis=1, keepdims=True)
+    unit = delta / scale
+    dist = scale[:, 0] * np.linalg.norm(unit, axis=1)
+    unit /= np.linalg.norm(unit, axis=1, keepdims=True)
+    cut = dist > rng
+    if 2 * rng >= 0.5 * _LONGEST_RAY:
+        return pts
+    pts = pts.copy()
+    rows = np.flatnonzero(far)[cut]
+    pts[rows] = (org.astype(np.float64) + unit[cut] * (2 * rng)).astype(np.float32)
+    return pts

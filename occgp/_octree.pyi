@@ -5,6 +5,7 @@ from typing_extensions import disjoint_base
 
 TREE_MAX_VAL: int
 TREE_DEPTH: int
+KEYRAY_CELLS: int
 
 @disjoint_base
 class _OcTree:
@@ -12,8 +13,8 @@ class _OcTree:
                clamping_min: float, clamping_max: float,
                occupancy_threshold: float) -> None: ...
     def _in_range(self, points: NDArray[np.float32]) -> NDArray[np.bool_]: ...
-    def _ends_in_range(self, points: NDArray[np.float32], origin: NDArray[np.float32],
-                       max_range: float) -> NDArray[np.bool_]: ...
+    def _check_rays(self, points: NDArray[np.float32], origin: NDArray[np.float32],
+                    max_range: float) -> tuple[NDArray[np.uint8], NDArray[np.int64]]: ...
     def _insert_point_cloud(self, points: NDArray[np.float32], origin: NDArray[np.float32],
                             max_range: float, discretize: bool) -> None: ...
     def _insert_batch(self, points: NDArray[np.float32], origin: NDArray[np.float32],

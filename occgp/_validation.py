@@ -7,20 +7,38 @@ input never reaches compiled code (whose own buffer errors are cryptic).
 from __future__ import annotations
 
 import numbers
+import os
+import pathlib
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["as_points", "as_point", "check_real", "check_probability"]
+__all__ = ["as_numeric", "as_points", "as_point", "check_real", "check_probability", "check_resolution",
+           "check_int", "check_bool", "check_choice", "as_path", "check_seed",
+           "RESOLUTION_RANGE"]
+
+#: The resolutions (metres) at which liboctomap's single-precision ray traversal is
+#: sound. ``computeRayKeys`` normalises each ray by its length computed from float
+#: squares: across the key range (``2 * 32768 * sqrt(3)`` cells) that squared length
+#: must stay below ``FLT_MAX`` (resolution < 1.6e14), and a ray of one cell must keep a
+#: normal (not denormal) squared length (resolution > 1.1e-19). Outside these bounds a
+#: ray's direction becomes zero or infinite and the traversal never ends. The range
+#: keeps a margin of ~1.6 below the first bound and 1e4 above the second.
+RESOLUTION_RANGE = (1e-15, 1e14)
 
 
-def _as_numeric(x: ArrayLike, name: str) -> np.ndarray:
+def as_numeric(x: ArrayLike, name: str, kinds: str = "iuf") -> np.ndarray:
+    """Return `x` as a numpy array of real numbers (any shape), or raise naming `name`.
+
+    `kinds` are the accepted dtype kinds (add ``"b"`` to accept booleans).
+    """
     try:
         arr = np.asarray(x)
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{name} must be a numeric array, could not convert it: {exc}") from None
-    if arr.dtype.kind not in "iuf":
-        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+    if arr.dtype.kind not in kinds:
+        what = "real numbers or booleans" if "b" in kinds else "real numbers"
+        raise TypeError(f"{name} must hold {what}, got dtype {arr.dtype}")
     return arr
 
 
@@ -34,7 +52,7 @@ def as_points(x: ArrayLike, name: str = "points", dim: int = 3) -> NDArray[np.fl
     ValueError
         If `x` is not of shape (n_points, dim) or holds NaN or inf.
     """
-    arr = _as_numeric(x, name)
+    arr = as_numeric(x, name)
     if arr.ndim != 2 or arr.shape[1] != dim:
         raise ValueError(f"{name} must have shape (n_points, {dim}), got {arr.shape}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
@@ -52,7 +70,7 @@ def as_points(x: ArrayLike, name: str = "points", dim: int = 3) -> NDArray[np.fl
 
 def as_point(x: ArrayLike, name: str = "origin", dim: int = 3) -> NDArray[np.float64]:
     """Return `x` as a float64 array of shape (dim,), finite."""
-    arr = _as_numeric(x, name)
+    arr = as_numeric(x, name)
     if arr.shape != (dim,):
         raise ValueError(f"{name} must have shape ({dim},), got {arr.shape}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
@@ -81,3 +99,66 @@ def check_real(value: object, name: str, *, low: float | None = None,
 def check_probability(value: object, name: str) -> float:
     """Return `value` as a float after checking it lies in the open interval (0, 1)."""
     return check_real(value, name, low=0.0, high=1.0)
+
+
+def check_resolution(value: object, name: str = "resolution") -> float:
+    """Return `value` as a float after checking it lies in :data:`RESOLUTION_RANGE`."""
+    v = check_real(value, name, low=0.0)
+    lo, hi = RESOLUTION_RANGE
+    if not lo <= v <= hi:
+        raise ValueError(f"{name} must lie in [{lo:g}, {hi:g}] m (the range where liboctomap's "
+                         f"single-precision ray traversal is sound), got {value!r}")
+    return v
+
+
+def check_int(value: object, name: str, *, low: int | None = None,
+              high: int | None = None) -> int:
+    """Return `value` as an int after checking it is an integer (not a bool) in [low, high]."""
+    kind = {0: "a non-negative int", 1: "a positive int"}.get(low, "an int")
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral,
+                                                                     np.integer)):
+        raise TypeError(f"{name} must be {kind}, got {type(value).__name__}")
+    v = int(value)
+    if (low is not None and v < low) or (high is not None and v > high):
+        if high is None:
+            raise ValueError(f"{name} must be {kind}, got {v}")
+        lo = "-inf" if low is None else str(low)
+        raise ValueError(f"{name} must lie in [{lo}, {high}], got {v}")
+    return v
+
+
+_as_numeric = as_numeric  # the former private name
+
+
+def check_bool(value: object, name: str) -> bool:
+    """Return `value` as a bool after checking it is one (numpy's included)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a bool, got {type(value).__name__}")
+    return bool(value)
+
+
+def check_choice(value: object, name: str, choices: tuple[str, ...]) -> str:
+    """Return `value` after checking it is one of the strings `choices`."""
+    if not isinstance(value, str) or value not in choices:
+        raise ValueError(f"{name} must be one of {choices}, got {value!r}")
+    return value
+
+
+def as_path(path: object, name: str = "path") -> "os.PathLike[str]":
+    """Return `path` as a :class:`pathlib.Path`; TypeError naming `name` otherwise."""
+    try:
+        return pathlib.Path(os.fspath(path))
+    except TypeError:
+        raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}") from None
+
+
+def check_seed(seed: object, name: str = "seed") -> np.random.Generator:
+    """``numpy.random.default_rng(seed)``, with errors that name `name`."""
+    if isinstance(seed, (bool, np.bool_)):
+        raise TypeError(f"{name} must be an int, a numpy Generator or None, got bool")
+    try:
+        return np.random.default_rng(seed)
+    except (TypeError, ValueError) as exc:
+        raise (ValueError if isinstance(exc, ValueError) else TypeError)(
+            f"{name} must be a non-negative int, a numpy Generator or None, got {seed!r}"
+        ) from None

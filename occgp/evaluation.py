@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from tqdm.auto import tqdm
 
-from ._validation import as_point, as_points, check_real
+from ._validation import as_point, as_points, check_real, check_seed
 from .metrics import score_all
 
 __all__ = ["TestSet", "MapResult", "held_out_split", "grid_test_set", "evaluate_map",
@@ -192,7 +192,7 @@ def held_out_split(scans: Iterable[Sequence[Any]], *, fraction: float = 0.2,
     fraction = check_real(fraction, "fraction", low=0.0, high=1.0)
     free_margin = check_real(free_margin, "free_margin", low=0.0, low_open=False)
     checked = _check_scans(scans)
-    rng = np.random.default_rng(seed)
+    rng = check_seed(seed)
     train, occupied, free = [], [], []
     for points, origin, template in checked:
         n = points.shape[0]
@@ -269,15 +269,19 @@ def grid_test_set(scene: Any, resolution: float, *,
     lo, hi = as_point(box[0], f"{name}[0]"), as_point(box[1], f"{name}[1]")
     if (lo > hi).any():
         raise ValueError(f"{name} must have min <= max on every axis, got {lo} and {hi}")
+    # the closed box, up to round-off: count the centres before making them
+    first = [math.ceil(lo[a] / resolution - 0.5 - 1e-9) for a in range(3)]
+    last = [math.floor(hi[a] / resolution - 0.5 + 1e-9) for a in range(3)]
+    counts = [max(last[a] - first[a] + 1, 1) for a in range(3)]
+    n = math.prod(counts)
+    if n > _MAX_GRID_POINTS:
+        raise ValueError(f"the grid would hold {' x '.join(map(str, counts))} points (more "
+                         f"than {_MAX_GRID_POINTS}); increase resolution or give a smaller "
+                         "bbox")
     axes = []
     for a in range(3):
-        k = np.arange(math.ceil(lo[a] / resolution - 0.5 - 1e-9),  # closed box,
-                      math.floor(hi[a] / resolution - 0.5 + 1e-9) + 1)  # up to round-off
+        k = np.arange(first[a], last[a] + 1)
         axes.append((k + 0.5) * resolution if k.size else np.array([(lo[a] + hi[a]) / 2]))
-    n = math.prod(len(c) for c in axes)
-    if n > _MAX_GRID_POINTS:
-        raise ValueError(f"the grid would hold {n} points (more than {_MAX_GRID_POINTS}); "
-                         "increase resolution or give a smaller bbox")
     centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     if observed is not None:
         keep = np.asarray(observed(centres), dtype=bool)
@@ -528,7 +532,7 @@ def equal_time_comparison(methods: Mapping[str, Callable[[], Any]],
             raise ValueError(f"full_rows must hold a row for every method, missing {missing}")
         full = {n: given[str(n)] for n in methods}
     budget = min(r.seconds for r in full.values())
-    rng = np.random.default_rng(seed)
+    rng = check_seed(seed)
     perms = [rng.permutation(len(p)) for p, _, _ in checked]
     n_rounds = math.ceil(round(1.0 / step, 9)) - 1
     if max_rounds is not None:

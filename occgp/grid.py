@@ -7,6 +7,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._grid import _Grid
 from ._logodds_map import Leaves, LogOddsMap
+from ._validation import check_bool
 
 __all__ = ["GridMap"]
 
@@ -34,7 +35,9 @@ class GridMap(LogOddsMap, _Grid):
     Parameters
     ----------
     resolution : float
-        Edge length of the cells, in metres. Must be positive.
+        Edge length of the cells, in metres. Must lie in ``[1e-15, 1e14]``:
+        the range where liboctomap's single-precision ray traversal is sound
+        (see the user guide's notes on single precision).
     prob_hit : float, default=0.7
         Probability that a cell is occupied given a ray ends in it; in (0.5, 1).
     prob_miss : float, default=0.4
@@ -114,7 +117,8 @@ class GridMap(LogOddsMap, _Grid):
         max_range : float, default=None
             Rays longer than this are truncated: the cells up to `max_range`
             are marked free and the end cell is not marked occupied. None means
-            no limit.
+            no limit. Points may then lie beyond the key range, or beyond float
+            range: their rays are cut at `max_range` all the same.
         mode : {"scan", "ray"}, default="scan"
             ``"scan"`` follows liboctomap's ``insertPointCloud``: the scan's sets
             of free and occupied cells are computed first, a cell in both counts
@@ -145,7 +149,10 @@ default="auto"
             If `points` or `origin` does not hold real numbers.
         ValueError
             If `points` is not of shape (n_points, 3), `origin` not of shape
-            (3,), either holds NaN or inf or lies outside the key range, or
+            (3,), either holds NaN or inf or lies outside the key range (after
+            truncation at `max_range`), a ray is shorter than 1.1e-19 m yet
+            crosses a cell border (too short for the single-precision
+            traversal), or
             `max_range`, `mode`, `method` or `superray_threshold` is invalid.
             The map is then unchanged.
 
@@ -160,7 +167,7 @@ default="auto"
         method, threshold = self._check_method(method, superray_threshold)
         scan = self._validated_scan(points, origin, max_range, mode, check_ends=False)
         if scan is not None:
-            pts, org, rng = scan
+            pts, org, rng, _ = scan
             threshold = self._adaptive_threshold(method, threshold)
             self._record_insert(self._insert(
                 pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),
@@ -189,7 +196,7 @@ default="auto"
         >>> centers.round(2).tolist(), sizes.round(2).tolist()
         ([[0.55, 0.05, 0.05]], [0.1])
         """
-        _, centers, values = self._cells_sorted(bool(occupied_only))
+        _, centers, values = self._cells_sorted(check_bool(occupied_only, "occupied_only"))
         return Leaves(centers, np.full(len(values), self.resolution), values)
 
     # ------------------------------------------------------------------ structure

@@ -19,6 +19,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sklearn import metrics as _skm
 
+from ._validation import as_numeric, check_real
+
 __all__ = [
     "roc_curve",
     "roc_auc",
@@ -41,13 +43,9 @@ def _check_labels_probs(y_true, y_prob):
     unknown : ndarray of bool, shape (n,)
         Where `y_prob` was NaN.
     """
-    y_true = np.asarray(y_true)
-    y_prob = np.asarray(y_prob)
+    y_true = as_numeric(y_true, "y_true", kinds="biuf")
+    y_prob = as_numeric(y_prob, "y_prob", kinds="biuf")
     for name, arr in (("y_true", y_true), ("y_prob", y_prob)):
-        if arr.dtype.kind not in "biuf":
-            raise TypeError(
-                f"{name} must hold real numbers or booleans, got dtype {arr.dtype}"
-            )
         if arr.ndim != 1:
             raise ValueError(f"{name} must have shape (n_points,), got {arr.shape}")
     if y_true.shape[0] != y_prob.shape[0]:
@@ -271,15 +269,8 @@ def accuracy(
 
 
 def _check_threshold(threshold):
-    try:
-        value = float(threshold)
-    except (TypeError, ValueError):
-        raise TypeError(
-            f"threshold must be a real number, got {type(threshold).__name__}"
-        ) from None
-    if not 0.0 <= value <= 1.0:
-        raise ValueError(f"threshold must be in [0, 1], got {threshold!r}")
-    return value
+    return check_real(threshold, "threshold", low=0.0, high=1.0, low_open=False,
+                      high_open=False)
 
 
 def _accuracy(labels, probs, threshold):

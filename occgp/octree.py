@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+import numbers
 import os
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _octomap_format as fmt
-from ._logodds_map import Leaves, LogOddsMap
-from ._octree import _check_binary_data, _check_full_data, _OcTree
-from ._validation import check_real
+from ._logodds_map import MODES, Leaves, LogOddsMap
+from ._octree import KEYRAY_CELLS, _check_binary_data, _check_full_data, _OcTree
+from ._validation import (
+    as_numeric, as_path, as_points, check_bool, check_choice, check_real, check_resolution,
+)
 
 __all__ = ["OccupancyOctree", "Leaves"]
 
@@ -33,7 +36,9 @@ class OccupancyOctree(LogOddsMap, _OcTree):
     Parameters
     ----------
     resolution : float
-        Edge length of the smallest cells, in metres. Must be positive.
+        Edge length of the smallest cells, in metres. Must lie in ``[1e-15, 1e14]``:
+        the range where liboctomap's single-precision ray traversal is sound
+        (see the user guide's notes on single precision).
     prob_hit : float, default=0.7
         Probability that a cell is occupied given a ray ends in it; in (0.5, 1).
     prob_miss : float, default=0.4
@@ -127,7 +132,8 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         max_range : float, default=None
             Rays longer than this are truncated: the cells up to `max_range`
             are marked free and the end cell is not marked occupied. None means
-            no limit.
+            no limit. Points may then lie beyond the key range, or beyond float
+            range: their rays are cut at `max_range` all the same.
         mode : {"scan", "ray"}, default="scan"
             ``"scan"`` is liboctomap's ``insertPointCloud``: the scan's sets of
             free and occupied cells are computed first, a cell in both counts as
@@ -186,7 +192,10 @@ default="auto"
             If `points` or `origin` does not hold real numbers.
         ValueError
             If `points` is not of shape (n_points, 3), `origin` not of shape
-            (3,), either holds NaN or inf or lies outside the key range, or
+            (3,), either holds NaN or inf or lies outside the key range (after
+            truncation at `max_range`), a ray is shorter than 1.1e-19 m yet
+            crosses a cell border (too short for the single-precision
+            traversal), or
             `max_range`, `mode` or `discretize` is invalid. The map is then
             unchanged.
 
@@ -202,25 +211,36 @@ default="auto"
         >>> m.is_occupied([[1.0, 0, 0]]).tolist()
         [True]
         """
-        if not isinstance(discretize, (bool, np.bool_)):
-            raise TypeError(f"discretize must be a bool, got {type(discretize).__name__}")
+        discretize = check_bool(discretize, "discretize")
+        mode = check_choice(mode, "mode", MODES)
         method, threshold = self._check_method(
-            "plain" if method == "auto" and discretize else method, superray_threshold)
+            "plain" if discretize and isinstance(method, str) and method == "auto" else method,
+            superray_threshold)
         if discretize and (mode != "scan" or method != "plain"):
             raise ValueError("discretize=True is only defined for mode='scan', method='plain'")
         liboctomap = mode == "scan" and method == "plain"
         scan = self._validated_scan(points, origin, max_range, mode, check_ends=liboctomap)
         if scan is None:
             return self
-        pts, org, rng = scan
+        pts, org, rng, cells = scan
         if liboctomap:
-            self._insert_point_cloud(pts, org, rng, bool(discretize))
-            self.last_insert_: dict[str, float] = {"rays": len(pts)}
-        else:
-            threshold = self._adaptive_threshold(method, threshold)
-            self._record_insert(self._insert_batch(
-                pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),
-                pts, org, rng, method, threshold)
+            if discretize and not self._in_range(pts).all():
+                # liboctomap discretises before it truncates, with unchecked keys
+                self._raise_out_of_range("points", self._in_range(pts),
+                                         " (with discretize=True, before truncation)")
+            if cells.max() <= KEYRAY_CELLS:
+                self._insert_point_cloud(pts, org, rng, bool(discretize))
+                self.last_insert_: dict[str, float] = {"rays": len(pts)}
+                return self
+            # a ray too long for liboctomap's key buffer (KEYRAY_CELLS): occgp's
+            # traversal visits the cells computeRayKeys visits, and gives the map
+            # insertPointCloud would give with a buffer large enough
+            if discretize:
+                pts = _discretized(pts, self.resolution)
+        threshold = self._adaptive_threshold(method, threshold)
+        self._record_insert(self._insert_batch(
+            pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),
+            pts, org, rng, method, threshold)
         return self
 
     # ------------------------------------------------------------------ queries
@@ -263,19 +283,17 @@ default="auto"
         >>> hits.tolist(), ends.round(2).tolist()
         ([True], [[1.05, 0.05, 0.05]])
         """
-        dirs = self._as_float32_points(directions, "directions")
+        dirs = _as_float32_directions(directions)
         n = len(dirs)
-        org_arr = np.asarray(origins)
+        ignore_unknown = check_bool(ignore_unknown, "ignore_unknown")
+        org_arr = as_numeric(origins, "origins")
         if org_arr.ndim == 1:
-            orgs = np.repeat(self._as_float32_origin(origins, "origins")[None], n, axis=0)
+            orgs = np.repeat(self._as_float32_origin(org_arr, "origins")[None], n, axis=0)
         else:
-            orgs = self._as_float32_points(origins, "origins")
+            orgs = self._as_float32_points(org_arr, "origins")
             if len(orgs) != n:
                 raise ValueError(f"origins must have shape (3,) or ({n}, 3) to match "
                                  f"directions, got {orgs.shape}")
-        if n and not (np.abs(dirs) > 0).any(axis=1).all():
-            zero = int(np.count_nonzero(~(np.abs(dirs) > 0).any(axis=1)))
-            raise ValueError(f"directions must be non-zero, got {zero} zero vectors")
         ok = self._in_range(orgs)
         if not ok.all():
             self._raise_out_of_range("origins", ok, "")
@@ -283,16 +301,24 @@ default="auto"
             ranges = np.full(n, -1.0)
             if ignore_unknown:
                 ranges = self._distance_past_bounds(orgs)
+        elif isinstance(max_range, (numbers.Real, np.floating, np.integer)):
+            ranges = np.full(n, check_real(max_range, "max_range", low=0.0))
         else:
-            ranges = np.asarray(max_range, dtype=np.float64)
-            if ranges.ndim == 0:
-                check_real(float(ranges), "max_range", low=0.0)
-                ranges = np.full(n, float(ranges))
-            elif ranges.shape != (n,):
+            try:
+                ranges = np.asarray(max_range)
+            except ValueError:  # ragged
+                ranges = np.array(None)
+            if ranges.dtype.kind not in "iuf" or ranges.ndim == 0:
+                raise TypeError(f"max_range must be a real number or an array of them, "
+                                f"got {type(max_range).__name__} of dtype {ranges.dtype}")
+            if ranges.shape != (n,):
                 raise ValueError(f"max_range must be a scalar or of shape ({n},), "
                                  f"got {ranges.shape}")
-            elif not (np.isfinite(ranges) & (ranges > 0)).all():
+            ranges = ranges.astype(np.float64)
+            if not (np.isfinite(ranges) & (ranges > 0)).all():
                 raise ValueError("max_range must be positive and finite")
+        # no ray travels farther than the key range's diagonal (castRay stops there)
+        ranges = np.minimum(ranges, 2 * np.sqrt(3) * (self.key_range[1] - self.key_range[0]))
         return self._cast_rays(orgs, dirs, bool(ignore_unknown), np.ascontiguousarray(ranges))
 
     def _distance_past_bounds(self, origins: np.ndarray) -> np.ndarray:
@@ -327,10 +353,9 @@ default="auto"
         >>> centers.round(2).tolist(), sizes.round(2).tolist()
         ([[0.55, 0.05, 0.05]], [0.1])
         """
+        occupied_only = check_bool(occupied_only, "occupied_only")
         if bbox is not None:
-            box = np.asarray(bbox)
-            if box.dtype.kind not in "iuf":
-                raise TypeError(f"bbox must hold real numbers, got dtype {box.dtype}")
+            box = as_numeric(bbox, "bbox")
             if box.shape != (2, 3):
                 raise ValueError(f"bbox must have shape (2, 3) (min and max corner), "
                                  f"got {box.shape}")
@@ -338,8 +363,8 @@ default="auto"
             if np.isnan(box).any() or (box[0] > box[1]).any():
                 raise ValueError(f"bbox must have min <= max on every axis, got {box.tolist()}")
             box = np.clip(box, *(np.array(self.key_range) * [1, 1 - 1e-12]))
-            return Leaves(*self._leaves(bool(occupied_only), box))
-        return Leaves(*self._leaves(bool(occupied_only)))
+            return Leaves(*self._leaves(occupied_only, box))
+        return Leaves(*self._leaves(occupied_only))
 
     # ------------------------------------------------------------------ structure
     @property
@@ -442,7 +467,7 @@ default="auto"
         -------
         self : OccupancyOctree
         """
-        path = os.fspath(path)
+        path = os.fspath(as_path(path))
         if format is None:
             format = os.path.splitext(path)[1].lstrip(".").lower()
             if format not in fmt.FORMATS:
@@ -469,7 +494,7 @@ default="auto"
         ValueError
             If it is not an OcTree file, or is truncated or corrupt.
         """
-        path = os.fspath(path)
+        path = os.fspath(as_path(path))
         with open(path, "rb") as f:
             data = f.read()
         return cls._from_data(data, path, params)
@@ -480,6 +505,10 @@ default="auto"
         if header.tree_type != "OcTree":
             raise ValueError(f"{source} holds a {header.tree_type!r} tree; only 'OcTree' "
                              "(occupancy) files can be read")
+        try:
+            check_resolution(header.resolution)
+        except ValueError as exc:
+            raise ValueError(f"{source}: the header's {exc}") from None
         tree = cls(header.resolution, **params)
         if header.size == 0:
             return tree
@@ -507,7 +536,31 @@ def _rebuild(cls, params: dict, data: bytes) -> OccupancyOctree:
     return cls.from_bytes(data, **{k: v for k, v in params.items() if k != "resolution"})
 
 
+def _as_float32_directions(directions: ArrayLike) -> np.ndarray:
+    """Ray directions for liboctomap's ``castRay``, which normalises them in single
+    precision: rows whose float squared length would overflow or underflow (e.g. 1e39,
+    or 1e-30) are normalised in double precision first; the others are passed as given."""
+    d64 = as_points(directions, "directions")
+    zero = ~(d64 != 0).any(axis=1)
+    if zero.any():
+        raise ValueError(f"directions must be non-zero, got {int(zero.sum())} zero vectors "
+                         f"(first: row {int(np.flatnonzero(zero)[0])})")
+    with np.errstate(over="ignore", under="ignore"):
+        d = d64.astype(np.float32)
+        nsq = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
+    bad = ~((nsq >= np.finfo(np.float32).tiny) & np.isfinite(nsq))
+    if bad.any():
+        u = d64[bad] / np.abs(d64[bad]).max(axis=1, keepdims=True)
+        d[bad] = u / np.linalg.norm(u, axis=1, keepdims=True)
+    return np.ascontiguousarray(d)
+
+
+def _discretized(points: np.ndarray, resolution: float) -> np.ndarray:
+    """liboctomap's ``discretize``: the centre of each distinct cell holding a point."""
+    keys = np.floor(points.astype(np.float64) * (1.0 / resolution))
+    keys = np.unique(keys, axis=0)
+    return np.ascontiguousarray((keys + 0.5) * resolution, dtype=np.float32)
+
+
 def _check_format(format: str) -> str:
-    if format not in fmt.FORMATS:
-        raise ValueError(f"format must be one of {fmt.FORMATS}, got {format!r}")
-    return format
+    return check_choice(format, "format", fmt.FORMATS)

@@ -233,7 +233,10 @@ def test_tpr_fdr_needs_an_occupied_point(func):
 
 @pytest.mark.parametrize("func", [accuracy, score_all])
 def test_bad_threshold(func):
-    with pytest.raises(ValueError, match=r"threshold must be in \[0, 1\], got 1.5"):
+    with pytest.raises(ValueError, match=r"threshold must lie in \[0.0, 1.0\], got 1.5"):
         func([0, 1], [0.2, 0.7], threshold=1.5)
     with pytest.raises(TypeError, match="threshold must be a real number, got str"):
         func([0, 1], [0.2, 0.7], threshold="half")
+    # a bool is no threshold (True would otherwise be taken as 1.0)
+    with pytest.raises(TypeError, match="threshold must be a real number, got bool"):
+        func([0, 1], [0.2, 0.7], threshold=True)

@@ -118,10 +118,11 @@ def test_superrays_property(resolution, origin_kind, snap, threshold, seed):
 
 
 @pytest.mark.parametrize("bad, err, match", [
-    (0, ValueError, "superray_threshold must be >= 1, got 0"),
-    (-3, ValueError, "superray_threshold must be >= 1"),
-    (2.5, TypeError, "superray_threshold must be an int, got float"),
-    (True, TypeError, "superray_threshold must be an int, got bool"),
+    (0, ValueError, r"superray_threshold must lie in \[1, 2147483647\], got 0"),
+    (2**31, ValueError, r"superray_threshold must lie in \[1, 2147483647\], got 2147483648"),
+    (-3, ValueError, r"superray_threshold must lie in \[1, "),
+    (2.5, TypeError, "superray_threshold must be a positive int, got float"),
+    (True, TypeError, "superray_threshold must be a positive int, got bool"),
 ])
 def test_superray_threshold_is_checked(bad, err, match):
     with pytest.raises(err, match=match):
@@ -138,12 +139,18 @@ def test_last_insert_statistics():
     m.insert_scan(points, origin)                       # "auto": super rays + culling
     assert m.last_insert_["superrays"] and m.last_insert_["rays"] < len(points)
     assert m.last_insert_["region_cells"] >= 0
-    m.insert_scan(points, origin, method="superray+culling", superray_threshold=5)
+    # "superray+culling" may back off after the scan above (a decision made on its
+    # measured times); "superray" and "culling" never do
+    m.insert_scan(points, origin, method="superray", superray_threshold=5)
     stats = m.last_insert_
-    assert stats["rays"] < len(points) and stats["updated_cells"] > 0
-    assert stats["region_cells"] >= 0 and stats["traversed_cells"] > 0
+    assert stats["superrays"] and stats["rays"] < len(points) and stats["updated_cells"] > 0
+    assert stats["region_cells"] == -1 and stats["traversed_cells"] > 0
     for phase in ("endpoint", "preprocessing", "traversal", "update"):
         assert stats[f"{phase}_seconds"] >= 0
+    m.insert_scan(points, origin, method="culling")
+    stats = m.last_insert_
+    assert not stats["superrays"] and stats["rays"] == len(points)
+    assert stats["region_cells"] >= 0
 
 
 @pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])

@@ -18,9 +18,12 @@ and headings 0, 120, 240 degrees; here the room is turned by -90 degrees
 (0, -1.5), (3, 0.5) with headings -90, 30, 150 degrees.
 """
 
+import numbers
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._validation import as_numeric, as_point, as_points, check_int
 from ._geometry import Box, Ellipsoid, Frustum, rotation_matrix
 from ._scan import Scan
 
@@ -41,53 +44,45 @@ _CLEARANCE = 0.3  # minimum distance from a sensor position to any object
 
 
 def _check_seed(seed, name="seed"):
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
-        raise TypeError(f"{name} must be a non-negative int, got {type(seed).__name__}")
-    if seed < 0:
-        raise ValueError(f"{name} must be a non-negative int, got {seed}")
-    return int(seed)
+    return check_int(seed, name, low=0)
 
 
 def _check_positive_int(value, name):
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be a positive int, got {type(value).__name__}")
-    if value < 1:
-        raise ValueError(f"{name} must be a positive int, got {value}")
-    return int(value)
+    return check_int(value, name, low=1)
 
 
 def _as_points(points, name, dim=3):
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    if points.ndim != 2 or points.shape[1] != dim:
-        raise ValueError(f"{name} must have shape (n_points, {dim}), got {points.shape}")
-    if not np.isfinite(points).all():
-        raise ValueError(f"{name} must be finite (found NaN or inf)")
-    return points
+    return as_points(points, name, dim)
 
 
 def _as_rays(origins, directions, dim=3):
     """Validate rays: returns (origins (n, dim), unit directions (n, dim))."""
     directions = _as_points(directions, "directions", dim)
-    origins = np.ascontiguousarray(origins, dtype=np.float64)
+    origins = as_numeric(origins, "origins")
     if origins.shape == (dim,):
-        origins = np.broadcast_to(origins, directions.shape)
-    elif origins.shape != directions.shape:
+        origins = np.broadcast_to(as_point(origins, "origins", dim), directions.shape)
+    elif origins.shape == directions.shape:
+        origins = as_points(origins, "origins", dim)
+    else:
         raise ValueError(
             f"origins must have shape ({dim},) or the shape of directions "
             f"{directions.shape}, got {origins.shape}"
         )
-    if not np.isfinite(origins).all():
-        raise ValueError("origins must be finite (found NaN or inf)")
-    norm = np.linalg.norm(directions, axis=1)
-    if np.any(norm == 0):
+    # scaled first, so that neither 1e300 nor 1e-300 over- or underflows
+    scale = np.abs(directions).max(axis=1, keepdims=True) if len(directions) else 1.0
+    if np.any(scale == 0):
         raise ValueError("directions must be non-zero vectors")
-    return origins, directions / norm[:, None]
+    unit = directions / scale
+    return origins, unit / np.linalg.norm(unit, axis=1, keepdims=True)
 
 
 def _check_max_range(max_range):
+    if isinstance(max_range, (bool, np.bool_)) or not isinstance(
+            max_range, (numbers.Real, np.floating, np.integer)):
+        raise TypeError(f"max_range must be a real number, got {type(max_range).__name__}")
     max_range = float(max_range)
     if not max_range > 0:
-        raise ValueError(f"max_range must be positive, got {max_range}")
+        raise ValueError(f"max_range must be positive (inf: no limit), got {max_range}")
     return max_range
 
 

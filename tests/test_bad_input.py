@@ -1,0 +1,80 @@
+"""The docs' table of bad inputs (docs/bad_input.csv), kept true: every row's call raises
+the exception it names, with a message matching its pattern, and a map the call would
+have changed is left unchanged."""
+
+import csv
+import pathlib
+import re
+
+import numpy as np
+import pytest
+
+import occgp
+from occgp import AKIMap, BGKMap, GridMap, OccupancyOctree, datasets, evaluation, gp, metrics
+
+TABLE = pathlib.Path(__file__).resolve().parents[1] / "docs" / "bad_input.csv"
+
+
+def rows():
+    with open(TABLE, newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        assert header == ["entry point", "call", "raises", "message (regular expression)"]
+        return [pytest.param(*row, id=f"{i + 2}:{row[0]}") for i, row in enumerate(reader)]
+
+
+def namespace(tmp_path):
+    """What the table's calls may use: occgp's public names, small maps, a folder."""
+    ns = {"np": np, "occgp": occgp, "datasets": datasets, "evaluation": evaluation,
+          "metrics": metrics, "gp": gp, "files": tmp_path}
+    for module in (occgp, datasets, evaluation, metrics, gp):
+        ns.update({name: getattr(module, name) for name in module.__all__})
+    ns["tree"] = OccupancyOctree(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
+    ns["grid"] = GridMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
+    ns["bgk"] = BGKMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
+    ns["akimap"] = AKIMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
+    for name, content in make_files().items():
+        (tmp_path / name).write_bytes(content)
+    return ns
+
+
+def make_files() -> dict[str, bytes]:
+    """Small bad files for the readers' rows, by name."""
+    good = np.arange(12, dtype=np.float32).reshape(3, 4)
+    return {
+        "odd.bin": good.tobytes()[:-3],                 # not a whole number of records
+        "five.bin": np.ones((4, 5), np.float32).tobytes(),   # 80 bytes: 5-float records
+        "corrupt.xyz.gz": b"\x1f\x8b\x08\x00garbage",
+        "empty.pcd": b"",
+    }
+
+
+def state(value):
+    """A fingerprint of a map's contents (None for other values)."""
+    if isinstance(value, OccupancyOctree):
+        return value.to_bytes("ot")
+    if isinstance(value, GridMap):
+        return value.cells().log_odds.tobytes(), value.cells().centers.tobytes()
+    if isinstance(value, (BGKMap, AKIMap)):
+        return tuple(np.asarray(a).tobytes() for a in value.cells())
+    return None
+
+
+@pytest.mark.parametrize("entry, call, raises, message", rows())
+def test_bad_input_table(entry, call, raises, message, tmp_path):
+    ns = namespace(tmp_path)
+    before = {k: state(v) for k, v in ns.items() if state(v) is not None}
+    exc = {"ValueError": ValueError, "TypeError": TypeError, "OSError": OSError,
+           "FileNotFoundError": FileNotFoundError, "NotFittedError": ValueError}[raises]
+    with pytest.raises(exc) as info:
+        eval(call, ns)  # noqa: S307 -- the table's own expressions
+    assert type(info.value).__name__ == raises or raises in ("OSError", "NotFittedError")
+    assert re.search(message, str(info.value)), (call, str(info.value))
+    for k, fingerprint in before.items():
+        assert state(ns[k]) == fingerprint, f"{call} changed {k}"
+
+
+def test_table_covers_every_public_class():
+    entries = {row.values[0].split(".")[0] for row in rows()}
+    for name in ("OccupancyOctree", "GridMap", "metrics", "evaluation", "datasets"):
+        assert name in entries
