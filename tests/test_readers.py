@@ -308,7 +308,7 @@ def test_missing_file_raises_oserror(tmp_path, reader, name):
 )
 @pytest.mark.parametrize("bad, name", [(3, "int"), (b"a.pcd", "bytes"), (None, "NoneType")])
 def test_readers_reject_non_path(reader, bad, name):
-    with pytest.raises(TypeError, match=f"path must be str or os.PathLike, got {name}"):
+    with pytest.raises(TypeError, match=f"path must be a str or os.PathLike, got {name}"):
         reader(bad)
 
 
@@ -318,7 +318,7 @@ def test_readers_reject_nul_in_path():
 
 
 def test_writers_reject_bad_arguments(tmp_path):
-    with pytest.raises(TypeError, match="path must be str or os.PathLike, got int"):
+    with pytest.raises(TypeError, match="path must be a str or os.PathLike, got int"):
         write_pcd(5, np.zeros((1, 3)))
     with pytest.raises(TypeError, match="data must be a str"):
         write_pcd(tmp_path / "a.pcd", np.zeros((1, 3)), data=1)

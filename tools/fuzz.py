@@ -396,9 +396,10 @@ def use_scans(scans, workdir, reader):
             if not _clean_insert_error(exc):
                 raise
             _check(tree.num_nodes == 0, "a rejected insert changed the map")
-        # insert clipped to a sane box: must work
+        # insert clipped to a sane box (and rounded to micrometres, so that no ray is
+        # shorter than single precision can walk): must work
         box = 20.0
-        oc, pc = np.clip(o, -box, box), np.clip(sub, -box, box)
+        oc, pc = np.round(np.clip(o, -box, box), 6), np.round(np.clip(sub, -box, box), 6)
         tree = OccupancyOctree(0.5).insert_scan(pc, oc)
         if len(pc):
             occ = tree.occupancy(pc[:40])

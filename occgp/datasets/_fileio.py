@@ -18,9 +18,9 @@ def as_path(path, name="path") -> Path:
     try:
         path = os.fspath(path)
     except TypeError:
-        raise TypeError(f"{name} must be str or os.PathLike, got {type(path).__name__}") from None
+        raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}") from None
     if not isinstance(path, str):
-        raise TypeError(f"{name} must be str or os.PathLike, got {type(path).__name__}")
+        raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}")
     if "\0" in path:
         raise ValueError(f"{name} must not contain a NUL character, got {path!r}")
     return Path(path)
