@@ -64,7 +64,8 @@ def make_observations(hits, segment_starts, segment_ends, dim=None) -> Observati
         starts = ends = np.empty((0, dim))
     else:
         starts, ends = as_segments(segment_starts, segment_ends, "segment", dim=dim)
-    lengths = np.linalg.norm(ends - starts, axis=1)
+    with np.errstate(over="ignore"):  # inf beyond 1e154: the coordinate limits reject those
+        lengths = np.linalg.norm(ends - starts, axis=1)
     n_hits = len(hits)
     return Observations(
         np.vstack([hits, starts]), np.vstack([hits, ends]),
