@@ -52,13 +52,14 @@ def cholesky(K, kernel, noise, what="the observations"):
         L = None
     if L is None or not np.isfinite(np.diag(L)).all():
         finite = bool(np.isfinite(K).all())
-        cause = ("it is not positive definite: observations that nearly coincide in "
-                 "length-scale units are not told apart by the noise" if finite else
-                 "it holds NaN or inf")
+        cause = ("it is not numerically positive definite (observations that nearly "
+                 "coincide in length-scale units, or SparseKernel in 2D or 3D, which is only "
+                 "nearly positive definite) and the noise does not make up for it"
+                 if finite else "it holds NaN or inf")
         raise np.linalg.LinAlgError(
             f"the covariance matrix of {what} ({len(K)} x {len(K)}, kernel {kernel!r}, noise "
             f"{noise:.3g}) cannot be factorised: {cause}; raise noise (and the lower bound of "
-            f"noise_bounds), or thin out the repeated observations") from None
+            f"noise_bounds), or thin out nearly coinciding observations") from None
     return L
 
 
