@@ -21,11 +21,10 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from .._validation import _as_numeric, as_points, check_real
-from ..kernel import _check_n_jobs, _threads
 from ._gpr import JITTER, factorise, optimize_hyperparameters
 from ._integral import _check_kernel, as_segments
 from ._kernels import SquaredExponential, _check_bounds
-from ._limits import MAX_DENSE_BYTES, check_coordinates, check_dense
+from ._limits import MAX_DENSE_BYTES, check_bool, check_coordinates, check_dense, threads
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
 
 __all__ = ["GPOM"]
@@ -204,9 +203,13 @@ class GPOM(BaseEstimator):
         for name, low in [("n_hit_neighbors", 1), ("n_free_neighbors", 1), ("n_restarts", 0),
                           ("max_optimize", 2), ("batch_size", 1)]:
             _check_int(getattr(self, name), name, low)
-        if not isinstance(self.optimizer, (bool, np.bool_)):
-            raise TypeError(f"optimizer must be a bool, got {type(self.optimizer).__name__}")
-        _check_n_jobs(self.n_jobs)
+        check_bool(self.optimizer, "optimizer")
+        threads(self.n_jobs)
+        try:
+            check_random_state(self.random_state)
+        except ValueError:
+            raise TypeError("random_state must be None, an int or a RandomState instance, got "
+                            f"{self.random_state!r}") from None
         return copy.deepcopy(kernel)
 
     def fit(self, hits: ArrayLike, segment_starts: ArrayLike, segment_ends: ArrayLike):
@@ -271,7 +274,7 @@ class GPOM(BaseEstimator):
         X_train = np.concatenate([hits, free])
         y_train = np.r_[np.ones(len(hits)), -np.ones(len(free))]
 
-        n_threads = _threads(_check_n_jobs(self.n_jobs))
+        n_threads = threads(self.n_jobs)
         rng = check_random_state(self.random_state)
         sub = _subsample(y_train, self.max_optimize, rng)
         Xs, ys = X_train[sub], y_train[sub]
@@ -358,9 +361,10 @@ class GPOM(BaseEstimator):
         True
         """
         X = self._check_X(X)
+        return_var = check_bool(return_var, "return_var")
         n_hit = min(self.n_hit_neighbors, self._hit_tree.n)
         n_free = min(self.n_free_neighbors, self._free_tree.n)
-        workers = _threads(self.n_jobs)
+        workers = threads(self.n_jobs)
         mean = np.zeros(len(X))
         var = np.full(len(X), float(self.kernel_.variance))   # the prior, far from the data
         reach = np.sqrt(type(self.kernel_).cutoff2) / self.kernel_.inverse_length_scales(

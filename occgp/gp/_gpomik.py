@@ -12,11 +12,10 @@ from sklearn.utils.validation import check_is_fitted
 
 from .. import _integral
 from .._validation import as_points, check_real
-from ..kernel import _check_n_jobs, _threads
 from ._gpr import _with_noise, cholesky, jitter_for, optimize_hyperparameters, solve_lower
 from ._integral import _check_kernel, _check_quadrature, _covariance
 from ._kernels import SquaredExponential
-from ._limits import check_coordinates, check_dense, check_segments
+from ._limits import check_bool, check_coordinates, check_dense, check_segments, generator, threads
 from ._observations import Observations, make_observations
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
 
@@ -213,6 +212,7 @@ default="clenshaw-curtis"
             _check_int(self.max_cell_size, "max_cell_size", 1)
         if self.kl_threshold is not None:
             check_real(self.kl_threshold, "kl_threshold", low=0.0, low_open=False)
+        check_bool(self.optimizer, "optimizer")
         return kernel, noise, (lo, hi)
 
     # ------------------------------------------------------------------- fit
@@ -247,7 +247,8 @@ default="clenshaw-curtis"
         """
         kernel, noise, noise_bounds = self._check_params()
         quadrature = _check_quadrature(self.quadrature)
-        n_threads = _threads(_check_n_jobs(self.n_jobs))
+        n_threads = threads(self.n_jobs)
+        rng = generator(self.random_state)
         obs = make_observations(hits, segment_starts, segment_ends)
         if not ((obs.labels > 0).any() and (obs.labels < 0).any()):
             raise ValueError("GPOMIK needs both hits and beams to fit its classifier, got "
@@ -260,7 +261,6 @@ default="clenshaw-curtis"
             check_dense(n_opt, n_opt, kernel.n_theta + 4, "the hyper-parameter optimisation", fix)
         check_dense(n_opt, n_opt, 3, "the classifier's leave-one-out predictions", fix)
         self._check_cell_size(len(obs.y))
-        rng = np.random.default_rng(self.random_state)
         subset = obs
         if len(obs.y) > self.max_optimize:
             subset = obs.take(np.sort(rng.choice(len(obs.y), self.max_optimize, replace=False)))
@@ -574,6 +574,7 @@ default="clenshaw-curtis"
             Only with `return_var`.
         """
         X = self._check_X(X)
+        return_var = check_bool(return_var, "return_var")
         if len(self.cells_) == 1:
             mean, var = self._predict_cell(self.cells_[0], X, return_var)
             return (mean, var) if return_var else mean

@@ -9,6 +9,7 @@
   lengths in length scales (quadratically for the Matérn and sparse kernels).
 * Dense matrices: the matrices one step builds at once (``n x n`` float64 for
   ``n`` observations, several of them) stay below ``MAX_DENSE_BYTES`` (4 GiB).
+* Threads: ``n_jobs`` above the number of cores counts as every core.
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["MAX_SCALED_COORDINATE", "MAX_SCALED_SEGMENT", "MAX_DENSE_BYTES",
-           "check_coordinates", "check_segments", "check_dense"]
+           "check_coordinates", "check_segments", "check_dense", "check_bool", "threads",
+           "generator"]
 
 MAX_SCALED_COORDINATE = 1e10
 MAX_SCALED_SEGMENT = 1e4
@@ -60,3 +62,32 @@ def check_dense(n_rows, n_cols, n_matrices, what, fix):
             f"{what} needs {n_matrices} dense {n_rows} x {n_cols} matrices "
             f"({size / 2 ** 30:.3g} GiB), more than the limit of "
             f"{MAX_DENSE_BYTES / 2 ** 30:g} GiB; {fix}")
+
+
+def check_bool(value, name):
+    """Return `value` as a bool; only bool and numpy.bool_ are accepted."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a bool, got {type(value).__name__}")
+    return bool(value)
+
+
+def threads(n_jobs):
+    """Threads for `n_jobs` (None: 1; -1: every core), at most the number of cores."""
+    from ..kernel import _check_n_jobs, _threads
+    n_jobs = _check_n_jobs(n_jobs)
+    if n_jobs is not None and n_jobs > 0:
+        n_jobs = min(n_jobs, _threads(-1))   # more threads than cores only cost
+    elif n_jobs is not None:
+        n_jobs = max(n_jobs, -_threads(-1) - 1)
+    return _threads(n_jobs)
+
+
+def generator(random_state, name="random_state"):
+    """``numpy.random.default_rng(random_state)``, with an error naming the argument."""
+    if isinstance(random_state, bool):
+        raise TypeError(f"{name} must be None, an int or a numpy Generator, got bool")
+    try:
+        return np.random.default_rng(random_state)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be None, a non-negative int or a numpy Generator, got "
+                        f"{random_state!r} ({exc})") from None
