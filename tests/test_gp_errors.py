@@ -211,3 +211,153 @@ def test_identical_beams_fit_like_their_merged_form():
                                       np.vstack([hits, hits]),
                                       np.r_[np.ones(60), -2.0 * np.ones(60)])
     assert_allclose(lml, full, rtol=1e-10)
+
+
+# ------------------------------------------------------- bad input at every entry
+from pathlib import Path  # noqa: E402
+
+from occgp.gp import (ClenshawCurtis as CC, Matern32, OccupancyGrid, Simpson,  # noqa: E402
+                      clenshaw_curtis, fit_plsc, grid_points, integral_kernel, loo_predictions,
+                      observations_from_scans, plsc_proba, predict_grid, simpson)
+
+HITS, STARTS, ENDS = wall()
+
+
+def _gpomik():
+    return GPOMIK(optimizer=False).fit(HITS, STARTS, ENDS)
+
+
+def _gpom():
+    return GPOM(optimizer=False).fit(HITS, STARTS, ENDS)
+
+
+BAD_CALLS = [
+    # (id, call, exception, message regex)
+    ("gpomik-ragged-hits", lambda: GPOMIK().fit([[1.0], [1.0, 2.0]], STARTS, ENDS), ValueError,
+     r"hits must be a numeric array, could not convert it"),
+    ("gpomik-str-hits", lambda: GPOMIK().fit([["a", "b"]], STARTS, ENDS), TypeError,
+     r"hits must hold real numbers"),
+    ("gpomik-path-starts", lambda: GPOMIK().fit(HITS, Path("/tmp"), ENDS), TypeError,
+     r"segment_starts must hold real numbers"),
+    ("gpomik-optimizer-str", lambda: GPOMIK(optimizer="yes").fit(HITS, STARTS, ENDS), TypeError,
+     r"optimizer must be a bool, got str"),
+    ("gpomik-random-state-str", lambda: GPOMIK(random_state="x").fit(HITS, STARTS, ENDS),
+     TypeError, r"random_state must be None, a non-negative int or a numpy Generator"),
+    ("gpomik-random-state-bool", lambda: GPOMIK(random_state=True).fit(HITS, STARTS, ENDS),
+     TypeError, r"random_state must be None, an int or a numpy Generator, got bool"),
+    ("gpomik-n-restarts-huge", lambda: GPOMIK(n_restarts=2**70).fit(HITS, STARTS, ENDS),
+     ValueError, r"n_restarts must be at most 1000"),
+    ("gpomik-n-jobs-bigint", lambda: GPOMIK(optimizer=False, n_jobs=2**70).fit(
+        HITS, STARTS, ENDS).n_accepted_ == 10 or None, None, None),
+    ("gpomik-return-var-str", lambda: _gpomik().predict(HITS, return_var="no"), TypeError,
+     r"return_var must be a bool, got str"),
+    ("gpom-return-var-none", lambda: _gpom().predict(HITS, return_var=None), TypeError,
+     r"return_var must be a bool, got NoneType"),
+    ("gpom-random-state-str", lambda: GPOM(random_state="x").fit(HITS, STARTS, ENDS),
+     TypeError, r"random_state must be None, an int or a RandomState instance"),
+    ("gpom-n-restarts-huge", lambda: GPOM(n_restarts=10**6).fit(HITS, STARTS, ENDS), ValueError,
+     r"n_restarts must be at most 1000"),
+    ("kernel-call-nan", lambda: SquaredExponential()([[np.nan, 0.0]]), ValueError,
+     r"X must be finite"),
+    ("kernel-call-str", lambda: SquaredExponential()("ab"), TypeError,
+     r"X must hold real numbers"),
+    ("kernel-call-y-inf", lambda: Matern32()(HITS, [[np.inf, 0.0]]), ValueError,
+     r"Y must be finite"),
+    ("kernel-call-3d", lambda: SquaredExponential()(np.zeros((1, 2, 2))), ValueError,
+     r"X must have shape \(n_samples, n_features\), got \(1, 2, 2\)"),
+    ("kernel-call-eval-gradient-str", lambda: SquaredExponential()(HITS, eval_gradient="y"),
+     TypeError, r"eval_gradient must be a bool, got str"),
+    ("kernel-call-huge", lambda: SquaredExponential()(np.zeros((100_000, 3))), ValueError,
+     r"kernel matrix of 100000 x 100000 samples needs 373 GiB"),
+    ("kernel-diag-ragged", lambda: SparseKernel().diag([[1.0], [1.0, 2.0]]), ValueError,
+     r"X must be a numeric array, could not convert it"),
+    ("kernel-with-theta-str", lambda: SquaredExponential().with_theta("ab"), TypeError,
+     r"theta must hold real numbers"),
+    ("kernel-profile-str", lambda: SquaredExponential().profile("a"), TypeError,
+     r"s must hold real numbers"),
+    ("integral-kernel-eval-gradient-str",
+     lambda: integral_kernel(SquaredExponential(), HITS, HITS, eval_gradient="y"), TypeError,
+     r"eval_gradient must be a bool, got str"),
+    ("integral-kernel-1e30", lambda: integral_kernel(SquaredExponential(), [[0, 0]], [[1e30, 0]]),
+     ValueError, r"observation_ends must lie within 1e\+10 length scales of the origin"),
+    ("integral-kernel-long-segments",
+     lambda: integral_kernel(Matern32(), [[0, 0], [0, 1]], [[2e4, 0], [2e4, 1]]), ValueError,
+     r"observations must be at most 10000 length scales long"),
+    ("integral-kernel-huge", lambda: integral_kernel(SquaredExponential(), np.zeros((200_000, 2)),
+                                                     np.zeros((200_000, 2))), ValueError,
+     r"kernel matrix needs 1 dense 200000 x 200000 matrices \(298 GiB\)"),
+    ("integral-kernel-ragged", lambda: integral_kernel(SquaredExponential(), [[1.0], [1, 2]],
+                                                       HITS), ValueError,
+     r"observation_starts must be a numeric array"),
+    ("order-for-inf", lambda: CC().order_for(SquaredExponential(), np.inf), ValueError,
+     r"length must lie in \[0.0, inf\), got inf"),
+    ("order-for-str", lambda: Simpson().order_for(SquaredExponential(), "1"), TypeError,
+     r"length must be a real number, got str"),
+    ("order-for-kernel", lambda: CC().order_for("se", 1.0), TypeError,
+     r"kernel must be one of occgp.gp's kernels"),
+    ("max-order-huge", lambda: CC(max_order=2**70).orders, ValueError,
+     r"max_order must be at least 3 and at most 16385"),
+    ("clenshaw-curtis-huge", lambda: clenshaw_curtis(10**9), ValueError,
+     r"n must be at least 2 and at most 16385, got 1000000000"),
+    ("simpson-huge", lambda: simpson(2**40 + 1), ValueError, r"n must be at least 3 and at most"),
+    ("loo-not-square", lambda: loo_predictions([1.0, 2.0], [1.0, 2.0]), ValueError,
+     r"L must be 2-D, got shape \(2,\)"),
+    ("loo-mismatched", lambda: loo_predictions(np.eye(3), [1.0, 2.0]), ValueError,
+     r"L must have shape \(n, n\) with n = len\(y\) = 2, got \(3, 3\)"),
+    ("loo-singular", lambda: loo_predictions(np.zeros((2, 2)), [1.0, 2.0]), ValueError,
+     r"L must be a lower Cholesky factor, with a positive diagonal"),
+    ("loo-none", lambda: loo_predictions(None, [1.0]), TypeError, r"L must hold real numbers"),
+    ("fit-plsc-nan", lambda: fit_plsc([np.nan, 1.0], [1.0, 1.0], [1, -1]), ValueError,
+     r"mu must be finite"),
+    ("fit-plsc-negative-var", lambda: fit_plsc([1.0, 1.0], [-5.0, 1.0], [1, -1]), ValueError,
+     r"var must be non-negative, got a minimum of -5.0"),
+    ("fit-plsc-platt-str", lambda: fit_plsc([1.0, -1.0], [1.0, 1.0], [1, -1],
+                                            platt_targets="y"), TypeError,
+     r"platt_targets must be a bool, got str"),
+    ("plsc-proba-nan", lambda: plsc_proba([np.nan], [1.0], 1.0, 0.0), ValueError,
+     r"mu must be finite"),
+    ("plsc-proba-a-str", lambda: plsc_proba([0.0], [1.0], "1", 0.0), TypeError,
+     r"a must be a real number, got str"),
+    ("plsc-proba-b-inf", lambda: plsc_proba([0.0], [1.0], 1.0, np.inf), ValueError,
+     r"b must lie in \(-inf, inf\), got inf"),
+    ("plsc-proba-shapes", lambda: plsc_proba([0.0, 1.0], [1.0, 1.0, 1.0], 1.0, 0.0), ValueError,
+     r"mu and var must broadcast together, got shapes \(2,\) and \(3,\)"),
+    ("scans-int", lambda: observations_from_scans(5), TypeError,
+     r"scans must be a list of scans, got int"),
+    ("scans-str", lambda: observations_from_scans("ab"), TypeError,
+     r"scans must be a list of scans, got str"),
+    ("scans-item-int", lambda: observations_from_scans([5]), TypeError,
+     r"scans\[0\] must be a LaserScan2D, a Scan or a \(points, origin\) pair, got int"),
+    ("scans-ragged", lambda: observations_from_scans([([[1.0], [1.0, 2.0]], [0, 0])]),
+     ValueError, r"scans\[0\].points must be a numeric array"),
+    ("predict-grid-none-model", lambda: predict_grid(None, [0, 0], [1, 1], 0.5), TypeError,
+     r"model must have a predict_proba\(\) method"),
+    ("grid-points-huge", lambda: grid_points([0, 0], [1e6, 1e6], 1e-3), ValueError,
+     r"has 1e\+18 cells, more than max_points=20000000"),
+    ("occupancy-grid-1e30", lambda: OccupancyGrid().fit([[1e30, 0.0]], None, None), ValueError,
+     r"hits must lie within 1e\+15 cells of the origin"),
+]
+
+
+@pytest.mark.parametrize("call, error, match", [c[1:] for c in BAD_CALLS],
+                         ids=[c[0] for c in BAD_CALLS])
+def test_bad_input_gives_a_clear_error(call, error, match):
+    if error is None:       # accepted (and bounded)
+        assert call() is not None
+        return
+    with pytest.raises(error, match=match):
+        call()
+
+
+def test_scans_hit_mask_must_match_the_points():
+    from types import SimpleNamespace
+    scan = SimpleNamespace(end_points=HITS, origin=np.zeros(2), hit=np.ones(3, dtype=bool))
+    with pytest.raises(ValueError, match=r"scans\[0\].hit must be a bool array of shape \(5,\)"):
+        observations_from_scans([scan])
+
+
+def test_n_jobs_beyond_the_cores_counts_as_every_core():
+    from occgp.gp._limits import threads
+    from occgp.kernel import _threads
+    assert threads(2**70) == threads(-1) == _threads(-1)
+    assert threads(None) == 1 and threads(1) == 1

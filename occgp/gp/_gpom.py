@@ -24,7 +24,7 @@ from .._validation import _as_numeric, as_points, check_real
 from ._gpr import JITTER, factorise, optimize_hyperparameters
 from ._integral import _check_kernel, as_segments
 from ._kernels import SquaredExponential, _check_bounds
-from ._limits import MAX_DENSE_BYTES, check_bool, check_coordinates, check_dense, threads
+from ._limits import MAX_DENSE_BYTES, MAX_RESTARTS, check_bool, check_coordinates, check_dense, threads
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
 
 __all__ = ["GPOM"]
@@ -133,7 +133,8 @@ class GPOM(BaseEstimator):
     optimizer : bool, default=True
         Whether to fit the kernel hyper-parameters and the noise.
     n_restarts : int, default=2
-        Extra optimiser starts, drawn log-uniformly within the bounds.
+        Extra optimiser starts, drawn log-uniformly within the bounds; at
+        most 1000.
     max_optimize : int, default=1000
         Most training points (a random subset) used to fit the
         hyper-parameters and PLSC.
@@ -203,6 +204,8 @@ class GPOM(BaseEstimator):
         for name, low in [("n_hit_neighbors", 1), ("n_free_neighbors", 1), ("n_restarts", 0),
                           ("max_optimize", 2), ("batch_size", 1)]:
             _check_int(getattr(self, name), name, low)
+        if self.n_restarts > MAX_RESTARTS:
+            raise ValueError(f"n_restarts must be at most {MAX_RESTARTS}, got {self.n_restarts!r}")
         check_bool(self.optimizer, "optimizer")
         threads(self.n_jobs)
         try:

@@ -15,7 +15,7 @@ from .._validation import as_points, check_real
 from ._gpr import _with_noise, cholesky, jitter_for, optimize_hyperparameters, solve_lower
 from ._integral import _check_kernel, _check_quadrature, _covariance
 from ._kernels import SquaredExponential
-from ._limits import check_bool, check_coordinates, check_dense, check_segments, generator, threads
+from ._limits import MAX_RESTARTS, check_bool, check_coordinates, check_dense, check_segments, generator, threads
 from ._observations import Observations, make_observations
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
 
@@ -120,7 +120,8 @@ default="clenshaw-curtis"
         Fit the hyper-parameters by maximising the log marginal likelihood
         (L-BFGS-B in log space).
     n_restarts : int, default=2
-        Extra optimiser starts, drawn log-uniformly within the bounds.
+        Extra optimiser starts, drawn log-uniformly within the bounds; at
+        most 1000.
     max_optimize : int, default=1000
         Hyper-parameters and PLSC are fitted on a random subset of at most
         this many observations.
@@ -207,6 +208,8 @@ default="clenshaw-curtis"
         if not lo < hi:
             raise ValueError(f"noise_bounds must satisfy low < high, got {self.noise_bounds!r}")
         _check_int(self.n_restarts, "n_restarts", 0)
+        if self.n_restarts > MAX_RESTARTS:
+            raise ValueError(f"n_restarts must be at most {MAX_RESTARTS}, got {self.n_restarts!r}")
         _check_int(self.max_optimize, "max_optimize", 2)
         if self.max_cell_size is not None:
             _check_int(self.max_cell_size, "max_cell_size", 1)

@@ -17,12 +17,14 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["MAX_SCALED_COORDINATE", "MAX_SCALED_SEGMENT", "MAX_DENSE_BYTES",
-           "check_coordinates", "check_segments", "check_dense", "check_bool", "threads",
+           "MAX_RESTARTS", "check_coordinates", "check_segments", "check_dense", "check_bool", "threads",
            "generator"]
 
 MAX_SCALED_COORDINATE = 1e10
 MAX_SCALED_SEGMENT = 1e4
 MAX_DENSE_BYTES = 4 * 2 ** 30
+#: Most extra starts of the hyper-parameter optimiser (``n_restarts``).
+MAX_RESTARTS = 1000
 
 
 def check_coordinates(arrays, inv_ls, *, fix="shift the data towards the origin"):

@@ -142,7 +142,7 @@ def fit_plsc(mu: ArrayLike, var: ArrayLike, labels: ArrayLike, *,
     if not np.isin(labels, (-1.0, 1.0)).all():
         raise ValueError("labels must be -1 or +1")
     if (var < 0).any():
-        raise ValueError(f"var must be non-negative, got a minimum of {var.min()!r}")
+        raise ValueError(f"var must be non-negative, got a minimum of {float(var.min())!r}")
     n_pos, n_neg = int((labels > 0).sum()), int((labels < 0).sum())
     if not (n_pos and n_neg):
         raise ValueError("PLSC needs both classes among the training labels")
@@ -175,7 +175,7 @@ def plsc_proba(mu: ArrayLike, var: ArrayLike, a: float, b: float) -> NDArray[np.
     mu, var = _finite(mu, "mu"), _finite(var, "var")
     a, b = check_real(a, "a"), check_real(b, "b")
     if (var < 0).any():
-        raise ValueError(f"var must be non-negative, got a minimum of {var.min()!r}")
+        raise ValueError(f"var must be non-negative, got a minimum of {float(var.min())!r}")
     try:
         np.broadcast_shapes(mu.shape, var.shape)
     except ValueError:
