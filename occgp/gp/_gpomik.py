@@ -98,7 +98,7 @@ class GPOMIK(BaseEstimator):
     Limits, checked before any work: observations must lie within 1e10
     length scales of the origin and beams be at most 1e4 length scales long
     (the kernel's length scales at :meth:`fit`, the fitted ones at
-    :meth:`update`; see :mod:`occgp.gp._limits`), and no step may build dense
+    :meth:`update`; see ``occgp.gp._limits``), and no step may build dense
     matrices of more than 4 GiB together (which bounds `max_optimize`,
     `max_cell_size` and the size of one update). Queries may lie anywhere:
     far from every observation they get the prior.

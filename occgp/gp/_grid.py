@@ -633,7 +633,7 @@ def predict_grid(model, lower: ArrayLike, upper: ArrayLike, resolution: float, *
         What to evaluate: the occupancy probability, or the predictive mean or
         variance of a Gaussian-process model.
     batch_size : int, default=50_000
-        Number of points passed to the model at once (at most `max_points`).
+        Number of points passed to the model at once.
     max_points : int, default=20_000_000
         Most cells of the grid, as for :func:`grid_points`; the values take
         8 bytes a cell, and only one batch of points exists at a time.

@@ -139,7 +139,7 @@ def integral_kernel(kernel, starts: ArrayLike, ends: ArrayLike, starts2: ArrayLi
     ValueError
         On NaN or inf, bad shapes, observations beyond 1e10 length scales
         from the origin or segments longer than 1e4 length scales (see
-        :mod:`occgp.gp._limits`), or a result of more than 4 GiB.
+        ``occgp.gp._limits``), or a result of more than 4 GiB.
     TypeError
         On non-numeric observations, a kernel or quadrature of another kind,
         or a non-bool `eval_gradient`.
