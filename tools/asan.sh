@@ -6,7 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PY:-.venv/bin/python}
-PY=$(realpath "$PY")
+PY="$(cd "$(dirname "$PY")" && pwd)/$(basename "$PY")"   # keep the venv: no symlink resolution
 DIR=build/asan
 LOGS=$(realpath -m "$DIR/logs")
 
