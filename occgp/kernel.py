@@ -242,8 +242,10 @@ class BGKMap(_KernelMap):
 
     Each scan becomes training samples: its end points within `max_range`
     (occupied, label 1) and points every `free_resolution` metres along each
-    beam plus the sensor origin (free, label 0), both reduced to one centroid per
-    cube of edge `ds_resolution`. Every cell whose centre lies within `ell` of a
+    beam, one more at ``length - free_resolution`` on every beam longer than
+    `free_resolution`, and the sensor origin (free, label 0; la3dm's
+    ``beam_sample``), both reduced to one centroid per cube of edge
+    `ds_resolution`. Every cell whose centre lies within `ell` of a
     sample gets ``k(r) y`` added to alpha and ``k(r) (1 - y)`` to beta, with
     ``r = distance / ell`` and k the sparse kernel times `sf2`. The occupancy of
     a cell is the posterior mean ``alpha / (alpha + beta)`` with `prior` added to
@@ -258,7 +260,8 @@ class BGKMap(_KernelMap):
     sf2 : float, default=1.0
         Kernel signal variance (scale of the kernel).
     free_resolution : float, default=0.5
-        Spacing of the free samples along each beam, in metres.
+        Spacing of the free samples along each beam, in metres (plus one sample
+        this far before each end point).
     ds_resolution : float, default=None
         Edge of the cubes that reduce the samples to centroids; None means
         `resolution`.
@@ -339,15 +342,21 @@ class BGKMap(_KernelMap):
             hits = hits[np.linalg.norm(hits - org, axis=1) <= self.max_range]
         if len(hits) == 0:
             return np.empty((0, 3)), np.empty(0)
-        # free samples every free_resolution metres along each beam (d < length), and
-        # the origin once per beam (so it weighs in its cube's centroid), as la3dm's
+        # free samples every free_resolution metres along each beam (d < length), one
+        # more at length - free_resolution on every beam longer than free_resolution,
+        # and the origin once per beam (so it weighs in its cube's centroid), as la3dm's
         # beam_sample and get_training_data
         length = np.linalg.norm(hits - org, axis=1)
-        n_free = np.maximum(np.ceil(length / self.free_resolution).astype(np.int64) - 1, 0)
+        fr = self.free_resolution
+        n_step = np.maximum(np.ceil(length / fr).astype(np.int64) - 1, 0)
+        n_free = n_step + (length > fr)
         beam = np.repeat(np.arange(len(hits)), n_free)
         step = np.arange(len(beam)) - np.repeat(np.cumsum(n_free) - n_free, n_free) + 1
+        dist = step * fr
+        last = step > n_step[beam]                  # the sample at length - fr
+        dist[last] = length[beam[last]] - fr
         unit = (hits - org) / np.where(length > 0, length, 1.0)[:, None]
-        frees = org + unit[beam] * (step * self.free_resolution)[:, None]
+        frees = org + unit[beam] * dist[:, None]
         frees = voxel_centroids(np.vstack([frees, np.repeat(org[None], len(hits), axis=0)]), ds)
         samples = np.vstack([hits, frees])
         labels = np.concatenate([np.ones(len(hits)), np.zeros(len(frees))])

@@ -45,15 +45,28 @@ def test_voxel_centroids():
 # ---------------------------------------------------------------------- BGK
 def test_bgk_training_data_follows_la3dm():
     """Hits reduced to centroids, free samples every free_resolution metres (d < length)
-    along each beam and the origin; beams longer than max_range dropped whole."""
+    along each beam, one more at length - free_resolution on beams longer than
+    free_resolution, and the origin; beams longer than max_range dropped whole
+    (la3dm's get_training_data gives 0, 0.5, 0.73, 1.0 for this 1.23 m beam)."""
     m = BGKMap(0.1, free_resolution=0.5, max_range=3.0)
     points = np.array([[1.22, 0.0, 0.0], [1.24, 0.0, 0.0], [0.0, 5.0, 0.0]])
     samples, labels = m.training_data(points, [0.0, 0.0, 0.0])
     hits = samples[labels == 1]
     frees = samples[labels == 0]
     assert_allclose(hits, [[1.23, 0.0, 0.0]])                   # one centroid, long beam gone
-    assert_allclose(np.sort(frees[:, 0]), [0.0, 0.5, 1.0])       # origin, 0.5, 1.0 (< 1.23)
+    assert_allclose(np.sort(frees[:, 0]), [0.0, 0.5, 0.73, 1.0])  # origin, 0.5, 1.23 - 0.5, 1.0
     assert_allclose(frees[:, 1:], 0.0)
+
+
+def test_bgk_extra_free_sample_only_on_beams_longer_than_free_resolution():
+    """la3dm's beam_sample: no free sample on a beam of at most free_resolution; on a
+    beam of exactly 2 free_resolution the extra sample falls on the step one (both
+    weigh in the centroid of their cube)."""
+    m = BGKMap(0.1, free_resolution=0.5, ds_resolution=1e-3)
+    for length, expected in [(0.5, [0.0]), (0.3, [0.0]), (0.6, [0.0, 0.1, 0.5]),
+                             (1.0, [0.0, 0.5]), (2.2, [0.0, 0.5, 1.0, 1.5, 1.7, 2.0])]:
+        samples, labels = m.training_data([[0.0, length, 0.0]], [0.0, 0.0, 0.0])
+        assert_allclose(np.sort(samples[labels == 0][:, 1]), expected, atol=1e-12)
 
 
 def slow_bgk(samples, labels, resolution, ell, sf2=1.0):
