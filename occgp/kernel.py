@@ -372,10 +372,11 @@ class AKIMap(_KernelMap):
     """Occupancy by adaptive anisotropic kernel inference (Kwon et al., AKIMap).
 
     Each scan becomes samples: its end points (occupied, label 1; the first
-    point in each cell of edge `resolution`), the sensor origin and one
-    uniformly random point in each `free_sample_distance` interval of every
-    beam (free, label 0; intervals start half a distance from the origin,
-    cells already holding a sample are skipped). Each sample gets its own
+    point in each cell of edge `resolution`), the sensor origin (always, as
+    the reference code) and one uniformly random point in each
+    `free_sample_distance` interval of every beam (free, label 0; intervals
+    start half a distance from the origin, cells already holding a sample are
+    skipped). Each sample gets its own
     bandwidth matrix H:
 
     * the same-label samples within ``r(d) = min((R - resolution) / sensor_range
@@ -544,11 +545,12 @@ class AKIMap(_KernelMap):
         beam, dist = beam[keep], dist[keep]
         unit = (hits - org) / np.where(length > 0, length, 1.0)[:, None]
         frees = org + unit[beam] * dist[:, None]
-        # a cell already holding a sample (end points, then the origin, then the free
-        # samples in order) takes no further one
+        # the origin is always a free sample (the reference code's first one, even in
+        # the cell of an end point); a cell already holding a sample (end points, the
+        # origin, then the free samples in order) takes no further free one
         cand = np.vstack([hits, org[None], frees])
         first = voxel_first(cand, res)
-        frees = cand[first[first >= len(hits)]]
+        frees = np.vstack([org[None], cand[first[first > len(hits)]]])
         samples = np.vstack([frees, hits])
         labels = np.concatenate([np.zeros(len(frees)), np.ones(len(hits))])
         return samples, labels

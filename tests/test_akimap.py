@@ -50,6 +50,20 @@ def test_training_data_follows_the_reference_sampling():
     assert len(np.unique(keys, axis=0)) == len(samples)        # one sample per cell
 
 
+def test_origin_is_a_free_sample_even_in_the_cell_of_an_end_point():
+    """As the reference code: the origin is always the first free sample, and free
+    samples in its cell or an end point's are skipped."""
+    m = AKIMap(0.1, random_state=0)
+    points = np.array([[0.05, 0.0, 0.0], [1.4, 0.0, 0.0]])
+    samples, labels = m.training_data(points, [0.01, 0.0, 0.0])
+    assert_array_equal(samples[labels == 1], points)
+    frees = samples[labels == 0]
+    assert_array_equal(frees[0], [0.01, 0.0, 0.0])
+    keys = np.floor(frees[1:] / 0.1)
+    assert not np.any(np.all(keys == [0, 0, 0], axis=1))        # nothing else in that cell
+    assert len(frees) >= 2
+
+
 def test_random_state_makes_samples_and_maps_reproducible():
     points, origin = wall_scan()
     a = AKIMap(0.1, random_state=3).update(points, origin)
