@@ -383,7 +383,8 @@ class _KernelMap(_KernelCells):
         order = np.lexsort(keys.T)
         keys, alpha, beta = keys[order], alpha[order], beta[order]
         centers = (keys.astype(np.float64) - _MAX_VAL + 0.5) * self.resolution
-        return KernelCells(centers, alpha + self.prior, beta + self.prior)
+        prior = check_real(self.prior, "prior", low=0.0)
+        return KernelCells(centers, alpha + prior, beta + prior)
 
     @property
     def num_cells(self) -> int:
@@ -406,7 +407,8 @@ class _KernelMap(_KernelCells):
                                clamping_max=clamping_max)
         keys, alpha, beta = self._cells_arrays()
         if len(keys):
-            p = (alpha + self.prior) / (alpha + beta + 2 * self.prior)
+            prior = check_real(self.prior, "prior", low=0.0)
+            p = (alpha + prior) / (alpha + beta + 2 * prior)
             log_odds = np.log(p) - np.log1p(-p)
             tree._set_values(np.ascontiguousarray(keys), log_odds.astype(np.float32))
         return tree
