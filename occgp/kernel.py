@@ -18,7 +18,8 @@ from numpy.typing import ArrayLike, NDArray
 import os
 from numbers import Integral
 
-from ._kernel import _akimap_bandwidths, _KernelCells, sparse_kernel
+from ._kernel import _akimap_bandwidths, _KernelCells
+from ._kernel import sparse_kernel as _sparse_kernel
 from .octree import OccupancyOctree
 from ._validation import as_point, as_points, check_real
 
@@ -88,9 +89,46 @@ def _merge_cube_sums(parts):
     return ukeys, out, np.bincount(inverse, weights=counts, minlength=len(ukeys))
 
 
-def voxel_centroids(points: NDArray[np.float64], size: float) -> NDArray[np.float64]:
+def sparse_kernel(r: ArrayLike) -> NDArray[np.float64]:
+    """The sparse kernel ``((2 + cos 2 pi r)(1 - r)) / 3 + sin(2 pi r) / (2 pi)`` for
+    ``|r| < 1``, 0 beyond (Melkumyan and Ramos, 2009), element-wise; NaN where `r`
+    is NaN.
+
+    Parameters
+    ----------
+    r : array-like of real numbers, any shape
+        Normalised distances.
+
+    Returns
+    -------
+    ndarray of the shape of `r`
+
+    Raises
+    ------
+    TypeError
+        If `r` does not hold real numbers.
+    """
+    arr = np.asarray(r)
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"r must hold real numbers, got dtype {arr.dtype}")
+    flat = np.ascontiguousarray(arr, dtype=np.float64).ravel()
+    out = _sparse_kernel(flat)
+    out[np.isnan(flat)] = np.nan
+    return out.reshape(arr.shape)
+
+
+def voxel_centroids(points: ArrayLike, size: float) -> NDArray[np.float64]:
     """The centroid of the points in each cube of edge `size` that holds any (PCL's
-    ``VoxelGrid``), ordered by cube."""
+    ``VoxelGrid``), ordered by cube.
+
+    Raises
+    ------
+    TypeError, ValueError
+        If `points` is not a finite array of shape (n_points, 3), `size` not a
+        positive real, or the points span more than 2^21 cubes on an axis.
+    """
+    points = as_points(points, "points")
+    size = check_real(size, "size", low=0.0)
     if len(points) == 0:
         return np.empty((0, 3))
     _, sums, counts = _cube_sums(points, size)

@@ -354,3 +354,17 @@ def test_corrupt_pickle_data_is_rejected(bad, match):
         fn(cls, params, *bad(keys, alpha, beta), extra)
     with pytest.raises(ValueError, match="corrupt pickle of a kernel map"):
         _restore(dict, params, keys, alpha, beta, extra)
+
+
+def test_sparse_kernel_and_voxel_centroids_check_their_input():
+    assert_allclose(sparse_kernel([[0.0, 2.0], [-0.5, np.nan]]),
+                    [[1.0, 0.0], [sparse_kernel([0.5])[0], np.nan]])
+    assert sparse_kernel(np.array([0, 1])).tolist() == [1.0, 0.0]
+    with pytest.raises(TypeError, match="r must hold real numbers, got dtype <U1"):
+        sparse_kernel(["a"])
+    with pytest.raises(ValueError, match=r"points must have shape \(n_points, 3\)"):
+        voxel_centroids(np.zeros((2, 2)), 0.1)
+    with pytest.raises(ValueError, match=r"size must lie in \(0.0, inf\)"):
+        voxel_centroids(np.zeros((2, 3)), -1.0)
+    with pytest.raises(ValueError, match="size=1e-09 is too small"):
+        voxel_centroids([[0, 0, 0], [1, 0, 0]], 1e-9)
