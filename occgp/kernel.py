@@ -229,12 +229,13 @@ def _check_n_jobs(n_jobs) -> int | None:
 
 
 def _threads(n_jobs: int | None) -> int:
-    """Threads for `n_jobs` as joblib counts them (None: 1; -1: every core)."""
+    """Threads for `n_jobs` as joblib counts them (None: 1; -1: every core), at most
+    the number of cores (OpenMP threads beyond them only cost memory)."""
     if n_jobs is None:
         return 1
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
         else (os.cpu_count() or 1)
-    return n_jobs if n_jobs > 0 else max(cores + 1 + n_jobs, 1)
+    return min(n_jobs, cores) if n_jobs > 0 else max(cores + 1 + n_jobs, 1)
 
 
 class Bandwidths(NamedTuple):
@@ -518,8 +519,8 @@ class BGKMap(_KernelMap):
     max_range : float, default=8.0
         Beams longer than this are dropped whole (la3dm's rule); None keeps all.
     n_jobs : int, default=None
-        Threads for the accumulation: None means 1, -1 every core. The map is
-        the same for any number.
+        Threads for the accumulation: None means 1, -1 every core, never more
+        than the cores. The map is the same for any number.
     max_cells_per_update : int, default=2**30
         Most cells one update's kernels may visit (the support boxes of its
         samples, about ``(2 ell / resolution + 1)^3`` cells each), a few
@@ -724,7 +725,8 @@ class AKIMap(_KernelMap):
         Seed of the free samples; an int makes every run draw the same ones.
     n_jobs : int, default=None
         Threads for the bandwidths and the accumulation: None means 1, -1
-        every core. The map is the same for any number.
+        every core, never more than the cores. The map is the same for any
+        number.
     max_cells_per_update : int, default=2**30
         Most cells one update's kernels may visit (the support boxes of its
         samples), and most (sample, candidate neighbour) pairs its bandwidths
@@ -795,10 +797,12 @@ class AKIMap(_KernelMap):
         self.max_cells_per_update = max_cells_per_update
         self._check_params()
         if not (random_state is None or isinstance(random_state, np.random.Generator)
-                or (isinstance(random_state, Integral) and not isinstance(random_state, bool)
-                    and random_state >= 0)):
+                or (isinstance(random_state, Integral) and not isinstance(random_state, bool))):
             raise TypeError(f"random_state must be None, a non-negative int or a "
                             f"numpy.random.Generator, got {random_state!r}")
+        if isinstance(random_state, Integral) and random_state < 0:
+            raise ValueError(f"random_state must be None, a non-negative int or a "
+                             f"numpy.random.Generator, got {random_state!r}")
         self.random_state = random_state
         self._rng = np.random.default_rng(random_state)
         self.last_bandwidths_: Bandwidths | None = None

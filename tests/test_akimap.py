@@ -335,7 +335,8 @@ def test_to_octree_of_akimap(tmp_path):
     (dict(sensor_range="8"), TypeError, "sensor_range must be a real number"),
     (dict(variant="paper"), ValueError, r"variant must be one of \('occgp', 'published'\)"),
     (dict(bandwidth_floor=-0.1), ValueError, "bandwidth_floor must lie in"),
-    (dict(random_state=-1), TypeError, "random_state must be None, a non-negative int"),
+    (dict(random_state=-1), ValueError, "random_state must be None, a non-negative int"),
+    (dict(random_state=True), TypeError, "random_state must be None, a non-negative int"),
     (dict(random_state=1.5), TypeError, "random_state must be None"),
     (dict(n_jobs=0), ValueError, "n_jobs must be None, a positive int"),
     (dict(n_jobs=2.0), ValueError, "n_jobs must be None"),
@@ -474,3 +475,15 @@ def test_corrupt_pickle_data_is_rejected():
         fn(cls, params, keys.astype(np.float64), alpha, beta, extra)
     with pytest.raises(ValueError, match="corrupt pickle of a kernel map"):
         fn(cls, params, keys, alpha, beta, [1, 2])
+
+
+def test_huge_n_jobs_uses_the_cores():
+    """n_jobs=2**40 neither overflows a C int nor allocates a scratch row per thread."""
+    points, origin = wall_scan()
+    a = AKIMap(0.1, random_state=0, n_jobs=2**40).update(points, origin)
+    b = AKIMap(0.1, random_state=0, n_jobs=1).update(points, origin)
+    for x, y in zip(a.cells(), b.cells()):
+        assert_array_equal(x, y)
+    c = BGKMap(0.1, n_jobs=-2**40).update(points, origin)
+    for x, y in zip(c.cells(), BGKMap(0.1).update(points, origin).cells()):
+        assert_array_equal(x, y)
