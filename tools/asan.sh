@@ -12,7 +12,7 @@ LOGS=$(realpath -m "$DIR/logs")
 
 mkdir -p "$DIR"
 # the tracked and new (not ignored) files of the working tree
-git ls-files -z --cached --others --exclude-standard -- setup.py pyproject.toml ext occgp tests \
+git ls-files -z --cached --others --exclude-standard -- setup.py pyproject.toml ext occgp tests docs \
   | xargs -0 cp -p --parents -t "$DIR"
 rm -rf "$LOGS" && mkdir -p "$LOGS"
 
