@@ -15,6 +15,8 @@ mkdir -p "$DIR"
 git ls-files -z --cached --others --exclude-standard -- setup.py pyproject.toml ext occgp tests docs \
   | xargs -0 cp -p --parents -t "$DIR"
 rm -rf "$LOGS" && mkdir -p "$LOGS"
+# the tests find real data in ../shared beside the project: beside the copy too
+if [ -d ../shared ] && [ ! -e build/shared ]; then ln -s "$(cd ../shared && pwd)" build/shared; fi
 
 SAN="-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined"
 echo "occgp asan: building the extensions with $SAN -DNDEBUG"
