@@ -124,9 +124,15 @@ cdef inline void _support_keys(const double* x, const double* ext, double res,
     """The keys whose centre ``(key - 32768 + 0.5) res`` lies in the support box of the
     sample at x with half-extents ext."""
     cdef int a
+    cdef double l, h
     for a in range(3):
-        lo[a] = max(<long>ceil((x[a] - ext[a]) / res - 0.5) + _MAX_VAL, 0)
-        hi[a] = min(<long>floor((x[a] + ext[a]) / res - 0.5) + _MAX_VAL, 2 * _MAX_VAL - 1)
+        # clamped in double first: a support wider than the key range casts safely
+        l = ceil((x[a] - ext[a]) / res - 0.5)
+        h = floor((x[a] + ext[a]) / res - 0.5)
+        l = min(max(l, -_MAX_VAL - 1.0), <double>_MAX_VAL)
+        h = min(max(h, -_MAX_VAL - 1.0), <double>_MAX_VAL)
+        lo[a] = max(<long>l + _MAX_VAL, 0)
+        hi[a] = min(<long>h + _MAX_VAL, 2 * _MAX_VAL - 1)
 
 
 def sparse_kernel(const double[::1] r):
@@ -328,21 +334,28 @@ cdef class _KernelCells:
         cdef BetaBlocks* cells = &self._cells
         cdef Beta* box
         cdef uint8_t* touched
+        cdef double visits = 0.0, boxes
         for a in range(3):
             org[a] = 2 * _MAX_VAL
             top[a] = -1
         for i in range(n):
             _support_keys(xs + 3 * i, es + 3 * i, res, lo, hi)
+            boxes = 1.0
             for a in range(3):
                 org[a] = min(org[a], lo[a])
                 top[a] = max(top[a], hi[a])
+                boxes *= <double>max(hi[a] - lo[a] + 1, 0)
+            visits += boxes
         for a in range(3):
             if top[a] < org[a]:      # no cell centre in any support
                 return 0
             org[a] = org[a] & ~3L
             dims[a] = ((top[a] | 3) + 1) - org[a]
         layer = dims[0] * dims[1]
-        if 4 * layer > _MAX_DENSE:
+        # the slabs sweep the whole key box (about a tenth of its cells' time each);
+        # where the supports fill little of a wide box, straight to the blocks
+        if 4 * layer > _MAX_DENSE or \
+                <double>layer * <double>dims[2] > 64.0 * visits + <double>_MAX_DENSE:
             return _accumulate_direct(cells, xs, labels, ps, es, ws, order, n, sf2, res)
         height = max(((_MAX_DENSE // layer) >> 2) << 2, 4)
         height = min(height, dims[2])
@@ -732,7 +745,14 @@ cdef void _bandwidth_one(
         xi[a] = x[3 * i + a]
     dist = sqrt((xi[0] - origin[0]) ** 2 + (xi[1] - origin[1]) ** 2
                 + (xi[2] - origin[2]) ** 2)
-    radius = min((radius_max - res) / max_range * dist + res, radius_max)
+    # r(d) = min((R - res) / sensor_range * d + res, R), R from sensor_range on (so a
+    # tiny sensor_range gives no 0 * inf); R where R < res (the formula dips below R)
+    if dist >= max_range:
+        radius = radius_max
+    else:
+        radius = min((radius_max - res) / max_range * dist + res, radius_max)
+    if not radius >= min(radius_max, res):
+        radius = min(radius_max, res)
     r2max = radius * radius
     for a in range(9):
         sig[a] = 0.0
@@ -836,10 +856,13 @@ cdef void _bandwidth_one(
 
 def _akimap_bandwidths(const double[:, ::1] samples, const uint8_t[::1] labels,
                        const double[::1] origin, double res, double radius_max,
-                       double max_range, bint published, double floor, int n_threads):
+                       double max_range, bint published, double floor, int n_threads,
+                       double cell):
     """Per sample: precision (inverse bandwidth, (n, 3, 3)), support half-extents (n, 3),
     weight |H|^-1/2, the length-scale factor c (H = c^2 Sigma + floor^2 I) and the
-    number of same-label samples in its search ball (itself included)."""
+    number of same-label samples in its search ball (itself included). The samples
+    are bucketed in cubes of edge `cell` (at least `radius_max`; wider where they
+    would span more than 2^20 cubes)."""
     cdef Py_ssize_t n = samples.shape[0], i
     precision = np.empty((n, 3, 3))
     extent = np.empty((n, 3))
@@ -848,8 +871,8 @@ def _akimap_bandwidths(const double[:, ::1] samples, const uint8_t[::1] labels,
     n_same = np.empty(n, dtype=np.int64)
     if n == 0:
         return precision, extent, weight, scale, n_same
-    # samples bucketed in cubes of edge radius_max, the cubes sorted by key
-    cell = radius_max
+    # samples bucketed in cubes of edge cell, the cubes sorted by key
+    cell = max(cell, radius_max)
     ck = np.floor(np.asarray(samples) / cell).astype(np.int64)
     lo = ck.min(axis=0)
     dims = ck.max(axis=0) - lo + 1

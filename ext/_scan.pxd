@@ -161,6 +161,8 @@ cdef struct Crossing:
     double border     # the border's position on `axis`, in metres
     int key_lo        # lowest key `other` may have there
     int n_keys        # how many keys `other` may have there
+    int key_min       # the keys of `other` from the origin's cell to the end cell:
+    int key_max       # only the borders between them are crossed
 
 
 cdef inline int _super_rays(double res, const point3d& o, const OcTreeKey& ko,
@@ -180,15 +182,20 @@ cdef inline int _super_rays(double res, const point3d& o, const OcTreeKey& ko,
     class size as weight.
 
     Exactness against liboctomap's float traversal: a ray joins a class only
-    when it is *certified* -- at every crossing (critical or not) the other
-    coordinate, and its end point in its cell, clear the nearest cell border by
-    more than a margin several times the error of liboctomap's
-    single-precision ray arithmetic: 2^-19 (length + resolution) for its float
-    direction, plus 2^-21 resolution times the slope |d_b / d_a| for the
-    single-precision half-cell offset of its borders. Its float traversal then
-    equals the exact one. Every other ray is traversed on its own. (A border
-    through the origin is crossed first, at t = 0, by every ray heading that
-    way; the margins of that crossing certify it like any other.)
+    when it is *certified* -- its end point clears the borders of its cell by
+    more than `delta` = 2^-19 (length + resolution), 4 x the error of
+    liboctomap's float direction, and at every crossing (critical or not) the
+    other coordinate clears the borders of its cell that the ray crosses (those
+    between the origin's cell and the end cell) by more than `delta` plus
+    2^-21 resolution times the slope |d_b / d_a|, for the single-precision
+    half-cell offset of liboctomap's borders. Its float traversal then equals
+    the exact one. Every other ray is traversed on its own. A crossing is
+    skipped as non-critical only when every certified ray of the group clears
+    the same borders there by that margin: the slopes are bounded over the end
+    cell shrunk by `delta` (where the origin lies on the end cell's face, at
+    t = 0 of the rays' first crossing, rays that end near that face are steep,
+    and the half-cell offset moves their first crossing far along them), and
+    the key ranges are computed in doubles, cut to the keys the rays can have.
     """
     cdef double rf = 1.0 / res
     cdef double oc[3]
@@ -208,6 +215,7 @@ cdef inline int _super_rays(double res, const point3d& o, const OcTreeKey& ko,
     cdef int a, b, step, code_bits, nk, d_a
     cdef long jj
     cdef double delta, eb, r, r_min, r_max, r_abs, s, b1, b2, t, y, kb, border, slack
+    cdef double k_first, k_last, margin
     cdef double far2
     cdef long segments
     cdef double dp[3]
@@ -251,7 +259,7 @@ cdef inline int _super_rays(double res, const point3d& o, const OcTreeKey& ko,
         far2 = 0
         for a in range(3):
             lo[a] = (<double>kv[a] - _MAX_VAL) * res
-            hi[a] = lo[a] + res
+            hi[a] = (<double>kv[a] + 1 - _MAX_VAL) * res
             far2 += _dmax((lo[a] - oc[a]) ** 2, (hi[a] - oc[a]) ** 2)
         # 2^-19 (length + res): 4 x the error of liboctomap's float32 ray direction
         delta = ldexp(sqrt(far2) + res, -19)
@@ -266,31 +274,41 @@ cdef inline int _super_rays(double res, const point3d& o, const OcTreeKey& ko,
                 for b in range(a + 1, 3):
                     if kv[b] == ko[b]:
                         continue     # the rays stay in one b-slab: the end margins certify it
-                    # the slopes d_b / d_a of the rays into the end cell: extreme at corners
+                    # the slopes d_b / d_a of the rays into the end cell, extreme at the
+                    # corners of the cell shrunk by the end margin `delta` (every other
+                    # ray is traversed on its own): finite even where the origin lies on
+                    # the end cell's a-face, and there as steep as such rays may be
                     r_min = 1e300
                     r_max = -1e300
                     for i in range(4):
-                        s = (hi[a] if i & 1 else lo[a]) - oc[a]
-                        if s == 0:
-                            continue   # the origin on the end cell's face: only X_1, at t = 0
+                        s = (hi[a] - delta if i & 1 else lo[a] + delta) - oc[a]
+                        if not (s * step >= 0.5 * delta):
+                            ok = False     # degenerate end cell: leave the group plain
+                            break
                         r = ((hi[b] if i & 2 else lo[b]) - oc[b]) / s
                         r_min = _dmin(r_min, r)
                         r_max = _dmax(r_max, r)
+                    if not ok:
+                        break
                     slack = delta + eb * _dmax(fabs(r_min), fabs(r_max))
+                    c.key_min = min(<int>ko[b], <int>kv[b]) - _MAX_VAL
+                    c.key_max = max(<int>ko[b], <int>kv[b]) - _MAX_VAL
                     for jj in range(1, abs(d_a) + 1):
                         border = (<double>(<int>ko[a] + (jj if step > 0 else 1 - jj))
                                   - _MAX_VAL) * res
                         s = border - oc[a]
-                        if s == 0:         # crossed at the origin by every ray
-                            b1 = b2 = oc[b]
-                        elif r_min > r_max:
-                            ok = False     # degenerate end cell: leave the group plain
+                        b1 = oc[b] + s * r_min
+                        b2 = oc[b] + s * r_max
+                        # the keys the rays may have there, in doubles (steep rays give
+                        # far ends), cut to the keys between the origin's and the end
+                        # cell's: the borders outside are never crossed
+                        k_first = _dmax(floor((_dmin(b1, b2) - slack) * rf), c.key_min)
+                        k_last = _dmin(floor((_dmax(b1, b2) + slack) * rf), c.key_max)
+                        if not (k_first <= k_last):
+                            ok = False     # no key left (rounding): leave the group plain
                             break
-                        else:
-                            b1 = oc[b] + s * r_min
-                            b2 = oc[b] + s * r_max
-                        c.key_lo = <int>floor((_dmin(b1, b2) - slack) * rf)
-                        nk = <int>floor((_dmax(b1, b2) + slack) * rf) - c.key_lo + 1
+                        c.key_lo = <int>k_first
+                        nk = <int>k_last - c.key_lo + 1
                         if nk == 1:
                             continue     # every ray of the group has the same key here
                         code_bits += 64 - _clz64(<uint64_t>(nk - 1))
@@ -343,7 +361,13 @@ cdef inline int _super_rays(double res, const point3d& o, const OcTreeKey& ko,
                 r_abs = fabs(dp[c.other] * inv[c.axis])
                 y = oc[c.other] + (c.border - oc[c.axis]) * inv[c.axis] * dp[c.other]
                 kb = floor(y * rf)
-                if (_dmin(y - kb * res, (kb + 1) * res - y) <= delta + eb * r_abs
+                # the margin to the borders of that key the rays cross
+                margin = 1e300
+                if kb > c.key_min:
+                    margin = y - kb * res
+                if kb < c.key_max:
+                    margin = _dmin(margin, (kb + 1) * res - y)
+                if (not (margin > delta + eb * r_abs)
                         or kb < c.key_lo or kb >= c.key_lo + c.n_keys):
                     ok = False
                 else:

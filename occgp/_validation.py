@@ -9,6 +9,7 @@ from __future__ import annotations
 import numbers
 import os
 import pathlib
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -114,7 +115,8 @@ def check_resolution(value: object, name: str = "resolution") -> float:
 def check_int(value: object, name: str, *, low: int | None = None,
               high: int | None = None) -> int:
     """Return `value` as an int after checking it is an integer (not a bool) in [low, high]."""
-    kind = {0: "a non-negative int", 1: "a positive int"}.get(low, "an int")
+    kind = {0: "a non-negative int", 1: "a positive int"}.get(low, "an int") \
+        if low is not None else "an int"
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral,
                                                                      np.integer)):
         raise TypeError(f"{name} must be {kind}, got {type(value).__name__}")
@@ -144,7 +146,7 @@ def check_choice(value: object, name: str, choices: tuple[str, ...]) -> str:
     return value
 
 
-def as_path(path: object, name: str = "path") -> "os.PathLike[str]":
+def as_path(path: Any, name: str = "path") -> pathlib.Path:
     """Return `path` as a :class:`pathlib.Path`; TypeError naming `name` otherwise."""
     try:
         return pathlib.Path(os.fspath(path))
@@ -152,7 +154,7 @@ def as_path(path: object, name: str = "path") -> "os.PathLike[str]":
         raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}") from None
 
 
-def check_seed(seed: object, name: str = "seed") -> np.random.Generator:
+def check_seed(seed: Any, name: str = "seed") -> np.random.Generator:
     """``numpy.random.default_rng(seed)``, with errors that name `name`."""
     if isinstance(seed, (bool, np.bool_)):
         raise TypeError(f"{name} must be an int, a numpy Generator or None, got bool")

@@ -18,7 +18,8 @@ from numpy.typing import ArrayLike, NDArray
 import os
 from numbers import Integral
 
-from ._kernel import _akimap_bandwidths, _KernelCells, sparse_kernel
+from ._kernel import _akimap_bandwidths, _KernelCells
+from ._kernel import sparse_kernel as _sparse_kernel
 from .octree import OccupancyOctree
 from ._validation import as_point, as_points, check_real
 
@@ -39,27 +40,119 @@ class KernelCells(NamedTuple):
     beta: NDArray[np.float64]
 
 
-def _packed_keys(points: NDArray[np.float64], size: float) -> NDArray[np.int64]:
-    """One int64 per cube of edge `size` (21 bits per axis, z major)."""
-    k = np.floor(points / size).astype(np.int64)
-    k -= k.min(axis=0)
-    if (k >= 1 << 21).any():
-        raise ValueError(f"the points span more than 2^21 cubes of {size:g} m on an axis")
+#: Most free samples one update draws along its beams before down-sampling; they are
+#: made and reduced in chunks of _FREE_CHUNK, so memory stays bounded.
+MAX_FREE_SAMPLES = 1 << 26
+_FREE_CHUNK = 1 << 22
+#: Default of `max_cells_per_update`: about 3 s of accumulation on one thread.
+MAX_CELLS_PER_UPDATE = 1 << 30
+
+
+def _packed_keys(points: NDArray[np.float64], size: float, name: str = "size",
+                 low: NDArray[np.float64] | None = None) -> NDArray[np.int64]:
+    """One int64 per cube of edge `size` (21 bits per axis, z major), counted from the
+    cube of `low` (default: the points' lowest corner)."""
+    q = np.floor(points / size)
+    q0 = q.min(axis=0) if low is None else np.floor(low / size)
+    span = q.max(axis=0) - q0
+    if not np.all(span < 1 << 21):
+        raise ValueError(f"{name}={size:g} is too small for this scan: the points span "
+                         f"{float(span.max()):.3g} cubes of {size:g} m on an axis, more "
+                         f"than 2^21")
+    k = np.maximum(q - q0, 0).astype(np.int64)     # (rounding below `low`: its cube)
     return (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
 
 
-def voxel_centroids(points: NDArray[np.float64], size: float) -> NDArray[np.float64]:
-    """The centroid of the points in each cube of edge `size` that holds any (PCL's
-    ``VoxelGrid``), ordered by cube."""
-    if len(points) == 0:
-        return np.empty((0, 3))
-    _, inverse, counts = np.unique(_packed_keys(points, size), return_inverse=True,
-                                   return_counts=True)
+def _cube_sums(points, size, name="size", low=None):
+    """(cube keys, coordinate sums (n, 3), counts) of the points in each cube."""
+    keys, inverse, counts = np.unique(_packed_keys(points, size, name, low),
+                                      return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
     sums = np.zeros((len(counts), 3))
     for a in range(3):
         sums[:, a] = np.bincount(inverse, weights=points[:, a], minlength=len(counts))
+    return keys, sums, counts
+
+
+def _merge_cube_sums(parts):
+    """The (keys, sums, counts) of the union of several (keys, sums, counts)."""
+    if len(parts) == 1:
+        return parts[0]
+    keys = np.concatenate([p[0] for p in parts])
+    sums = np.concatenate([p[1] for p in parts])
+    counts = np.concatenate([p[2] for p in parts])
+    ukeys, inverse = np.unique(keys, return_inverse=True)
+    inverse = inverse.ravel()
+    out = np.zeros((len(ukeys), 3))
+    for a in range(3):
+        out[:, a] = np.bincount(inverse, weights=sums[:, a], minlength=len(ukeys))
+    return ukeys, out, np.bincount(inverse, weights=counts, minlength=len(ukeys))
+
+
+def sparse_kernel(r: ArrayLike) -> NDArray[np.float64]:
+    """The sparse kernel ``((2 + cos 2 pi r)(1 - r)) / 3 + sin(2 pi r) / (2 pi)`` for
+    ``|r| < 1``, 0 beyond (Melkumyan and Ramos, 2009), element-wise; NaN where `r`
+    is NaN.
+
+    Parameters
+    ----------
+    r : array-like of real numbers, any shape
+        Normalised distances.
+
+    Returns
+    -------
+    ndarray of the shape of `r`
+
+    Raises
+    ------
+    TypeError
+        If `r` does not hold real numbers.
+    """
+    arr = np.asarray(r)
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"r must hold real numbers, got dtype {arr.dtype}")
+    flat = np.ascontiguousarray(arr, dtype=np.float64).ravel()
+    out = _sparse_kernel(flat)
+    out[np.isnan(flat)] = np.nan
+    return out.reshape(arr.shape)
+
+
+def voxel_centroids(points: ArrayLike, size: float) -> NDArray[np.float64]:
+    """The centroid of the points in each cube of edge `size` that holds any (PCL's
+    ``VoxelGrid``), ordered by cube.
+
+    Raises
+    ------
+    TypeError, ValueError
+        If `points` is not a finite array of shape (n_points, 3), `size` not a
+        positive real, or the points span more than 2^21 cubes on an axis.
+    """
+    points = as_points(points, "points")
+    size = check_real(size, "size", low=0.0)
+    if len(points) == 0:
+        return np.empty((0, 3))
+    _, sums, counts = _cube_sums(points, size)
     return sums / counts[:, None]
+
+
+def _beam_chunks(counts):
+    """(beam index, index along the beam from 0) of every sample of beams holding
+    `counts` samples each, in chunks of at most _FREE_CHUNK samples."""
+    ends = np.cumsum(counts)
+    starts = ends - counts
+    total = int(ends[-1]) if len(ends) else 0
+    for a in range(0, total, _FREE_CHUNK):
+        idx = np.arange(a, min(a + _FREE_CHUNK, total), dtype=np.int64)
+        beam = np.searchsorted(ends, idx, side="right")
+        yield beam, idx - starts[beam]
+
+
+def _check_free_count(total, name, value):
+    if total > MAX_FREE_SAMPLES:
+        raise ValueError(
+            f"{name}={value:g} would make {float(total):.3g} free samples along this "
+            f"scan's beams, more than the {MAX_FREE_SAMPLES} an update takes; use a "
+            f"larger {name} (or split the scan); the map is unchanged")
 
 
 def voxel_first(points: NDArray[np.float64], size: float) -> NDArray[np.int64]:
@@ -69,6 +162,61 @@ def voxel_first(points: NDArray[np.float64], size: float) -> NDArray[np.int64]:
         return np.empty(0, dtype=np.int64)
     _, first = np.unique(_packed_keys(points, size), return_index=True)
     return np.sort(first)
+
+
+def _check_max_cells(value) -> int:
+    if isinstance(value, bool) or not isinstance(value, Integral):
+        raise TypeError(f"max_cells_per_update must be a positive int, got "
+                        f"{type(value).__name__}")
+    if value < 1:
+        raise ValueError(f"max_cells_per_update must be a positive int, got {value!r}")
+    return int(value)
+
+
+def _support_cells(samples, extent, res) -> float:
+    """Cells in the support boxes of the samples (as the accumulation visits them:
+    cell centres within `extent` of each sample, keys clamped to the key range)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        lo = np.maximum(np.ceil((samples - extent) / res - 0.5) + _MAX_VAL, 0)
+        hi = np.minimum(np.floor((samples + extent) / res - 0.5) + _MAX_VAL,
+                        2 * _MAX_VAL - 1)
+    return float(np.sum(np.prod(np.clip(hi - lo + 1, 0, None), axis=1)))
+
+
+def _search_cell(xs, radius) -> float:
+    """Edge of the cubes AKIMap's neighbour search buckets the samples in: the largest
+    search radius, widened where the samples would span more than 2^20 cubes."""
+    if len(xs) == 0:
+        return radius
+    span = float(np.max(np.ptp(xs, axis=0)))
+    return max(radius, span / (1 << 20), float(np.max(np.abs(xs))) / (1 << 52))
+
+
+def _candidate_pairs(xs, cell) -> float:
+    """(sample, candidate) pairs AKIMap's neighbour search examines: for each sample,
+    the samples in the 3 x 3 x 3 cubes of edge `cell` around its own."""
+    if len(xs) == 0:
+        return 0.0
+    ck = np.floor(xs / cell).astype(np.int64)
+    ck -= ck.min(axis=0) - 1                      # a cube of padding each side
+    d0, d1 = int(ck[:, 0].max()) + 2, int(ck[:, 1].max()) + 2
+    keys, counts = np.unique((ck[:, 2] * d1 + ck[:, 1]) * d0 + ck[:, 0],
+                             return_counts=True)
+    near = np.zeros(len(keys))
+    for dz in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                q = keys + (dz * d1 + dy) * d0 + dx
+                idx = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
+                hit = keys[idx] == q
+                near[hit] += counts[idx[hit]]
+    return float(np.dot(counts, near))
+
+
+#: Largest kernel weight times sf2 an update may carry (and 1 / MAX_WEIGHT the
+#: smallest): the cells keep float32 evidence (3.4e38 at most, 1.2e-38 at least in
+#: full precision), so this leaves room for 3e8 contributions to one cell.
+MAX_WEIGHT = 1e30
 
 
 def _check_n_jobs(n_jobs) -> int | None:
@@ -81,12 +229,13 @@ def _check_n_jobs(n_jobs) -> int | None:
 
 
 def _threads(n_jobs: int | None) -> int:
-    """Threads for `n_jobs` as joblib counts them (None: 1; -1: every core)."""
+    """Threads for `n_jobs` as joblib counts them (None: 1; -1: every core), at most
+    the number of cores (OpenMP threads beyond them only cost memory)."""
     if n_jobs is None:
         return 1
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
         else (os.cpu_count() or 1)
-    return n_jobs if n_jobs > 0 else max(cores + 1 + n_jobs, 1)
+    return min(n_jobs, cores) if n_jobs > 0 else max(cores + 1 + n_jobs, 1)
 
 
 class Bandwidths(NamedTuple):
@@ -108,9 +257,59 @@ class _KernelMap(_KernelCells):
     """What the kernel maps share: cells, Beta posteriors and queries."""
 
     def _init_cells(self, resolution: float, prior: float) -> None:
-        self.resolution = check_real(resolution, "resolution", low=0.0)
+        self._resolution = check_real(resolution, "resolution", low=0.0)
         self.prior = check_real(prior, "prior", low=0.0)
-        self._setup(self.resolution)
+        self._setup(self._resolution)
+
+    @property
+    def resolution(self) -> float:
+        """Edge length of the cells, in metres (fixed when the map is made)."""
+        return self._resolution
+
+    def _check_params(self) -> None:
+        """Check the parameters (also when changed after construction) and store them
+        as plain floats / ints; raises before anything changes."""
+        self.prior = check_real(self.prior, "prior", low=0.0)
+        self.n_jobs = _check_n_jobs(self.n_jobs)
+        self.max_cells_per_update = _check_max_cells(self.max_cells_per_update)
+
+    _SUPPORT_HINT = ""
+
+    def _check_cells(self, samples, extent, weights, sf2) -> None:
+        """Refuse an update whose kernels would visit more than max_cells_per_update
+        cells, or whose weights would overflow the float32 cells, before anything
+        changes."""
+        top = float(np.max(weights)) * sf2
+        bottom = float(np.min(weights)) * sf2
+        if not top <= MAX_WEIGHT:
+            raise ValueError(
+                f"the kernel weights of this update reach {top:.3g} (sf2 times the weight "
+                f"|H|^-1/2, which scales as resolution^-3 for AKIMap), more than "
+                f"{MAX_WEIGHT:g}: the cells' float32 evidence would overflow; use a "
+                f"smaller sf2 or a coarser resolution; the map is unchanged")
+        if not bottom >= 1.0 / MAX_WEIGHT:
+            raise ValueError(
+                f"the kernel weights of this update fall to {bottom:.3g} (sf2 times the "
+                f"weight |H|^-1/2, which scales as resolution^-3 for AKIMap), under "
+                f"{1.0 / MAX_WEIGHT:g}: the cells' float32 evidence would underflow; use "
+                f"a larger sf2 or a finer resolution; the map is unchanged")
+        total = _support_cells(samples, extent, self.resolution)
+        if total > self.max_cells_per_update:
+            raise ValueError(
+                f"this update would visit {total:.3g} cells (the support boxes of its "
+                f"{len(samples)} samples at resolution {self.resolution:g} m), more than "
+                f"max_cells_per_update={self.max_cells_per_update}; raise "
+                f"max_cells_per_update, or use a coarser resolution or "
+                f"{self._SUPPORT_HINT}; the map is unchanged")
+
+    def _rng_state(self):
+        return None
+
+    def _set_rng_state(self, state) -> None:
+        pass
+
+    def _keep(self, extra) -> None:
+        """Keep what an accepted update's kernels leave (AKIMap: its bandwidths)."""
 
     def _validated_scan(self, points: ArrayLike, origin: ArrayLike):
         pts = as_points(points, "points")
@@ -126,14 +325,26 @@ class _KernelMap(_KernelCells):
         return pts, org
 
     n_jobs: int | None
+    max_cells_per_update: int
 
     def _training_data(self, pts, org):
         """(samples (n, 3), labels (n,)) of a validated scan."""
         raise NotImplementedError
 
     def _kernels(self, samples, labels, org):
-        """(precision (n, 3, 3), extent (n, 3), weights (n,), sf2) of the samples."""
+        """(precision (n, 3, 3), extent (n, 3), weights (n,), sf2, extra) of the
+        samples; `extra` goes to :meth:`_keep` once the update is accepted."""
         raise NotImplementedError
+
+    def _checked_training_data(self, points, origin):
+        self._check_params()
+        pts, org = self._validated_scan(points, origin)
+        state = self._rng_state()
+        try:
+            return (*self._training_data(pts, org), org, state)
+        except BaseException:
+            self._set_rng_state(state)
+            raise
 
     def update(self, points: ArrayLike, origin: ArrayLike):
         """Add one scan's evidence; return self.
@@ -146,20 +357,38 @@ class _KernelMap(_KernelCells):
         origin : array-like of shape (3,)
             Sensor position, in metres.
 
+        Returns
+        -------
+        self
+            The updated map.
+
         Raises
         ------
         TypeError
-            If `points` or `origin` does not hold real numbers.
+            If `points` or `origin` does not hold real numbers, or a parameter
+            changed after construction has the wrong type.
         ValueError
             If their shapes are wrong, they hold NaN or inf, or lie outside the
-            key range; the map is then unchanged.
+            key range (``[-32768 resolution, 32768 resolution)`` per axis); if
+            the scan would make more than ``MAX_FREE_SAMPLES`` (2^26) free
+            samples before down-sampling; if the samples' kernels would visit
+            more than `max_cells_per_update` cells (or, for AKIMap, its
+            bandwidths examine more sample pairs); or if a parameter changed
+            after construction is out of range. The map (and AKIMap's random
+            stream) is then unchanged.
         """
-        pts, org = self._validated_scan(points, origin)
-        samples, labels = self._training_data(pts, org)
-        if len(samples):
-            precision, extent, weights, sf2 = self._kernels(samples, labels, org)
-            self._accumulate(np.ascontiguousarray(samples), labels, precision, extent,
-                             weights, sf2, _threads(self.n_jobs))
+        samples, labels, org, state = self._checked_training_data(points, origin)
+        if not len(samples):
+            return self
+        try:
+            precision, extent, weights, sf2, extra = self._kernels(samples, labels, org)
+            self._check_cells(samples, extent, weights, sf2)
+        except BaseException:
+            self._set_rng_state(state)
+            raise
+        self._keep(extra)
+        self._accumulate(np.ascontiguousarray(samples), labels, precision, extent,
+                         weights, sf2, _threads(self.n_jobs))
         return self
 
     # evaluation harness protocol: maps take scans through insert_scan
@@ -173,11 +402,13 @@ class _KernelMap(_KernelCells):
 
         Returns NaN where no sample's kernel ever reached the cell (unknown).
         """
-        return self._query(as_points(points, "points"), self.prior, 0)
+        pts = as_points(points, "points")
+        return self._query(pts, check_real(self.prior, "prior", low=0.0), 0)
 
     def variance(self, points: ArrayLike) -> NDArray[np.float64]:
         """Posterior variance of occupancy, ab / ((a + b)^2 (a + b + 1)); NaN where unknown."""
-        return self._query(as_points(points, "points"), self.prior, 1)
+        pts = as_points(points, "points")
+        return self._query(pts, check_real(self.prior, "prior", low=0.0), 1)
 
     def is_occupied(self, points: ArrayLike, threshold: float = 0.5) -> NDArray[np.bool_]:
         """Whether each point's cell has occupancy above `threshold` (unknown: False)."""
@@ -191,7 +422,8 @@ class _KernelMap(_KernelCells):
         order = np.lexsort(keys.T)
         keys, alpha, beta = keys[order], alpha[order], beta[order]
         centers = (keys.astype(np.float64) - _MAX_VAL + 0.5) * self.resolution
-        return KernelCells(centers, alpha + self.prior, beta + self.prior)
+        prior = check_real(self.prior, "prior", low=0.0)
+        return KernelCells(centers, alpha + prior, beta + prior)
 
     @property
     def num_cells(self) -> int:
@@ -214,7 +446,8 @@ class _KernelMap(_KernelCells):
                                clamping_max=clamping_max)
         keys, alpha, beta = self._cells_arrays()
         if len(keys):
-            p = (alpha + self.prior) / (alpha + beta + 2 * self.prior)
+            prior = check_real(self.prior, "prior", low=0.0)
+            p = (alpha + prior) / (alpha + beta + 2 * prior)
             log_odds = np.log(p) - np.log1p(-p)
             tree._set_values(np.ascontiguousarray(keys), log_odds.astype(np.float32))
         return tree
@@ -229,9 +462,25 @@ class _KernelMap(_KernelCells):
 
 
 def _restore(cls, params, keys, alpha, beta, extra=None):
+    if not (isinstance(cls, type) and issubclass(cls, _KernelMap)) or \
+            not isinstance(params, dict) or not (extra is None or isinstance(extra, dict)):
+        raise ValueError("corrupt pickle of a kernel map: expected a kernel map class, "
+                         "its parameters (a dict) and its cells")
+    keys = np.asarray(keys)
+    alpha = np.asarray(alpha)
+    beta = np.asarray(beta)
+    n = len(keys) if keys.ndim == 2 else -1
+    if keys.dtype != np.uint16 or keys.shape != (n, 3) or alpha.shape != (n,) or \
+            beta.shape != (n,) or alpha.dtype.kind != "f" or beta.dtype.kind != "f":
+        raise ValueError(f"corrupt pickle of a {cls.__name__}: expected cell keys uint16 "
+                         f"(n, 3) and float alpha, beta (n,), got {keys.dtype} "
+                         f"{keys.shape}, {alpha.dtype} {alpha.shape}, {beta.dtype} "
+                         f"{beta.shape}")
+    if not (np.isfinite(alpha).all() and np.isfinite(beta).all()):
+        raise ValueError(f"corrupt pickle of a {cls.__name__}: alpha and beta must be finite")
     m = cls(**params)
-    m._set_cells(np.ascontiguousarray(keys), np.ascontiguousarray(alpha),
-                 np.ascontiguousarray(beta))
+    m._set_cells(np.ascontiguousarray(keys), np.ascontiguousarray(alpha, dtype=np.float64),
+                 np.ascontiguousarray(beta, dtype=np.float64))
     for name, value in (extra or {}).items():
         setattr(m, name, value)
     return m
@@ -242,8 +491,10 @@ class BGKMap(_KernelMap):
 
     Each scan becomes training samples: its end points within `max_range`
     (occupied, label 1) and points every `free_resolution` metres along each
-    beam plus the sensor origin (free, label 0), both reduced to one centroid per
-    cube of edge `ds_resolution`. Every cell whose centre lies within `ell` of a
+    beam, one more at ``length - free_resolution`` on every beam longer than
+    `free_resolution`, and the sensor origin (free, label 0; la3dm's
+    ``beam_sample``), both reduced to one centroid per cube of edge
+    `ds_resolution`. Every cell whose centre lies within `ell` of a
     sample gets ``k(r) y`` added to alpha and ``k(r) (1 - y)`` to beta, with
     ``r = distance / ell`` and k the sparse kernel times `sf2`. The occupancy of
     a cell is the posterior mean ``alpha / (alpha + beta)`` with `prior` added to
@@ -258,7 +509,8 @@ class BGKMap(_KernelMap):
     sf2 : float, default=1.0
         Kernel signal variance (scale of the kernel).
     free_resolution : float, default=0.5
-        Spacing of the free samples along each beam, in metres.
+        Spacing of the free samples along each beam, in metres (plus one sample
+        this far before each end point).
     ds_resolution : float, default=None
         Edge of the cubes that reduce the samples to centroids; None means
         `resolution`.
@@ -267,8 +519,22 @@ class BGKMap(_KernelMap):
     max_range : float, default=8.0
         Beams longer than this are dropped whole (la3dm's rule); None keeps all.
     n_jobs : int, default=None
-        Threads for the accumulation: None means 1, -1 every core. The map is
-        the same for any number.
+        Threads for the accumulation: None means 1, -1 every core, never more
+        than the cores. The map is the same for any number.
+    max_cells_per_update : int, default=2**30
+        Most cells one update's kernels may visit (the support boxes of its
+        samples, about ``(2 ell / resolution + 1)^3`` cells each), a few
+        seconds of work on one thread; an update that would visit more raises
+        a ValueError and changes nothing.
+
+    Notes
+    -----
+    Limits of one update, each a ValueError that leaves the map unchanged:
+    points and origin within the key range ``[-32768, 32768) * resolution``
+    per axis; at most ``MAX_FREE_SAMPLES`` (2^26) free samples before
+    down-sampling; at most `max_cells_per_update` cells visited; ``sf2``
+    within ``[1e-30, 1e30]`` (the cells keep float32 evidence); the scan at
+    most 2^21 cubes of `ds_resolution` across; ``ell`` at least 1e-150 m.
 
     Attributes
     ----------
@@ -305,22 +571,39 @@ class BGKMap(_KernelMap):
         prior: float = 0.001,
         max_range: float | None = 8.0,
         n_jobs: int | None = None,
+        max_cells_per_update: int = MAX_CELLS_PER_UPDATE,
     ) -> None:
         self._init_cells(resolution, prior)
-        self.n_jobs = _check_n_jobs(n_jobs)
-        self.ell = check_real(ell, "ell", low=0.0)
-        self.sf2 = check_real(sf2, "sf2", low=0.0)
-        self.free_resolution = check_real(free_resolution, "free_resolution", low=0.0)
-        self.ds_resolution = (None if ds_resolution is None
-                              else check_real(ds_resolution, "ds_resolution", low=0.0))
-        self.max_range = None if max_range is None else check_real(max_range, "max_range",
-                                                                   low=0.0)
+        self.n_jobs = n_jobs
+        self.ell = ell
+        self.sf2 = sf2
+        self.free_resolution = free_resolution
+        self.ds_resolution = ds_resolution
+        self.max_range = max_range
+        self.max_cells_per_update = max_cells_per_update
+        self._check_params()
+
+    _SUPPORT_HINT = "a smaller ell"
+
+    def _check_params(self) -> None:
+        super()._check_params()
+        self.ell = check_real(self.ell, "ell", low=0.0)
+        if self.ell < 1e-150:
+            raise ValueError(f"ell must be at least 1e-150 m (its inverse square must be "
+                             f"finite), got {self.ell!r}")
+        self.sf2 = check_real(self.sf2, "sf2", low=0.0)
+        self.free_resolution = check_real(self.free_resolution, "free_resolution", low=0.0)
+        self.ds_resolution = (None if self.ds_resolution is None else
+                              check_real(self.ds_resolution, "ds_resolution", low=0.0))
+        self.max_range = (None if self.max_range is None else
+                          check_real(self.max_range, "max_range", low=0.0))
 
     def get_params(self) -> dict:
         """The constructor's parameters, as a dict."""
         return dict(resolution=self.resolution, ell=self.ell, sf2=self.sf2,
                     free_resolution=self.free_resolution, ds_resolution=self.ds_resolution,
-                    prior=self.prior, max_range=self.max_range, n_jobs=self.n_jobs)
+                    prior=self.prior, max_range=self.max_range, n_jobs=self.n_jobs,
+                    max_cells_per_update=self.max_cells_per_update)
 
     def __repr__(self) -> str:
         return f"BGKMap(resolution={self.resolution!r}, ell={self.ell!r}, " \
@@ -328,27 +611,51 @@ class BGKMap(_KernelMap):
 
     def training_data(self, points: ArrayLike,
                       origin: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The samples and labels (1 occupied, 0 free) that :meth:`update` uses."""
-        pts, org = self._validated_scan(points, origin)
-        return self._training_data(pts, org)
+        """The samples and labels (1 occupied, 0 free) that :meth:`update` uses.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`update`.
+        """
+        samples, labels, _, _ = self._checked_training_data(points, origin)
+        return samples, labels
 
     def _training_data(self, pts, org):
         ds = self.resolution if self.ds_resolution is None else self.ds_resolution
-        hits = voxel_centroids(pts, ds)
+        if len(pts) == 0:
+            return np.empty((0, 3)), np.empty(0)
+        _, sums, counts = _cube_sums(pts, ds, "ds_resolution")
+        hits = sums / counts[:, None]
         if self.max_range is not None:
             hits = hits[np.linalg.norm(hits - org, axis=1) <= self.max_range]
         if len(hits) == 0:
             return np.empty((0, 3)), np.empty(0)
-        # free samples every free_resolution metres along each beam (d < length), and
-        # the origin once per beam (so it weighs in its cube's centroid), as la3dm's
+        # free samples every free_resolution metres along each beam (d < length), one
+        # more at length - free_resolution on every beam longer than free_resolution,
+        # and the origin once per beam (so it weighs in its cube's centroid), as la3dm's
         # beam_sample and get_training_data
         length = np.linalg.norm(hits - org, axis=1)
-        n_free = np.maximum(np.ceil(length / self.free_resolution).astype(np.int64) - 1, 0)
-        beam = np.repeat(np.arange(len(hits)), n_free)
-        step = np.arange(len(beam)) - np.repeat(np.cumsum(n_free) - n_free, n_free) + 1
+        fr = self.free_resolution
+        with np.errstate(over="ignore"):
+            n_step_f = np.maximum(np.ceil(length / fr) - 1, 0)
+        n_free_f = n_step_f + (length > fr)
+        _check_free_count(n_free_f.sum(), "free_resolution", fr)
+        n_step, n_free = n_step_f.astype(np.int64), n_free_f.astype(np.int64)
         unit = (hits - org) / np.where(length > 0, length, 1.0)[:, None]
-        frees = org + unit[beam] * (step * self.free_resolution)[:, None]
-        frees = voxel_centroids(np.vstack([frees, np.repeat(org[None], len(hits), axis=0)]), ds)
+        # centroids per cube of ds, the free samples made and reduced chunk by chunk
+        low = np.minimum(hits.min(axis=0), org) - ds
+        parts = []
+        for beam, j in _beam_chunks(n_free):
+            dist = (j + 1) * fr
+            last = j >= n_step[beam]                # the sample at length - fr
+            dist[last] = length[beam[last]] - fr
+            parts.append(_cube_sums(org + unit[beam] * dist[:, None], ds, "ds_resolution",
+                                    low))
+        parts.append((_packed_keys(org[None], ds, "ds_resolution", low),
+                      org[None] * len(hits), np.array([len(hits)])))
+        _, sums, counts = _merge_cube_sums(parts)
+        frees = sums / counts[:, None]
         samples = np.vstack([hits, frees])
         labels = np.concatenate([np.ones(len(hits)), np.zeros(len(frees))])
         return samples, labels
@@ -356,17 +663,18 @@ class BGKMap(_KernelMap):
     def _kernels(self, samples, labels, org):
         n = len(samples)
         precision = np.broadcast_to(np.eye(3) / self.ell ** 2, (n, 3, 3)).copy()
-        return precision, np.full((n, 3), self.ell), np.ones(n), self.sf2
+        return precision, np.full((n, 3), self.ell), np.ones(n), self.sf2, None
 
 
 class AKIMap(_KernelMap):
     """Occupancy by adaptive anisotropic kernel inference (Kwon et al., AKIMap).
 
     Each scan becomes samples: its end points (occupied, label 1; the first
-    point in each cell of edge `resolution`), the sensor origin and one
-    uniformly random point in each `free_sample_distance` interval of every
-    beam (free, label 0; intervals start half a distance from the origin,
-    cells already holding a sample are skipped). Each sample gets its own
+    point in each cell of edge `resolution`), the sensor origin (always, as
+    the reference code) and one uniformly random point in each
+    `free_sample_distance` interval of every beam (free, label 0; intervals
+    start half a distance from the origin, cells already holding a sample are
+    skipped). Each sample gets its own
     bandwidth matrix H:
 
     * the same-label samples within ``r(d) = min((R - resolution) / sensor_range
@@ -417,7 +725,24 @@ class AKIMap(_KernelMap):
         Seed of the free samples; an int makes every run draw the same ones.
     n_jobs : int, default=None
         Threads for the bandwidths and the accumulation: None means 1, -1
-        every core. The map is the same for any number.
+        every core, never more than the cores. The map is the same for any
+        number.
+    max_cells_per_update : int, default=2**30
+        Most cells one update's kernels may visit (the support boxes of its
+        samples), and most (sample, candidate neighbour) pairs its bandwidths
+        may examine (the samples in the search cubes around each sample);
+        a few seconds of work on one thread each. An update that would exceed
+        either raises a ValueError and changes nothing.
+
+    Notes
+    -----
+    Limits of one update, each a ValueError that leaves the map (and its
+    random stream) unchanged: points and origin within the key range
+    ``[-32768, 32768) * resolution`` per axis; at most ``MAX_FREE_SAMPLES``
+    (2^26) free samples; at most `max_cells_per_update` cells visited and
+    sample pairs examined; kernel weights ``|H|^-1/2`` within
+    ``[1e-30, 1e30]`` (the cells keep float32 evidence: with the default
+    floor, resolutions from about 1e-10 m to 1e10 m).
 
     Attributes
     ----------
@@ -460,28 +785,52 @@ class AKIMap(_KernelMap):
         prior: float = 0.001,
         random_state: int | np.random.Generator | None = None,
         n_jobs: int | None = None,
+        max_cells_per_update: int = MAX_CELLS_PER_UPDATE,
     ) -> None:
         self._init_cells(resolution, prior)
-        self.free_sample_distance = check_real(free_sample_distance, "free_sample_distance",
-                                               low=0.0)
-        self.max_search_range = (None if max_search_range is None else
-                                 check_real(max_search_range, "max_search_range", low=0.0))
-        self.sensor_range = check_real(sensor_range, "sensor_range", low=0.0)
-        if variant not in self.VARIANTS:
-            raise ValueError(f"variant must be one of {self.VARIANTS}, got {variant!r}")
+        self.free_sample_distance = free_sample_distance
+        self.max_search_range = max_search_range
+        self.sensor_range = sensor_range
         self.variant = variant
-        self.bandwidth_floor = (None if bandwidth_floor is None else
-                                check_real(bandwidth_floor, "bandwidth_floor", low=0.0,
-                                           low_open=False))
+        self.bandwidth_floor = bandwidth_floor
+        self.n_jobs = n_jobs
+        self.max_cells_per_update = max_cells_per_update
+        self._check_params()
         if not (random_state is None or isinstance(random_state, np.random.Generator)
-                or (isinstance(random_state, Integral) and not isinstance(random_state, bool)
-                    and random_state >= 0)):
+                or (isinstance(random_state, Integral) and not isinstance(random_state, bool))):
             raise TypeError(f"random_state must be None, a non-negative int or a "
                             f"numpy.random.Generator, got {random_state!r}")
+        if isinstance(random_state, Integral) and random_state < 0:
+            raise ValueError(f"random_state must be None, a non-negative int or a "
+                             f"numpy.random.Generator, got {random_state!r}")
         self.random_state = random_state
         self._rng = np.random.default_rng(random_state)
-        self.n_jobs = _check_n_jobs(n_jobs)
         self.last_bandwidths_: Bandwidths | None = None
+
+    _SUPPORT_HINT = "a smaller bandwidth_floor or max_search_range"
+
+    def _check_params(self) -> None:
+        super()._check_params()
+        self.free_sample_distance = check_real(self.free_sample_distance,
+                                               "free_sample_distance", low=0.0)
+        self.max_search_range = (None if self.max_search_range is None else
+                                 check_real(self.max_search_range, "max_search_range",
+                                            low=0.0))
+        self.sensor_range = check_real(self.sensor_range, "sensor_range", low=0.0)
+        if not isinstance(self.variant, str) or self.variant not in self.VARIANTS:
+            raise ValueError(f"variant must be one of {self.VARIANTS}, got {self.variant!r}")
+        self.bandwidth_floor = (None if self.bandwidth_floor is None else
+                                check_real(self.bandwidth_floor, "bandwidth_floor",
+                                           low=0.0, low_open=False))
+
+    def _rng_state(self):
+        return self._rng.bit_generator.state
+
+    def _set_rng_state(self, state) -> None:
+        self._rng.bit_generator.state = state
+
+    def _keep(self, extra) -> None:
+        self.last_bandwidths_ = extra
 
     def get_params(self) -> dict:
         """The constructor's parameters, as a dict."""
@@ -490,7 +839,7 @@ class AKIMap(_KernelMap):
                     max_search_range=self.max_search_range, sensor_range=self.sensor_range,
                     variant=self.variant, bandwidth_floor=self.bandwidth_floor,
                     prior=self.prior, random_state=self.random_state,
-                    n_jobs=self.n_jobs)
+                    n_jobs=self.n_jobs, max_cells_per_update=self.max_cells_per_update)
 
     def __repr__(self) -> str:
         return (f"AKIMap(resolution={self.resolution!r}, variant={self.variant!r}, "
@@ -515,31 +864,47 @@ class AKIMap(_KernelMap):
     def training_data(self, points: ArrayLike,
                       origin: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The samples and labels (1 occupied, 0 free) an update would use, drawn from
-        the map's random generator (so this advances it)."""
-        pts, org = self._validated_scan(points, origin)
-        return self._training_data(pts, org)
+        the map's random generator (so this advances it).
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`update` (the generator is then not advanced).
+        """
+        samples, labels, _, _ = self._checked_training_data(points, origin)
+        return samples, labels
 
     def _training_data(self, pts, org):
         res, step = self.resolution, self.free_sample_distance
-        hits = pts[voxel_first(pts, res)]
-        if len(hits) == 0:
+        if len(pts) == 0:
             return np.empty((0, 3)), np.empty(0)
+        hits = pts[voxel_first(pts, res)]
         length = np.linalg.norm(hits - org, axis=1)
         # one random point in each interval [step/2 + j step, step/2 + (j+1) step)
         # that starts before the end point, kept when it falls before it
-        n_free = np.maximum(np.ceil((length - 0.5 * step) / step).astype(np.int64), 0)
-        beam = np.repeat(np.arange(len(hits)), n_free)
-        j = np.arange(len(beam)) - np.repeat(np.cumsum(n_free) - n_free, n_free)
-        dist = step * (0.5 + j + self._rng.random(len(beam)))
-        keep = dist < length[beam]
-        beam, dist = beam[keep], dist[keep]
+        with np.errstate(over="ignore"):
+            n_free_f = np.maximum(np.ceil((length - 0.5 * step) / step), 0)
+        _check_free_count(n_free_f.sum(), "free_sample_distance", step)
+        n_free = n_free_f.astype(np.int64)
         unit = (hits - org) / np.where(length > 0, length, 1.0)[:, None]
-        frees = org + unit[beam] * dist[:, None]
-        # a cell already holding a sample (end points, then the origin, then the free
-        # samples in order) takes no further one
-        cand = np.vstack([hits, org[None], frees])
-        first = voxel_first(cand, res)
-        frees = cand[first[first >= len(hits)]]
+        # the origin is always a free sample (the reference code's first one, even in
+        # the cell of an end point); a cell already holding a sample (end points, the
+        # origin, then the free samples in order) takes no further free one. The free
+        # samples are drawn chunk by chunk (the same stream as at once).
+        low = np.minimum(hits.min(axis=0), org) - res
+        taken = np.unique(_packed_keys(np.vstack([hits, org[None]]), res, "resolution", low))
+        kept = [org[None]]
+        for beam, j in _beam_chunks(n_free):
+            dist = step * (0.5 + j + self._rng.random(len(beam)))
+            keep = dist < length[beam]
+            beam, dist = beam[keep], dist[keep]
+            frees = org + unit[beam] * dist[:, None]
+            keys = _packed_keys(frees, res, "resolution", low)
+            _, first = np.unique(keys, return_index=True)
+            first = np.sort(first[~np.isin(keys[first], taken, assume_unique=True)])
+            kept.append(frees[first])
+            taken = np.union1d(taken, keys[first])
+        frees = np.vstack(kept)
         samples = np.vstack([frees, hits])
         labels = np.concatenate([np.zeros(len(frees)), np.ones(len(hits))])
         return samples, labels
@@ -555,24 +920,51 @@ class AKIMap(_KernelMap):
             1 (occupied) or 0 (free).
         origin : array-like of shape (3,)
             Sensor position (the search radius grows with the distance to it).
+
+        Returns
+        -------
+        Bandwidths
+            Precision, support extents, weights, scales and neighbour counts.
+
+        Raises
+        ------
+        TypeError
+            If `samples`, `labels` or `origin` does not hold real numbers.
+        ValueError
+            If their shapes are wrong, they hold NaN or inf, a label is not 0
+            or 1, or the search would examine more than
+            `max_cells_per_update` sample pairs.
         """
+        self._check_params()
         xs = as_points(samples, "samples")
+        org = as_point(origin, "origin")
         lab = np.asarray(labels)
         if lab.shape != (len(xs),):
             raise ValueError(f"labels must have shape ({len(xs)},), got {lab.shape}")
+        if lab.dtype.kind not in "biuf":
+            raise TypeError(f"labels must hold 0 or 1, got dtype {lab.dtype}")
         if not np.isin(lab, (0, 1)).all():
             raise ValueError("labels must be 0 (free) or 1 (occupied)")
-        return self._bandwidths(xs, lab, as_point(origin, "origin"))
+        return self._bandwidths(xs, lab, org)
 
     def _bandwidths(self, xs, lab, org) -> Bandwidths:
+        radius = self._search_range
+        cell = _search_cell(xs, radius)
+        pairs = _candidate_pairs(xs, cell)
+        if pairs > self.max_cells_per_update:
+            raise ValueError(
+                f"the bandwidths of these {len(xs)} samples would examine {pairs:.3g} "
+                f"sample pairs (those in the cubes of edge max_search_range="
+                f"{radius:g} m around each), more than max_cells_per_update="
+                f"{self.max_cells_per_update}; use a smaller max_search_range or raise "
+                f"max_cells_per_update; the map is unchanged")
         out = _akimap_bandwidths(np.ascontiguousarray(xs, dtype=np.float64),
                                  np.ascontiguousarray(lab, dtype=np.uint8), org,
-                                 self.resolution, self._search_range, self.sensor_range,
+                                 self.resolution, radius, self.sensor_range,
                                  self.variant == "published", self.floor_,
-                                 _threads(self.n_jobs))
+                                 _threads(self.n_jobs), cell)
         return Bandwidths(*out)
 
     def _kernels(self, samples, labels, org):
         bw = self._bandwidths(samples, labels, org)
-        self.last_bandwidths_ = bw
-        return bw.precision, bw.extent, bw.weight, 1.0
+        return bw.precision, bw.extent, bw.weight, 1.0, bw

@@ -50,6 +50,20 @@ def test_training_data_follows_the_reference_sampling():
     assert len(np.unique(keys, axis=0)) == len(samples)        # one sample per cell
 
 
+def test_origin_is_a_free_sample_even_in_the_cell_of_an_end_point():
+    """As the reference code: the origin is always the first free sample, and free
+    samples in its cell or an end point's are skipped."""
+    m = AKIMap(0.1, random_state=0)
+    points = np.array([[0.05, 0.0, 0.0], [1.4, 0.0, 0.0]])
+    samples, labels = m.training_data(points, [0.01, 0.0, 0.0])
+    assert_array_equal(samples[labels == 1], points)
+    frees = samples[labels == 0]
+    assert_array_equal(frees[0], [0.01, 0.0, 0.0])
+    keys = np.floor(frees[1:] / 0.1)
+    assert not np.any(np.all(keys == [0, 0, 0], axis=1))        # nothing else in that cell
+    assert len(frees) >= 2
+
+
 def test_random_state_makes_samples_and_maps_reproducible():
     points, origin = wall_scan()
     a = AKIMap(0.1, random_state=3).update(points, origin)
@@ -321,7 +335,8 @@ def test_to_octree_of_akimap(tmp_path):
     (dict(sensor_range="8"), TypeError, "sensor_range must be a real number"),
     (dict(variant="paper"), ValueError, r"variant must be one of \('occgp', 'published'\)"),
     (dict(bandwidth_floor=-0.1), ValueError, "bandwidth_floor must lie in"),
-    (dict(random_state=-1), TypeError, "random_state must be None, a non-negative int"),
+    (dict(random_state=-1), ValueError, "random_state must be None, a non-negative int"),
+    (dict(random_state=True), TypeError, "random_state must be None, a non-negative int"),
     (dict(random_state=1.5), TypeError, "random_state must be None"),
     (dict(n_jobs=0), ValueError, "n_jobs must be None, a positive int"),
     (dict(n_jobs=2.0), ValueError, "n_jobs must be None"),
@@ -356,3 +371,119 @@ def test_bad_scans_leave_the_map_unchanged(points, origin, exc, match):
 def test_bad_bandwidth_input(samples, labels, match):
     with pytest.raises(ValueError, match=match):
         AKIMap(0.1).bandwidths(samples, labels, [0, 0, 0])
+
+
+# ---------------------------------------------------------------------- limits and bad input
+def wall60():
+    return np.column_stack([np.full(60, 2.0), np.linspace(-1, 1, 60), np.zeros(60)]), \
+        np.zeros(3)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(resolution=1e-4), r"would visit .* cells .* more than max_cells_per_update="
+                            r"1073741824; .*bandwidth_floor or max_search_range"),
+    (dict(resolution=0.1, bandwidth_floor=100.0), r"would visit 7.\d+e\+11 cells"),
+    (dict(resolution=0.1, free_sample_distance=1e-9), r"free_sample_distance=1e-09 would "
+                                                      r"make 4.39e\+10 free samples"),
+    (dict(resolution=0.1, max_search_range=100.0, max_cells_per_update=1000),
+     r"would examine .* sample pairs .*max_search_range=100 m"),
+    (dict(resolution=1e20), r"kernel weights of this update fall to 3.16e-62 .* underflow"),
+    (dict(resolution=1e-12), r"kernel weights of this update reach .* overflow"),
+])
+def test_too_large_or_degenerate_updates_change_nothing(kwargs, match):
+    """Refused up front: no cells, no bandwidths kept, the random stream where it was."""
+    wall, origin = wall60()
+    if kwargs["resolution"] == 1e-12:
+        wall, origin = wall * 1e-12, origin
+    m = AKIMap(random_state=0, **kwargs)
+    with pytest.raises(ValueError, match=match):
+        m.update(wall, origin)
+    assert m.num_cells == 0 and m.last_bandwidths_ is None
+    fresh = AKIMap(random_state=0, **kwargs)
+    assert_array_equal(m._rng.random(5), fresh._rng.random(5))
+
+
+def test_far_points_and_tiny_resolutions_are_outside_the_key_range():
+    with pytest.raises(ValueError, match="1 of 1 points lie outside the map's key range"):
+        AKIMap(0.1).update([[1e39, 0, 0]], [0, 0, 0])
+    with pytest.raises(ValueError, match=r"60 of 60 points lie outside .*resolution 1e-25"):
+        AKIMap(1e-25).update(*wall60())
+
+
+def test_extreme_search_parameters_give_the_right_bandwidths():
+    wall, origin = wall60()
+    m = AKIMap(0.1, random_state=0)
+    samples, labels = m.training_data(wall, origin)
+    # a search radius far below the sample spacing: every kernel isotropic
+    bw = AKIMap(0.1, max_search_range=1e-300).bandwidths(samples, labels, origin)
+    assert np.all(bw.n_same == 1)
+    # a sensor range of 1e-320 m: the radius is R = 0.5 m everywhere (no 0 * inf)
+    bw = AKIMap(0.1, sensor_range=1e-320).bandwidths(samples, labels, origin)
+    want = [len(neighbours(samples, labels, i, origin, 0.1, 0.5, 1e-300)[0])
+            for i in range(len(samples))]
+    assert_array_equal(bw.n_same, want)
+    # free samples farther apart than every beam: only the origin is free
+    s, lab = AKIMap(0.1, free_sample_distance=1e30, random_state=0).training_data(wall, origin)
+    assert_array_equal(s[lab == 0], [[0.0, 0.0, 0.0]])
+
+
+def test_free_samples_in_chunks_equal_all_at_once(monkeypatch):
+    import occgp.kernel as kernel
+    points, origin = wall_scan(11, 5)
+    whole = AKIMap(0.05, free_sample_distance=0.1, random_state=2).training_data(points, origin)
+    assert len(whole[0]) > 500
+    monkeypatch.setattr(kernel, "_FREE_CHUNK", 64)
+    chunked = AKIMap(0.05, free_sample_distance=0.1, random_state=2).training_data(points,
+                                                                                  origin)
+    assert_array_equal(whole[0], chunked[0])
+    assert_array_equal(whole[1], chunked[1])
+
+
+@pytest.mark.parametrize("name, value, exc, match", [
+    ("variant", "paper", ValueError, "variant must be one of"),
+    ("variant", 3, ValueError, "variant must be one of"),
+    ("bandwidth_floor", "0.1", TypeError, "bandwidth_floor must be a real number"),
+    ("free_sample_distance", -0.5, ValueError, "free_sample_distance must lie in"),
+    ("sensor_range", np.nan, ValueError, "sensor_range must lie in"),
+    ("max_cells_per_update", 2.0**40, TypeError, "max_cells_per_update must be a positive"),
+])
+def test_parameters_changed_after_construction_are_checked_on_update(name, value, exc, match):
+    points, origin = wall_scan()
+    m = AKIMap(0.1, random_state=0).update(points, origin)
+    before = m._cells_arrays()
+    setattr(m, name, value)
+    with pytest.raises(exc, match=match):
+        m.update(points, origin)
+    for x, y in zip(before, m._cells_arrays()):
+        assert_array_equal(x, y)
+
+
+def test_bandwidths_reject_bad_labels_and_origin():
+    with pytest.raises(TypeError, match="labels must hold 0 or 1, got dtype <U1"):
+        AKIMap(0.1).bandwidths(np.zeros((2, 3)), ["a", "b"], [0, 0, 0])
+    with pytest.raises(ValueError, match=r"origin must have shape \(3,\)"):
+        AKIMap(0.1).bandwidths(np.zeros((2, 3)), [0, 1], [0, 0])
+    with pytest.raises(ValueError, match="samples must be finite"):
+        AKIMap(0.1).bandwidths([[np.inf, 0, 0]], [0], [0, 0, 0])
+
+
+def test_corrupt_pickle_data_is_rejected():
+    points, origin = wall_scan()
+    m = AKIMap(0.1, random_state=0).update(points, origin)
+    fn, (cls, params, keys, alpha, beta, extra) = m.__reduce__()
+    with pytest.raises(ValueError, match="corrupt pickle of a AKIMap: expected cell keys"):
+        fn(cls, params, keys.astype(np.float64), alpha, beta, extra)
+    with pytest.raises(ValueError, match="corrupt pickle of a kernel map"):
+        fn(cls, params, keys, alpha, beta, [1, 2])
+
+
+def test_huge_n_jobs_uses_the_cores():
+    """n_jobs=2**40 neither overflows a C int nor allocates a scratch row per thread."""
+    points, origin = wall_scan()
+    a = AKIMap(0.1, random_state=0, n_jobs=2**40).update(points, origin)
+    b = AKIMap(0.1, random_state=0, n_jobs=1).update(points, origin)
+    for x, y in zip(a.cells(), b.cells()):
+        assert_array_equal(x, y)
+    c = BGKMap(0.1, n_jobs=-2**40).update(points, origin)
+    for x, y in zip(c.cells(), BGKMap(0.1).update(points, origin).cells()):
+        assert_array_equal(x, y)

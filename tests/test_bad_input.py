@@ -33,6 +33,8 @@ def namespace(tmp_path):
     ns["grid"] = GridMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
     ns["bgk"] = BGKMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
     ns["akimap"] = AKIMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
+    # a wall of 60 points 2 m in front of the origin
+    ns["wall60"] = np.column_stack([np.full(60, 2.0), np.linspace(-1, 1, 60), np.zeros(60)])
     for name, content in make_files().items():
         (tmp_path / name).write_bytes(content)
     return ns

@@ -333,7 +333,7 @@ def test_predict_grid_rejects_bad_arguments(kwargs, error, match):
         predict_grid(FakeGP(), [0.0, 0.0], [1.0, 1.0], 0.5, **kwargs)
 
 
-@pytest.mark.parametrize("far", [10.0, 1e17])  # cells spread beyond int64 mixed-radix codes
+@pytest.mark.parametrize("far", [10.0, 1e15])  # cells spread beyond int64 mixed-radix codes
 def test_lookup_near_and_far_cells(far):
     rng = np.random.default_rng(0)
     hits = np.vstack([rng.uniform(-2, 2, (50, 3)), [[-far, 0.5, 0.5], [far, -far, far]]])
@@ -343,3 +343,98 @@ def test_lookup_near_and_far_cells(far):
     assert_array_equal(grid.is_known(hits), True)
     misses = centres + [[0.0, 0.0, 3 * far]]
     assert_array_equal(grid.is_known(np.vstack([misses, [[far, far, far]]])), False)
+
+
+# ----------------------------------------------------------- size and range limits
+@pytest.mark.parametrize("lower, upper, resolution", [
+    ([0, 0], [1e6, 1e6], 1e-3),                     # 1e18 cells (7.5 GiB of float64 per 1e9)
+    ([0, 0, 0], [1e4, 1e4, 1e4], 1e-2),
+    ([-1e308, 0], [1e308, 1], 1.0),                 # the extent overflows to inf
+    ([0, 0], [1, 1], 1e-300),
+])
+def test_grid_points_rejects_too_many_cells(lower, upper, resolution):
+    with pytest.raises(ValueError, match=r"cells, more than max_points=20000000"):
+        grid_points(lower, upper, resolution)
+    with pytest.raises(ValueError, match=r"cells, more than max_points=20000000"):
+        predict_grid(FakeGP(), lower, upper, resolution, output="mean")
+
+
+def test_grid_points_max_points_is_a_parameter():
+    assert grid_points([0, 0], [10, 10], 1.0, max_points=100)[1] == (10, 10)
+    with pytest.raises(ValueError, match=r"has 100 cells, more than max_points=99"):
+        grid_points([0, 0], [10, 10], 1.0, max_points=99)
+    with pytest.raises(ValueError, match=r"has 100 cells, more than max_points=99"):
+        predict_grid(FakeGP(), [0, 0], [10, 10], 1.0, output="mean", max_points=99)
+    with pytest.raises(TypeError, match="max_points must be an integer, got float"):
+        grid_points([0, 0], [1, 1], 0.5, max_points=1e8)
+    with pytest.raises(ValueError, match="max_points must be a positive integer, got 0"):
+        grid_points([0, 0], [1, 1], 0.5, max_points=0)
+
+
+def test_grid_points_thin_box_has_one_cell():
+    assert grid_points([0, 0], [1e-12, 1.0], 0.5)[1] == (1, 2)
+
+
+def test_predict_grid_batches_do_not_change_the_points():
+    model = FakeGP()
+    lower, upper = [0.0, -1.0, 2.0], [1.2, 0.0, 2.35]
+    points, shape = grid_points(lower, upper, 0.1)
+    expected = model.predict(points, return_var=True)[0].reshape(shape)
+    for batch_size in (1, 5, 10**9):
+        assert_array_equal(predict_grid(model, lower, upper, 0.1, output="mean",
+                                       batch_size=batch_size), expected)
+
+
+@pytest.mark.parametrize("kwargs, model, error, match", [
+    (dict(output=None), FakeGP(), TypeError, "output must be one of .* got NoneType"),
+    (dict(batch_size=True), FakeGP(), TypeError, "batch_size must be an integer, got bool"),
+    (dict(), FakeGP(), TypeError, r"model must have a predict_proba\(\) method"),
+    (dict(output="var"), object(), TypeError, r"model must have a predict\(\) method"),
+])
+def test_predict_grid_rejects_bad_types(kwargs, model, error, match):
+    with pytest.raises(error, match=match):
+        predict_grid(model, [0.0, 0.0], [1.0, 1.0], 0.5, **kwargs)
+
+
+@pytest.mark.parametrize("data", [
+    dict(hits=[[1e30, 0.0]], segment_starts=None, segment_ends=None),
+    dict(hits=None, segment_starts=[[0.0, 0.0]], segment_ends=[[1e30, 0.0]]),
+    dict(hits=[[2e14, 0.0]], segment_starts=None, segment_ends=None),   # 2e15 cells at 0.1
+])
+def test_occupancy_grid_rejects_far_coordinates(data):
+    name = "hits" if data["hits"] is not None else "segment_ends"
+    with pytest.raises(ValueError, match=rf"{name} must lie within 1e\+15 cells of the origin"):
+        OccupancyGrid(resolution=0.1).fit(**data)
+
+
+def test_occupancy_grid_update_far_data_leaves_the_map_unchanged():
+    grid = OccupancyGrid(resolution=0.5).fit([[1.0, 1.0]], [[0.0, 0.0]], [[1.0, 1.0]])
+    before = (grid.keys_.copy(), grid.log_odds_.copy(), grid.n_updates_)
+    with pytest.raises(ValueError, match="segment_ends must lie within"):
+        grid.update([[0.0, 0.0]], [[0.0, 0.0]], [[0.0, 1e300]])
+    with pytest.raises(ValueError, match=r"crosses about 2e\+07 cells .* more than the limit"):
+        grid.update(None, [[0.0, 0.0]], [[1e7, 0.0]])
+    assert_array_equal(grid.keys_, before[0])
+    assert_array_equal(grid.log_odds_, before[1])
+    assert grid.n_updates_ == before[2]
+
+
+def test_occupancy_grid_far_queries_are_unknown():
+    grid = OccupancyGrid(resolution=0.1).fit([[0.05, 0.05]], None, None)
+    X = [[1e30, 0.0], [1e300, -1e300], [0.05, 0.05], [-1e16, 0.0]]
+    assert_array_equal(grid.is_known(X), [False, False, True, False])
+    assert_array_equal(grid.predict_proba(X), [0.5, 0.5, 0.7, 0.5])
+
+
+def test_occupancy_grid_chunked_traversal_matches_one_pass(monkeypatch):
+    import occgp.gp._grid as grid_module
+    rng = np.random.default_rng(3)
+    starts = rng.uniform(-3, 3, (60, 2))
+    ends = starts + rng.uniform(-4, 4, (60, 2))
+    hits = ends[:20]
+    one = OccupancyGrid(resolution=0.2, clamping_min=1e-6, clamping_max=1 - 1e-6)
+    one.fit(hits, starts, ends)
+    monkeypatch.setattr(grid_module, "MAX_SEGMENT_CELLS", 70)   # several chunks
+    chunked = clone(one).fit(hits, starts, ends)
+    assert_array_equal(chunked.keys_, one.keys_)
+    assert_allclose(chunked.log_odds_, one.log_odds_, rtol=0, atol=1e-12)

@@ -45,15 +45,28 @@ def test_voxel_centroids():
 # ---------------------------------------------------------------------- BGK
 def test_bgk_training_data_follows_la3dm():
     """Hits reduced to centroids, free samples every free_resolution metres (d < length)
-    along each beam and the origin; beams longer than max_range dropped whole."""
+    along each beam, one more at length - free_resolution on beams longer than
+    free_resolution, and the origin; beams longer than max_range dropped whole
+    (la3dm's get_training_data gives 0, 0.5, 0.73, 1.0 for this 1.23 m beam)."""
     m = BGKMap(0.1, free_resolution=0.5, max_range=3.0)
     points = np.array([[1.22, 0.0, 0.0], [1.24, 0.0, 0.0], [0.0, 5.0, 0.0]])
     samples, labels = m.training_data(points, [0.0, 0.0, 0.0])
     hits = samples[labels == 1]
     frees = samples[labels == 0]
     assert_allclose(hits, [[1.23, 0.0, 0.0]])                   # one centroid, long beam gone
-    assert_allclose(np.sort(frees[:, 0]), [0.0, 0.5, 1.0])       # origin, 0.5, 1.0 (< 1.23)
+    assert_allclose(np.sort(frees[:, 0]), [0.0, 0.5, 0.73, 1.0])  # origin, 0.5, 1.23 - 0.5, 1.0
     assert_allclose(frees[:, 1:], 0.0)
+
+
+def test_bgk_extra_free_sample_only_on_beams_longer_than_free_resolution():
+    """la3dm's beam_sample: no free sample on a beam of at most free_resolution; on a
+    beam of exactly 2 free_resolution the extra sample falls on the step one (both
+    weigh in the centroid of their cube)."""
+    m = BGKMap(0.1, free_resolution=0.5, ds_resolution=1e-3)
+    for length, expected in [(0.5, [0.0]), (0.3, [0.0]), (0.6, [0.0, 0.1, 0.5]),
+                             (1.0, [0.0, 0.5]), (2.2, [0.0, 0.5, 1.0, 1.5, 1.7, 2.0])]:
+        samples, labels = m.training_data([[0.0, length, 0.0]], [0.0, 0.0, 0.0])
+        assert_allclose(np.sort(samples[labels == 0][:, 1]), expected, atol=1e-12)
 
 
 def slow_bgk(samples, labels, resolution, ell, sf2=1.0):
@@ -183,3 +196,175 @@ def test_to_octree_holds_the_posterior_means(tmp_path):
     from occgp import OccupancyOctree
     back = OccupancyOctree.load(tmp_path / "bgk.bt")
     assert_array_equal(back.is_occupied(cells.centers), tree.is_occupied(cells.centers))
+
+
+# ---------------------------------------------------------------------- limits and bad input
+def wall60():
+    return np.column_stack([np.full(60, 2.0), np.linspace(-1, 1, 60), np.zeros(60)]), \
+        np.zeros(3)
+
+
+def assert_same_cells(a, b):
+    for x, y in zip(a.cells(), b.cells()):
+        assert_array_equal(x, y)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(resolution=0.1, ell=100.0), r"would visit 7.2e\+11 cells .* max_cells_per_update="
+                                      r"1073741824; .* a smaller ell; the map is unchanged"),
+    (dict(resolution=1e-4), r"would visit .* cells .*at resolution 0.0001 m\), more than "
+                            r"max_cells_per_update"),
+    (dict(resolution=0.1, max_cells_per_update=1000), "max_cells_per_update=1000"),
+    (dict(resolution=0.1, free_resolution=1e-9), r"free_resolution=1e-09 would make 4.39e\+10 "
+                                                 r"free samples .* more than the 67108864"),
+    (dict(resolution=0.1, ds_resolution=1e-9), r"ds_resolution=1e-09 is too small for this "
+                                               r"scan: the points span 2e\+09 cubes"),
+    (dict(resolution=0.1, sf2=1e35), r"kernel weights of this update reach 1e\+35 .* overflow"),
+    (dict(resolution=0.1, sf2=1e-35), r"kernel weights of this update fall to 1e-35 .* "
+                                      r"underflow"),
+])
+def test_too_large_or_degenerate_updates_are_refused_before_any_change(kwargs, match):
+    """BGKMap(0.1, ell=100) or BGKMap(1e-4) on a 60-point wall would take minutes:
+    refused up front, and the map keeps what it had."""
+    wall, origin = wall60()
+    m = BGKMap(**kwargs)
+    with pytest.raises(ValueError, match=match):
+        m.update(wall, origin)
+    assert m.num_cells == 0
+    if kwargs["resolution"] == 0.1:             # a map that had cells keeps them
+        full = BGKMap(0.1).update(wall + [0, 0, 1], origin)
+        before = full.cells()
+        for k, v in m.get_params().items():
+            setattr(full, k, v) if k != "resolution" else None
+        with pytest.raises(ValueError, match=match):
+            full.update(wall, origin)
+        for x, y in zip(before, full.cells()):
+            assert_array_equal(x, y)
+
+
+def test_max_cells_per_update_can_be_raised():
+    wall, origin = wall60()
+    with pytest.raises(ValueError, match="max_cells_per_update=100000"):
+        BGKMap(0.1, ell=1.0, max_cells_per_update=100_000).update(wall, origin)
+    m = BGKMap(0.1, ell=1.0, max_cells_per_update=10**7).update(wall, origin)
+    assert_same_cells(m, BGKMap(0.1, ell=1.0).update(wall, origin))
+
+
+@pytest.mark.parametrize("value, exc, match", [
+    (1.5, TypeError, "max_cells_per_update must be a positive int, got float"),
+    (True, TypeError, "max_cells_per_update must be a positive int, got bool"),
+    (0, ValueError, "max_cells_per_update must be a positive int, got 0"),
+    ("9", TypeError, "max_cells_per_update must be a positive int, got str"),
+])
+def test_bad_max_cells_per_update(value, exc, match):
+    with pytest.raises(exc, match=match):
+        BGKMap(0.1, max_cells_per_update=value)
+
+
+def test_extreme_parameters_give_the_right_map():
+    wall, origin = wall60()
+    # cells of 1e20 m: no cell centre within ell of any sample
+    assert BGKMap(1e20).update(wall, origin).num_cells == 0
+    # free samples farther apart than every beam: only the origin is free
+    samples, labels = BGKMap(0.1, free_resolution=1e30).training_data(wall, origin)
+    assert_array_equal(samples[labels == 0], [[0.0, 0.0, 0.0]])
+    # a max_range beyond every beam drops nothing
+    assert_same_cells(BGKMap(0.1, max_range=1e30).update(wall, origin),
+                      BGKMap(0.1, max_range=None).update(wall, origin))
+    # cubes of 1e20 m: one hit centroid on each side of the face y = 0
+    samples, labels = BGKMap(0.1, ds_resolution=1e20).training_data(wall, origin)
+    assert labels.tolist().count(1) == 2
+    with pytest.raises(ValueError, match=r"ell must be at least 1e-150 m .*got 1e-200"):
+        BGKMap(0.1, ell=1e-200)
+
+
+@pytest.mark.parametrize("point", [[1e30, 0, 0], [1e39, 0, 0], [-1e30, 5, 5]])
+def test_far_points_are_outside_the_key_range(point):
+    with pytest.raises(ValueError, match=r"1 of 1 points lie outside the map's key range "
+                                         r"\[-3276.8, 3276.8\) m"):
+        BGKMap(0.1).update([point], [0, 0, 0])
+
+
+@pytest.mark.parametrize("name, value, exc, match", [
+    ("ell", "0.2", TypeError, "ell must be a real number, got str"),
+    ("ell", -1.0, ValueError, "ell must lie in"),
+    ("free_resolution", None, TypeError, "free_resolution must be a real number"),
+    ("max_range", np.inf, ValueError, "max_range must lie in"),
+    ("prior", 0.0, ValueError, "prior must lie in"),
+    ("n_jobs", 1.5, ValueError, "n_jobs must be None"),
+    ("max_cells_per_update", 0.5, TypeError, "max_cells_per_update must be a positive int"),
+])
+def test_parameters_changed_after_construction_are_checked_on_update(name, value, exc, match):
+    wall, origin = wall60()
+    m = BGKMap(0.1).update(wall, origin)
+    before = m._cells_arrays()
+    setattr(m, name, value)
+    with pytest.raises(exc, match=match):
+        m.update(wall, origin)
+    for x, y in zip(before, m._cells_arrays()):
+        assert_array_equal(x, y)
+
+
+def test_resolution_is_fixed():
+    m = BGKMap(0.1)
+    with pytest.raises(AttributeError):
+        m.resolution = 0.2
+
+
+def test_free_samples_in_chunks_equal_all_at_once(monkeypatch):
+    import occgp.kernel as kernel
+    wall, origin = wall60()
+    m = BGKMap(0.05, free_resolution=0.1, max_range=None)
+    whole = m.training_data(wall, origin)
+    monkeypatch.setattr(kernel, "_FREE_CHUNK", 7)
+    chunked = m.training_data(wall, origin)
+    assert_array_equal(whole[1], chunked[1])
+    assert_allclose(whole[0], chunked[0], rtol=0, atol=1e-12)
+
+
+def test_far_apart_samples_in_a_wide_key_box():
+    """Two samples 6 km apart: the update goes straight to the blocks instead of
+    sweeping the key box, and gives the union of their maps."""
+    a, b = [[1.0, 1.0, -3000.0]], [[30.0, 30.0, 3000.0]]
+    kw = dict(free_resolution=1e6, max_range=None)
+    both = BGKMap(0.1, **kw).update(a + b, [0.0, 0.0, 0.0])
+    one = BGKMap(0.1, **kw).update(a, [0.0, 0.0, 0.0]).update(b, [0.0, 0.0, 0.0])
+    x, y = both.cells(), one.cells()
+    assert_array_equal(x.centers, y.centers)
+    far = np.linalg.norm(x.centers, axis=1) > 1.0      # (two updates: the origin twice)
+    assert_allclose(x.alpha, y.alpha, rtol=1e-6)
+    assert_allclose(x.beta[far], y.beta[far], rtol=1e-6)
+    assert far.sum() > 0 and (~far).sum() > 0
+    assert both.occupancy([[30.0, 30.0, 3000.0]])[0] > 0.5
+
+
+@pytest.mark.parametrize("bad, match", [
+    (lambda k, a, b: (k.astype(np.int64), a, b), "expected cell keys uint16"),
+    (lambda k, a, b: (k, a[:-1], b), "expected cell keys uint16"),
+    (lambda k, a, b: (k, a, np.full_like(b, np.nan)), "alpha and beta must be finite"),
+    (lambda k, a, b: (k[:, :2].copy(), a, b), "expected cell keys uint16"),
+])
+def test_corrupt_pickle_data_is_rejected(bad, match):
+    from occgp.kernel import _restore
+    wall, origin = wall60()
+    m = BGKMap(0.1).update(wall, origin)
+    fn, args = m.__reduce__()
+    cls, params, keys, alpha, beta, extra = args
+    with pytest.raises(ValueError, match=match):
+        fn(cls, params, *bad(keys, alpha, beta), extra)
+    with pytest.raises(ValueError, match="corrupt pickle of a kernel map"):
+        _restore(dict, params, keys, alpha, beta, extra)
+
+
+def test_sparse_kernel_and_voxel_centroids_check_their_input():
+    assert_allclose(sparse_kernel([[0.0, 2.0], [-0.5, np.nan]]),
+                    [[1.0, 0.0], [sparse_kernel([0.5])[0], np.nan]])
+    assert sparse_kernel(np.array([0, 1])).tolist() == [1.0, 0.0]
+    with pytest.raises(TypeError, match="r must hold real numbers, got dtype <U1"):
+        sparse_kernel(["a"])
+    with pytest.raises(ValueError, match=r"points must have shape \(n_points, 3\)"):
+        voxel_centroids(np.zeros((2, 2)), 0.1)
+    with pytest.raises(ValueError, match=r"size must lie in \(0.0, inf\)"):
+        voxel_centroids(np.zeros((2, 3)), -1.0)
+    with pytest.raises(ValueError, match="size=1e-09 is too small"):
+        voxel_centroids([[0, 0, 0], [1, 0, 0]], 1e-9)

@@ -6,15 +6,17 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PY:-.venv/bin/python}
-PY=$(realpath "$PY")
+PY="$(cd "$(dirname "$PY")" && pwd)/$(basename "$PY")"   # keep the venv: no symlink resolution
 DIR=build/asan
 LOGS=$(realpath -m "$DIR/logs")
 
 mkdir -p "$DIR"
 # the tracked and new (not ignored) files of the working tree
-git ls-files -z --cached --others --exclude-standard -- setup.py pyproject.toml ext occgp tests \
+git ls-files -z --cached --others --exclude-standard -- setup.py pyproject.toml ext occgp tests docs \
   | xargs -0 cp -p --parents -t "$DIR"
 rm -rf "$LOGS" && mkdir -p "$LOGS"
+# the tests find real data in ../shared beside the project: beside the copy too
+if [ -d ../shared ] && [ ! -e build/shared ]; then ln -s "$(cd ../shared && pwd)" build/shared; fi
 
 SAN="-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined"
 echo "occgp asan: building the extensions with $SAN -DNDEBUG"

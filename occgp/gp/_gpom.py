@@ -21,13 +21,18 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from .._validation import _as_numeric, as_points, check_real
-from ..kernel import _check_n_jobs, _threads
 from ._gpr import JITTER, factorise, optimize_hyperparameters
 from ._integral import _check_kernel, as_segments
 from ._kernels import SquaredExponential, _check_bounds
+from ._limits import MAX_DENSE_BYTES, MAX_RESTARTS, check_bool, check_coordinates, check_dense, threads
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
 
 __all__ = ["GPOM"]
+
+#: Most free points the beams of one fit may be cut into.
+MAX_FREE_POINTS = 10_000_000
+#: Memory of the local matrices of one batch of queries (the batch is cut to fit).
+_BATCH_BYTES = 2 ** 28
 
 
 class _PointsOnly:
@@ -51,6 +56,13 @@ def _check_int(value, name, low):
     if value < low:
         raise ValueError(f"{name} must be an int >= {low}, got {value!r}")
     return int(value)
+
+
+def _free_point_count(starts, ends, step):
+    """Number of free points :func:`_discretise` would make, as a float (no overflow)."""
+    with np.errstate(over="ignore"):
+        length = np.linalg.norm(ends - starts, axis=1)
+    return float(np.maximum(np.ceil(length / step - 0.5), 1.0).sum())
 
 
 def _discretise(starts, ends, step):
@@ -95,6 +107,14 @@ class GPOM(BaseEstimator):
     leave-one-out predictions of the same subset) turns them into a
     probability of occupancy.
 
+    Limits, checked before any work: the data must lie within 1e10 length
+    scales of the origin (the kernel's length scales at :meth:`fit`), the
+    beams may give at most ``MAX_FREE_POINTS`` (1e7) free points, and the
+    dense matrices of the optimisation at most 4 GiB (which bounds
+    `max_optimize`). Queries may lie anywhere: beyond the kernel's reach of
+    every training point (its cutoff, 9.2 length scales for the squared
+    exponential) they get the prior, ``mean = 0`` and ``var = variance``.
+
     Parameters
     ----------
     kernel : SquaredExponential, Matern32 or SparseKernel, default=None
@@ -113,7 +133,8 @@ class GPOM(BaseEstimator):
     optimizer : bool, default=True
         Whether to fit the kernel hyper-parameters and the noise.
     n_restarts : int, default=2
-        Extra optimiser starts, drawn log-uniformly within the bounds.
+        Extra optimiser starts, drawn log-uniformly within the bounds; at
+        most 1000.
     max_optimize : int, default=1000
         Most training points (a random subset) used to fit the
         hyper-parameters and PLSC.
@@ -183,9 +204,15 @@ class GPOM(BaseEstimator):
         for name, low in [("n_hit_neighbors", 1), ("n_free_neighbors", 1), ("n_restarts", 0),
                           ("max_optimize", 2), ("batch_size", 1)]:
             _check_int(getattr(self, name), name, low)
-        if not isinstance(self.optimizer, (bool, np.bool_)):
-            raise TypeError(f"optimizer must be a bool, got {type(self.optimizer).__name__}")
-        _check_n_jobs(self.n_jobs)
+        if self.n_restarts > MAX_RESTARTS:
+            raise ValueError(f"n_restarts must be at most {MAX_RESTARTS}, got {self.n_restarts!r}")
+        check_bool(self.optimizer, "optimizer")
+        threads(self.n_jobs)
+        try:
+            check_random_state(self.random_state)
+        except ValueError:
+            raise TypeError("random_state must be None, an int or a RandomState instance, got "
+                            f"{self.random_state!r}") from None
         return copy.deepcopy(kernel)
 
     def fit(self, hits: ArrayLike, segment_starts: ArrayLike, segment_ends: ArrayLike):
@@ -208,7 +235,11 @@ class GPOM(BaseEstimator):
         ------
         ValueError
             If a parameter or an input has a bad value or shape, if the inputs
-            disagree in dimension, or if there are no hits or no free points.
+            disagree in dimension, if there are no hits or no free points, or
+            if the data is beyond the limits (see the class docstring).
+        numpy.linalg.LinAlgError
+            (a ValueError) If the covariance of the optimisation subset
+            cannot be factorised (the message says what to change).
         TypeError
             If a parameter or an input has a bad type.
         """
@@ -219,31 +250,56 @@ class GPOM(BaseEstimator):
             raise ValueError(f"hits must have shape (n_hits, D) with D in 1..3, got {hits.shape}")
         hits = as_points(hits, "hits", dim)
         starts, ends = as_segments(segment_starts, segment_ends, "segment", dim)
-        kernel.inverse_length_scales(dim)  # ARD length scales must match D
+        inv_ls = kernel.inverse_length_scales(dim)  # ARD length scales must match D
+        check_coordinates({"hits": hits, "segment_starts": starts, "segment_ends": ends}, inv_ls,
+                          fix="shift the data towards the origin or use a longer length scale")
+        n_free = _free_point_count(starts, ends, float(self.free_step))
+        if n_free > MAX_FREE_POINTS:
+            raise ValueError(
+                f"the segments would give {n_free:.4g} free points at free_step="
+                f"{self.free_step!r}, more than the limit of {MAX_FREE_POINTS}; raise free_step "
+                f"or pass fewer or shorter segments")
+        n_opt = min(len(hits) + int(n_free), self.max_optimize)
+        if self.optimizer:
+            check_dense(n_opt, n_opt, kernel.n_theta + 4, "the hyper-parameter optimisation",
+                        "lower max_optimize")
+        check_dense(n_opt, n_opt, 3, "the classifier's leave-one-out predictions",
+                    "lower max_optimize")
+        m = min(self.n_hit_neighbors, len(hits)) + min(self.n_free_neighbors, int(n_free))
+        if 32 * m * m > MAX_DENSE_BYTES:
+            raise ValueError(
+                f"n_hit_neighbors + n_free_neighbors (at most the data) must give local models "
+                f"of at most {int(np.sqrt(MAX_DENSE_BYTES / 32))} points, got {m}")
         free = _discretise(starts, ends, float(self.free_step))
         if len(hits) == 0 or len(free) == 0:
             raise ValueError(f"GPOM needs both occupied and free points, got {len(hits)} hits "
                              f"and {len(free)} free points (from {len(starts)} segments)")
-        self.n_dims_ = dim
-        self.X_train_ = np.concatenate([hits, free])
-        self.y_train_ = np.r_[np.ones(len(hits)), -np.ones(len(free))]
-        self._hit_tree, self._free_tree = cKDTree(hits), cKDTree(free)
+        X_train = np.concatenate([hits, free])
+        y_train = np.r_[np.ones(len(hits)), -np.ones(len(free))]
 
-        n_threads = _threads(_check_n_jobs(self.n_jobs))
+        n_threads = threads(self.n_jobs)
         rng = check_random_state(self.random_state)
-        sub = _subsample(self.y_train_, self.max_optimize, rng)
-        Xs, ys = self.X_train_[sub], self.y_train_[sub]
+        sub = _subsample(y_train, self.max_optimize, rng)
+        Xs, ys = X_train[sub], y_train[sub]
         quadrature = _PointsOnly()
         noise = float(self.noise)
         if self.optimizer:
             kernel, noise, _ = optimize_hyperparameters(
                 kernel, noise, self.noise_bounds, Xs, Xs, ys, quadrature,
                 n_restarts=self.n_restarts, rng=rng, n_threads=n_threads)
+        L, alpha = factorise(kernel, quadrature, noise, Xs, Xs, ys, n_threads,
+                             what="the optimisation subset")
+        plsc = fit_plsc(*loo_predictions(L, ys), ys)
+        if not np.isfinite(plsc).all():
+            raise ValueError(f"the classifier's fit on the leave-one-out predictions failed "
+                             f"(PLSC a, b = {plsc}); check the data and the noise")
+        self.n_dims_ = dim
+        self.X_train_, self.y_train_ = X_train, y_train
+        self._hit_tree, self._free_tree = cKDTree(hits), cKDTree(free)
         self.kernel_, self.noise_ = kernel, noise
-        L, alpha = factorise(kernel, quadrature, noise, Xs, Xs, ys, n_threads)
         self.log_marginal_likelihood_value_ = float(
             -0.5 * ys @ alpha - np.log(np.diag(L)).sum() - 0.5 * len(ys) * np.log(2.0 * np.pi))
-        self.plsc_ = fit_plsc(*loo_predictions(L, ys), ys)
+        self.plsc_ = plsc
         return self
 
     def _check_X(self, X):
@@ -290,7 +346,8 @@ class GPOM(BaseEstimator):
             ``k_*^T (K + (noise + jitter) I)^-1 y`` over the local training set.
         var : ndarray of shape (n_queries,)
             ``k(x, x) - k_*^T (K + (noise + jitter) I)^-1 k_*``, at least 0.
-            Only when `return_var` is True.
+            Only when `return_var` is True. A query beyond the kernel's reach
+            of every training point gets the prior (mean 0, the variance).
 
         Raises
         ------
@@ -307,12 +364,20 @@ class GPOM(BaseEstimator):
         True
         """
         X = self._check_X(X)
+        return_var = check_bool(return_var, "return_var")
         n_hit = min(self.n_hit_neighbors, self._hit_tree.n)
         n_free = min(self.n_free_neighbors, self._free_tree.n)
-        workers = _threads(self.n_jobs)
-        mean, var = np.empty(len(X)), np.empty(len(X))
-        for lo in range(0, len(X), self.batch_size):
-            part = slice(lo, lo + self.batch_size)
+        workers = threads(self.n_jobs)
+        mean = np.zeros(len(X))
+        var = np.full(len(X), float(self.kernel_.variance))   # the prior, far from the data
+        reach = np.sqrt(type(self.kernel_).cutoff2) / self.kernel_.inverse_length_scales(
+            self.n_dims_)
+        lo, hi = self.X_train_.min(axis=0) - reach, self.X_train_.max(axis=0) + reach
+        near = np.flatnonzero(np.all((X >= lo) & (X <= hi), axis=1))
+        m = n_hit + n_free
+        batch = max(1, min(int(self.batch_size), _BATCH_BYTES // (32 * m * m)))
+        for start in range(0, len(near), batch):
+            part = near[start:start + batch]
             mean[part], var[part] = self._predict_batch(X[part], n_hit, n_free, workers)
         return (mean, var) if return_var else mean
 

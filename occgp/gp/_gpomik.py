@@ -12,10 +12,10 @@ from sklearn.utils.validation import check_is_fitted
 
 from .. import _integral
 from .._validation import as_points, check_real
-from ..kernel import _check_n_jobs, _threads
-from ._gpr import factorise, jitter_for, optimize_hyperparameters, solve_lower
+from ._gpr import _with_noise, cholesky, jitter_for, optimize_hyperparameters, solve_lower
 from ._integral import _check_kernel, _check_quadrature, _covariance
 from ._kernels import SquaredExponential
+from ._limits import MAX_RESTARTS, check_bool, check_coordinates, check_dense, check_segments, generator, threads
 from ._observations import Observations, make_observations
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
 
@@ -95,6 +95,14 @@ class GPOMIK(BaseEstimator):
     A probabilistic least-squares classifier (PLSC) maps the latent mean and
     variance to a probability of occupancy.
 
+    Limits, checked before any work: observations must lie within 1e10
+    length scales of the origin and beams be at most 1e4 length scales long
+    (the kernel's length scales at :meth:`fit`, the fitted ones at
+    :meth:`update`; see ``occgp.gp._limits``), and no step may build dense
+    matrices of more than 4 GiB together (which bounds `max_optimize`,
+    `max_cell_size` and the size of one update). Queries may lie anywhere:
+    far from every observation they get the prior.
+
     Parameters
     ----------
     kernel : SquaredExponential, Matern32 or SparseKernel, default=None
@@ -112,7 +120,8 @@ default="clenshaw-curtis"
         Fit the hyper-parameters by maximising the log marginal likelihood
         (L-BFGS-B in log space).
     n_restarts : int, default=2
-        Extra optimiser starts, drawn log-uniformly within the bounds.
+        Extra optimiser starts, drawn log-uniformly within the bounds; at
+        most 1000.
     max_optimize : int, default=1000
         Hyper-parameters and PLSC are fitted on a random subset of at most
         this many observations.
@@ -199,11 +208,14 @@ default="clenshaw-curtis"
         if not lo < hi:
             raise ValueError(f"noise_bounds must satisfy low < high, got {self.noise_bounds!r}")
         _check_int(self.n_restarts, "n_restarts", 0)
+        if self.n_restarts > MAX_RESTARTS:
+            raise ValueError(f"n_restarts must be at most {MAX_RESTARTS}, got {self.n_restarts!r}")
         _check_int(self.max_optimize, "max_optimize", 2)
         if self.max_cell_size is not None:
             _check_int(self.max_cell_size, "max_cell_size", 1)
         if self.kl_threshold is not None:
             check_real(self.kl_threshold, "kl_threshold", low=0.0, low_open=False)
+        check_bool(self.optimizer, "optimizer")
         return kernel, noise, (lo, hi)
 
     # ------------------------------------------------------------------- fit
@@ -227,19 +239,31 @@ default="clenshaw-curtis"
         ------
         ValueError
             On NaN or inf, wrong shapes, inconsistent dimensions, missing
-            class (PLSC needs hits and beams) or invalid parameters.
+            class (PLSC needs hits and beams), invalid parameters, or data
+            beyond the limits (coordinates past 1e10 length scales, beams
+            longer than 1e4 length scales, dense matrices past 4 GiB).
+        numpy.linalg.LinAlgError
+            (a ValueError) If a covariance matrix cannot be factorised (the
+            message says what to change, usually a larger noise).
         TypeError
             On non-numeric input or a kernel that is not one of occgp.gp's.
         """
         kernel, noise, noise_bounds = self._check_params()
         quadrature = _check_quadrature(self.quadrature)
-        n_threads = _threads(_check_n_jobs(self.n_jobs))
+        n_threads = threads(self.n_jobs)
+        rng = generator(self.random_state)
         obs = make_observations(hits, segment_starts, segment_ends)
         if not ((obs.labels > 0).any() and (obs.labels < 0).any()):
             raise ValueError("GPOMIK needs both hits and beams to fit its classifier, got "
                              f"{int((obs.labels > 0).sum())} hits and "
                              f"{int((obs.labels < 0).sum())} beams")
-        rng = np.random.default_rng(self.random_state)
+        self._check_observations(obs, kernel)
+        n_opt = min(len(obs.y), self.max_optimize)
+        fix = "lower max_optimize"
+        if self.optimizer:
+            check_dense(n_opt, n_opt, kernel.n_theta + 4, "the hyper-parameter optimisation", fix)
+        check_dense(n_opt, n_opt, 3, "the classifier's leave-one-out predictions", fix)
+        self._check_cell_size(len(obs.y))
         subset = obs
         if len(obs.y) > self.max_optimize:
             subset = obs.take(np.sort(rng.choice(len(obs.y), self.max_optimize, replace=False)))
@@ -249,30 +273,55 @@ default="clenshaw-curtis"
                 kernel, noise, noise_bounds, subset.starts, subset.ends, subset.y, quadrature,
                 n_restarts=self.n_restarts, rng=rng, n_threads=n_threads)
         K_sub = _covariance(kernel, quadrature, subset.starts, subset.ends, n_threads=n_threads)
-        self.jitter_ = jitter_for(K_sub)
-        L, _ = factorise(kernel, quadrature, noise, subset.starts, subset.ends, subset.y,
-                         n_threads, self.jitter_)
+        jitter = jitter_for(K_sub)
+        L = cholesky(_with_noise(K_sub, noise, jitter), kernel, noise,
+                     "the optimisation subset")
         mu, var = loo_predictions(L, subset.y)
         scale = np.where(subset.lengths > 0, subset.lengths, 1.0)    # per unit length
-        self.plsc_ = fit_plsc(mu / scale, var / scale ** 2, subset.labels)
-        self.kernel_, self.noise_ = kernel, noise
+        plsc = fit_plsc(mu / scale, var / scale ** 2, subset.labels)
+        if not np.isfinite(plsc).all():
+            raise ValueError(f"the classifier's fit on the leave-one-out predictions failed "
+                             f"(PLSC a, b = {plsc}); check the data and the noise")
+        cells = self._make_cells(obs, kernel, noise, jitter, quadrature, n_threads)
+        self.kernel_, self.noise_, self.jitter_ = kernel, noise, jitter
+        self.plsc_ = plsc
         self.log_marginal_likelihood_value_ = lml
         self.n_dims_ = obs.starts.shape[1]
         self._quadrature, self._n_threads = quadrature, n_threads
-        self.cells_ = []
-        self._add_cells(obs)
+        self.cells_ = cells
         self.n_accepted_, self.n_rejected_ = len(obs.y), 0
         return self
 
-    def _factorised_cell(self, obs):
-        L, alpha = factorise(self.kernel_, self._quadrature, self.noise_, obs.starts, obs.ends,
-                             obs.y, self._n_threads, self.jitter_)
-        return _Cell(obs, L, alpha)
+    @staticmethod
+    def _check_observations(obs, kernel):
+        """Coordinate and beam-length limits of `obs` (hits first, then beams) for `kernel`."""
+        inv = kernel.inverse_length_scales(obs.starts.shape[1])
+        n_hits = int(np.count_nonzero(obs.labels > 0))
+        check_coordinates({"hits": obs.starts[:n_hits], "segment_starts": obs.starts[n_hits:],
+                           "segment_ends": obs.ends[n_hits:]}, inv,
+                          fix="shift the data towards the origin or use a longer length scale")
+        check_segments(obs.starts[n_hits:], obs.ends[n_hits:], inv)
 
-    def _add_cells(self, obs):
+    def _check_cell_size(self, n_new, n_old=0):
+        """Dense-size limit of a cell grown from `n_old` to up to `n_old + n_new` observations."""
+        size = n_old + n_new
+        if self.max_cell_size is not None:
+            size = min(size, max(self.max_cell_size, n_old))
+        check_dense(size, size, 4, f"a local model of {size} observations",
+                    "lower max_cell_size" if self.max_cell_size is None or n_old == 0
+                    else "update with fewer observations at a time")
+
+    def _make_cells(self, obs, kernel, noise, jitter, quadrature, n_threads):
+        """Factorised cells of `obs` split by `max_cell_size`; nothing is stored."""
         size = len(obs.y) if self.max_cell_size is None else self.max_cell_size
+        cells = []
         for idx in _spatial_groups(obs.anchors, max(size, 1)):
-            self.cells_.append(self._factorised_cell(obs.take(idx)))
+            part = obs.take(idx)
+            K = _covariance(kernel, quadrature, part.starts, part.ends, n_threads=n_threads)
+            L = cholesky(_with_noise(K, noise, jitter), kernel, noise,
+                         f"a local model of {len(idx)} observations")
+            cells.append(_Cell(part, L, solve_lower(L, part.y)))
+        return cells
 
     # ---------------------------------------------------------------- update
     def _cross(self, obs_a, obs_b):
@@ -290,10 +339,12 @@ default="clenshaw-curtis"
         if K22 is None:
             K22 = _covariance(self.kernel_, self._quadrature, new.starts, new.ends,
                               n_threads=self._n_threads)
-        K22 = K22 + (self.noise_ + self.jitter_) * np.eye(len(K22))
+        m = len(K22)
+        K22 = K22 + (self.noise_ + self.jitter_) * np.eye(m)
         S12 = sl.solve_triangular(cell.L, K12, lower=True, check_finite=False)
-        S22 = sl.cholesky(K22 - S12.T @ S12, lower=True, check_finite=False)
-        n, m = cell.size, new.y.shape[0]
+        S22 = cholesky(K22 - S12.T @ S12, self.kernel_, self.noise_,
+                       f"the {m} new observations given the newest local model")
+        n = cell.size
         L = np.zeros((n + m, n + m))
         L[:n, :n] = cell.L
         L[n:, :n] = S12.T
@@ -323,9 +374,19 @@ default="clenshaw-curtis"
         -------
         kl : ndarray of shape (n_hits + n_beams,)
         """
+        new = self._new_observations(hits, segment_starts, segment_ends, kl=True)
+        return self._kl(new)[0]
+
+    def _new_observations(self, hits, segment_starts, segment_ends, kl):
+        """Validated observations for :meth:`update` and :meth:`kl_divergence`."""
         check_is_fitted(self, "cells_")
         new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
-        return self._kl(new)[0]
+        self._check_observations(new, self.kernel_)
+        if kl:  # the batch's covariance and its blocks against a cell
+            m, n = len(new.y), max(cell.size for cell in self.cells_)
+            check_dense(m, 3 * m + 2 * n, 1, f"the divergences of {m} new observations",
+                        "pass fewer observations at a time")
+        return new
 
     def _kl(self, new):
         """KL gains of `new`, and the newest cell's blocks K12 and K22 (no noise)."""
@@ -352,7 +413,8 @@ default="clenshaw-curtis"
                 K12_newest = K12
                 C = K22 - S12.T @ S12
                 C[np.diag_indices_from(C)] += noise
-                Lc = sl.cholesky(C, lower=True, check_finite=False)
+                Lc = cholesky(C, self.kernel_, self.noise_,
+                              f"the {len(sub.y)} new observations given the newest local model")
                 z = sl.solve_triangular(Lc, sub.y - mu, lower=True, check_finite=False)
                 d = np.diag(Lc)
                 mu, var = sub.y - d * z, d * d - noise
@@ -385,29 +447,41 @@ default="clenshaw-curtis"
         Raises
         ------
         ValueError, TypeError
-            As :meth:`fit`; the model is then unchanged.
+            As :meth:`fit`, also for observations beyond the limits of the
+            fitted kernel (see the class docstring); the model is then
+            unchanged (every fitted attribute).
+        numpy.linalg.LinAlgError
+            (a ValueError) If the grown covariance cannot be factorised; the
+            model is then unchanged.
         """
-        check_is_fitted(self, "cells_")
-        new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
+        new = self._new_observations(hits, segment_starts, segment_ends,
+                                     kl=self.kl_threshold is not None)
         keep = np.arange(len(new.y))
         K12 = K22 = None
         if self.kl_threshold is not None and len(new.y):
             kl, K12, K22 = self._kl(new)  # the blocks serve the Cholesky update below
             keep = np.flatnonzero(kl >= float(self.kl_threshold))
-            self.n_rejected_ += len(new.y) - len(keep)
+        n_rejected = len(new.y) - len(keep)
+        cells = list(self.cells_)
+        if len(keep):
+            room = len(keep) if self.max_cell_size is None \
+                else self.max_cell_size - self.cells_[-1].size
+            self._check_cell_size(min(max(room, 0), len(keep)), self.cells_[-1].size)
+            rest = keep[max(room, 0):]
+            if len(rest):
+                self._check_cell_size(len(rest))
+            if room > 0:
+                head = keep[:room]
+                cells[-1] = self._extend(
+                    self.cells_[-1], new.take(head), None if K12 is None else K12[:, head],
+                    None if K22 is None else K22[np.ix_(head, head)])
+            if len(rest):
+                cells += self._make_cells(new.take(rest), self.kernel_, self.noise_,
+                                          self.jitter_, self._quadrature, self._n_threads)
+        # every step that can fail is done: now change the model
+        self.cells_[:] = cells
         self.n_accepted_ += len(keep)
-        if not len(keep):
-            return self
-        room = len(keep) if self.max_cell_size is None else self.max_cell_size - self.cells_[-1].size
-        if room > 0:
-            head = keep[:room]
-            self.cells_[-1] = self._extend(
-                self.cells_[-1], new.take(head), None if K12 is None else K12[:, head],
-                None if K22 is None else K22[np.ix_(head, head)])
-            keep = keep[room:]
-        new = new.take(keep)
-        if len(new.y):
-            self._add_cells(new)
+        self.n_rejected_ += n_rejected
         return self
 
     # --------------------------------------------------------------- predict
@@ -418,20 +492,33 @@ default="clenshaw-curtis"
     def _predict_cell(self, cell, X, return_var):
         """Mean (and variance) of one cell at `X`, tile by tile.
 
-        Queries are grouped into square tiles of `_TILE` (4) length scales; a tile
+        Queries beyond the kernel's reach (its cutoff) of the cell's box get
+        the prior, as the tiles would give them. The others are grouped into
+        square tiles of `_TILE` (4) length scales; a tile
         only meets the observations that come within the kernel's cutoff of
         it (the other entries of its cross-covariance are exactly 0), so each
         tile solves a small dense problem: ``mean = k_S . alpha_S`` and
         ``var = k(x, x) - k_S^T [K^-1]_SS k_S``. The blocks of many tiles are
         computed in one parallel call, then the products run tile by tile.
         """
+        kernel = self.kernel_
+        inv = kernel.inverse_length_scales(self.n_dims_)
+        reach = np.sqrt(type(kernel).cutoff2)
+        lo, hi = cell.bounds(reach / inv)
+        inside = np.all((X >= lo) & (X <= hi), axis=1)
+        if not inside.all():  # beyond the kernel's reach of every observation: the prior
+            mean = np.zeros(len(X))
+            var = np.full(len(X), float(kernel.variance)) if return_var else None
+            if inside.any():
+                m, v = self._predict_cell(cell, X[inside], return_var)
+                mean[inside] = m
+                if return_var:
+                    var[inside] = v
+            return mean, var
         mean = np.empty(len(X))
         var = np.empty(len(X)) if return_var else None
         if not len(X):
             return mean, var
-        kernel = self.kernel_
-        inv = kernel.inverse_length_scales(self.n_dims_)
-        reach = np.sqrt(type(kernel).cutoff2)
         if return_var and cell.kinv is None:
             Linv = sl.solve_triangular(cell.L, np.eye(cell.size), lower=True, check_finite=False)
             cell.kinv = Linv.T @ Linv
@@ -490,6 +577,7 @@ default="clenshaw-curtis"
             Only with `return_var`.
         """
         X = self._check_X(X)
+        return_var = check_bool(return_var, "return_var")
         if len(self.cells_) == 1:
             mean, var = self._predict_cell(self.cells_[0], X, return_var)
             return (mean, var) if return_var else mean

@@ -6,6 +6,13 @@ Shared by :class:`~occgp.gp.GPOMIK` (points and segments) and
 global noise variance (a hyper-parameter) and ``jitter = 1e-10 * mean(diag K)``,
 which keeps the factorisation defined when the fitted noise sits at its lower
 bound.
+
+Repeated observations (the same start, end and target, as many identical beams
+give) are merged for the hyper-parameter optimisation: ``c`` copies of an
+observation with noise ``nu`` have the likelihood of one copy with noise
+``nu / c``, times ``(2 pi nu)**(-(c - 1) / 2) / sqrt(c)`` (their residuals are
+all equal), so the merged log marginal likelihood and its gradient are the
+same numbers at a fraction of the cost.
 """
 
 from __future__ import annotations
@@ -19,7 +26,7 @@ from scipy import optimize
 from ._integral import _covariance
 
 __all__ = ["JITTER", "jitter_for", "log_marginal_likelihood", "optimize_hyperparameters",
-           "factorise"]
+           "factorise", "cholesky", "unique_observations"]
 
 #: Jitter added to the diagonal, relative to the mean of diag(K).
 JITTER = 1e-10
@@ -37,15 +44,52 @@ def _with_noise(K, noise, jitter=None):
     return K
 
 
-def factorise(kernel, quadrature, noise, starts, ends, y, n_threads=1, jitter=None):
+def cholesky(K, kernel, noise, what="the observations"):
+    """Lower Cholesky factor of `K`, or a LinAlgError (a ValueError) saying what to change."""
+    try:
+        L = sl.cholesky(K, lower=True, check_finite=False)
+    except np.linalg.LinAlgError:
+        L = None
+    if L is None or not np.isfinite(np.diag(L)).all():
+        finite = bool(np.isfinite(K).all())
+        cause = ("it is not numerically positive definite (observations that nearly "
+                 "coincide in length-scale units, or SparseKernel in 2D or 3D, which is only "
+                 "nearly positive definite) and the noise does not make up for it"
+                 if finite else "it holds NaN or inf")
+        raise np.linalg.LinAlgError(
+            f"the covariance matrix of {what} ({len(K)} x {len(K)}, kernel {kernel!r}, noise "
+            f"{noise:.3g}) cannot be factorised: {cause}; raise noise (and the lower bound of "
+            f"noise_bounds), or thin out nearly coinciding observations") from None
+    return L
+
+
+def factorise(kernel, quadrature, noise, starts, ends, y, n_threads=1, jitter=None,
+              what="the observations"):
     """Lower Cholesky factor of the target covariance and ``alpha = K^-1 y``.
 
-    `jitter` None means ``jitter_for(K)``.
+    `jitter` None means ``jitter_for(K)``. A matrix that cannot be factorised
+    raises a LinAlgError naming `what`, the kernel and the noise.
     """
     K = _with_noise(_covariance(kernel, quadrature, starts, ends, n_threads=n_threads),
                     noise, jitter)
-    L = sl.cholesky(K, lower=True, check_finite=False)
+    L = cholesky(K, kernel, noise, what)
     return L, solve_lower(L, y)
+
+
+def unique_observations(starts, ends, y):
+    """First occurrences of repeated observations and their counts, or None without repeats.
+
+    Two observations repeat each other when start, end and target are equal.
+    Returns ``(index, counts)``: ``index`` increasing.
+    """
+    if len(y) < 2:
+        return None
+    rows = np.column_stack([starts, ends, y]) + 0.0   # -0.0 and 0.0 are the same
+    _, first, counts = np.unique(rows, axis=0, return_index=True, return_counts=True)
+    if len(first) == len(y):
+        return None
+    order = np.argsort(first)
+    return first[order], counts[order]
 
 
 def solve_lower(L, y, z=None):
@@ -55,12 +99,26 @@ def solve_lower(L, y, z=None):
     return sl.solve_triangular(L, z, lower=True, trans="T", check_finite=False)
 
 
-def log_marginal_likelihood(theta, kernel, quadrature, starts, ends, y, n_threads=1):
-    """Log marginal likelihood and its gradient at ``theta = [kernel.theta, log(noise)]``."""
+def log_marginal_likelihood(theta, kernel, quadrature, starts, ends, y, n_threads=1,
+                            counts=None):
+    """Log marginal likelihood and its gradient at ``theta = [kernel.theta, log(noise)]``.
+
+    With `counts`, observation ``i`` stands for ``counts[i]`` identical copies
+    (see the module docstring): the value and gradient are those of the data
+    with the copies.
+    """
     k = kernel.with_theta(theta[:-1])
     noise = float(np.exp(theta[-1]))
     K, dK = _covariance(k, quadrature, starts, ends, eval_gradient=True, n_threads=n_threads)
-    _with_noise(K, noise)
+    if counts is None:
+        _with_noise(K, noise)
+        share = 1.0
+    else:
+        counts = np.asarray(counts, dtype=np.float64)
+        diag = np.diag(K)
+        jitter = JITTER * max(float(counts @ diag / counts.sum()), 1e-300)
+        share = 1.0 / counts
+        K[np.diag_indices_from(K)] += (noise + jitter) * share
     try:
         L = sl.cholesky(K, lower=True, check_finite=False)
     except np.linalg.LinAlgError:
@@ -72,7 +130,12 @@ def log_marginal_likelihood(theta, kernel, quadrature, starts, ends, y, n_thread
     W = np.outer(alpha, alpha) - Linv.T @ Linv
     grad = np.empty_like(theta)
     grad[:-1] = 0.5 * np.einsum("ij,kij->k", W, dK)
-    grad[-1] = 0.5 * noise * np.trace(W)
+    grad[-1] = 0.5 * noise * (np.trace(W) if counts is None else np.diag(W) @ share)
+    if counts is not None:  # the copies: (2 pi nu)^(-(c - 1) / 2) / sqrt(c) each
+        nu = noise + jitter
+        extra = float((counts - 1.0).sum())
+        lml -= 0.5 * extra * np.log(2.0 * np.pi * nu) + 0.5 * np.log(counts).sum()
+        grad[-1] -= 0.5 * extra * noise / nu
     return float(lml), grad
 
 
@@ -81,8 +144,9 @@ def optimize_hyperparameters(kernel, noise, noise_bounds, starts, ends, y, quadr
     """Maximise the log marginal likelihood with L-BFGS-B in log space.
 
     The first start is the given hyper-parameters; `n_restarts` more are drawn
-    log-uniformly within the bounds from `rng`. Returns the best
-    ``(kernel, noise, lml)``.
+    log-uniformly within the bounds from `rng`. Repeated observations are
+    merged first (same value and gradient, see the module docstring). Returns
+    the best ``(kernel, noise, lml)``.
     """
     bounds = np.vstack([kernel.bounds, np.log(np.asarray(noise_bounds, dtype=np.float64))])
     theta0 = np.r_[kernel.theta, np.log(noise)]
@@ -91,8 +155,16 @@ def optimize_hyperparameters(kernel, noise, noise_bounds, starts, ends, y, quadr
     for _ in range(n_restarts):
         starts_theta.append(rng.uniform(bounds[:, 0], bounds[:, 1]))
 
+    counts = None
+    repeats = unique_observations(starts, ends, y)
+    if repeats is not None:
+        index, counts = repeats
+        _LOG.debug("hyper-parameters: %d observations, %d distinct", len(y), len(index))
+        starts, ends, y = starts[index], ends[index], y[index]
+
     def objective(theta):
-        lml, grad = log_marginal_likelihood(theta, kernel, quadrature, starts, ends, y, n_threads)
+        lml, grad = log_marginal_likelihood(theta, kernel, quadrature, starts, ends, y, n_threads,
+                                            counts)
         if not np.isfinite(lml):
             return 1e25, np.zeros_like(theta)
         return -lml, -grad

@@ -23,6 +23,15 @@ __all__ = ["OccupancyGrid", "grid_points", "predict_grid"]
 #: Crossing intervals shorter than this (in cells along the segment's longest axis) are skipped,
 #: so a segment through a grid corner or edge marks no cell it only touches.
 _TOL = 1e-9
+#: Largest ``|x| / resolution`` of the data of an :class:`OccupancyGrid`: cell keys stay exact
+#: in float64 (below 2**53) and in int64.
+MAX_CELL_INDEX = 1e15
+#: Most cells one segment may cross; segments are also traversed in chunks of about this many
+#: crossings, so memory stays bounded (about 130 bytes a crossing).
+MAX_SEGMENT_CELLS = 4_000_000
+#: Default most cells of :func:`grid_points` and :func:`predict_grid` (points of 24 bytes each
+#: in 3D, 16 in 2D).
+MAX_GRID_POINTS = 20_000_000
 
 
 def _unique_rows(keys: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -105,6 +114,68 @@ def _free_cells(starts: NDArray[np.float64], ends: NDArray[np.float64],
     return keys[~(keys == end_key[s]).all(axis=1)]
 
 
+def _crossing_counts(starts, ends, resolution):
+    """Upper bound on the cells each segment crosses (grid planes strictly inside it, + 1)."""
+    a, b = starts / resolution, ends / resolution
+    planes = np.ceil(np.maximum(a, b)) - np.floor(np.minimum(a, b)) - 1
+    return np.maximum(planes, 0).sum(axis=1) + 1
+
+
+def _free_cell_counts(starts, ends, resolution):
+    """Distinct keys of the cells the segments cross (end cells excepted) and their counts.
+
+    Segments are traversed in chunks of at most about `MAX_SEGMENT_CELLS`
+    crossings, so that a large call never builds the whole crossing list at once.
+    """
+    dim = starts.shape[1]
+    if not len(starts):
+        return np.empty((0, dim), dtype=np.int64), np.empty(0, dtype=np.int64)
+    per_segment = _crossing_counts(starts, ends, resolution)
+    worst = int(np.argmax(per_segment))
+    if per_segment[worst] > MAX_SEGMENT_CELLS:
+        raise ValueError(
+            f"segment {worst} (from {starts[worst].tolist()} to {ends[worst].tolist()}) crosses "
+            f"about {per_segment[worst]:.3g} cells at resolution {resolution!r}, more than the "
+            f"limit of {MAX_SEGMENT_CELLS}; use a coarser resolution or shorter segments")
+    total = np.cumsum(per_segment)
+    bounds = [0]
+    while bounds[-1] < len(starts):
+        base = total[bounds[-1] - 1] if bounds[-1] else 0.0
+        bounds.append(max(int(np.searchsorted(total, base + MAX_SEGMENT_CELLS, side="right")),
+                          bounds[-1] + 1))
+    if len(bounds) == 2:
+        return _unique_counts(_free_cells(starts, ends, resolution))
+    keys, counts = [], []
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        k, c = _unique_counts(_free_cells(starts[lo:hi], ends[lo:hi], resolution))
+        keys.append(k)
+        counts.append(c)
+    keys, inverse = _unique_rows(np.concatenate(keys))
+    return keys, np.bincount(inverse, weights=np.concatenate(counts),
+                             minlength=len(keys)).astype(np.int64)
+
+
+def _unique_counts(keys):
+    if not len(keys):
+        return keys, np.empty(0, dtype=np.int64)
+    table, inverse = _unique_rows(keys)
+    return table, np.bincount(inverse, minlength=len(table))
+
+
+def _check_extent(arrays, resolution):
+    """Reject data whose cell keys ``floor(x / resolution)`` would not be exact."""
+    for name, x in arrays.items():
+        if not len(x):
+            continue
+        worst = float(np.abs(x).max())
+        if worst / resolution > MAX_CELL_INDEX:
+            raise ValueError(
+                f"{name} must lie within {MAX_CELL_INDEX:g} cells of the origin "
+                f"(|x| <= {MAX_CELL_INDEX:g} * resolution = {MAX_CELL_INDEX * resolution:.6g}), "
+                f"got a coordinate of {worst:.6g} at resolution {resolution!r}; shift the data "
+                f"towards the origin or use a coarser resolution")
+
+
 def _shape(x) -> tuple[int, ...] | None:
     """Shape of `x` if it converts to a numeric array, else None (as_points says why)."""
     try:
@@ -114,8 +185,11 @@ def _shape(x) -> tuple[int, ...] | None:
     return arr.shape if arr.dtype.kind in "iuf" else None
 
 
-def _check_data(hits, segment_starts, segment_ends, dim=None):
-    """Validated (hits, starts, ends), float64 of `dim` columns (2 or 3 from the data if None)."""
+def _check_data(hits, segment_starts, segment_ends, dim=None, resolution=None):
+    """Validated (hits, starts, ends), float64 of `dim` columns (2 or 3 from the data if None).
+
+    With `resolution`, coordinates must lie within `MAX_CELL_INDEX` cells of the origin.
+    """
     if (segment_starts is None) != (segment_ends is None):
         missing = "segment_ends" if segment_ends is None else "segment_starts"
         raise ValueError("segment_starts and segment_ends must both be given or both be "
@@ -138,6 +212,8 @@ def _check_data(hits, segment_starts, segment_ends, dim=None):
             raise ValueError(f"all arrays must have the same number of columns, got {got}")
         dim = next(iter(found.values()), 3)
     arrays = {name: as_points(x, name, dim) for name, x in given}
+    if resolution is not None:
+        _check_extent(arrays, resolution)
     empty = np.empty((0, dim))
     hits = arrays.get("hits", empty)
     starts = arrays.get("segment_starts", empty)
@@ -168,6 +244,13 @@ class OccupancyGrid(BaseEstimator):
     steps diagonally. A segment inside one cell, or of zero length, marks
     nothing. A point on a cell boundary belongs to the cell above it: cell keys
     are ``floor(x / resolution)`` per axis.
+
+    Limits: data must lie within ``MAX_CELL_INDEX = 1e15`` cells of the
+    origin (``|x| <= 1e15 * resolution``, where float64 still resolves a
+    cell), and one segment may cross at most ``MAX_SEGMENT_CELLS = 4e6``
+    cells; a call may hold any number of segments (they are traversed in
+    chunks of about 4e6 crossings). Queries beyond the data's range are
+    simply unknown.
 
     Parameters
     ----------
@@ -253,7 +336,9 @@ class OccupancyGrid(BaseEstimator):
             If a parameter is out of range, if an array is not of shape
             (n, 2) or (n, 3), if the arrays differ in dimension, if starts and
             ends differ in length or only one is given, if a value is NaN or
-            inf, or if there are neither hits nor segments.
+            inf, if there are neither hits nor segments, if a coordinate lies
+            more than 1e15 cells from the origin, or if a segment crosses
+            more than 4e6 cells.
         TypeError
             If an array does not hold real numbers.
 
@@ -270,13 +355,14 @@ class OccupancyGrid(BaseEstimator):
             "clamping_min": check_real(self.clamping_min, "clamping_min", low=0.0, high=0.5),
             "clamping_max": check_real(self.clamping_max, "clamping_max", low=0.5, high=1.0),
         }
-        data = _check_data(hits, segment_starts, segment_ends)
+        data = _check_data(hits, segment_starts, segment_ends, resolution=params["resolution"])
+        free = _free_cell_counts(data[1], data[2], params["resolution"])
         self._params = params
         self.n_dims_ = data[0].shape[1]
         self.keys_ = np.empty((0, self.n_dims_), dtype=np.int64)
         self.log_odds_ = np.empty(0)
         self.n_updates_ = 0
-        return self._integrate(*data)
+        return self._integrate(data[0], free)
 
     def update(self, hits: ArrayLike | None = None, segment_starts: ArrayLike | None = None,
                segment_ends: ArrayLike | None = None) -> "OccupancyGrid":
@@ -316,16 +402,18 @@ class OccupancyGrid(BaseEstimator):
         (2, 1.695)
         """
         check_is_fitted(self)
-        data = _check_data(hits, segment_starts, segment_ends, self.n_dims_)
-        return self._integrate(*data)
+        resolution = self._params["resolution"]
+        data = _check_data(hits, segment_starts, segment_ends, self.n_dims_, resolution)
+        return self._integrate(data[0], _free_cell_counts(data[1], data[2], resolution))
 
-    def _integrate(self, hits, starts, ends):
+    def _integrate(self, hits, free):
+        """Add the hits and the free cells ``(keys, counts)``; nothing can fail here."""
         p = self._params
-        free = _free_cells(starts, ends, p["resolution"])
+        free_keys, free_counts = free
         hit = np.floor(hits / p["resolution"]).astype(np.int64)
-        n_old, n_new = len(self.keys_), len(self.keys_) + len(free)
-        keys, inverse = _unique_rows(np.concatenate([self.keys_, free, hit]))
-        n_free = np.bincount(inverse[n_old:n_new], minlength=len(keys))
+        n_old, n_new = len(self.keys_), len(self.keys_) + len(free_keys)
+        keys, inverse = _unique_rows(np.concatenate([self.keys_, free_keys, hit]))
+        n_free = np.bincount(inverse[n_old:n_new], weights=free_counts, minlength=len(keys))
         n_hit = np.bincount(inverse[n_new:], minlength=len(keys))
         log_odds = n_free * logit(p["prob_miss"]) + n_hit * logit(p["prob_hit"])
         log_odds[inverse[:n_old]] += self.log_odds_  # old keys are unique: no repeats
@@ -339,12 +427,14 @@ class OccupancyGrid(BaseEstimator):
         """Index in `keys_` of the cell of each point of X, and whether it is known."""
         check_is_fitted(self)
         X = as_points(X, "X", self.n_dims_)
-        query = np.floor(X / self._params["resolution"]).astype(np.int64)
+        scaled = X / self._params["resolution"]
+        near = (np.abs(scaled) <= MAX_CELL_INDEX + 2).all(axis=1)  # no data beyond: unknown
+        query = np.floor(np.where(near[:, None], scaled, 0.0)).astype(np.int64)
         if len(self.keys_) == 0:
             return np.zeros(len(query), dtype=np.intp), np.zeros(len(query), dtype=bool)
         table, query = _row_codes(self.keys_, query)
         index = np.searchsorted(table, query)
-        known = index < len(table)
+        known = near & (index < len(table))
         known[known] = table[index[known]] == query[known]
         return index, known
 
@@ -434,8 +524,41 @@ class OccupancyGrid(BaseEstimator):
         return (self.keys_ + 0.5) * self._params["resolution"], expit(self.log_odds_)
 
 
-def grid_points(lower: ArrayLike, upper: ArrayLike,
-                resolution: float) -> tuple[NDArray[np.float64], tuple[int, ...]]:
+def _check_count(value, name):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
+    if value < 1:
+        raise ValueError(f"{name} must be a positive integer, got {value}")
+    return int(value)
+
+
+def _grid_shape(lower, upper, resolution, max_points):
+    """Validated lower corner and the number of cells per axis of a grid."""
+    lower_shape = _shape(lower)
+    if lower_shape is not None and lower_shape not in ((2,), (3,)):
+        raise ValueError(f"lower must have shape (2,) or (3,), got {lower_shape}")
+    dim = 3 if lower_shape is None else lower_shape[0]  # else as_point says what is wrong
+    lower = as_point(lower, "lower", dim)
+    upper = as_point(upper, "upper", dim)
+    resolution = check_real(resolution, "resolution", low=0.0)
+    max_points = _check_count(max_points, "max_points")
+    if not (lower < upper).all():
+        raise ValueError(f"lower must be below upper on every axis, got lower={lower.tolist()} "
+                         f"and upper={upper.tolist()}")
+    with np.errstate(over="ignore"):
+        cells = np.maximum(np.ceil((upper - lower) / resolution - 1e-9), 1.0)   # may be inf
+        total = float(np.prod(cells))
+    if not total <= max_points:
+        raise ValueError(
+            f"the grid from lower={lower.tolist()} to upper={upper.tolist()} at resolution "
+            f"{resolution!r} has {total:.4g} cells, more than max_points={max_points}; use a "
+            f"coarser resolution, a smaller box, or raise max_points")
+    shape = tuple(int(n) for n in cells)
+    return lower, shape
+
+
+def grid_points(lower: ArrayLike, upper: ArrayLike, resolution: float, *,
+                max_points: int = MAX_GRID_POINTS) -> tuple[NDArray[np.float64], tuple[int, ...]]:
     """Centres of a regular grid of cells covering the box [lower, upper).
 
     Cell ``i`` along axis ``d`` has its centre at
@@ -451,6 +574,10 @@ def grid_points(lower: ArrayLike, upper: ArrayLike,
         Upper corner of the box, in metres; above `lower` on every axis.
     resolution : float
         Edge length of the cells, in metres. Must be positive.
+    max_points : int, default=20_000_000
+        Most cells the grid may have (``prod(shape)``); a larger box raises
+        before anything is allocated. The points take ``8 * n_dims`` bytes
+        each (480 MB in 3D at the default).
 
     Returns
     -------
@@ -464,7 +591,10 @@ def grid_points(lower: ArrayLike, upper: ArrayLike,
     ------
     ValueError
         If `lower` and `upper` are not finite of equal length 2 or 3, if
-        ``lower >= upper`` on some axis, or if `resolution` is not positive.
+        ``lower >= upper`` on some axis, if `resolution` is not positive, or
+        if the grid would have more than `max_points` cells.
+    TypeError
+        If an argument has the wrong type.
 
     Examples
     --------
@@ -475,17 +605,7 @@ def grid_points(lower: ArrayLike, upper: ArrayLike,
     array([[0.25, 0.25],
            [0.75, 0.25]])
     """
-    lower_shape = _shape(lower)
-    if lower_shape is not None and lower_shape not in ((2,), (3,)):
-        raise ValueError(f"lower must have shape (2,) or (3,), got {lower_shape}")
-    dim = 3 if lower_shape is None else lower_shape[0]  # else as_point says what is wrong
-    lower = as_point(lower, "lower", dim)
-    upper = as_point(upper, "upper", dim)
-    resolution = check_real(resolution, "resolution", low=0.0)
-    if not (lower < upper).all():
-        raise ValueError(f"lower must be below upper on every axis, got lower={lower.tolist()} "
-                         f"and upper={upper.tolist()}")
-    shape = tuple(int(n) for n in np.ceil((upper - lower) / resolution - 1e-9))
+    lower, shape = _grid_shape(lower, upper, resolution, max_points)
     axes = [lo + (np.arange(n) + 0.5) * resolution for lo, n in zip(lower, shape)]
     mesh = np.meshgrid(*axes, indexing="ij")
     return np.column_stack([m.reshape(-1) for m in mesh]), shape
@@ -494,8 +614,11 @@ def grid_points(lower: ArrayLike, upper: ArrayLike,
 _OUTPUTS = ("proba", "mean", "var")
 
 
+
+
 def predict_grid(model, lower: ArrayLike, upper: ArrayLike, resolution: float, *,
-                 output: str = "proba", batch_size: int = 50_000) -> NDArray[np.float64]:
+                 output: str = "proba", batch_size: int = 50_000,
+                 max_points: int = MAX_GRID_POINTS) -> NDArray[np.float64]:
     """Evaluate a fitted map on the cell centres of a regular grid.
 
     Parameters
@@ -511,6 +634,9 @@ def predict_grid(model, lower: ArrayLike, upper: ArrayLike, resolution: float, *
         variance of a Gaussian-process model.
     batch_size : int, default=50_000
         Number of points passed to the model at once.
+    max_points : int, default=20_000_000
+        Most cells of the grid, as for :func:`grid_points`; the values take
+        8 bytes a cell, and only one batch of points exists at a time.
 
     Returns
     -------
@@ -522,7 +648,9 @@ def predict_grid(model, lower: ArrayLike, upper: ArrayLike, resolution: float, *
     ------
     ValueError
         If `output` is unknown, `batch_size` is not a positive integer, or the
-        grid is invalid (see :func:`grid_points`).
+        grid is invalid or larger than `max_points` (see :func:`grid_points`).
+    TypeError
+        If `output` is not a string or `batch_size` not an integer.
 
     Examples
     --------
@@ -531,16 +659,25 @@ def predict_grid(model, lower: ArrayLike, upper: ArrayLike, resolution: float, *
     array([[0.7],
            [0.5]])
     """
+    if not isinstance(output, str):
+        raise TypeError(f"output must be one of {_OUTPUTS}, got {type(output).__name__}")
     if output not in _OUTPUTS:
         raise ValueError(f"output must be one of {_OUTPUTS}, got {output!r}")
-    if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)):
-        raise TypeError(f"batch_size must be an integer, got {type(batch_size).__name__}")
-    if batch_size < 1:
-        raise ValueError(f"batch_size must be a positive integer, got {batch_size}")
-    points, shape = grid_points(lower, upper, resolution)
-    values = np.empty(len(points))
-    for start in range(0, len(points), batch_size):
-        batch = points[start:start + batch_size]
+    batch_size = _check_count(batch_size, "batch_size")
+    method = "predict_proba" if output == "proba" else "predict"
+    if not callable(getattr(model, method, None)):
+        raise TypeError(f"model must have a {method}() method for output={output!r}, got "
+                        f"{type(model).__name__}")
+    # points are made batch by batch, never all at once
+    lower_arr, shape = _grid_shape(lower, upper, resolution, max_points)
+    n = math.prod(shape)
+    strides = np.cumprod((shape[1:] + (1,))[::-1])[::-1]
+    batch_size = min(batch_size, n)
+    values = np.empty(n)
+    for start in range(0, n, batch_size):
+        index = np.arange(start, min(start + batch_size, n))
+        cell = (index[:, None] // strides) % np.asarray(shape)
+        batch = lower_arr + (cell + 0.5) * float(resolution)
         if output == "proba":
             values[start:start + batch_size] = model.predict_proba(batch)
         else:

@@ -14,9 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import _integral
-from .._validation import as_points
-from ..kernel import _check_n_jobs, _threads
+from .._validation import _as_numeric, as_points
 from ._kernels import _Stationary
+from ._limits import check_bool, check_coordinates, check_dense, check_segments, threads
 from ._quadrature import ClenshawCurtis, Simpson, _Rule
 
 __all__ = ["integral_kernel"]
@@ -44,8 +44,8 @@ def _check_quadrature(quadrature):
 def as_segments(starts, ends, name="segment", dim=None):
     """Validate paired start and end points; returns (starts, ends) float64 (n, D)."""
     starts_name, ends_name = f"{name}_starts", f"{name}_ends"
-    starts = np.asarray(starts) if not isinstance(starts, np.ndarray) else starts
     if dim is None:
+        starts = _as_numeric(starts, starts_name)
         dim = starts.shape[1] if starts.ndim == 2 else -1
         if not 1 <= dim <= 3:
             raise ValueError(f"{starts_name} must have shape (n, D) with D in 1..3, "
@@ -134,6 +134,16 @@ def integral_kernel(kernel, starts: ArrayLike, ends: ArrayLike, starts2: ArrayLi
     K_gradient : ndarray of shape (n_obs, n_obs, n_theta)
         Only with `eval_gradient`.
 
+    Raises
+    ------
+    ValueError
+        On NaN or inf, bad shapes, observations beyond 1e10 length scales
+        from the origin or segments longer than 1e4 length scales (see
+        ``occgp.gp._limits``), or a result of more than 4 GiB.
+    TypeError
+        On non-numeric observations, a kernel or quadrature of another kind,
+        or a non-bool `eval_gradient`.
+
     Examples
     --------
     A unit segment against a point on its line, one length scale beyond its end:
@@ -150,7 +160,8 @@ def integral_kernel(kernel, starts: ArrayLike, ends: ArrayLike, starts2: ArrayLi
     """
     kernel = _check_kernel(kernel)
     quadrature = _check_quadrature(quadrature)
-    n_threads = _threads(_check_n_jobs(n_jobs))
+    n_threads = threads(n_jobs)
+    eval_gradient = check_bool(eval_gradient, "eval_gradient")
     starts, ends = as_segments(starts, ends, "observation")
     if (starts2 is None) != (ends2 is None):
         raise ValueError("starts2 and ends2 must be given together")
@@ -158,6 +169,17 @@ def integral_kernel(kernel, starts: ArrayLike, ends: ArrayLike, starts2: ArrayLi
         if eval_gradient:
             raise ValueError("eval_gradient is only supported for one set of observations")
         starts2, ends2 = as_segments(starts2, ends2, "observation2", dim=starts.shape[1])
+    inv = kernel.inverse_length_scales(starts.shape[1])
+    sets = [("observation", starts, ends)]
+    if starts2 is not None:
+        sets.append(("observation2", starts2, ends2))
+    for name, a, b in sets:
+        check_coordinates({f"{name}_starts": a, f"{name}_ends": b}, inv,
+                          fix="shift the observations towards the origin")
+        check_segments(a, b, inv, name)
+    n2 = len(starts) if starts2 is None else len(starts2)
+    check_dense(len(starts), n2, 1 + (kernel.n_theta + 1 if eval_gradient else 0),
+                "the kernel matrix", "pass fewer observations at a time")
     out = _covariance(kernel, quadrature, starts, ends, starts2, ends2,
                       eval_gradient=eval_gradient, n_threads=n_threads)
     if eval_gradient:

@@ -17,10 +17,24 @@ import numbers
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._validation import _as_numeric
+from ._limits import MAX_DENSE_BYTES, check_bool
+
 __all__ = ["SquaredExponential", "Matern32", "SparseKernel"]
 
 _SQRT3 = np.sqrt(3.0)
 _TWO_PI = 2.0 * np.pi
+
+
+def _as_samples(x, name):
+    """`x` as a finite float64 array of shape (n_samples, n_features); 1-D is one sample."""
+    arr = np.atleast_2d(_as_numeric(x, name))
+    if arr.ndim != 2:
+        raise ValueError(f"{name} must have shape (n_samples, n_features), got {arr.shape}")
+    arr = arr.astype(np.float64)
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be finite (found NaN or inf)")
+    return arr
 
 
 def _check_bounds(bounds, name):
@@ -104,7 +118,7 @@ class _Stationary:
 
     def with_theta(self, theta: ArrayLike):
         """A copy of the kernel with hyper-parameters ``exp(theta)``."""
-        theta = np.asarray(theta, dtype=np.float64)
+        theta = _as_numeric(theta, "theta").astype(np.float64)
         if theta.shape != (self.n_theta,) or not np.isfinite(theta).all():
             raise ValueError(f"theta must be a finite array of shape ({self.n_theta},), got {theta!r}")
         ls = np.exp(theta[1:])
@@ -152,11 +166,11 @@ class _Stationary:
 
     def profile(self, s: ArrayLike) -> NDArray[np.float64]:
         """The kernel as a function of the squared scaled distance, divided by the variance."""
-        return self._profile(np.asarray(s, dtype=np.float64))
+        return self._profile(_as_numeric(s, "s").astype(np.float64))
 
     def gradient_factor(self, s: ArrayLike) -> NDArray[np.float64]:
         """``-2 f'(s)``: ``dk/dlog(l_d) = variance * gradient_factor(s) * (dx_d / l_d) ** 2``."""
-        return self._gradient_factor(np.asarray(s, dtype=np.float64))
+        return self._gradient_factor(_as_numeric(s, "s").astype(np.float64))
 
     def __call__(self, X: ArrayLike, Y: ArrayLike | None = None, eval_gradient: bool = False):
         """Kernel matrix between the rows of `X` and `Y` (default `X`).
@@ -174,14 +188,31 @@ class _Stationary:
         K : ndarray of shape (n_samples_X, n_samples_Y)
         K_gradient : ndarray of shape (n_samples_X, n_samples_X, n_theta)
             Only when `eval_gradient` is True.
+
+        Raises
+        ------
+        ValueError
+            If `X` or `Y` is not finite of shape (n, n_features), the column
+            counts differ, or the result with its intermediate arrays would
+            take more than 4 GiB.
+        TypeError
+            If `X` or `Y` does not hold real numbers, or `eval_gradient` is
+            not a bool.
         """
-        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
-        if eval_gradient and Y is not None:
+        X = _as_samples(X, "X")
+        if check_bool(eval_gradient, "eval_gradient") and Y is not None:
             raise ValueError("eval_gradient is only supported when Y is None")
-        Y = X if Y is None else np.atleast_2d(np.asarray(Y, dtype=np.float64))
-        if X.ndim != 2 or Y.ndim != 2 or X.shape[1] != Y.shape[1]:
+        Y = X if Y is None else _as_samples(Y, "Y")
+        if X.shape[1] != Y.shape[1]:
             raise ValueError(f"X and Y must be 2-D with the same number of columns, got "
                              f"{X.shape} and {Y.shape}")
+        width = X.shape[1] * (3 if eval_gradient else 1) + 2
+        size = 8.0 * X.shape[0] * Y.shape[0] * width
+        if size > MAX_DENSE_BYTES:
+            raise ValueError(f"the kernel matrix of {X.shape[0]} x {Y.shape[0]} samples needs "
+                             f"{size / 2 ** 30:.3g} GiB with its intermediate arrays, more than "
+                             f"the limit of {MAX_DENSE_BYTES / 2 ** 30:g} GiB; pass fewer "
+                             f"samples at a time")
         variance, _ = self._checked()
         inv = self.inverse_length_scales(X.shape[1])
         diff = (X[:, None, :] - Y[None, :, :]) * inv
@@ -198,7 +229,7 @@ class _Stationary:
     def diag(self, X: ArrayLike) -> NDArray[np.float64]:
         """``k(x, x)`` for each row of `X` (the variance), shape (n_samples,)."""
         variance, _ = self._checked()
-        return np.full(np.atleast_2d(X).shape[0], variance)
+        return np.full(_as_samples(X, "X").shape[0], variance)
 
 
 class SquaredExponential(_Stationary):

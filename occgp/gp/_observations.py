@@ -7,7 +7,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import as_point, as_points
+from .._validation import _as_numeric, as_point, as_points
 from ._integral import as_segments
 
 __all__ = ["Observations", "observations_from_scans", "make_observations"]
@@ -38,12 +38,13 @@ class Observations(NamedTuple):
 
 
 def _dimension(hits, starts):
-    for arr in (hits, starts):
+    shapes = []
+    for name, arr in (("hits", hits), ("segment_starts", starts)):
         if arr is not None:
-            shape = np.shape(arr)
+            shape = _as_numeric(arr, name).shape
             if len(shape) == 2 and 1 <= shape[1] <= 3:
                 return shape[1]
-    shapes = [np.shape(a) for a in (hits, starts) if a is not None]
+            shapes.append(shape)
     raise ValueError(f"hits and segment_starts must have shape (n, D) with D in 1..3, got {shapes}")
 
 
@@ -64,7 +65,8 @@ def make_observations(hits, segment_starts, segment_ends, dim=None) -> Observati
         starts = ends = np.empty((0, dim))
     else:
         starts, ends = as_segments(segment_starts, segment_ends, "segment", dim=dim)
-    lengths = np.linalg.norm(ends - starts, axis=1)
+    with np.errstate(over="ignore"):  # inf beyond 1e154: the coordinate limits reject those
+        lengths = np.linalg.norm(ends - starts, axis=1)
     n_hits = len(hits)
     return Observations(
         np.vstack([hits, starts]), np.vstack([hits, ends]),
@@ -89,6 +91,14 @@ def observations_from_scans(scans) -> tuple[NDArray[np.float64], NDArray[np.floa
     hits : ndarray of shape (n_hits, D)
     segment_starts, segment_ends : ndarray of shape (n_beams, D)
 
+    Raises
+    ------
+    ValueError
+        If there is no scan, or a scan's points or origin have a bad shape,
+        differ in dimension from the first scan's, or hold NaN or inf.
+    TypeError
+        If `scans` is not a list of scans or the arrays are not numeric.
+
     Examples
     --------
     >>> from occgp.datasets import room_2d
@@ -96,19 +106,30 @@ def observations_from_scans(scans) -> tuple[NDArray[np.float64], NDArray[np.floa
     >>> starts.shape, ends.shape, hits.shape[1]
     ((34, 2), (34, 2), 2)
     """
+    if isinstance(scans, (str, bytes)) or not hasattr(scans, "__iter__"):
+        raise TypeError(f"scans must be a list of scans, got {type(scans).__name__}")
     hits, starts, ends = [], [], []
     dim = None
     for i, scan in enumerate(scans):
         laser = hasattr(scan, "hit") and hasattr(scan, "end_points")
-        points = scan.end_points if laser else scan[0]
+        if not laser and (isinstance(scan, (str, bytes)) or not hasattr(scan, "__len__")
+                          or len(scan) != 2):
+            raise TypeError(f"scans[{i}] must be a LaserScan2D, a Scan or a (points, origin) "
+                            f"pair, got {type(scan).__name__}")
+        points = _as_numeric(scan.end_points if laser else scan[0], f"scans[{i}].points")
         if dim is None:
-            dim = np.shape(points)[-1] if np.ndim(points) == 2 else -1
+            dim = points.shape[-1] if points.ndim == 2 else -1
             if not 1 <= dim <= 3:
                 raise ValueError(f"scans[{i}] points must have shape (n_points, D) with D in "
                                  f"1..3, got {np.shape(points)}")
         end = as_points(points, f"scans[{i}].points", dim)
         origin = as_point(scan.origin if laser else scan[1], f"scans[{i}].origin", dim)
-        hits.append(end[np.asarray(scan.hit, dtype=bool)] if laser else end)
+        if laser:
+            hit = np.asarray(scan.hit)
+            if hit.dtype != bool or hit.shape != (len(end),):
+                raise ValueError(f"scans[{i}].hit must be a bool array of shape ({len(end)},), "
+                                 f"got dtype {hit.dtype} and shape {hit.shape}")
+        hits.append(end[hit] if laser else end)
         starts.append(np.broadcast_to(origin, end.shape))
         ends.append(end)
     if not ends:

@@ -18,7 +18,19 @@ import scipy.linalg as sl
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize, special
 
+from .._validation import _as_numeric, check_real
+from ._limits import check_bool
+
 __all__ = ["loo_predictions", "fit_plsc", "plsc_proba"]
+
+
+def _finite(x, name, ndim=None):
+    arr = _as_numeric(x, name).astype(np.float64)
+    if ndim is not None and arr.ndim != ndim:
+        raise ValueError(f"{name} must be {ndim}-D, got shape {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be finite (found NaN or inf)")
+    return arr
 
 
 def loo_predictions(L: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -40,6 +52,14 @@ def loo_predictions(L: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.float64], ND
     -------
     mu, var : ndarray of shape (n,)
 
+    Raises
+    ------
+    ValueError
+        If `L` is not a finite (n, n) matrix with a positive diagonal, or `y`
+        not finite of shape (n,).
+    TypeError
+        If `L` or `y` does not hold real numbers.
+
     Examples
     --------
     >>> K = np.array([[2.0, 1.0], [1.0, 2.0]])
@@ -47,8 +67,12 @@ def loo_predictions(L: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.float64], ND
     >>> mu.tolist(), var.tolist()      # y_0 | y_1: mean 1/2 * (-1), variance 2 - 1/2
     ([-0.5, 0.5], [1.5, 1.5])
     """
-    L = np.asarray(L, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
+    L = _finite(L, "L", 2)
+    y = _finite(y, "y", 1)
+    if L.shape != (len(y), len(y)):
+        raise ValueError(f"L must have shape (n, n) with n = len(y) = {len(y)}, got {L.shape}")
+    if not (np.diag(L) > 0).all():
+        raise ValueError("L must be a lower Cholesky factor, with a positive diagonal")
     Linv = sl.solve_triangular(L, np.eye(len(y)), lower=True, check_finite=False)
     alpha = Linv.T @ (Linv @ y)
     kinv_diag = np.einsum("ij,ij->j", Linv, Linv)
@@ -95,20 +119,30 @@ def fit_plsc(mu: ArrayLike, var: ArrayLike, labels: ArrayLike, *,
     -------
     a, b : float
 
+    Raises
+    ------
+    ValueError
+        If the arrays differ in shape, hold NaN or inf or a negative
+        variance, or the labels are not -1/+1 of both classes.
+    TypeError
+        If an array does not hold real numbers or `platt_targets` is not a
+        bool.
+
     Examples
     --------
     >>> a, b = fit_plsc([1.0, 0.8, -0.9, -1.1], [0.1] * 4, [1, 1, -1, -1])
     >>> a > 0.5
     True
     """
-    mu = np.asarray(mu, dtype=np.float64)
-    var = np.asarray(var, dtype=np.float64)
-    labels = np.asarray(labels, dtype=np.float64)
+    mu, var, labels = _finite(mu, "mu"), _finite(var, "var"), _finite(labels, "labels")
+    platt_targets = check_bool(platt_targets, "platt_targets")
     if not (mu.shape == var.shape == labels.shape and mu.ndim == 1):
         raise ValueError(f"mu, var and labels must be 1-D of one length, got {mu.shape}, "
                          f"{var.shape} and {labels.shape}")
     if not np.isin(labels, (-1.0, 1.0)).all():
         raise ValueError("labels must be -1 or +1")
+    if (var < 0).any():
+        raise ValueError(f"var must be non-negative, got a minimum of {float(var.min())!r}")
     n_pos, n_neg = int((labels > 0).sum()), int((labels < 0).sum())
     if not (n_pos and n_neg):
         raise ValueError("PLSC needs both classes among the training labels")
@@ -124,11 +158,27 @@ def fit_plsc(mu: ArrayLike, var: ArrayLike, labels: ArrayLike, *,
 def plsc_proba(mu: ArrayLike, var: ArrayLike, a: float, b: float) -> NDArray[np.float64]:
     """``Phi((a mu + b) / sqrt(1 + a**2 var))``, the probability of class +1.
 
+    `mu` and `var` (non-negative) broadcast together; all inputs are finite.
+
+    Raises
+    ------
+    ValueError
+        On NaN or inf, a negative variance or shapes that do not broadcast.
+    TypeError
+        On non-numeric input.
+
     Examples
     --------
     >>> plsc_proba([0.0], [1.0], 1.0, 0.0).tolist()
     [0.5]
     """
-    mu = np.asarray(mu, dtype=np.float64)
-    var = np.asarray(var, dtype=np.float64)
+    mu, var = _finite(mu, "mu"), _finite(var, "var")
+    a, b = check_real(a, "a"), check_real(b, "b")
+    if (var < 0).any():
+        raise ValueError(f"var must be non-negative, got a minimum of {float(var.min())!r}")
+    try:
+        np.broadcast_shapes(mu.shape, var.shape)
+    except ValueError:
+        raise ValueError(f"mu and var must broadcast together, got shapes {mu.shape} and "
+                         f"{var.shape}") from None
     return special.ndtr((a * mu + b) / np.sqrt(1.0 + a * a * var))

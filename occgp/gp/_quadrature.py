@@ -24,6 +24,12 @@ from scipy import integrate
 
 __all__ = ["ClenshawCurtis", "Simpson", "clenshaw_curtis", "simpson"]
 
+#: Most nodes of :func:`clenshaw_curtis` (its weights take O(n**2) work) and the highest
+#: `max_order` of the adaptive rules.
+MAX_CC_NODES = 16385
+#: Most nodes of :func:`simpson`.
+MAX_SIMPSON_NODES = 2 ** 20 + 1
+
 
 def clenshaw_curtis(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Nodes and weights of the `n`-point Clenshaw–Curtis rule on [0, 1].
@@ -31,7 +37,7 @@ def clenshaw_curtis(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     Parameters
     ----------
     n : int
-        Number of nodes, at least 2 (the end points are nodes).
+        Number of nodes, from 2 (the end points are nodes) to 16385.
 
     Returns
     -------
@@ -46,7 +52,7 @@ def clenshaw_curtis(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     >>> float(w @ x ** 4)       # exact for polynomials of degree < n
     0.2
     """
-    n = _check_order(n, 2, "n")
+    n = _check_order(n, 2, "n", MAX_CC_NODES)
     N = n - 1
     theta = np.pi * np.arange(n) / N
     w = np.zeros(n)
@@ -69,13 +75,15 @@ def clenshaw_curtis(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
 def simpson(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Nodes and weights of the composite Simpson rule with `n` (odd) nodes on [0, 1].
 
+    `n` runs from 3 to 2**20 + 1.
+
     Examples
     --------
     >>> x, w = simpson(5)
     >>> (w * 12).tolist()
     [1.0, 4.0, 2.0, 4.0, 1.0]
     """
-    n = _check_order(n, 3, "n")
+    n = _check_order(n, 3, "n", MAX_SIMPSON_NODES)
     if n % 2 == 0:
         raise ValueError(f"n must be odd for Simpson's rule, got {n}")
     w = np.ones(n)
@@ -84,12 +92,20 @@ def simpson(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     return np.linspace(0.0, 1.0, n), w / (3.0 * (n - 1))
 
 
-def _check_order(n, low, name):
+def _check_order(n, low, name, high):
     if isinstance(n, bool) or not isinstance(n, numbers.Integral):
         raise TypeError(f"{name} must be an int, got {type(n).__name__}")
-    if n < low:
-        raise ValueError(f"{name} must be at least {low}, got {n}")
+    if not low <= n <= high:
+        raise ValueError(f"{name} must be at least {low} and at most {high}, got {n}")
     return int(n)
+
+
+def _check_kernel_class(kernel):
+    from ._kernels import _Stationary
+    if not isinstance(kernel, _Stationary):
+        raise TypeError("kernel must be one of occgp.gp's kernels (SquaredExponential, "
+                        f"Matern32, SparseKernel), got {type(kernel).__name__}")
+    return kernel
 
 
 class _Rule:
@@ -106,7 +122,7 @@ class _Rule:
         if isinstance(self.tol, bool) or not isinstance(self.tol, numbers.Real) \
                 or not (1e-15 <= float(self.tol) < 1):
             raise ValueError(f"tol must be a number in [1e-15, 1), got {self.tol!r}")
-        max_order = _check_order(self.max_order, self._min_max_order, "max_order")
+        max_order = _check_order(self.max_order, self._min_max_order, "max_order", MAX_CC_NODES)
         return float(self.tol), max_order
 
     @property
@@ -126,14 +142,16 @@ class _Rule:
     def table(self, kernel):
         """Concatenated nodes, weights, offsets and reaches for `kernel`'s profile."""
         tol, max_order = self._checked()
-        return _table(type(self).__name__, type(kernel), tol, max_order)
+        return _table(type(self).__name__, type(_check_kernel_class(kernel)), tol, max_order)
 
     def reach(self, kernel) -> NDArray[np.float64]:
         """Longest piece (length-scale units) each order integrates to `tol`."""
         return self.table(kernel)[3].copy()
 
     def order_for(self, kernel, length: float) -> tuple[int, int]:
-        """``(order, n_panels)`` used for a piece of `length` length-scale units."""
+        """``(order, n_panels)`` used for a piece of `length` length-scale units (finite, >= 0)."""
+        from .._validation import check_real
+        length = check_real(length, "length", low=0.0, low_open=False)
         reach = self.table(kernel)[3]
         orders = self.orders
         k = int(np.searchsorted(reach, length)) if reach[-1] >= length else len(orders) - 1
@@ -155,7 +173,7 @@ class ClenshawCurtis(_Rule):
     tol : float, default=1e-10
         Error allowed on one piece, relative to the profile's half mass.
     max_order : int, default=257
-        Highest order; longer pieces are split into panels of it.
+        Highest order, at most 16385; longer pieces are split into panels of it.
 
     Examples
     --------
@@ -175,7 +193,8 @@ class Simpson(_Rule):
     tol : float, default=1e-10
         Error allowed on one piece, relative to the profile's half mass.
     max_order : int, default=4097
-        Most nodes on one panel; longer pieces are split into panels.
+        Most nodes on one panel, at most 16385; longer pieces are split into
+        panels.
 
     Examples
     --------
