@@ -149,9 +149,14 @@ def check_choice(value: object, name: str, choices: tuple[str, ...]) -> str:
 def as_path(path: Any, name: str = "path") -> pathlib.Path:
     """Return `path` as a :class:`pathlib.Path`; TypeError naming `name` otherwise."""
     try:
-        return pathlib.Path(os.fspath(path))
+        path = os.fspath(path)
     except TypeError:
         raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}") from None
+    if not isinstance(path, str):
+        raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}")
+    if "\0" in path:
+        raise ValueError(f"{name} must not contain a NUL character, got {path!r}")
+    return pathlib.Path(path)
 
 
 def check_seed(seed: Any, name: str = "seed") -> np.random.Generator:

@@ -45,7 +45,7 @@ def make_files() -> dict[str, bytes]:
     good = np.arange(12, dtype=np.float32).reshape(3, 4)
     return {
         "odd.bin": good.tobytes()[:-3],                 # not a whole number of records
-        "five.bin": np.ones((4, 5), np.float32).tobytes(),   # 80 bytes: 5-float records
+        "five.bin": np.ones((7, 5), np.float32).tobytes(),   # 140 bytes: 5-float records
         "corrupt.xyz.gz": b"\x1f\x8b\x08\x00garbage",
         "empty.pcd": b"",
     }

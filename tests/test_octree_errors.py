@@ -167,7 +167,7 @@ def test_corrupt_files_raise_clear_errors(m):
         OccupancyOctree.from_bytes(b"hello\nworld\n")
     with pytest.raises(ValueError, match="holds a 'ColorOcTree' tree"):
         OccupancyOctree.from_bytes(data.replace(b"id OcTree", b"id ColorOcTree"))
-    with pytest.raises(ValueError, match="header announces 99 nodes"):
+    with pytest.raises(ValueError, match="(header announces|corrupt header: it announces) 99 nodes"):
         size = data.split(b"size ")[1].split(b"\n")[0]
         OccupancyOctree.from_bytes(data.replace(b"size " + size, b"size 99"))
     with pytest.raises(ValueError, match="malformed header"):

@@ -8,29 +8,9 @@ import os
 import zlib
 from pathlib import Path
 
-import numpy as np
+from .._validation import as_path, check_bool
 
 __all__ = ["as_path", "read_bytes", "read_maybe_compressed"]
-
-
-def as_path(path, name="path") -> Path:
-    """Coerce a str / os.PathLike to :class:`~pathlib.Path` (TypeError otherwise)."""
-    try:
-        path = os.fspath(path)
-    except TypeError:
-        raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}") from None
-    if not isinstance(path, str):
-        raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}")
-    if "\0" in path:
-        raise ValueError(f"{name} must not contain a NUL character, got {path!r}")
-    return Path(path)
-
-
-def check_bool(value, name):
-    """Return `value` if it is a bool (numpy's too), else raise a TypeError naming it."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be a bool, got {type(value).__name__}")
-    return bool(value)
 
 
 def _check_file(path: Path) -> None:
