@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.occgp-installed
 EXTRAS ?= test
 BUILD_INPUTS := setup.py pyproject.toml $(wildcard ext/*.pyx ext/*.pxd ext/*.h)
 
-.PHONY: all demo test bench docs asan soak system venv install clean distclean
+.PHONY: all demo test bench docs asan soak fuzz system venv install clean distclean
 
 all: test
 
@@ -62,7 +62,6 @@ distclean: clean
 # crash, hang or unclear exception.
 FUZZ_CASES ?= 10000
 FUZZ_JOBS  ?= 2
-.PHONY: fuzz
 fuzz: $(STAMP)
 	-$(PY) -m pip install -q atheris || echo "atheris does not install here: the seeded generator runs alone"
 	$(PY) tools/fuzz.py --cases $(FUZZ_CASES) --jobs $(FUZZ_JOBS) --atheris-runs $(FUZZ_CASES)
