@@ -12,7 +12,7 @@ LOGS=$(realpath -m "$DIR/logs")
 
 mkdir -p "$DIR"
 # the tracked and new (not ignored) files of the working tree
-git ls-files -z --cached --others --exclude-standard -- setup.py pyproject.toml ext occgp tests docs \
+git ls-files -z --cached --others --exclude-standard -- setup.py pyproject.toml ext occgp tests docs tools \
   | xargs -0 cp -p --parents -t "$DIR"
 rm -rf "$LOGS" && mkdir -p "$LOGS"
 # the tests find real data in ../shared beside the project: beside the copy too
@@ -26,6 +26,8 @@ echo "occgp asan: building the extensions with $SAN -DNDEBUG"
 PRELOAD="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libubsan.so)"
 echo "occgp asan: running the test suite (reports to $LOGS)"
 set +e
+# OCCGP_UNDER_SANITIZER: tools/fuzz.py then sets no address-space limit in its child
+# processes (ASan reserves terabytes of shadow address space)
 (cd "$DIR" && LD_PRELOAD="$PRELOAD" \
   ASAN_OPTIONS="detect_leaks=0:abort_on_error=0:halt_on_error=1:log_path=$LOGS/asan" \
   UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:log_path=$LOGS/ubsan" \
