@@ -111,7 +111,7 @@ cdef class _Grid:
     # ------------------------------------------------------------------ updates
     def _insert(self, const float[:, ::1] points, const float[::1] origin, double max_range,
                 bint ray_mode, bint culling=False, const uint32_t[::1] weights=None,
-                int superray_threshold=0, bint diagnose=False):
+                int superray_threshold=0, bint diagnose=False, uint64_t max_cells=0):
         """Insert a scan: one update per cell (see ``scan_updates`` in ``ext/_scan.pxd``).
 
         The cells, their counts and updates are the octree's; each update is
@@ -139,7 +139,7 @@ cdef class _Grid:
             with nogil:
                 scan_updates(tree, points, o, max_range, ray_mode, culling, w,
                              superray_threshold, _fully_free, &view, self._counts,
-                             &self._counts_dirty, found, &stats, diagnose)
+                             &self._counts_dirty, found, &stats, diagnose, max_cells)
                 if self._cells.empty():
                     self._cells.reserve(found.size())
                 for j in range(<Py_ssize_t>found.size()):

@@ -108,7 +108,7 @@ cdef class _OcTree:
     def _insert_batch(self, const float[:, ::1] points, const float[::1] origin,
                       double max_range, bint ray_mode, bint culling,
                       const uint32_t[::1] weights=None, int superray_threshold=0,
-                      bint diagnose=False):
+                      bint diagnose=False, uint64_t max_cells=0):
         """Insert a scan through occgp's own key table, optionally culled.
 
         Every ray is traversed by liboctomap's ``computeRayKeys``; the cells are
@@ -128,7 +128,8 @@ cdef class _OcTree:
         is -1 when culling was off or the scan's key box was too large to cull;
         unnecessary_traversals is -1 unless `diagnose` (slow) asks for it.
         Returns None, changing nothing, when a ray's end (after truncation)
-        lies outside the key range.
+        lies outside the key range or a ray cannot be walked, and "too many cells",
+        changing nothing, when the scan reaches more than `max_cells` cells (> 0).
         """
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t j
@@ -143,8 +144,8 @@ cdef class _OcTree:
             with nogil:
                 scan_updates(tree, points, o, max_range, ray_mode, culling, w,
                              superray_threshold, _fully_free, tree, self._counts,
-                             &self._counts_dirty, found, &stats, diagnose)
-                if not stats.bad_ends:
+                             &self._counts_dirty, found, &stats, diagnose, max_cells)
+                if not stats.bad_ends and not stats.too_many:
                     cells.resize(found.size())
                     for j in range(<Py_ssize_t>found.size()):
                         key = _unpack(found[j].key)

@@ -43,6 +43,7 @@ cdef struct ScanStats:
     long traversed_cells   # cell visits that counted a ray
     long unnecessary       # with `diagnose`: visits to cells whose update is a no-op
     long bad_ends          # ray ends outside the key range (then nothing is collected)
+    bint too_many          # the scan reached more than max_cells cells (nothing collected)
     timespec clock[5]      # start; end points, super rays, culling region, traversal done
 
 
@@ -118,9 +119,12 @@ cdef inline object scan_result(const ScanStats& stats, size_t updated, const tim
     """What the maps' scan insertion returns: (region_cells, updated_cells,
     traversed_rays, traversed_cells, seconds, unnecessary_traversals), seconds =
     (end points, super rays, culling region, traversal, map update) with the update
-    ending at `done`; None when a ray end was out of range."""
+    ending at `done`; None when a ray end was out of range, "too many cells" when the
+    scan reached more cells than its limit (nothing changed either way)."""
     if stats.bad_ends:
         return None
+    if stats.too_many:
+        return "too many cells"
     seconds = tuple([_elapsed(stats.clock[k], stats.clock[k + 1]) for k in range(4)]
                     + [_elapsed(stats.clock[4], done)])
     return (stats.region_cells, updated, stats.rays, stats.traversed_cells, seconds,
@@ -464,7 +468,8 @@ cdef inline int scan_updates(
         OcTree* keys, const float[:, ::1] points, const point3d& o, double max_range,
         bint ray_mode, bint culling, const uint32_t* weights, int superray_threshold,
         FreeTest fully_free, void* map, vector[uint32_t]& counts, bint* counts_dirty,
-        vector[ScanCell]& cells, ScanStats* stats, bint diagnose=False) except -1 nogil:
+        vector[ScanCell]& cells, ScanStats* stats, bint diagnose=False,
+        uint64_t max_cells=0) except -1 nogil:
     """Collect one update per cell for a scan (appended to `cells`, keys distinct).
 
     Every ray is traversed as liboctomap's ``computeRayKeys`` traverses it
@@ -484,7 +489,9 @@ cdef inline int scan_updates(
     them and nothing is collected. With `diagnose`
     (slow), ``stats.unnecessary`` counts the visits of the walked rays to cells
     whose update changes nothing: fully free cells that no ray ends in (the
-    dissertation's "unnecessary traversals", Table 2.3).
+    dissertation's "unnecessary traversals", Table 2.3). With `max_cells` > 0, a scan
+    whose rays reach more than that many distinct cells sets ``stats.too_many`` and
+    collects nothing (checked after each ray, so memory stays within one ray of it).
     """
     cdef Py_ssize_t i, n = points.shape[0]
     cdef bint weighted = weights != NULL
@@ -520,6 +527,7 @@ cdef inline int scan_updates(
     stats.traversed_cells = 0
     stats.unnecessary = -1
     stats.bad_ends = 0
+    stats.too_many = False
     clock_gettime(CLOCK_MONOTONIC, &stats.clock[0])
     keys.coordToKeyChecked(o, ko)
     for axis in range(3):
@@ -572,6 +580,9 @@ cdef inline int scan_updates(
         counts.assign(max(box_cells, counts.size()), 0)
     counts_dirty[0] = True
     for r in range(n_trav):
+        if max_cells and touched.size() + table.size() > max_cells:
+            stats.too_many = True
+            break
         if superray_threshold > 0:
             i = ray_ids[r]
             w = ray_weights[r]
@@ -615,6 +626,13 @@ cdef inline int scan_updates(
             stats.traversed_cells += 1
             more = walker.next()
     clock_gettime(CLOCK_MONOTONIC, &stats.clock[4])
+    if max_cells and touched.size() + table.size() > max_cells:
+        stats.too_many = True
+    if stats.too_many:
+        for j in range(touched.size()):
+            counts[touched[j]] = 0
+        counts_dirty[0] = False
+        return 0            # nothing changed: the caller reports it
     # one update per cell: the traversed cells, then end cells no ray crossed
     cells.reserve(touched.size() + table.size())
     for j in range(touched.size()):

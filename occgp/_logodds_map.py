@@ -51,6 +51,12 @@ class LogOddsMap:
     #: the culling region alone, then tries super rays again; each further such scan
     #: in a row doubles the pause, up to 8 times this.
     SUPERRAY_BACKOFF = 8
+    #: The most distinct cells one scan may reach (its rays' cells and end cells): a
+    #: scan past it raises ValueError and changes nothing, instead of collecting
+    #: tens of gigabytes of cells (e.g. a resolution a thousand times too fine for
+    #: its rays). About 48 bytes a cell while the scan is collected, plus the map's
+    #: own nodes; raise it on the class or the map for larger scans.
+    MAX_SCAN_CELLS = 2**27
     _superray_skip = 0
     _superray_pause = SUPERRAY_BACKOFF
 
@@ -194,6 +200,10 @@ class LogOddsMap:
             method = "superray+culling"
         return method, int(superray_threshold) if method.startswith("superray") else 0
 
+    def _max_scan_cells(self) -> int:
+        """MAX_SCAN_CELLS, checked (it may be set on the class or the map)."""
+        return check_int(self.MAX_SCAN_CELLS, "MAX_SCAN_CELLS", low=1, high=2**62)
+
     def _adaptive_threshold(self, method: str, threshold: int) -> int:
         """The super-ray threshold for this scan: 0 while "superray+culling" backs off."""
         if method == "superray+culling" and self._superray_skip > 0:
@@ -272,6 +282,12 @@ class LogOddsMap:
         if stats is None:
             self._raise_bad_ends(pts, org, rng)
             raise AssertionError("the core reported a ray end out of range")  # unreachable
+        if isinstance(stats, str):
+            raise ValueError(
+                f"the scan's {len(pts)} rays reach more than MAX_SCAN_CELLS="
+                f"{self.MAX_SCAN_CELLS} cells at resolution {self.resolution:g} m; use a "
+                "coarser resolution, max_range or fewer points, or raise MAX_SCAN_CELLS; "
+                "the map is unchanged")
         self.last_insert_ = self._insert_statistics(stats)
         self.last_insert_["superrays"] = threshold > 0
         self._learn_superrays(method, len(pts))

@@ -152,7 +152,8 @@ default="auto"
             (3,), either holds NaN or inf or lies outside the key range (after
             truncation at `max_range`), a ray is shorter than 1.1e-19 m yet
             crosses a cell border (too short for the single-precision
-            traversal), or
+            traversal), the scan reaches more than :attr:`MAX_SCAN_CELLS`
+            distinct cells, or
             `max_range`, `mode`, `method` or `superray_threshold` is invalid.
             The map is then unchanged.
 
@@ -170,8 +171,8 @@ default="auto"
             pts, org, rng, _ = scan
             threshold = self._adaptive_threshold(method, threshold)
             self._record_insert(self._insert(
-                pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),
-                pts, org, rng, method, threshold)
+                pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold,
+                False, self._max_scan_cells()), pts, org, rng, method, threshold)
         return self
 
     # ------------------------------------------------------------------ queries

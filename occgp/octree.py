@@ -195,7 +195,8 @@ default="auto"
             (3,), either holds NaN or inf or lies outside the key range (after
             truncation at `max_range`), a ray is shorter than 1.1e-19 m yet
             crosses a cell border (too short for the single-precision
-            traversal), or
+            traversal), the scan reaches more than :attr:`MAX_SCAN_CELLS`
+            distinct cells, or
             `max_range`, `mode` or `discretize` is invalid. The map is then
             unchanged.
 
@@ -228,7 +229,10 @@ default="auto"
                 # liboctomap discretises before it truncates, with unchecked keys
                 self._raise_out_of_range("points", self._in_range(pts),
                                          " (with discretize=True, before truncation)")
-            if cells.max() <= KEYRAY_CELLS:
+            # rays within liboctomap's key buffer, and a bound on the cells they reach
+            # within MAX_SCAN_CELLS: otherwise occgp's traversal, which checks it
+            reach = cells.sum() + len(cells)
+            if cells.max() <= KEYRAY_CELLS and reach <= self._max_scan_cells():
                 self._insert_point_cloud(pts, org, rng, bool(discretize))
                 self.last_insert_: dict[str, float] = {"rays": len(pts)}
                 return self
@@ -239,8 +243,8 @@ default="auto"
                 pts = _discretized(pts, self.resolution)
         threshold = self._adaptive_threshold(method, threshold)
         self._record_insert(self._insert_batch(
-            pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold),
-            pts, org, rng, method, threshold)
+            pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold,
+            False, self._max_scan_cells()), pts, org, rng, method, threshold)
         return self
 
     # ------------------------------------------------------------------ queries

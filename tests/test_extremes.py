@@ -207,3 +207,34 @@ def test_octree_arguments_are_checked(call, exc, match):
 def test_grid_cells_checks_its_flag():
     with pytest.raises(TypeError, match="occupied_only must be a bool, got str"):
         GridMap(0.1).cells(occupied_only="no")
+
+
+@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
+def test_scan_reaching_more_than_max_scan_cells_is_rejected(cls):
+    """A scan's cells are counted as they are collected: past MAX_SCAN_CELLS (set low on
+    the map here) the scan changes nothing, with every method."""
+    points = [[5.0, 0, 0]] * 3 + [[0, 5.0, 0]] * 3      # 99 distinct cells
+    methods = ALL_METHODS if cls is OccupancyOctree else ["plain", "auto", "superray"]
+    for method in methods:
+        m = cls(0.1).insert_scan([[0, 0, 1.0]], [0, 0, 0])
+        before = m.cells() if cls is GridMap else m.leaves()
+        m.MAX_SCAN_CELLS = 50
+        with pytest.raises(ValueError, match=r"the scan's 6 rays reach more than "
+                                             r"MAX_SCAN_CELLS=50 cells .* unchanged"):
+            m.insert_scan(points, [0, 0, 0], method=method)
+        after = m.cells() if cls is GridMap else m.leaves()
+        assert_array_equal(after.log_odds, before.log_odds)
+        m.MAX_SCAN_CELLS = 110                  # 306 cell visits, 99 distinct cells
+        m.insert_scan(points, [0, 0, 0], method=method)
+        ref = cls(0.1).insert_scan([[0, 0, 1.0]], [0, 0, 0]).insert_scan(points, [0, 0, 0])
+        if cls is OccupancyOctree:
+            assert_same_leaves(m, ref)           # the plain method's own map
+        else:
+            assert_array_equal(m.cells().log_odds, ref.cells().log_odds)
+
+
+def test_max_scan_cells_is_checked():
+    m = OccupancyOctree(0.1)
+    m.MAX_SCAN_CELLS = 0
+    with pytest.raises(ValueError, match=r"MAX_SCAN_CELLS must lie in \[1, 4611686018427387904\], got 0"):
+        m.insert_scan([[1.0, 0, 0]], [0, 0, 0])
