@@ -39,7 +39,6 @@ sphinx_gallery_conf = {
     "filename_pattern": "/plot_",
     "doc_module": ("occgp",),
     "backreferences_dir": "gen_modules/backreferences",
-    "reference_url": {"occgp": None},
     "remove_config_comments": True,
 }
 
