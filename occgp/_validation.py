@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["as_numeric", "as_points", "as_point", "check_real", "check_probability", "check_resolution",
            "check_int", "check_bool", "check_choice", "as_path", "check_seed",
-           "RESOLUTION_RANGE"]
+           "check_n_jobs", "n_threads", "RESOLUTION_RANGE"]
 
 #: The resolutions (metres) at which liboctomap's single-precision ray traversal is
 #: sound. ``computeRayKeys`` normalises each ray by its length computed from float
@@ -169,3 +169,24 @@ def check_seed(seed: Any, name: str = "seed") -> np.random.Generator:
         raise (ValueError if isinstance(exc, ValueError) else TypeError)(
             f"{name} must be a non-negative int, a numpy Generator or None, got {seed!r}"
         ) from None
+
+
+def check_n_jobs(n_jobs: Any, name: str = "n_jobs") -> int | None:
+    """Return `n_jobs` (None, or a non-zero int as joblib counts them) after checking it."""
+    if n_jobs is None:
+        return None
+    if isinstance(n_jobs, (bool, np.bool_)) or not isinstance(
+            n_jobs, (numbers.Integral, np.integer)) or n_jobs == 0:
+        raise ValueError(f"{name} must be None, a positive int or a negative int "
+                         f"(-1: every core), got {n_jobs!r}")
+    return int(n_jobs)
+
+
+def n_threads(n_jobs: int | None) -> int:
+    """Threads for a checked `n_jobs` as joblib counts them (None: 1; -1: every core), at
+    most the number of cores (threads beyond them only cost memory)."""
+    if n_jobs is None:
+        return 1
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
+        else (os.cpu_count() or 1)
+    return min(n_jobs, cores) if n_jobs > 0 else max(cores + 1 + n_jobs, 1)

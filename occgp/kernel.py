@@ -10,23 +10,24 @@ samples; the bandwidths and the accumulation are compiled (``ext/_kernel.pyx``).
 
 from __future__ import annotations
 
+from numbers import Integral
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-import os
-from numbers import Integral
-
 from ._kernel import _akimap_bandwidths, _KernelCells
 from ._kernel import sparse_kernel as _sparse_kernel
+from ._kernel_samples import (  # noqa: F401 (MAX_FREE_SAMPLES: the documented limit)
+    _MAX_VAL, MAX_CELLS_PER_UPDATE, MAX_FREE_SAMPLES, MAX_WEIGHT, _beam_chunks,
+    _candidate_pairs, _check_free_count, _check_max_cells, _cube_sums, _merge_cube_sums,
+    _packed_keys, _search_cell, _support_cells, voxel_first,
+)
 from .octree import OccupancyOctree
-from ._validation import as_point, as_points, check_real
+from ._validation import as_point, as_points, check_n_jobs, check_real, n_threads
 
 __all__ = ["AKIMap", "BGKMap", "KernelCells", "Bandwidths", "sparse_kernel",
            "voxel_centroids"]
-
-_MAX_VAL = 32768
 
 
 class KernelCells(NamedTuple):
@@ -42,53 +43,6 @@ class KernelCells(NamedTuple):
 
 #: Most free samples one update draws along its beams before down-sampling; they are
 #: made and reduced in chunks of _FREE_CHUNK, so memory stays bounded.
-MAX_FREE_SAMPLES = 1 << 26
-_FREE_CHUNK = 1 << 22
-#: Default of `max_cells_per_update`: about 3 s of accumulation on one thread.
-MAX_CELLS_PER_UPDATE = 1 << 30
-
-
-def _packed_keys(points: NDArray[np.float64], size: float, name: str = "size",
-                 low: NDArray[np.float64] | None = None) -> NDArray[np.int64]:
-    """One int64 per cube of edge `size` (21 bits per axis, z major), counted from the
-    cube of `low` (default: the points' lowest corner)."""
-    q = np.floor(points / size)
-    q0 = q.min(axis=0) if low is None else np.floor(low / size)
-    span = q.max(axis=0) - q0
-    if not np.all(span < 1 << 21):
-        raise ValueError(f"{name}={size:g} is too small for this scan: the points span "
-                         f"{float(span.max()):.3g} cubes of {size:g} m on an axis, more "
-                         f"than 2^21")
-    k = np.maximum(q - q0, 0).astype(np.int64)     # (rounding below `low`: its cube)
-    return (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
-
-
-def _cube_sums(points, size, name="size", low=None):
-    """(cube keys, coordinate sums (n, 3), counts) of the points in each cube."""
-    keys, inverse, counts = np.unique(_packed_keys(points, size, name, low),
-                                      return_inverse=True, return_counts=True)
-    inverse = inverse.ravel()
-    sums = np.zeros((len(counts), 3))
-    for a in range(3):
-        sums[:, a] = np.bincount(inverse, weights=points[:, a], minlength=len(counts))
-    return keys, sums, counts
-
-
-def _merge_cube_sums(parts):
-    """The (keys, sums, counts) of the union of several (keys, sums, counts)."""
-    if len(parts) == 1:
-        return parts[0]
-    keys = np.concatenate([p[0] for p in parts])
-    sums = np.concatenate([p[1] for p in parts])
-    counts = np.concatenate([p[2] for p in parts])
-    ukeys, inverse = np.unique(keys, return_inverse=True)
-    inverse = inverse.ravel()
-    out = np.zeros((len(ukeys), 3))
-    for a in range(3):
-        out[:, a] = np.bincount(inverse, weights=sums[:, a], minlength=len(ukeys))
-    return ukeys, out, np.bincount(inverse, weights=counts, minlength=len(ukeys))
-
-
 def sparse_kernel(r: ArrayLike) -> NDArray[np.float64]:
     """The sparse kernel ``((2 + cos 2 pi r)(1 - r)) / 3 + sin(2 pi r) / (2 pi)`` for
     ``|r| < 1``, 0 beyond (Melkumyan and Ramos, 2009), element-wise; NaN where `r`
@@ -135,109 +89,6 @@ def voxel_centroids(points: ArrayLike, size: float) -> NDArray[np.float64]:
     return sums / counts[:, None]
 
 
-def _beam_chunks(counts):
-    """(beam index, index along the beam from 0) of every sample of beams holding
-    `counts` samples each, in chunks of at most _FREE_CHUNK samples."""
-    ends = np.cumsum(counts)
-    starts = ends - counts
-    total = int(ends[-1]) if len(ends) else 0
-    for a in range(0, total, _FREE_CHUNK):
-        idx = np.arange(a, min(a + _FREE_CHUNK, total), dtype=np.int64)
-        beam = np.searchsorted(ends, idx, side="right")
-        yield beam, idx - starts[beam]
-
-
-def _check_free_count(total, name, value):
-    if total > MAX_FREE_SAMPLES:
-        raise ValueError(
-            f"{name}={value:g} would make {float(total):.3g} free samples along this "
-            f"scan's beams, more than the {MAX_FREE_SAMPLES} an update takes; use a "
-            f"larger {name} (or split the scan); the map is unchanged")
-
-
-def voxel_first(points: NDArray[np.float64], size: float) -> NDArray[np.int64]:
-    """Indices of the first point (in order) in each cube of edge `size` that holds any,
-    in increasing order."""
-    if len(points) == 0:
-        return np.empty(0, dtype=np.int64)
-    _, first = np.unique(_packed_keys(points, size), return_index=True)
-    return np.sort(first)
-
-
-def _check_max_cells(value) -> int:
-    if isinstance(value, bool) or not isinstance(value, Integral):
-        raise TypeError(f"max_cells_per_update must be a positive int, got "
-                        f"{type(value).__name__}")
-    if value < 1:
-        raise ValueError(f"max_cells_per_update must be a positive int, got {value!r}")
-    return int(value)
-
-
-def _support_cells(samples, extent, res) -> float:
-    """Cells in the support boxes of the samples (as the accumulation visits them:
-    cell centres within `extent` of each sample, keys clamped to the key range)."""
-    with np.errstate(over="ignore", invalid="ignore"):
-        lo = np.maximum(np.ceil((samples - extent) / res - 0.5) + _MAX_VAL, 0)
-        hi = np.minimum(np.floor((samples + extent) / res - 0.5) + _MAX_VAL,
-                        2 * _MAX_VAL - 1)
-    return float(np.sum(np.prod(np.clip(hi - lo + 1, 0, None), axis=1)))
-
-
-def _search_cell(xs, radius) -> float:
-    """Edge of the cubes AKIMap's neighbour search buckets the samples in: the largest
-    search radius, widened where the samples would span more than 2^20 cubes."""
-    if len(xs) == 0:
-        return radius
-    span = float(np.max(np.ptp(xs, axis=0)))
-    return max(radius, span / (1 << 20), float(np.max(np.abs(xs))) / (1 << 52))
-
-
-def _candidate_pairs(xs, cell) -> float:
-    """(sample, candidate) pairs AKIMap's neighbour search examines: for each sample,
-    the samples in the 3 x 3 x 3 cubes of edge `cell` around its own."""
-    if len(xs) == 0:
-        return 0.0
-    ck = np.floor(xs / cell).astype(np.int64)
-    ck -= ck.min(axis=0) - 1                      # a cube of padding each side
-    d0, d1 = int(ck[:, 0].max()) + 2, int(ck[:, 1].max()) + 2
-    keys, counts = np.unique((ck[:, 2] * d1 + ck[:, 1]) * d0 + ck[:, 0],
-                             return_counts=True)
-    near = np.zeros(len(keys))
-    for dz in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            for dx in (-1, 0, 1):
-                q = keys + (dz * d1 + dy) * d0 + dx
-                idx = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
-                hit = keys[idx] == q
-                near[hit] += counts[idx[hit]]
-    return float(np.dot(counts, near))
-
-
-#: Largest kernel weight times sf2 an update may carry (and 1 / MAX_WEIGHT the
-#: smallest): the cells keep float32 evidence (3.4e38 at most, 1.2e-38 at least in
-#: full precision), so this leaves room for 3e8 contributions to one cell.
-MAX_WEIGHT = 1e30
-
-
-def _check_n_jobs(n_jobs) -> int | None:
-    if n_jobs is None:
-        return None
-    if isinstance(n_jobs, bool) or not isinstance(n_jobs, Integral) or n_jobs == 0:
-        raise ValueError(f"n_jobs must be None, a positive int or a negative int "
-                         f"(-1: every core), got {n_jobs!r}")
-    return int(n_jobs)
-
-
-def _threads(n_jobs: int | None) -> int:
-    """Threads for `n_jobs` as joblib counts them (None: 1; -1: every core), at most
-    the number of cores (OpenMP threads beyond them only cost memory)."""
-    if n_jobs is None:
-        return 1
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
-        else (os.cpu_count() or 1)
-    return min(n_jobs, cores) if n_jobs > 0 else max(cores + 1 + n_jobs, 1)
-
-
 class Bandwidths(NamedTuple):
     """Per-sample kernels of an :class:`AKIMap` update (see :meth:`AKIMap.bandwidths`)."""
 
@@ -270,7 +121,7 @@ class _KernelMap(_KernelCells):
         """Check the parameters (also when changed after construction) and store them
         as plain floats / ints; raises before anything changes."""
         self.prior = check_real(self.prior, "prior", low=0.0)
-        self.n_jobs = _check_n_jobs(self.n_jobs)
+        self.n_jobs = check_n_jobs(self.n_jobs)
         self.max_cells_per_update = _check_max_cells(self.max_cells_per_update)
 
     _SUPPORT_HINT = ""
@@ -388,7 +239,7 @@ class _KernelMap(_KernelCells):
             raise
         self._keep(extra)
         self._accumulate(np.ascontiguousarray(samples), labels, precision, extent,
-                         weights, sf2, _threads(self.n_jobs))
+                         weights, sf2, n_threads(self.n_jobs))
         return self
 
     # evaluation harness protocol: maps take scans through insert_scan
@@ -962,7 +813,7 @@ class AKIMap(_KernelMap):
                                  np.ascontiguousarray(lab, dtype=np.uint8), org,
                                  self.resolution, radius, self.sensor_range,
                                  self.variant == "published", self.floor_,
-                                 _threads(self.n_jobs), cell)
+                                 n_threads(self.n_jobs), cell)
         return Bandwidths(*out)
 
     def _kernels(self, samples, labels, org):

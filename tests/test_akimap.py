@@ -428,11 +428,11 @@ def test_extreme_search_parameters_give_the_right_bandwidths():
 
 
 def test_free_samples_in_chunks_equal_all_at_once(monkeypatch):
-    import occgp.kernel as kernel
+    import occgp._kernel_samples as _kernel_samples
     points, origin = wall_scan(11, 5)
     whole = AKIMap(0.05, free_sample_distance=0.1, random_state=2).training_data(points, origin)
     assert len(whole[0]) > 500
-    monkeypatch.setattr(kernel, "_FREE_CHUNK", 64)
+    monkeypatch.setattr(_kernel_samples, "_FREE_CHUNK", 64)
     chunked = AKIMap(0.05, free_sample_distance=0.1, random_state=2).training_data(points,
                                                                                   origin)
     assert_array_equal(whole[0], chunked[0])

@@ -358,6 +358,6 @@ def test_scans_hit_mask_must_match_the_points():
 
 def test_n_jobs_beyond_the_cores_counts_as_every_core():
     from occgp.gp._limits import threads
-    from occgp.kernel import _threads
-    assert threads(2**70) == threads(-1) == _threads(-1)
+    from occgp._validation import n_threads
+    assert threads(2**70) == threads(-1) == n_threads(-1)
     assert threads(None) == 1 and threads(1) == 1

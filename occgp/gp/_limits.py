@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._validation import check_n_jobs, n_threads
+
 __all__ = ["MAX_SCALED_COORDINATE", "MAX_SCALED_SEGMENT", "MAX_DENSE_BYTES",
            "MAX_RESTARTS", "check_coordinates", "check_segments", "check_dense", "check_bool", "threads",
            "generator"]
@@ -75,13 +77,7 @@ def check_bool(value, name):
 
 def threads(n_jobs):
     """Threads for `n_jobs` (None: 1; -1: every core), at most the number of cores."""
-    from ..kernel import _check_n_jobs, _threads
-    n_jobs = _check_n_jobs(n_jobs)
-    if n_jobs is not None and n_jobs > 0:
-        n_jobs = min(n_jobs, _threads(-1))   # more threads than cores only cost
-    elif n_jobs is not None:
-        n_jobs = max(n_jobs, -_threads(-1) - 1)
-    return _threads(n_jobs)
+    return n_threads(check_n_jobs(n_jobs))
 
 
 def generator(random_state, name="random_state"):
