@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["as_numeric", "as_points", "as_point", "check_real", "check_probability", "check_resolution",
+__all__ = ["as_numeric", "as_points", "as_point", "check_real", "check_probability",
+           "check_resolution",
            "check_int", "check_bool", "check_choice", "as_path", "check_seed",
            "check_n_jobs", "n_threads", "RESOLUTION_RANGE"]
 
@@ -129,8 +130,6 @@ def check_int(value: object, name: str, *, low: int | None = None,
     return v
 
 
-_as_numeric = as_numeric  # the former private name
-
 
 def check_bool(value: object, name: str) -> bool:
     """Return `value` as a bool after checking it is one (numpy's included)."""
@@ -151,7 +150,8 @@ def as_path(path: Any, name: str = "path") -> pathlib.Path:
     try:
         path = os.fspath(path)
     except TypeError:
-        raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}") from None
+        raise TypeError(f"{name} must be a str or os.PathLike, "
+                        f"got {type(path).__name__}") from None
     if not isinstance(path, str):
         raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}")
     if "\0" in path:

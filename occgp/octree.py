@@ -225,9 +225,9 @@ default="auto"
             return self
         pts, org, rng, cells = scan
         if liboctomap:
-            if discretize and not self._in_range(pts).all():
+            if discretize and not (inside := self._in_range(pts)).all():
                 # liboctomap discretises before it truncates, with unchecked keys
-                self._raise_out_of_range("points", self._in_range(pts),
+                self._raise_out_of_range("points", inside,
                                          " (with discretize=True, before truncation)")
             # rays within liboctomap's key buffer, and a bound on the cells they reach
             # within MAX_SCAN_CELLS: otherwise occgp's traversal, which checks it

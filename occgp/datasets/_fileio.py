@@ -4,11 +4,10 @@ import bz2
 import errno
 import gzip
 import lzma
-import os
 import zlib
 from pathlib import Path
 
-from .._validation import as_path, check_bool
+from .._validation import as_path
 
 __all__ = ["as_path", "read_bytes", "read_maybe_compressed"]
 

@@ -14,7 +14,8 @@ import struct
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._fileio import as_path, check_bool, read_bytes
+from .._validation import as_path, check_bool
+from ._fileio import read_bytes
 from ._scan import Scan, _drop_non_finite, _make_scan
 
 __all__ = ["read_pcd", "write_pcd", "lzf_decompress", "lzf_compress_literal"]

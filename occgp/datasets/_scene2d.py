@@ -15,7 +15,8 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._scenes import _as_points, _as_rays, _check_max_range, _check_positive_int, _check_seed
+from .._validation import as_points, check_int
+from ._scenes import _as_rays, _check_max_range
 
 __all__ = ["LaserScan2D", "Scene2D", "room_2d"]
 
@@ -191,7 +192,7 @@ class Scene2D:
         >>> room_2d().occupancy([[-1.0, 6.5]]).tolist()    # a pillar
         [True]
         """
-        points = _as_points(points, "points", dim=2)
+        points = as_points(points, "points", dim=2)
         out = np.zeros(len(points), dtype=bool)
         for solid in self.solids:
             out |= solid.contains(points)
@@ -207,7 +208,7 @@ class Scene2D:
         >>> round(float(room_2d().signed_distance([[0.0, 8.5]])[0]), 12)
         0.5
         """
-        points = _as_points(points, "points", dim=2)
+        points = as_points(points, "points", dim=2)
         return np.min([s.signed_distance(points) for s in self.solids], axis=0)
 
     def ray_cast(self, origins: ArrayLike, directions: ArrayLike, max_range: float = np.inf):
@@ -259,7 +260,7 @@ class Scene2D:
         >>> origins.shape, headings.shape
         ((26, 2), (26,))
         """
-        n_poses = _check_positive_int(n_poses, "n_poses")
+        n_poses = check_int(n_poses, "n_poses", low=1)
         seg = np.diff(self.path, axis=0)
         length = np.linalg.norm(seg, axis=1)
         cum = np.concatenate([[0.0], np.cumsum(length)])
@@ -308,7 +309,7 @@ class Scene2D:
         >>> len(scans), scans[0].ranges.shape
         (26, (17,))
         """
-        n_beams = _check_positive_int(n_beams, "n_beams")
+        n_beams = check_int(n_beams, "n_beams", low=1)
         fov = float(fov)
         if not 0 <= fov <= 2 * np.pi:
             raise ValueError(f"fov must be in [0, 2 pi], got {fov}")
@@ -318,7 +319,7 @@ class Scene2D:
         noise = float(noise)
         if not noise >= 0:
             raise ValueError(f"noise must be non-negative, got {noise}")
-        rng = np.random.default_rng(_check_seed(seed))
+        rng = np.random.default_rng(check_int(seed, "seed", low=0))
         origins, headings = self.poses(n_poses)
         angles = np.linspace(-fov / 2, fov / 2, n_beams) if n_beams > 1 else np.zeros(1)
         world = headings[:, None] + angles  # (n_poses, n_beams)
@@ -361,7 +362,7 @@ def room_2d(seed: int = 0) -> Scene2D:
     >>> [b.tolist() for b in room.bounds]
     [[-11.2, -9.2], [11.2, 9.2]]
     """
-    seed = _check_seed(seed)
+    seed = check_int(seed, "seed", low=0)
     hx, hy, t = 11.0, 9.0, 0.2
     solids = [
         _Rect([-hx - t / 2, 0.0], [t / 2, hy + t]),

@@ -43,21 +43,9 @@ ELEVATION_RANGE = (0.0, np.radians(42.0))
 _CLEARANCE = 0.3  # minimum distance from a sensor position to any object
 
 
-def _check_seed(seed, name="seed"):
-    return check_int(seed, name, low=0)
-
-
-def _check_positive_int(value, name):
-    return check_int(value, name, low=1)
-
-
-def _as_points(points, name, dim=3):
-    return as_points(points, name, dim)
-
-
 def _as_rays(origins, directions, dim=3):
     """Validate rays: returns (origins (n, dim), unit directions (n, dim))."""
-    directions = _as_points(directions, "directions", dim)
+    directions = as_points(directions, "directions", dim)
     origins = as_numeric(origins, "origins")
     if origins.shape == (dim,):
         origins = np.broadcast_to(as_point(origins, "origins", dim), directions.shape)
@@ -175,7 +163,7 @@ class Scene:
         >>> structured_room().occupancy([[5.05, 0.0, 1.0]]).tolist()   # in a wall
         [True]
         """
-        points = _as_points(points, "points")
+        points = as_points(points, "points")
         out = np.zeros(len(points), dtype=bool)
         for solid in self.solids:
             out |= solid.contains(points)
@@ -202,7 +190,7 @@ class Scene:
         >>> bool(d[0] > 0)
         True
         """
-        points = _as_points(points, "points")
+        points = as_points(points, "points")
         return np.min([s.signed_distance(points) for s in self.solids], axis=0)
 
     def ray_cast(self, origins: ArrayLike, directions: ArrayLike, max_range: float = np.inf):
@@ -265,9 +253,9 @@ class Scene:
         >>> origins.shape, np.degrees(headings[0]).round().tolist()
         ((4, 3), [-90.0, 30.0, 150.0])
         """
-        n_poses = _check_positive_int(n_poses, "n_poses")
-        scans_per_pose = _check_positive_int(scans_per_pose, "scans_per_pose")
-        seed = _check_seed(seed)
+        n_poses = check_int(n_poses, "n_poses", low=1)
+        scans_per_pose = check_int(scans_per_pose, "scans_per_pose", low=1)
+        seed = check_int(seed, "seed", low=0)
         n_fixed = min(n_poses, len(self.sensor_positions))
         origins = [self.sensor_positions[:n_fixed]]
         base = np.full(n_fixed, self.base_heading)
@@ -358,7 +346,7 @@ class Scene:
         >>> len(scans), scans[0].points.shape, scans[0].origin.tolist()
         (2, (100, 3), [-4.0, 2.5, 0.1])
         """
-        n_points = _check_positive_int(n_points, "n_points")
+        n_points = check_int(n_points, "n_points", low=1)
         noise = float(noise)
         if not noise >= 0:
             raise ValueError(f"noise must be non-negative, got {noise}")
@@ -478,7 +466,7 @@ def _unstructured_objects():
 
 
 def _build_room(name, objects, seed, jitter_xy, jitter_yaw):
-    seed = _check_seed(seed)
+    seed = check_int(seed, "seed", low=0)
     solids, labels = _shell()
     rng = np.random.default_rng(seed) if seed else None
     probe = DEFAULT_POSITIONS

@@ -15,10 +15,10 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
-from .._validation import as_points, check_real
+from .._validation import as_points, check_int, check_real
 from ..octree import OccupancyOctree
 from ._scan import Scan
-from ._scenes import Scene, _check_positive_int
+from ._scenes import Scene
 
 __all__ = ["LidarSensor", "simulate_scans", "free_path"]
 
@@ -73,8 +73,8 @@ class LidarSensor:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
         fix("horizontal_fov", check_real(self.horizontal_fov, "horizontal_fov", low=0.0,
                                          high=2 * np.pi, high_open=False))
-        fix("n_horizontal", _check_positive_int(self.n_horizontal, "n_horizontal"))
-        fix("n_vertical", _check_positive_int(self.n_vertical, "n_vertical"))
+        fix("n_horizontal", check_int(self.n_horizontal, "n_horizontal", low=1))
+        fix("n_vertical", check_int(self.n_vertical, "n_vertical", low=1))
         fov = np.asarray(self.vertical_fov)
         if fov.dtype.kind not in "iuf":
             raise TypeError(f"vertical_fov must hold real numbers, got dtype {fov.dtype}")
@@ -269,7 +269,7 @@ def free_path(
     ((5, 3), [0.5, 0.5, 0.5, 0.5])
     """
     world = _as_world(environment)
-    n_poses = _check_positive_int(n_poses, "n_poses")
+    n_poses = check_int(n_poses, "n_poses", low=1)
     step = check_real(step, "step", low=0.0)
     clearance = check_real(clearance, "clearance", low=0.0, low_open=False)
     height = world.default_height() if height is None else check_real(height, "height")

@@ -20,11 +20,11 @@ from sklearn.base import BaseEstimator
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
-from .._validation import _as_numeric, as_points, check_real
+from .._validation import as_numeric, as_points, check_bool, check_real
 from ._gpr import JITTER, factorise, optimize_hyperparameters
 from ._integral import _check_kernel, as_segments
 from ._kernels import SquaredExponential, _check_bounds
-from ._limits import MAX_DENSE_BYTES, MAX_RESTARTS, check_bool, check_coordinates, check_dense, threads
+from ._limits import MAX_DENSE_BYTES, MAX_RESTARTS, check_coordinates, check_dense, threads
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
 
 __all__ = ["GPOM"]
@@ -244,7 +244,7 @@ class GPOM(BaseEstimator):
             If a parameter or an input has a bad type.
         """
         kernel = self._check_params()
-        hits = _as_numeric(hits, "hits")
+        hits = as_numeric(hits, "hits")
         dim = hits.shape[1] if hits.ndim == 2 else -1
         if not 1 <= dim <= 3:
             raise ValueError(f"hits must have shape (n_hits, D) with D in 1..3, got {hits.shape}")

@@ -11,11 +11,11 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from .. import _integral
-from .._validation import as_points, check_real
+from .._validation import as_points, check_bool, check_real
 from ._gpr import _with_noise, cholesky, jitter_for, optimize_hyperparameters, solve_lower
 from ._integral import _check_kernel, _check_quadrature, _covariance
 from ._kernels import SquaredExponential
-from ._limits import MAX_RESTARTS, check_bool, check_coordinates, check_dense, check_segments, generator, threads
+from ._limits import MAX_RESTARTS, check_coordinates, check_dense, check_segments, generator, threads
 from ._observations import Observations, make_observations
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
 

@@ -14,9 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import _integral
-from .._validation import _as_numeric, as_points
+from .._validation import as_numeric, as_points, check_bool
 from ._kernels import _Stationary
-from ._limits import check_bool, check_coordinates, check_dense, check_segments, threads
+from ._limits import check_coordinates, check_dense, check_segments, threads
 from ._quadrature import ClenshawCurtis, Simpson, _Rule
 
 __all__ = ["integral_kernel"]
@@ -45,7 +45,7 @@ def as_segments(starts, ends, name="segment", dim=None):
     """Validate paired start and end points; returns (starts, ends) float64 (n, D)."""
     starts_name, ends_name = f"{name}_starts", f"{name}_ends"
     if dim is None:
-        starts = _as_numeric(starts, starts_name)
+        starts = as_numeric(starts, starts_name)
         dim = starts.shape[1] if starts.ndim == 2 else -1
         if not 1 <= dim <= 3:
             raise ValueError(f"{starts_name} must have shape (n, D) with D in 1..3, "

@@ -17,8 +17,8 @@ import numbers
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import _as_numeric
-from ._limits import MAX_DENSE_BYTES, check_bool
+from .._validation import as_numeric, check_bool
+from ._limits import MAX_DENSE_BYTES
 
 __all__ = ["SquaredExponential", "Matern32", "SparseKernel"]
 
@@ -28,7 +28,7 @@ _TWO_PI = 2.0 * np.pi
 
 def _as_samples(x, name):
     """`x` as a finite float64 array of shape (n_samples, n_features); 1-D is one sample."""
-    arr = np.atleast_2d(_as_numeric(x, name))
+    arr = np.atleast_2d(as_numeric(x, name))
     if arr.ndim != 2:
         raise ValueError(f"{name} must have shape (n_samples, n_features), got {arr.shape}")
     arr = arr.astype(np.float64)
@@ -118,7 +118,7 @@ class _Stationary:
 
     def with_theta(self, theta: ArrayLike):
         """A copy of the kernel with hyper-parameters ``exp(theta)``."""
-        theta = _as_numeric(theta, "theta").astype(np.float64)
+        theta = as_numeric(theta, "theta").astype(np.float64)
         if theta.shape != (self.n_theta,) or not np.isfinite(theta).all():
             raise ValueError(f"theta must be a finite array of shape ({self.n_theta},), got {theta!r}")
         ls = np.exp(theta[1:])
@@ -166,11 +166,11 @@ class _Stationary:
 
     def profile(self, s: ArrayLike) -> NDArray[np.float64]:
         """The kernel as a function of the squared scaled distance, divided by the variance."""
-        return self._profile(_as_numeric(s, "s").astype(np.float64))
+        return self._profile(as_numeric(s, "s").astype(np.float64))
 
     def gradient_factor(self, s: ArrayLike) -> NDArray[np.float64]:
         """``-2 f'(s)``: ``dk/dlog(l_d) = variance * gradient_factor(s) * (dx_d / l_d) ** 2``."""
-        return self._gradient_factor(_as_numeric(s, "s").astype(np.float64))
+        return self._gradient_factor(as_numeric(s, "s").astype(np.float64))
 
     def __call__(self, X: ArrayLike, Y: ArrayLike | None = None, eval_gradient: bool = False):
         """Kernel matrix between the rows of `X` and `Y` (default `X`).

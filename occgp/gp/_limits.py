@@ -19,7 +19,7 @@ import numpy as np
 from .._validation import check_n_jobs, n_threads
 
 __all__ = ["MAX_SCALED_COORDINATE", "MAX_SCALED_SEGMENT", "MAX_DENSE_BYTES",
-           "MAX_RESTARTS", "check_coordinates", "check_segments", "check_dense", "check_bool", "threads",
+           "MAX_RESTARTS", "check_coordinates", "check_segments", "check_dense", "threads",
            "generator"]
 
 MAX_SCALED_COORDINATE = 1e10
@@ -66,13 +66,6 @@ def check_dense(n_rows, n_cols, n_matrices, what, fix):
             f"{what} needs {n_matrices} dense {n_rows} x {n_cols} matrices "
             f"({size / 2 ** 30:.3g} GiB), more than the limit of "
             f"{MAX_DENSE_BYTES / 2 ** 30:g} GiB; {fix}")
-
-
-def check_bool(value, name):
-    """Return `value` as a bool; only bool and numpy.bool_ are accepted."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be a bool, got {type(value).__name__}")
-    return bool(value)
 
 
 def threads(n_jobs):

@@ -7,7 +7,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import _as_numeric, as_point, as_points
+from .._validation import as_numeric, as_point, as_points
 from ._integral import as_segments
 
 __all__ = ["Observations", "observations_from_scans", "make_observations"]
@@ -41,7 +41,7 @@ def _dimension(hits, starts):
     shapes = []
     for name, arr in (("hits", hits), ("segment_starts", starts)):
         if arr is not None:
-            shape = _as_numeric(arr, name).shape
+            shape = as_numeric(arr, name).shape
             if len(shape) == 2 and 1 <= shape[1] <= 3:
                 return shape[1]
             shapes.append(shape)
@@ -116,7 +116,7 @@ def observations_from_scans(scans) -> tuple[NDArray[np.float64], NDArray[np.floa
                           or len(scan) != 2):
             raise TypeError(f"scans[{i}] must be a LaserScan2D, a Scan or a (points, origin) "
                             f"pair, got {type(scan).__name__}")
-        points = _as_numeric(scan.end_points if laser else scan[0], f"scans[{i}].points")
+        points = as_numeric(scan.end_points if laser else scan[0], f"scans[{i}].points")
         if dim is None:
             dim = points.shape[-1] if points.ndim == 2 else -1
             if not 1 <= dim <= 3:

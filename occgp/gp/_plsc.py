@@ -18,14 +18,13 @@ import scipy.linalg as sl
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize, special
 
-from .._validation import _as_numeric, check_real
-from ._limits import check_bool
+from .._validation import as_numeric, check_bool, check_real
 
 __all__ = ["loo_predictions", "fit_plsc", "plsc_proba"]
 
 
 def _finite(x, name, ndim=None):
-    arr = _as_numeric(x, name).astype(np.float64)
+    arr = as_numeric(x, name).astype(np.float64)
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"{name} must be {ndim}-D, got shape {arr.shape}")
     if not np.isfinite(arr).all():
