@@ -12,6 +12,7 @@
 * the log-odds :class:`OccupancyGrid` baseline and :func:`predict_grid`.
 """
 
+from ._committee import COMBINE_RULES, combine_predictions
 from ._gpom import GPOM
 from ._gpomik import GPOMIK
 from ._grid import OccupancyGrid, grid_points, predict_grid
@@ -27,4 +28,5 @@ __all__ = [
     "GPOMIK", "GPOM", "OccupancyGrid", "grid_points", "predict_grid",
     "Observations", "observations_from_scans",
     "loo_predictions", "fit_plsc", "plsc_proba",
+    "COMBINE_RULES", "combine_predictions",
 ]

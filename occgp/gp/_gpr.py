@@ -148,6 +148,20 @@ def optimize_hyperparameters(kernel, noise, noise_bounds, starts, ends, y, quadr
     merged first (same value and gradient, see the module docstring). Returns
     the best ``(kernel, noise, lml)``.
     """
+    return optimize_shared_hyperparameters(kernel, noise, noise_bounds, [(starts, ends, y)],
+                                           quadrature, n_restarts=n_restarts, rng=rng,
+                                           n_threads=n_threads)
+
+
+def optimize_shared_hyperparameters(kernel, noise, noise_bounds, parts, quadrature, *,
+                                    n_restarts=2, rng=None, n_threads=1):
+    """Maximise the sum of the log marginal likelihoods of independent `parts`.
+
+    `parts` is a list of ``(starts, ends, y)``; each is one GP with the shared
+    hyper-parameters (the experts of a mixture, Deisenroth & Ng 2015, §2.1).
+    One part is :func:`optimize_hyperparameters`. Returns the best
+    ``(kernel, noise, lml)``.
+    """
     bounds = np.vstack([kernel.bounds, np.log(np.asarray(noise_bounds, dtype=np.float64))])
     theta0 = np.r_[kernel.theta, np.log(noise)]
     theta0 = np.clip(theta0, bounds[:, 0], bounds[:, 1])
@@ -155,19 +169,26 @@ def optimize_hyperparameters(kernel, noise, noise_bounds, starts, ends, y, quadr
     for _ in range(n_restarts):
         starts_theta.append(rng.uniform(bounds[:, 0], bounds[:, 1]))
 
-    counts = None
-    repeats = unique_observations(starts, ends, y)
-    if repeats is not None:
-        index, counts = repeats
-        _LOG.debug("hyper-parameters: %d observations, %d distinct", len(y), len(index))
-        starts, ends, y = starts[index], ends[index], y[index]
+    data = []
+    for starts, ends, y in parts:
+        counts = None
+        repeats = unique_observations(starts, ends, y)
+        if repeats is not None:
+            index, counts = repeats
+            _LOG.debug("hyper-parameters: %d observations, %d distinct", len(y), len(index))
+            starts, ends, y = starts[index], ends[index], y[index]
+        data.append((starts, ends, y, counts))
 
     def objective(theta):
-        lml, grad = log_marginal_likelihood(theta, kernel, quadrature, starts, ends, y, n_threads,
-                                            counts)
-        if not np.isfinite(lml):
-            return 1e25, np.zeros_like(theta)
-        return -lml, -grad
+        total, total_grad = 0.0, np.zeros_like(theta)
+        for starts, ends, y, counts in data:
+            lml, grad = log_marginal_likelihood(theta, kernel, quadrature, starts, ends, y,
+                                                n_threads, counts)
+            if not np.isfinite(lml):
+                return 1e25, np.zeros_like(theta)
+            total += lml
+            total_grad += grad
+        return -total, -total_grad
 
     best = None
     for i, t0 in enumerate(starts_theta):
