@@ -157,7 +157,7 @@ class _Circle:
 class Scene2D:
     """A 2D room of rectangles and discs, with exact occupancy and ray casting.
 
-    Build it with :func:`room_2d`.
+    Build it with :func:`room_2d` or :func:`floor_plan_2d`.
 
     Parameters
     ----------
