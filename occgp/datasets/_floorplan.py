@@ -70,13 +70,13 @@ class FloorPlan2D(Scene2D):
 
 
 def _check_size(value, name):
-    v = check_real(value, name)
     lo, hi = SIZE_RANGE
-    if not lo <= v <= hi:
+    try:
+        return check_real(value, name, low=lo, high=hi, low_open=False, high_open=False)
+    except ValueError:                  # NaN, inf or out of range (a TypeError passes)
         raise ValueError(f"{name} must lie in [{lo:g}, {hi:g}] m (room for a row of rooms "
                          f"{ROOM_SIZE[0]:g} to {ROOM_SIZE[1]:g} m deep on each side of a "
-                         f"corridor, and at most 1 km), got {value!r}")
-    return v
+                         f"corridor, and at most 1 km), got {value!r}") from None
 
 
 def _split(rng, length, lo=ROOM_SIZE[0], hi=ROOM_SIZE[1]):
