@@ -87,6 +87,12 @@ def _slab(o, d, lo, hi):
     return t0, t1
 
 
+def _padded(lo, hi):
+    """A box grown by far more than the rounding error of the solids' membership tests."""
+    pad = 1e-9 * (1.0 + np.maximum(np.abs(lo), np.abs(hi)).max() + (hi - lo).max())
+    return lo - pad, hi + pad
+
+
 class _Rect:
     """Solid rectangle ``|x_i| <= half_i`` in a frame turned by `angle`."""
 
@@ -98,6 +104,11 @@ class _Rect:
 
     def _local(self, p):
         return (p - self.center) @ self.rotation
+
+    def bounding_box(self):
+        """``(min (2,), max (2,))`` enclosing the rectangle, with a margin past rounding."""
+        reach = np.abs(self.rotation) @ self.half
+        return _padded(self.center - reach, self.center + reach)
 
     def contains(self, p):
         return np.all(np.abs(self._local(p)) <= self.half, axis=1)
@@ -122,6 +133,10 @@ class _Circle:
         self.center = np.asarray(center, dtype=np.float64)
         self.radius = float(radius)
 
+    def bounding_box(self):
+        """``(min (2,), max (2,))`` enclosing the disc, with a margin past rounding."""
+        return _padded(self.center - self.radius, self.center + self.radius)
+
     def contains(self, p):
         return np.sum((p - self.center) ** 2, axis=1) <= self.radius**2
 
@@ -142,7 +157,7 @@ class _Circle:
 class Scene2D:
     """A 2D room of rectangles and discs, with exact occupancy and ray casting.
 
-    Build it with :func:`room_2d`.
+    Build it with :func:`room_2d` or :func:`floor_plan_2d`.
 
     Parameters
     ----------
@@ -194,8 +209,22 @@ class Scene2D:
         """
         points = as_points(points, "points", dim=2)
         out = np.zeros(len(points), dtype=bool)
+        if not len(points):
+            return out
+        # each solid tests only the points in its bounding box: those in its x range are
+        # a slice of the points sorted by x, then a y test picks the ones to test exactly
+        order = np.argsort(points[:, 0], kind="stable")
+        xs, ys = points[order, 0], points[order, 1]
         for solid in self.solids:
-            out |= solid.contains(points)
+            lo, hi = solid.bounding_box()
+            a = np.searchsorted(xs, lo[0], side="left")
+            b = np.searchsorted(xs, hi[0], side="right")
+            if a >= b:
+                continue
+            inside = (ys[a:b] >= lo[1]) & (ys[a:b] <= hi[1])
+            idx = order[a:b][inside]
+            if idx.size:
+                out[idx] |= solid.contains(points[idx])
         return out
 
     def signed_distance(self, points: ArrayLike) -> NDArray[np.float64]:
@@ -209,7 +238,10 @@ class Scene2D:
         0.5
         """
         points = as_points(points, "points", dim=2)
-        return np.min([s.signed_distance(points) for s in self.solids], axis=0)
+        out = np.full(len(points), np.inf)
+        for solid in self.solids:
+            np.minimum(out, solid.signed_distance(points), out=out)
+        return out
 
     def ray_cast(self, origins: ArrayLike, directions: ArrayLike, max_range: float = np.inf):
         """Exact first intersection of 2D rays with the solids.
