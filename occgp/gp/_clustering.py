@@ -27,6 +27,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator
 from sklearn.exceptions import ConvergenceWarning
+from threadpoolctl import threadpool_limits
 
 from .. import _linetrack
 from .._validation import as_numeric, as_points, check_choice, check_int, check_real
@@ -211,6 +212,10 @@ class DirichletProcessClustering(_Clustering):
     themselves and new labels. A fit on a single hit is one cluster that no
     later hit joins. Existing clusters never change or merge.
 
+    Each fit runs on one thread (``threadpoolctl.threadpool_limits(1)`` while
+    it runs): the problems are small (D <= 3), and the k-means
+    initialisation's OpenMP threads only cost time on a busy machine.
+
     Parameters
     ----------
     concentration : float, default=1.0
@@ -312,7 +317,10 @@ class DirichletProcessClustering(_Clustering):
             weight_concentration_prior=params["concentration"],
             max_iter=params["max_iter"], n_init=params["n_init"],
             random_state=params["random_state"])
-        with warnings.catch_warnings():
+        # one thread: the matrices are D x D (D <= 3), and scikit-learn's k-means
+        # initialisation on OpenMP threads slows down by orders of magnitude on a
+        # busy machine
+        with warnings.catch_warnings(), threadpool_limits(limits=1):
             warnings.simplefilter("ignore", ConvergenceWarning)
             model.fit(X)
         comp = model.predict(X)
@@ -519,7 +527,8 @@ class LineTracking(_Clustering):
 
     Examples
     --------
-    Two walls at right angles seen from one pose:
+    Two walls at right angles seen from one pose (the corner hit goes with
+    the wall tracked first, by bearing):
 
     >>> import numpy as np
     >>> t = np.linspace(0.0, 2.0, 9)
@@ -527,7 +536,7 @@ class LineTracking(_Clustering):
     ...                   np.column_stack([np.full(8, 2.0), t[:-1][::-1]])])
     >>> lt = LineTracking().fit(hits, np.zeros_like(hits))
     >>> lt.n_clusters_, np.bincount(lt.labels_).tolist()
-    (2, [9, 8])
+    (2, [8, 9])
     """
 
     _dims = (2,)
