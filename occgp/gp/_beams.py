@@ -1,0 +1,469 @@
+"""Clusters of beams for the mixture of GP experts (Kim & Kim 2013, §3.1.1).
+
+Hits are clustered first (:mod:`occgp.gp._clustering`); :func:`assign_beams`
+then gives each beam a cluster (its hit's, or that of the most similar
+returning beam under the line integral kernel) and :func:`merge_small_clusters`
+folds clusters that could not train a classifier into their nearest neighbour.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+from scipy.special import erf, erfc
+
+from .._validation import as_numeric, as_points, check_int
+from ._clustering import _segment_distance
+from ._integral import _check_kernel, _check_quadrature, _covariance, as_segments
+from ._kernels import SquaredExponential
+from ._limits import check_coordinates, check_segments, threads
+
+__all__ = ["assign_beams", "merge_small_clusters"]
+
+#: Free beams per kernel evaluation (one ``_covariance`` call against the union
+#: of their candidates); consecutive beams share most candidates.
+_CHUNK = 32
+#: Most balls covering the strip of one free beam (see _candidates).
+_MAX_BALLS = 256
+#: Nearest returning beams (by midpoint) that give each free beam its first
+#: similarity bound.
+_FIRST_CANDIDATES = 8
+
+
+def _as_labels(labels, name, n=None):
+    arr = as_numeric(labels, name, kinds="iu")
+    if arr.ndim != 1 or (n is not None and len(arr) != n):
+        want = "(n,)" if n is None else f"({n},)"
+        raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+    arr = arr.astype(np.int64)
+    if len(arr) and arr.min() < 0:
+        raise ValueError(f"{name} must be non-negative, got {int(arr.min())}")
+    return arr
+
+
+def _row_index(rows, table):
+    """Index of the first row of `table` equal to each row of `rows` (-1: none)."""
+    out = np.full(len(rows), -1, dtype=np.int64)
+    if not len(table) or not len(rows):
+        return out
+    key = np.dtype((np.void, 8 * table.shape[1]))
+    t = np.ascontiguousarray(table + 0.0).view(key).ravel()    # + 0.0: -0.0 equals 0.0
+    r = np.ascontiguousarray(rows + 0.0).view(key).ravel()
+    unique, first = np.unique(t, return_index=True)             # stable: first occurrence
+    pos = np.minimum(np.searchsorted(unique, r), len(unique) - 1)
+    found = unique[pos] == r
+    out[found] = first[pos[found]]
+    return out
+
+
+def _reach_table(kernel):
+    """(s, f(s)): the kernel's profile on squared scaled distances up to its cutoff."""
+    cutoff2 = float(type(kernel).cutoff2)
+    s = np.linspace(0.0, cutoff2, 4097)
+    return s, kernel._profile(s)
+
+
+def _reach(value, table):
+    """Scaled distance beyond which the profile is below `value` (a safe over-estimate)."""
+    s, f = table
+    count = np.searchsorted(-f, -value, side="right")       # grid points with f >= value
+    return np.sqrt(s[np.minimum(count, len(s) - 1)])
+
+
+def _pairs(tree, centres, radii):
+    """(row, column) pairs of the tree's points within `radii` of each centre."""
+    if not len(centres):
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    found = cKDTree(centres).sparse_distance_matrix(tree, float(np.max(radii)),
+                                                     output_type="ndarray")
+    keep = found["v"] <= radii[found["i"]]
+    return found["i"][keep].astype(np.int64), found["j"][keep].astype(np.int64)
+
+
+def assign_beams(hit_labels: ArrayLike, hits: ArrayLike, segment_starts: ArrayLike,
+                 segment_ends: ArrayLike, *, kernel=None, quadrature=None,
+                 n_jobs: int | None = None) -> NDArray[np.int64]:
+    """Cluster of each beam, from the clusters of the hits (Kim & Kim, §3.1.1).
+
+    * A beam **with a return** is one whose end equals a hit exactly (row
+      equality; of coinciding hits, the first counts): it takes that hit's
+      label.
+    * A beam **without a return** takes the label of the most similar
+      returning beam, the similarity being the line–line integral kernel in
+      the paper's form (Eq. 11, parameters ``u, v`` in [0, 1]): occgp's
+      integral kernel (over arc length) divided by the two lengths, a
+      zero-length beam counting as a point of length 1. Ties go to the
+      returning beam listed first.
+
+    The search is exact but pruned: the similarity of two beams is at most
+    the kernel at their closest approach, so once the nearest returning
+    beams (by midpoint) give a free beam a similarity ``s``, only returning
+    beams that pass within the distance where the kernel falls to ``s`` are
+    evaluated (a k-d tree of midpoints finds them), in chunks of free beams
+    with one kernel evaluation each. A free beam beyond the kernel's reach
+    (``sqrt(cutoff2)`` length scales) of every returning beam, where every
+    similarity is 0, takes the label of the returning beam nearest to it
+    (Euclidean segment-to-segment distance).
+
+    Parameters
+    ----------
+    hit_labels : array-like of int of shape (n_hits,)
+        Cluster of each hit (non-negative).
+    hits : array-like of shape (n_hits, D)
+        The hits, D in 1..3.
+    segment_starts, segment_ends : array-like of shape (n_beams, D)
+        The beams, from the sensor to the return or to the maximum range.
+    kernel : SquaredExponential, Matern32 or SparseKernel, default=None
+        The point kernel whose integral measures similarity; None means
+        ``SquaredExponential(1.0, 1.0)``.
+    quadrature : {"clenshaw-curtis", "simpson"}, ClenshawCurtis, Simpson or None
+        The integration rule (None: Clenshaw–Curtis; the paper used
+        Simpson's, about 20 times slower).
+    n_jobs : int, default=None
+        Threads of the kernel evaluation (None: 1; -1: every core); the
+        result does not depend on it.
+
+    Returns
+    -------
+    beam_labels : ndarray of shape (n_beams,), dtype int64
+
+    Raises
+    ------
+    ValueError
+        On NaN or inf, wrong shapes or lengths, negative labels, data beyond
+        the integral kernel's limits (coordinates past 1e10 length scales,
+        beams longer than 1e4 length scales), or beams without a return
+        when no beam has one.
+    TypeError
+        On non-numeric data, non-integer labels, or a kernel or quadrature
+        of another kind.
+
+    Examples
+    --------
+    Two returning beams in clusters 0 and 1, and a free beam beside the
+    second:
+
+    >>> import numpy as np
+    >>> hits = np.array([[2.0, 0.0], [0.0, 2.0]])
+    >>> starts = np.zeros((3, 2))
+    >>> ends = np.array([[2.0, 0.0], [0.0, 2.0], [0.5, 3.0]])
+    >>> assign_beams([0, 1], hits, starts, ends).tolist()
+    [0, 1, 1]
+    """
+    kernel = SquaredExponential(1.0, 1.0) if kernel is None else _check_kernel(kernel)
+    kernel._checked()
+    quadrature = _check_quadrature(quadrature)
+    n_threads = threads(n_jobs)
+    arr = as_numeric(hits, "hits")
+    if arr.ndim != 2 or not 1 <= arr.shape[1] <= 3:
+        raise ValueError(f"hits must have shape (n_hits, D) with D in 1..3, got {arr.shape}")
+    dim = arr.shape[1]
+    hits = as_points(arr, "hits", dim)
+    labels = _as_labels(hit_labels, "hit_labels", len(hits))
+    starts, ends = as_segments(segment_starts, segment_ends, "segment", dim=dim)
+    inv = kernel.inverse_length_scales(dim)
+    check_coordinates({"hits": hits, "segment_starts": starts, "segment_ends": ends}, inv,
+                      fix="shift the data towards the origin or use a longer length scale")
+    check_segments(starts, ends, inv)
+    hit_of = _row_index(ends, hits)
+    out = np.full(len(ends), -1, dtype=np.int64)
+    out[hit_of >= 0] = labels[hit_of[hit_of >= 0]]
+    free = np.flatnonzero(hit_of < 0)
+    ret = np.flatnonzero(hit_of >= 0)
+    if not len(free):
+        return out
+    if not len(ret):
+        raise ValueError(f"{len(free)} beams have no return (their ends equal no hit) and no "
+                         "beam has one: a free beam takes the cluster of a returning beam, so "
+                         "give the beams that end at the hits")
+    best = _most_similar(kernel, quadrature, starts[free], ends[free], starts[ret], ends[ret],
+                         n_threads)
+    out[free] = out[ret[best]]
+    return out
+
+
+def _erf_diff(a, b):
+    """``erf(b) - erf(a)`` for ``a <= b``, without cancellation in the tails."""
+    return np.where(a >= 0, erfc(a) - erfc(b),
+                    np.where(b <= 0, erfc(-b) - erfc(-a), erf(b) - erf(a)))
+
+
+def _line_mean(x0, x1, y0, y1):
+    """Upper bound of the mean over segment x of ``exp(-h^2 / 2)``, h the distance to line y.
+
+    With ``h(u)^2 = A u^2 + 2 B u + C`` along x (u in [0, 1]) the mean is an erf
+    difference; for a segment (nearly) parallel to the line, or a point,
+    ``exp(-min h^2 / 2)``. Coordinates are scaled (unit length scale).
+    """
+    v = y1 - y0
+    length = np.linalg.norm(v, axis=1)
+    u = v / np.where(length > 0, length, 1.0)[:, None]
+    a = x0 - y0
+    a -= np.einsum("ij,ij->i", a, u)[:, None] * u
+    b = x1 - x0
+    b -= np.einsum("ij,ij->i", b, u)[:, None] * u
+    A = np.einsum("ij,ij->i", b, b)
+    B = np.einsum("ij,ij->i", a, b)
+    C = np.einsum("ij,ij->i", a, a)
+    # the least h^2 on [0, 1]: at the vertex of the (convex) quadratic, clamped
+    vertex = np.where(A > 0, np.clip(-B / np.where(A > 0, A, 1.0), 0.0, 1.0), 0.0)
+    h2_min = np.maximum(C + 2.0 * B * vertex + A * vertex ** 2, 0.0)
+    curved = A > 1e-8
+    As = np.where(curved, A, 1.0)
+    r = np.sqrt(As / 2.0)
+    with np.errstate(under="ignore"):
+        exact = np.exp(-0.5 * np.maximum(C - B * B / As, 0.0)) * np.sqrt(np.pi / (2.0 * As)) \
+            * _erf_diff(r * B / As, r * (1.0 + B / As))
+    return np.where(curved, np.minimum(exact, np.exp(-0.5 * h2_min)), np.exp(-0.5 * h2_min))
+
+
+def _upper_bound(kernel, table, line_integral, fs, fe, rs, re, dist):
+    """Upper bound of the (length-normalised) similarity of segment pairs, scaled coordinates.
+
+    Every kernel: ``f(d^2)`` at the closest approach ``d``, and
+    ``I1 / (longer length)`` with ``I1`` the kernel's integral along a line.
+    The squared exponential also factorises along a line, which bounds the
+    similarity by the mean of ``sqrt(2 pi) exp(-h^2 / 2)`` over one segment
+    (h its distance to the other's line) over the other's length, both ways.
+    """
+    s, f = table
+    # the profile at the table point just below d^2: an over-estimate (f decreases)
+    profile = f[np.maximum(np.searchsorted(s, dist * dist, side="right") - 1, 0)]
+    f_len, r_len = np.linalg.norm(fe - fs, axis=1), np.linalg.norm(re - rs, axis=1)
+    longer = np.maximum(f_len, r_len)
+    with np.errstate(divide="ignore"):
+        bound = np.minimum(profile, np.where(longer > 0, line_integral / longer, np.inf))
+        if isinstance(kernel, SquaredExponential):
+            root = np.sqrt(2.0 * np.pi)
+            to_r = np.where(r_len > 0, root * _line_mean(fs, fe, rs, re) / r_len, np.inf)
+            to_f = np.where(f_len > 0, root * _line_mean(rs, re, fs, fe) / f_len, np.inf)
+            bound = np.minimum(bound, np.minimum(to_r, to_f))
+    # slack for rounding in the bounds and in the kernel's own evaluation
+    return float(kernel.variance) * (bound * (1.0 + 1e-6) + 1e-300)
+
+
+def _candidates(tree, f_mid, f_half, fs, fe, r_half_max, radius, value):
+    """(row, returning beam) pairs that may come within `radius` of each free beam.
+
+    Those whose midpoint is within ``f_half + r_half_max + radius`` of the
+    free beam's midpoint (a k-d tree ball). For the squared exponential with a
+    similarity ``value`` (over the variance) to beat, the line bound of
+    :func:`_upper_bound` says more: with ``c = value * length / sqrt(2 pi)``
+    above 1/2, ``exp(-h^2 / 2) >= 2 c - 1`` on at least half of a candidate
+    (h: the distance to the free beam's line, convex along it), so its
+    midpoint lies within ``w = sqrt(-2 log(2 c - 1))`` of that line: a strip
+    of half-width `w` along the free beam extended by ``radius + r_half_max``
+    at both ends, covered by balls along its axis.
+    """
+    length = 2.0 * f_half
+    disc = np.ones(len(f_mid), dtype=bool)
+    parts = []
+    if value is not None:
+        c = value * length / np.sqrt(2.0 * np.pi)
+        strip = (c > 0.5) & (length > 0)
+        disc = ~strip
+        rows = np.flatnonzero(strip)
+        if len(rows):
+            w = np.sqrt(-2.0 * np.log(np.minimum(2.0 * c[rows] - 1.0, 1.0)))
+            extend = radius[rows] + r_half_max
+            span = length[rows] + 2.0 * extend
+            step = np.maximum(w, span / _MAX_BALLS)
+            m = np.ceil(span / step).astype(np.int64) + 1
+            owner = np.repeat(np.arange(len(rows)), m)
+            first = np.cumsum(m) - m
+            t = (np.arange(len(owner)) - first[owner]) * step[owner] - extend[owner]
+            u = (fe[rows] - fs[rows]) / length[rows, None]
+            centres = fs[rows][owner] + t[:, None] * u[owner]
+            ball = np.sqrt(w ** 2 + (0.5 * step) ** 2)[owner]
+            k, j = _pairs(tree, centres, ball)
+            key = np.unique(rows[owner[k]] * len(tree.data) + j)
+            parts.append((key // len(tree.data), key % len(tree.data)))
+    rows = np.flatnonzero(disc)
+    if len(rows):
+        i, j = _pairs(tree, f_mid[rows], f_half[rows] + r_half_max + radius[rows])
+        parts.append((rows[i], j))
+    if not parts:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def _most_similar(kernel, quadrature, fs, fe, rs, re, n_threads):
+    """Index of the returning beam (rs, re) most similar to each free beam (fs, fe)."""
+    inv = kernel.inverse_length_scales(fs.shape[1])
+    variance = float(kernel.variance)
+    table = _reach_table(kernel)
+    cutoff = float(np.sqrt(type(kernel).cutoff2))
+    r_grid = np.sqrt(table[0])
+    line_integral = 1.01 * 2.0 * float(np.sum(0.5 * (table[1][1:] + table[1][:-1])
+                                             * np.diff(r_grid)))
+    f_len, r_len = np.linalg.norm(fe - fs, axis=1), np.linalg.norm(re - rs, axis=1)
+    f_norm, r_norm = np.where(f_len > 0, f_len, 1.0), np.where(r_len > 0, r_len, 1.0)
+
+    def similarity(rows, cols):
+        return _covariance(kernel, quadrature, fs[rows], fe[rows], rs[cols], re[cols],
+                           n_threads=n_threads) / (f_norm[rows, None] * r_norm[None, cols])
+
+    # pruning geometry in scaled coordinates
+    fs_s, fe_s, rs_s, re_s = fs * inv, fe * inv, rs * inv, re * inv
+    f_mid, r_mid = 0.5 * (fs_s + fe_s), 0.5 * (rs_s + re_s)
+    f_half = 0.5 * np.linalg.norm(fe_s - fs_s, axis=1)
+    r_half = 0.5 * np.linalg.norm(re_s - rs_s, axis=1)
+    r_half_max = float(r_half.max())
+    tree = cKDTree(r_mid)
+    squared_exp = isinstance(kernel, SquaredExponential)
+    k0 = min(_FIRST_CANDIDATES, len(rs))
+    best = np.full(len(fs), -1, dtype=np.int64)
+    for lo in range(0, len(fs), _CHUNK):
+        rows = np.arange(lo, min(lo + _CHUNK, len(fs)))
+        # 1. a first similarity from the nearest midpoints
+        _, nn = tree.query(f_mid[rows], k=k0)
+        first = np.unique(nn)
+        S_first = similarity(rows, first)
+        value = S_first.max(axis=1)
+        col = first[np.argmax(S_first, axis=1)]
+        # 2. every returning beam whose bound reaches that similarity
+        radius = np.where(value > 0, np.minimum(_reach(value / variance, table), cutoff), cutoff)
+        i, j = _candidates(tree, f_mid[rows], f_half[rows], fs_s[rows], fe_s[rows],
+                           r_half_max, radius, value / variance if squared_exp else None)
+        gap = np.linalg.norm(f_mid[rows[i]] - r_mid[j], axis=1) - f_half[rows[i]] - r_half[j]
+        keep = gap <= radius[i]
+        i, j = i[keep], j[keep]
+        d = _segment_distance(fs_s[rows[i]], fe_s[rows[i]], rs_s[j], re_s[j])
+        keep = d <= radius[i]
+        i, j, d = i[keep], j[keep], d[keep]
+        keep = _upper_bound(kernel, table, line_integral, fs_s[rows[i]], fe_s[rows[i]],
+                            rs_s[j], re_s[j], d) >= np.where(value[i] > 0, value[i], 1e-300)
+        i, j = i[keep], j[keep]
+        if len(i):
+            # 3. exact similarities of the survivors: one call for the chunk when the
+            # rows share their candidates, one per row otherwise
+            cols = np.unique(j)
+            if len(cols) * len(rows) <= 2 * len(i):
+                S = similarity(rows, cols)[i, np.searchsorted(cols, j)]
+            else:
+                order = np.argsort(i, kind="stable")
+                i, j = i[order], j[order]
+                bounds = np.searchsorted(i, np.arange(len(rows) + 1))
+                S = np.concatenate([similarity(rows[a:a + 1], j[bounds[a]:bounds[a + 1]])[0]
+                                    for a in range(len(rows)) if bounds[a + 1] > bounds[a]])
+            # the best per row (ties: the lowest index), against the first pass
+            i = np.r_[i, np.arange(len(rows))]
+            j = np.r_[j, col]
+            S = np.r_[S, value]
+            order = np.lexsort((j, -S, i))
+            i, j, S = i[order], j[order], S[order]
+            top = np.r_[True, i[1:] != i[:-1]]
+            value, col = S[top], j[top]
+        best[rows] = np.where(value > 0, col, -1)
+    lost = np.flatnonzero(best < 0)
+    if len(lost):
+        best[lost] = _nearest_segment(fs[lost], fe[lost], rs, re)
+    return best
+
+
+def _nearest_segment(fs, fe, rs, re):
+    """Index of the segment (rs, re) nearest to each segment (fs, fe); ties: lowest."""
+    r_mid = 0.5 * (rs + re)
+    r_half_max = 0.5 * float(np.linalg.norm(re - rs, axis=1).max())
+    f_mid, f_half = 0.5 * (fs + fe), 0.5 * np.linalg.norm(fe - fs, axis=1)
+    tree = cKDTree(r_mid)
+    _, nn = tree.query(f_mid, k=1)
+    bound = _segment_distance(fs, fe, rs[nn], re[nn])
+    # any nearer segment has its midpoint within bound + both half-lengths
+    i, j = _pairs(tree, f_mid, bound + f_half + r_half_max + 1e-12 * (1 + bound))
+    d = _segment_distance(fs[i], fe[i], rs[j], re[j])
+    order = np.lexsort((j, d, i))
+    i, j = i[order], j[order]
+    first = np.r_[True, i[1:] != i[:-1]]
+    out = nn.astype(np.int64)
+    out[i[first]] = j[first]
+    return out
+
+
+def merge_small_clusters(labels: ArrayLike, points: ArrayLike, is_hit: ArrayLike,
+                         min_hits: int = 3) -> NDArray[np.int64]:
+    """Fold clusters that cannot train a classifier into their nearest neighbour.
+
+    A cluster is *kept* when it holds at least `min_hits` hits and at least
+    one beam (an observation with `is_hit` False): a GP classifier needs both
+    classes. Every other cluster (too few hits, hits only, or beams only) is
+    merged whole into the kept cluster nearest to it: the one holding the
+    point nearest to any of its points (k-d tree; ties go to the lower
+    label). The kept clusters are then numbered 0..k-1 in the order of their
+    old labels. If no cluster is kept, every observation goes to cluster 0.
+
+    Parameters
+    ----------
+    labels : array-like of int of shape (n_obs,)
+        Cluster of each observation (non-negative).
+    points : array-like of shape (n_obs, D)
+        Where each observation lies (D in 1..3): a hit, or e.g. a beam's
+        midpoint.
+    is_hit : array-like of bool of shape (n_obs,)
+        True for hits, False for beams.
+    min_hits : int, default=3
+        Fewest hits of a kept cluster (at least 1).
+
+    Returns
+    -------
+    labels : ndarray of shape (n_obs,), dtype int64
+        A new array. When every cluster is kept nothing merges, and it is
+        `labels` renumbered 0..k-1 in order (a copy of `labels` when they
+        were already 0..k-1).
+
+    Raises
+    ------
+    ValueError
+        On wrong shapes or lengths, negative labels, NaN or inf points, or
+        a bad `min_hits`.
+    TypeError
+        On non-integer labels, non-bool `is_hit` or non-numeric points.
+
+    Examples
+    --------
+    Cluster 1 has a single hit, so it merges into cluster 0 (nearer than 2):
+
+    >>> import numpy as np
+    >>> labels = [0, 0, 0, 0, 1, 2, 2, 2, 2]
+    >>> points = np.array([[0, 0], [0, 1], [0, 2], [1, 1], [0, 3.5],
+    ...                    [0, 8], [0, 9], [0, 10], [1, 9]], dtype=float)
+    >>> is_hit = [True, True, True, False, True, True, True, True, False]
+    >>> merge_small_clusters(labels, points, is_hit).tolist()
+    [0, 0, 0, 0, 0, 1, 1, 1, 1]
+    """
+    labels = _as_labels(labels, "labels")
+    n = len(labels)
+    arr = as_numeric(points, "points")
+    if arr.ndim != 2 or not 1 <= arr.shape[1] <= 3 or len(arr) != n:
+        raise ValueError(f"points must have shape ({n}, D) with D in 1..3 (one row per label), "
+                         f"got {arr.shape}")
+    points = as_points(arr, "points", arr.shape[1])
+    hit = as_numeric(is_hit, "is_hit", kinds="b")
+    if hit.shape != (n,):
+        raise ValueError(f"is_hit must have shape ({n},), got {hit.shape}")
+    min_hits = check_int(min_hits, "min_hits", low=1)
+    if not n:
+        return np.zeros(0, dtype=np.int64)
+    old, cluster = np.unique(labels, return_inverse=True)
+    k = len(old)
+    n_hits = np.bincount(cluster[hit], minlength=k)
+    n_beams = np.bincount(cluster[~hit], minlength=k)
+    kept = (n_hits >= min_hits) & (n_beams >= 1)
+    if not kept.any():
+        return np.zeros(n, dtype=np.int64)
+    rank = np.cumsum(kept) - 1
+    out = cluster.copy()
+    lone = ~kept[cluster]
+    if lone.any():
+        anchor = np.flatnonzero(~lone)
+        dist, nearest = cKDTree(points[anchor]).query(points[lone], k=1)
+        target = cluster[anchor[nearest]]
+        source = cluster[lone]
+        order = np.lexsort((target, dist, source))
+        source, target = source[order], target[order]
+        first = np.r_[True, source[1:] != source[:-1]]
+        into = np.arange(k)
+        into[source[first]] = target[first]
+        out = into[cluster]
+    return rank[out].astype(np.int64)
