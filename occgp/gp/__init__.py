@@ -9,12 +9,20 @@
   active sampling), and :class:`GPOM`, the earlier map with a local GP per
   query; both turn the latent GP into probabilities by PLSC
   (:func:`fit_plsc`);
+* :class:`GPMixture`, a mixture of GPOMIK experts (Kim & Kim): hits
+  clustered by :class:`LineTracking`, :class:`DirichletProcessClustering` or
+  :class:`PlaneClustering`, beams assigned by :func:`assign_beams`, tiny
+  clusters merged by :func:`merge_small_clusters`, predictions merged by a
+  committee rule (:func:`combine_predictions`);
 * the log-odds :class:`OccupancyGrid` baseline and :func:`predict_grid`.
 """
 
+from ._beams import assign_beams, merge_small_clusters
+from ._clustering import DirichletProcessClustering, LineTracking, PlaneClustering
 from ._committee import COMBINE_RULES, combine_predictions
 from ._gpom import GPOM
 from ._gpomik import GPOMIK
+from ._mixture import GPMixture
 from ._grid import OccupancyGrid, grid_points, predict_grid
 from ._integral import integral_kernel
 from ._kernels import Matern32, SparseKernel, SquaredExponential
@@ -28,5 +36,6 @@ __all__ = [
     "GPOMIK", "GPOM", "OccupancyGrid", "grid_points", "predict_grid",
     "Observations", "observations_from_scans",
     "loo_predictions", "fit_plsc", "plsc_proba",
-    "COMBINE_RULES", "combine_predictions",
+    "GPMixture", "LineTracking", "DirichletProcessClustering", "PlaneClustering",
+    "assign_beams", "merge_small_clusters", "COMBINE_RULES", "combine_predictions",
 ]

@@ -683,12 +683,12 @@ class LineTracking(_Clustering):
             cluster_of_line[free] = m + comp
         # short lines: join the best cluster (existing or new), or cluster among themselves
         if len(short_idx):
-            long_hits = cluster_of_line[line] >= 0
+            new_hits = cluster_of_line[line] >= m  # hits of the new clusters' long lines
             sets = []
             if m:
                 sets.append(existing)
             if n_new:
-                sets.append(_line_set(hits[long_hits], cluster_of_line[line[long_hits]] - m,
+                sets.append(_line_set(hits[new_hits], cluster_of_line[line[new_hits]] - m,
                                       n_new))
             clusters = _LineSet(*(np.concatenate(parts) for parts in zip(*sets))) \
                 if sets else None

@@ -1,0 +1,682 @@
+"""A mixture of Gaussian-process experts for occupancy (Kim & Kim 2022).
+
+The observations are clustered (hits by line tracking, a Dirichlet process
+or plane growing; beams follow their hit, or the most similar returning beam
+when they have none), one :class:`~occgp.gp.GPOMIK` expert is fitted per
+cluster with its own hyper-parameters, and the experts' latent predictions
+are merged by a committee rule (:mod:`occgp.gp._committee`) before PLSC maps
+them to probabilities.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import scipy.linalg as sl
+from joblib import Parallel, delayed
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+from sklearn.base import BaseEstimator, clone
+from sklearn.utils.validation import check_is_fitted
+
+from .._validation import as_points, check_bool, check_choice, check_int, check_n_jobs, check_real
+from ._beams import assign_beams, merge_small_clusters
+from ._clustering import DirichletProcessClustering, LineTracking, PlaneClustering
+from ._committee import COMBINE_RULES, Committee
+from ._gpomik import GPOMIK, _spatial_groups
+from ._gpr import optimize_shared_hyperparameters
+from ._integral import _check_quadrature, _covariance
+from ._limits import generator, threads
+from ._observations import Observations, make_observations
+from ._plsc import fit_plsc, plsc_proba
+
+__all__ = ["GPMixture"]
+
+_CLUSTERINGS = ("line", "dp", "plane")
+_UPDATES = ("cholesky", "refit")
+_HYPERPARAMETERS = ("shared", "own")
+#: Spacing (in length scales) of the samples along an expert's beams that
+#: bound the distance from a query to its observations.
+_SAMPLE_STEP = 0.5
+#: Experts of at most this many observations are evaluated densely; queries
+#: go in blocks of `_BLOCK`.
+_DENSE_SIZE = 400
+_BLOCK = 4096
+
+
+def _row_keys(a):
+    """Rows of a float array as hashable bytes (exact equality)."""
+    a = np.ascontiguousarray(a, dtype=np.float64) + 0.0  # -0.0 and 0.0 are one row
+    return a.view(np.dtype((np.void, a.dtype.itemsize * a.shape[1]))).ravel()
+
+
+def hit_origins(hits, segment_starts, segment_ends):
+    """The sensor position of each hit: the start of the first beam ending exactly on it.
+
+    A hit that ends no beam is its own origin (a scan of one hit).
+    """
+    origins = hits.copy()
+    if not len(segment_ends) or not len(hits):
+        return origins
+    keys, first = np.unique(_row_keys(segment_ends), return_index=True)
+    hk = _row_keys(hits)
+    pos = np.clip(np.searchsorted(keys, hk), 0, len(keys) - 1)
+    found = keys[pos] == hk
+    origins[found] = segment_starts[first[pos[found]]]
+    return origins
+
+
+class _Reach:
+    """Where one expert may differ from its prior by more than a tolerance.
+
+    With ``C = K + noise I`` the expert's covariance, a query's variance
+    reduction is ``k^T C^-1 k <= |k|^2 / noise`` and its mean
+    ``|k^T C^-1 y| <= sqrt(k^T C^-1 k * y^T C^-1 y)`` (Cauchy–Schwarz in the
+    ``C^-1`` inner product). Each entry of ``k`` is at most
+    ``variance * w_i * f(d^2)``, with ``w_i`` the observation's length (1
+    for a point), ``f`` the kernel's (decreasing) profile and ``d`` the
+    distance in length scales from the query to the nearest observation.
+    Beyond the radius where those bounds give a variance within
+    ``eps * prior`` of the prior and a mean within ``eps * sqrt(prior)`` of 0
+    the expert is at its prior up to the tolerance; beyond the kernel's
+    cutoff it is exactly there. Distances are bounded below through samples
+    every `_SAMPLE_STEP` length scales along the observations (a point of a
+    segment is within half a step of a sample).
+    """
+
+    def __init__(self, gp):
+        kernel = gp.kernel_
+        self.kernel = kernel
+        self.inv = kernel.inverse_length_scales(gp.n_dims_)
+        self.prior = float(kernel.variance)
+        cells = gp.cells_
+        self.w2 = sum(float(np.sum(np.where(c.obs.lengths > 0, c.obs.lengths, 1.0) ** 2))
+                      for c in cells)
+        self.energy = max(max(float(c.obs.y @ c.alpha) for c in cells), 1e-300)
+        self.noise = gp.noise_ + gp.jitter_
+        starts = np.vstack([c.obs.starts for c in cells]) * self.inv
+        ends = np.vstack([c.obs.ends for c in cells]) * self.inv
+        n = np.ceil(np.linalg.norm(ends - starts, axis=1) / _SAMPLE_STEP).astype(np.intp) + 1
+        owner = np.repeat(np.arange(len(n)), n)
+        t = (np.arange(len(owner)) - np.repeat(np.cumsum(n) - n, n)) / np.maximum(n - 1, 1)[owner]
+        samples = starts[owner] + t[:, None] * (ends - starts)[owner]
+        self.lo, self.hi = samples.min(axis=0), samples.max(axis=0)
+        self.tree = cKDTree(samples)
+        self._radius = {}
+
+    def radius(self, eps):
+        """Distance (length scales) beyond which the expert is within `eps` of its prior."""
+        if eps not in self._radius:
+            r_max = eps * self.prior * min(1.0, eps / self.energy)
+            bound = np.sqrt(r_max * self.noise / (self.w2 * self.prior ** 2)) if eps > 0 else 0.0
+            profile = self.kernel.profile
+            lo, hi = 0.0, float(type(self.kernel).cutoff2)
+            if profile(np.array([hi]))[0] <= bound:
+                for _ in range(60):  # smallest squared distance with f(s) <= bound
+                    mid = 0.5 * (lo + hi)
+                    lo, hi = (mid, hi) if profile(np.array([mid]))[0] > bound else (lo, mid)
+            self._radius[eps] = float(np.sqrt(hi))
+        return self._radius[eps]
+
+    def queries(self, X, eps):
+        """Indices of the queries `X` (world coordinates) within reach."""
+        Xs = X * self.inv
+        r = self.radius(eps) + _SAMPLE_STEP / 2
+        cand = np.flatnonzero(np.all((Xs >= self.lo - r) & (Xs <= self.hi + r), axis=1))
+        if not len(cand):
+            return cand
+        d, _ = self.tree.query(Xs[cand], distance_upper_bound=r)
+        return cand[np.isfinite(d)]
+
+
+def _fit_expert(template, obs, seed):
+    expert = clone(template).set_params(random_state=seed)
+    n_hits = int(np.count_nonzero(obs.labels > 0))
+    return expert.fit(obs.starts[:n_hits], obs.starts[n_hits:], obs.ends[n_hits:])
+
+
+def _inverse(cell):
+    """``C^-1`` of a GPOMIK cell (kept on the cell, as GPOMIK's predict does)."""
+    if cell.kinv is None:
+        Linv = sl.solve_triangular(cell.L, np.eye(cell.size), lower=True, check_finite=False)
+        cell.kinv = Linv.T @ Linv
+    return cell.kinv
+
+
+def _predict_expert(expert, X):
+    """Latent mean and variance of `expert` at `X`.
+
+    A single-cell expert of at most `_DENSE_SIZE` observations is evaluated
+    densely (its cross-covariance in blocks of `_BLOCK` queries): the same
+    values as :meth:`GPOMIK.predict`, without its tiles' bookkeeping.
+    """
+    if len(expert.cells_) > 1 or expert.cells_[0].size > _DENSE_SIZE:
+        return expert.predict(X, return_var=True)
+    cell = expert.cells_[0]
+    kinv = _inverse(cell)
+    prior = float(expert.kernel_.variance)
+    mean, var = np.empty(len(X)), np.empty(len(X))
+    for i in range(0, len(X), _BLOCK):
+        x = X[i:i + _BLOCK]
+        k = _covariance(expert.kernel_, expert._quadrature, cell.obs.starts, cell.obs.ends, x, x,
+                        n_threads=expert._n_threads)
+        mean[i:i + _BLOCK] = k.T @ cell.alpha
+        var[i:i + _BLOCK] = np.maximum(prior - np.einsum("ij,ij->j", k, kinv @ k), 0.0)
+    return mean, var
+
+
+def _split(obs):
+    """`obs` as GPOMIK's (hits, segment_starts, segment_ends)."""
+    hit = obs.labels > 0
+    return obs.starts[hit], obs.starts[~hit], obs.ends[~hit]
+
+
+def _order(obs):
+    """`obs` with its hits first (the order GPOMIK keeps)."""
+    return obs.take(np.r_[np.flatnonzero(obs.labels > 0), np.flatnonzero(obs.labels < 0)])
+
+
+class GPMixture(BaseEstimator):
+    """Mixture of Gaussian-process experts merged by a committee (Kim & Kim).
+
+    The observations (hits and beams, as for :class:`GPOMIK`) are split into
+    clusters, one GPOMIK expert with its own hyper-parameters (maximum
+    marginal likelihood) is fitted on each, and the experts' latent
+    predictions are merged by a committee rule. The cost falls from
+    ``O(n^3)`` for one GP to ``O(n^3 / k^2)`` for k equal clusters, and the
+    experts fit and predict in parallel through joblib.
+
+    1. **Clustering of the hits**: line tracking (``"line"``, 2D: walls as
+       lines, merged across scans), a Dirichlet-process Gaussian mixture
+       (``"dp"``, any dimension) or plane growing (``"plane"``, 3D, with the
+       Dirichlet process for what is not planar).
+    2. **Beams**: a beam with a return (its end is a hit) joins its hit's
+       cluster; one without joins the cluster of the most similar returning
+       beam under the line–line integral kernel (the paper's Eq. 11, with
+       the expert kernel's starting hyper-parameters).
+    3. **Tiny clusters**: a cluster with fewer than `min_hits` hits, or
+       without any beam, is merged into the nearest other cluster (every
+       expert needs both classes for its classifier); clusters of more than
+       `max_cluster_size` observations are split by median bisection.
+    4. **Merging** (``combine``): ``"bcm"`` is the paper's Eq. 13,
+       ``"tresp"`` the BCM with its prior correction, ``"rbcm"`` the robust
+       BCM and ``"gpoe"`` the generalised product of experts (see
+       :func:`combine_predictions`). An expert is evaluated only at the
+       queries where it may differ from its prior by more than
+       ``prior_tol / n_experts`` (in prior variances and standard deviations;
+       a bound from the distance to its observations); elsewhere it counts
+       as its prior, exactly known. Merged means and variances then differ
+       from evaluating every expert everywhere by about `prior_tol` at most.
+    5. **PLSC** (``a``, ``b``) is fitted on the committee's leave-one-out
+       predictions: at each hit, and at a random point of each beam, every
+       expert predicts and the observation's own expert predicts without it
+       (a rank-one downdate).
+
+    Parameters
+    ----------
+    expert : GPOMIK, default=None
+        Template of the experts (its kernel is the starting point of every
+        expert's hyper-parameter fit); None means ``GPOMIK(n_restarts=0)``.
+        Its `random_state` and `max_cell_size` are replaced per expert.
+    clustering : {"line", "dp", "plane"} or clustering object, default="line"
+        How the hits are clustered: :class:`LineTracking`,
+        :class:`DirichletProcessClustering` or :class:`PlaneClustering` with
+        their defaults, or an instance of one of them (or any object with
+        ``fit_predict(hits, origins)`` and ``partial_fit(hits, origins)``),
+        which is cloned.
+    combine : {"bcm", "tresp", "rbcm", "gpoe"}, default="rbcm"
+        The committee rule.
+    min_hits : int, default=3
+        Fewest hits of a cluster with its own expert.
+    max_cluster_size : int, default=1000
+        Most observations of one expert at :meth:`fit`; also the experts'
+        `max_cell_size` in :meth:`update`.
+    prior_tol : float, default=1e-3
+        Tolerance of skipping an expert at a query (see above); 0 skips only
+        where the kernel's entries are exactly zero.
+    update_experts : {"cholesky", "refit"}, default="cholesky"
+        What :meth:`update` does to an expert whose cluster grew: a Cholesky
+        update with its hyper-parameters as fitted, or a new fit on all of its
+        observations.
+    max_optimize : int, default=1000
+        Most observations the committee's PLSC is fitted on (a random subset).
+    n_jobs : int, default=None
+        Experts fitted and evaluated at once through joblib (threads unless
+        the caller chose another backend, e.g.
+        ``joblib.parallel_config(backend="dask")``); None means 1, -1 every
+        core. The map does not depend on it.
+    random_state : int, Generator or None, default=None
+        Seeds the clustering, every expert (one seed per expert, from its
+        index) and the PLSC subset.
+
+    Attributes
+    ----------
+    experts_ : list of GPOMIK
+        The fitted experts.
+    n_experts_ : int
+    labels_ : ndarray of shape (n_observations,)
+        Expert of every observation so far: the hits, then the beams, of each
+        :meth:`fit` / :meth:`update` call in turn.
+    n_clusters_ : int
+        Clusters the clustering found (before tiny clusters were merged and
+        large ones split).
+    clustering_ : object
+        The fitted clustering.
+    plsc_ : tuple of float
+        PLSC's ``(a, b)`` on the committee's predictions.
+    n_dims_ : int
+    updated_experts_ : ndarray of int
+        The experts the last :meth:`update` changed or created (all of them
+        after :meth:`fit`).
+
+    References
+    ----------
+    S. Kim, J. Kim, "Efficient clustering for continuous occupancy mapping
+    using a mixture of Gaussian processes", Sensors 22 (2022) 6832.
+
+    Examples
+    --------
+    >>> from occgp.datasets import room_2d
+    >>> from occgp.gp import GPMixture, observations_from_scans
+    >>> hits, starts, ends = observations_from_scans(room_2d().scan(n_poses=6))
+    >>> model = GPMixture(random_state=0).fit(hits, starts, ends)
+    >>> model.n_experts_ > 1, model.labels_.shape == (len(hits) + len(starts),)
+    (True, True)
+    """
+
+    def __init__(self, expert=None, *, clustering="line", combine="rbcm",
+                 hyperparameters="shared", min_hits=3, max_cluster_size=1000, prior_tol=1e-3,
+                 update_experts="cholesky", max_optimize=1000, n_jobs=None, random_state=None):
+        self.expert = expert
+        self.clustering = clustering
+        self.combine = combine
+        self.hyperparameters = hyperparameters
+        self.min_hits = min_hits
+        self.max_cluster_size = max_cluster_size
+        self.prior_tol = prior_tol
+        self.update_experts = update_experts
+        self.max_optimize = max_optimize
+        self.n_jobs = n_jobs
+        self.random_state = random_state
+
+    # ------------------------------------------------------------ parameters
+    def _check_params(self):
+        if self.expert is None:
+            template = GPOMIK(n_restarts=0)
+        elif isinstance(self.expert, GPOMIK):
+            template = self.expert
+        else:
+            raise TypeError(f"expert must be a GPOMIK or None, got {type(self.expert).__name__}")
+        check_choice(self.combine, "combine", COMBINE_RULES)
+        check_choice(self.update_experts, "update_experts", _UPDATES)
+        check_choice(self.hyperparameters, "hyperparameters", _HYPERPARAMETERS)
+        check_int(self.min_hits, "min_hits", low=1)
+        check_int(self.max_cluster_size, "max_cluster_size", low=2)
+        check_int(self.max_optimize, "max_optimize", low=2)
+        check_real(self.prior_tol, "prior_tol", low=0.0, high=1.0, low_open=False)
+        check_n_jobs(self.n_jobs)
+        c = self.clustering
+        if isinstance(c, str):
+            check_choice(c, "clustering", _CLUSTERINGS)
+        elif not (callable(getattr(c, "fit_predict", None))
+                  and callable(getattr(c, "partial_fit", None))):
+            raise TypeError("clustering must be 'line', 'dp', 'plane' or an object with "
+                            f"fit_predict and partial_fit, got {type(c).__name__}")
+        template = clone(template).set_params(max_cell_size=self.max_cluster_size)
+        return template
+
+    def _make_clustering(self, seed):
+        c = self.clustering
+        if c == "line":
+            return LineTracking()
+        if c == "dp":
+            return DirichletProcessClustering(random_state=seed)
+        if c == "plane":
+            return PlaneClustering(random_state=seed)
+        return clone(c)
+
+    def _parallel(self):
+        return Parallel(n_jobs=check_n_jobs(self.n_jobs), prefer="threads")
+
+    def _expert_seed(self, e):
+        return int(np.random.SeedSequence([self._seed, e]).generate_state(1)[0])
+
+    # ------------------------------------------------------------- clusters
+    def _cluster_labels(self, clustering, obs, n_hits, partial):
+        """Cluster labels (of `clustering`) of the hits and of the beams of `obs`."""
+        hits = obs.starts[:n_hits]
+        starts, ends = obs.starts[n_hits:], obs.ends[n_hits:]
+        origins = hit_origins(hits, starts, ends)
+        fit = clustering.partial_fit if partial else clustering.fit_predict
+        hit_labels = np.asarray(fit(hits, origins), dtype=np.int64)
+        kernel = self._template.kernel
+        quadrature = self._template.quadrature
+        if partial:  # returning beams of earlier calls are candidates too
+            old = self._observations
+            old_hit = old.labels > 0
+            all_hits = np.vstack([old.starts[old_hit], hits])
+            all_labels = np.r_[self._hit_clusters, hit_labels]
+            beam_labels = assign_beams(
+                all_labels, all_hits, np.vstack([old.starts[~old_hit], starts]),
+                np.vstack([old.ends[~old_hit], ends]), kernel=kernel, quadrature=quadrature,
+                n_jobs=self.n_jobs)[int(np.count_nonzero(~old_hit)):]
+        else:
+            beam_labels = assign_beams(hit_labels, hits, starts, ends, kernel=kernel,
+                                       quadrature=quadrature, n_jobs=self.n_jobs)
+        return hit_labels, np.asarray(beam_labels, dtype=np.int64)
+
+    # ------------------------------------------------------------------- fit
+    def fit(self, hits: ArrayLike | None, segment_starts: ArrayLike | None,
+            segment_ends: ArrayLike | None) -> "GPMixture":
+        """Cluster the observations, fit one expert per cluster and the committee's PLSC.
+
+        Parameters
+        ----------
+        hits : array-like of shape (n_hits, D) or None
+            Laser returns (occupied), D in 1..3 (2 for line tracking, 3 for
+            plane clustering), in scan order.
+        segment_starts, segment_ends : array-like of shape (n_beams, D) or None
+            Beams from the sensor to the return or the maximum range; a beam
+            whose end equals a hit is that hit's beam.
+
+        Returns
+        -------
+        self : GPMixture
+
+        Raises
+        ------
+        ValueError
+            On NaN or inf, wrong shapes, no hits or no beams, invalid
+            parameters, a clustering that does not fit the dimension, or an
+            expert's fit failing (see :meth:`GPOMIK.fit`).
+        TypeError
+            On non-numeric input or parameters of the wrong type.
+        """
+        template = self._check_params()
+        rng = generator(self.random_state)
+        seed = int(rng.integers(2 ** 32))
+        obs = make_observations(hits, segment_starts, segment_ends)
+        n_hits = int(np.count_nonzero(obs.labels > 0))
+        if not (n_hits and n_hits < len(obs.y)):
+            raise ValueError(f"GPMixture needs both hits and beams, got {n_hits} hits and "
+                             f"{len(obs.y) - n_hits} beams")
+        self._template, self._seed = template, seed
+        self.kernel_, self.noise_ = None, None
+        clustering = self._make_clustering(seed)
+        hit_labels, beam_labels = self._cluster_labels(clustering, obs, n_hits, partial=False)
+        clusters = np.r_[hit_labels, beam_labels]
+        merged = merge_small_clusters(clusters, obs.anchors, obs.labels > 0,
+                                      min_hits=self.min_hits)
+        groups, expert_of = [], np.empty(len(obs.y), dtype=np.int64)
+        for g in np.unique(merged):
+            idx = np.flatnonzero(merged == g)
+            for part in sorted(_spatial_groups(obs.anchors[idx], self.max_cluster_size),
+                               key=lambda p: int(p.min())):
+                expert_of[idx[part]] = len(groups)
+                groups.append(np.sort(idx[part]))
+        if self.hyperparameters == "shared":
+            template = self._shared_template(template, obs, groups, np.random.default_rng(seed))
+        experts = self._parallel()(
+            delayed(_fit_expert)(template, _order(obs.take(idx)), self._expert_seed(e))
+            for e, idx in enumerate(groups))
+        self.experts_ = list(experts)
+        self.clustering_ = clustering
+        self.n_dims_ = obs.starts.shape[1]
+        self.labels_ = expert_of
+        self.n_clusters_ = int(len(np.unique(clusters)))
+        self._observations = obs
+        self._hit_clusters = hit_labels
+        # clustering label -> the experts that hold its observations
+        self._cluster_experts = {}
+        for c, e in zip(clusters.tolist(), expert_of.tolist()):
+            self._cluster_experts.setdefault(c, set()).add(e)
+        self._reach = [None] * len(self.experts_)
+        self.updated_experts_ = np.arange(len(self.experts_))
+        self.plsc_ = self._fit_plsc(obs, expert_of, groups, np.random.default_rng(seed))
+        return self
+
+    def _shared_template(self, template, obs, groups, rng):
+        """`template` with the hyper-parameters that maximise the experts' summed LML.
+
+        They are fitted on whole experts in random order, as many as fit in
+        `max_optimize` observations of the template (at least one).
+        """
+        kernel, noise, noise_bounds = template._check_params()
+        if template.optimizer:
+            order = rng.permutation(len(groups))
+            sizes = np.array([len(groups[e]) for e in order])
+            n_parts = max(1, int(np.searchsorted(np.cumsum(sizes), template.max_optimize,
+                                                 side="right")))
+            parts = [(o.starts, o.ends, o.y) for o in
+                     (obs.take(groups[e]) for e in np.sort(order[:n_parts]))]
+            kernel, noise, _ = optimize_shared_hyperparameters(
+                kernel, noise, noise_bounds, parts, _check_quadrature(template.quadrature),
+                n_restarts=template.n_restarts, rng=rng,
+                n_threads=max(threads(template.n_jobs), threads(self.n_jobs)))
+        self.kernel_, self.noise_ = kernel, noise
+        return clone(template).set_params(kernel=kernel, noise=noise, optimizer=False)
+
+    @property
+    def n_experts_(self) -> int:
+        check_is_fitted(self, "experts_")
+        return len(self.experts_)
+
+    # -------------------------------------------------------------- predict
+    def _reaches(self):
+        for e, gp in enumerate(self.experts_):
+            if self._reach[e] is None:
+                self._reach[e] = _Reach(gp)
+        return self._reach
+
+    def _committee(self, X, skip=None):
+        """The committee at `X` with every expert evaluated where it is within reach.
+
+        `skip` (one expert per query, or -1) leaves that expert out at that
+        query (the caller adds it).
+        """
+        priors = np.array([float(gp.kernel_.variance) for gp in self.experts_])
+        committee = Committee(self.combine, priors, len(X))
+        tasks = []
+        eps = float(self.prior_tol) / len(self.experts_)
+        for e, reach in enumerate(self._reaches()):
+            idx = reach.queries(X, eps)
+            if skip is not None:
+                idx = idx[skip[idx] != e]
+            if len(idx):
+                tasks.append((e, idx))
+        results = self._parallel()(delayed(_predict_expert)(self.experts_[e], X[idx])
+                                   for e, idx in tasks)
+        for (e, idx), (mean, var) in zip(tasks, results):
+            committee.add(idx, mean, var, priors[e])
+        return committee, priors
+
+    def predict(self, X: ArrayLike, return_var: bool = False):
+        """Merged latent mean (and variance) of the occupancy function at `X`.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_queries, D)
+        return_var : bool, default=False
+
+        Returns
+        -------
+        mean : ndarray of shape (n_queries,)
+        var : ndarray of shape (n_queries,)
+            Only with `return_var`.
+        """
+        check_is_fitted(self, "experts_")
+        X = as_points(X, "X", self.n_dims_)
+        return_var = check_bool(return_var, "return_var")
+        mean, var = self._committee(X)[0].result()
+        return (mean, var) if return_var else mean
+
+    def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
+        """Probability of occupancy at `X` (PLSC of the merged prediction), shape (n_queries,)."""
+        mean, var = self.predict(X, return_var=True)
+        a, b = self.plsc_
+        return plsc_proba(mean, var, a, b)
+
+    # ----------------------------------------------------------------- PLSC
+    def _fit_plsc(self, obs, expert_of, groups, rng):
+        """PLSC on the committee's leave-one-out predictions (see the class docstring)."""
+        take = np.arange(len(obs.y))
+        if len(take) > self.max_optimize:
+            take = np.sort(rng.choice(len(take), self.max_optimize, replace=False))
+        u = rng.random(len(take))
+        X = obs.starts[take] + u[:, None] * (obs.ends[take] - obs.starts[take])
+        owner = expert_of[take]
+        committee, priors = self._committee(X, skip=owner)
+        for e, gp in enumerate(self.experts_):
+            sel = np.flatnonzero(owner == e)
+            if not len(sel):
+                continue
+            # the observation's place in its expert (hits first, as _order put them)
+            idx = groups[e]
+            local = _order_positions(obs.labels[idx] > 0)
+            pos = local[np.searchsorted(idx, take[sel])]
+            mean, var = _downdated(gp, X[sel], pos)
+            committee.add(sel, mean, var, priors[e])
+        mean, var = committee.result()
+        a, b = fit_plsc(mean, var, obs.labels[take])
+        if not np.isfinite([a, b]).all():
+            raise ValueError(f"the committee's classifier fit failed (PLSC a, b = {a}, {b}); "
+                             "check the data")
+        return a, b
+
+    # --------------------------------------------------------------- update
+    def update(self, hits: ArrayLike | None = None, segment_starts: ArrayLike | None = None,
+               segment_ends: ArrayLike | None = None) -> "GPMixture":
+        """Add observations: cluster them and update only the experts they reach.
+
+        New hits are clustered incrementally (``clustering_.partial_fit``:
+        they join existing clusters or open new ones); beams follow as in
+        :meth:`fit`, with the returning beams of earlier calls as candidates.
+        A new cluster with fewer than `min_hits` hits (or no beam) joins the
+        expert nearest to it; a new cluster of its own gets a new expert. An
+        existing expert that received observations is Cholesky-updated
+        (``update_experts="cholesky"``, its hyper-parameters as fitted) or
+        refitted on all its observations (``"refit"``); every other expert
+        is left untouched (the same object, unchanged). The PLSC stays as
+        fitted. :attr:`updated_experts_` lists the experts changed or created.
+
+        Parameters
+        ----------
+        hits : array-like of shape (n_hits, D), default=None
+        segment_starts, segment_ends : array-like of shape (n_beams, D), default=None
+
+        Returns
+        -------
+        self : GPMixture
+
+        Raises
+        ------
+        ValueError, TypeError
+            As :meth:`fit`; the model is then unchanged.
+        """
+        check_is_fitted(self, "experts_")
+        template = self._check_params()
+        new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
+        n_hits = int(np.count_nonzero(new.labels > 0))
+        if not len(new.y):
+            return self
+        clustering = copy.deepcopy(self.clustering_)  # the fitted one stays as it is on failure
+        hit_labels, beam_labels = self._cluster_labels(clustering, new, n_hits, partial=True)
+        clusters = np.r_[hit_labels, beam_labels]
+        expert_of = np.empty(len(new.y), dtype=np.int64)
+        experts, next_id = list(self.experts_), len(self.experts_)
+        old_tree = cKDTree(self._observations.anchors)
+        old_labels = self.labels_
+        cluster_experts = {c: set(s) for c, s in self._cluster_experts.items()}
+        new_groups = {}
+        for c in np.unique(clusters):
+            idx = np.flatnonzero(clusters == c)
+            known = cluster_experts.get(int(c))
+            if known:
+                cand = sorted(known)
+                if len(cand) == 1:
+                    expert_of[idx] = cand[0]
+                else:  # a split cluster: the expert with the nearest observation
+                    _, near = old_tree.query(new.anchors[idx])
+                    owner = old_labels[near]
+                    expert_of[idx] = np.where(np.isin(owner, cand), owner, cand[0])
+                continue
+            n_c_hits = int(np.count_nonzero(new.labels[idx] > 0))
+            if n_c_hits < self.min_hits or n_c_hits == len(idx):
+                _, near = old_tree.query(new.anchors[idx])
+                dist = np.linalg.norm(new.anchors[idx] - self._observations.anchors[near],
+                                      axis=1)
+                target = int(old_labels[near[int(np.argmin(dist))]])
+                expert_of[idx] = target
+                cluster_experts[int(c)] = {target}
+                continue
+            cluster_experts[int(c)] = set()
+            for part in sorted(_spatial_groups(new.anchors[idx], self.max_cluster_size),
+                               key=lambda p: int(p.min())):
+                expert_of[idx[part]] = next_id
+                cluster_experts[int(c)].add(next_id)
+                new_groups[next_id] = np.sort(idx[part])
+                next_id += 1
+        changed = np.unique(expert_of)
+        old_changed = changed[changed < len(self.experts_)]
+        fresh = [int(e) for e in changed if e >= len(self.experts_)]
+        all_obs = _concat(self._observations, new)
+        all_labels = np.r_[self.labels_, expert_of]
+
+        def grow(e):
+            gp = self.experts_[e]
+            if self.update_experts == "refit":
+                return _fit_expert(template, _order(all_obs.take(all_labels == e)),
+                                   self._expert_seed(e))
+            return copy.deepcopy(gp).update(*_split(new.take(expert_of == e)))
+
+        grown = self._parallel()(delayed(grow)(int(e)) for e in old_changed)
+        made = self._parallel()(
+            delayed(_fit_expert)(template, _order(new.take(new_groups[e])),
+                                 self._expert_seed(e)) for e in fresh)
+        # every step that can fail is done: now change the model
+        for e, gp in zip(old_changed, grown):
+            experts[int(e)] = gp
+        experts += list(made)
+        self.experts_ = experts
+        self.clustering_ = clustering
+        stale = set(changed.tolist())
+        self._reach = [None if i in stale else r for i, r in enumerate(self._reach)]
+        self._reach += [None] * len(made)
+        self.labels_ = all_labels
+        self._observations = all_obs
+        self._hit_clusters = np.r_[self._hit_clusters, hit_labels]
+        self._cluster_experts = cluster_experts
+        self.n_clusters_ = int(getattr(self.clustering_, "n_clusters_", self.n_clusters_))
+        self.updated_experts_ = changed
+        return self
+
+
+def _concat(a: Observations, b: Observations) -> Observations:
+    return Observations(*(np.concatenate([x, y]) for x, y in zip(a, b)))
+
+
+def _order_positions(is_hit):
+    """Position of each observation within :func:`_order` of them (hits first)."""
+    order = np.r_[np.flatnonzero(is_hit), np.flatnonzero(~is_hit)]
+    pos = np.empty(len(order), dtype=np.intp)
+    pos[order] = np.arange(len(order))
+    return pos
+
+
+def _downdated(gp, X, pos):
+    """Latent mean and variance of single-cell expert `gp` at X[j] without its observation pos[j].
+
+    With ``c = C^-1 k_x`` the removal of observation ``i`` is a rank-one
+    downdate: ``mean - c_i alpha_i / [C^-1]_ii`` and ``var + c_i^2 / [C^-1]_ii``.
+    """
+    cell = gp.cells_[0]
+    kinv = _inverse(cell)
+    k = _covariance(gp.kernel_, gp._quadrature, cell.obs.starts, cell.obs.ends, X, X,
+                    n_threads=gp._n_threads)
+    c = kinv @ k
+    mean = k.T @ cell.alpha
+    var = float(gp.kernel_.variance) - np.einsum("ij,ij->j", k, c)
+    ci = c[pos, np.arange(len(pos))]
+    d = kinv[pos, pos]
+    return mean - ci * cell.alpha[pos] / d, np.maximum(var, 0.0) + ci * ci / d

@@ -1,0 +1,267 @@
+"""Tests of the mixture of GP experts (occgp.gp.GPMixture)."""
+
+import pickle
+
+import joblib
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from sklearn.base import BaseEstimator, clone
+from sklearn.exceptions import NotFittedError
+
+from occgp.datasets import room_2d
+from occgp.gp import (COMBINE_RULES, GPOMIK, GPMixture, SquaredExponential,
+                      observations_from_scans, predict_grid)
+
+
+class Halves(BaseEstimator):
+    """Hits clustered by the sign of x - `split` (a hand-checkable clustering)."""
+
+    def __init__(self, split=0.0):
+        self.split = split
+
+    def fit_predict(self, hits, origins):
+        self.labels_ = (np.asarray(hits)[:, 0] > self.split).astype(np.int64)
+        self.n_clusters_ = int(self.labels_.max()) + 1
+        return self.labels_
+
+    def partial_fit(self, hits, origins):
+        labels = (np.asarray(hits)[:, 0] > self.split).astype(np.int64)
+        self.labels_ = np.r_[self.labels_, labels]
+        self.n_clusters_ = max(self.n_clusters_, int(labels.max()) + 1)
+        return labels
+
+
+class One(Halves):
+    """Every hit in one cluster."""
+
+    def __init__(self, split=np.inf):
+        super().__init__(split)
+
+
+@pytest.fixture(scope="module")
+def data():
+    return observations_from_scans(room_2d().scan(n_poses=8))
+
+
+@pytest.fixture(scope="module")
+def queries():
+    return np.random.default_rng(0).uniform([-11, -9], [11, 9], (600, 2))
+
+
+FIXED = GPOMIK(SquaredExponential(1.7, 0.6), noise=1e-3, optimizer=False)
+
+
+@pytest.fixture(scope="module")
+def fitted(data):
+    return GPMixture(FIXED, random_state=0).fit(*data)
+
+
+def test_fit_assigns_every_observation_to_an_expert(fitted, data):
+    hits, starts, _ = data
+    assert fitted.labels_.shape == (len(hits) + len(starts),)
+    assert fitted.n_experts_ == len(fitted.experts_) > 1
+    assert set(np.unique(fitted.labels_)) == set(range(fitted.n_experts_))
+    sizes = np.bincount(fitted.labels_)
+    assert sizes.sum() == len(fitted.labels_)
+    for e, gp in enumerate(fitted.experts_):
+        assert gp.cells_[0].size == sizes[e]
+        n_hits = int((gp.cells_[0].obs.labels > 0).sum())
+        assert n_hits >= fitted.min_hits and n_hits < sizes[e]  # both classes
+    assert fitted.n_clusters_ >= fitted.n_experts_ - 1
+
+
+@pytest.mark.parametrize("rule", ["bcm", "tresp", "gpoe"])
+@pytest.mark.parametrize("hyperparameters", ["own", "shared"])
+def test_one_expert_is_gpomik(data, queries, rule, hyperparameters):
+    template = GPOMIK(n_restarts=0, random_state=0)
+    single = clone(template).fit(*data)
+    mix = GPMixture(template, clustering=One(), combine=rule, hyperparameters=hyperparameters,
+                    prior_tol=0.0, random_state=0).fit(*data)
+    assert mix.n_experts_ == 1
+    assert mix.experts_[0].kernel_ == single.kernel_
+    assert mix.experts_[0].noise_ == single.noise_
+    mean, var = mix.predict(queries, return_var=True)
+    m0, v0 = single.predict(queries, return_var=True)
+    assert_allclose(mean, m0, rtol=1e-12, atol=1e-12)
+    assert_allclose(var, v0, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("rule", COMBINE_RULES)
+def test_skipping_experts_changes_predictions_by_less_than_the_tolerance(data, queries, rule):
+    tol = 1e-3
+    exact = GPMixture(FIXED, combine=rule, prior_tol=0.0, random_state=0).fit(*data)
+    skip = GPMixture(FIXED, combine=rule, prior_tol=tol, random_state=0).fit(*data)
+    X = np.vstack([queries, data[0]])
+    m0, v0 = exact.predict(X, return_var=True)
+    m1, v1 = skip.predict(X, return_var=True)
+    prior = float(FIXED.kernel.variance)
+    assert np.abs(m1 - m0).max() <= tol * np.sqrt(prior)
+    assert np.abs(v1 - v0).max() <= tol * prior
+    # the classifiers were fitted on skipped predictions too: compare through one of them
+    a, b = exact.plsc_
+    from occgp.gp import plsc_proba
+    assert np.abs(plsc_proba(m1, v1, a, b) - plsc_proba(m0, v0, a, b)).max() <= tol
+    # and skipping did skip: fewer expert evaluations than queries x experts within the cutoff
+    eps = tol / skip.n_experts_
+    pairs = [sum(len(r.queries(X, e)) for r in skip._reaches()) for e in (eps, 0.0)]
+    assert pairs[0] < pairs[1]
+
+
+def test_n_jobs_and_backends_give_the_same_map(data, queries):
+    models = [GPMixture(combine="tresp", random_state=0, n_jobs=n).fit(*data) for n in (1, 2)]
+    with joblib.parallel_config(backend="loky"):
+        models.append(GPMixture(combine="tresp", random_state=0, n_jobs=2).fit(*data))
+    ref = models[0].predict(queries, return_var=True)
+    for m in models[1:]:
+        assert_array_equal(m.labels_, models[0].labels_)
+        assert m.plsc_ == models[0].plsc_
+        out = m.predict(queries, return_var=True)
+        assert_array_equal(out[0], ref[0])
+        assert_array_equal(out[1], ref[1])
+
+
+def test_dask_local_cluster_gives_the_same_map(data, queries):
+    distributed = pytest.importorskip("distributed", reason="the dask extra is not installed")
+    ref = GPMixture(combine="tresp", random_state=0).fit(*data)
+    with distributed.LocalCluster(processes=False, n_workers=2, threads_per_worker=1,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster), joblib.parallel_config(backend="dask"):
+        model = GPMixture(combine="tresp", random_state=0, n_jobs=2).fit(*data)
+        out = model.predict(queries, return_var=True)
+    assert_array_equal(model.labels_, ref.labels_)
+    assert model.plsc_ == ref.plsc_
+    expected = ref.predict(queries, return_var=True)
+    assert_array_equal(out[0], expected[0])
+    assert_array_equal(out[1], expected[1])
+
+
+def split_scans(n_first=6, n_poses=10):
+    scans = room_2d().scan(n_poses=n_poses)
+    return (observations_from_scans(scans[:n_first]),
+            observations_from_scans(scans[n_first:]))
+
+
+@pytest.mark.parametrize("how", ["cholesky", "refit"])
+def test_update_touches_only_the_experts_that_got_observations(how):
+    first, second = split_scans()
+    model = GPMixture(FIXED, update_experts=how, random_state=0).fit(*first)
+    before = list(model.experts_)
+    factors = [gp.cells_[0].L.copy() for gp in before]
+    n_obs = len(model.labels_)
+    model.update(*second)
+    changed = set(model.updated_experts_.tolist())
+    assert len(model.labels_) == n_obs + len(second[0]) + len(second[1])
+    assert changed == set(np.unique(model.labels_[n_obs:]).tolist())
+    assert changed and len(changed) < model.n_experts_
+    for e, gp in enumerate(before):
+        if e in changed:
+            assert model.experts_[e] is not gp
+            assert model.experts_[e].n_accepted_ > gp.n_accepted_ or how == "refit"
+        else:
+            assert model.experts_[e] is gp
+            assert_array_equal(gp.cells_[0].L, factors[e])
+    sizes = np.bincount(model.labels_)
+    for e, gp in enumerate(model.experts_):
+        assert sum(c.size for c in gp.cells_) == sizes[e]
+
+
+def test_cholesky_update_of_an_expert_equals_its_refit_with_fixed_hyperparameters(queries):
+    first, second = split_scans()
+    grown = GPMixture(FIXED, random_state=0).fit(*first).update(*second)
+    refit = GPMixture(FIXED, update_experts="refit", random_state=0).fit(*first).update(*second)
+    assert_array_equal(grown.labels_, refit.labels_)
+    m0, v0 = grown.predict(queries, return_var=True)
+    m1, v1 = refit.predict(queries, return_var=True)
+    assert_allclose(m0, m1, atol=1e-8)
+    assert_allclose(v0, v1, atol=1e-8)
+
+
+def test_rejected_update_leaves_the_model_unchanged(data):
+    model = GPMixture(FIXED, random_state=0).fit(*data)
+    state = pickle.dumps(model)
+    with pytest.raises(ValueError, match="hits"):
+        model.update([[np.nan, 0.0]], [[0.0, 0.0]], [[1.0, 0.0]])
+    with pytest.raises(ValueError, match="hits must have shape"):
+        model.update([[0.0, 0.0, 0.0]], None, None)
+    assert pickle.dumps(model) == state
+
+
+class FirstHits(Halves):
+    """The first `split` hits in cluster 1, the others in cluster 0."""
+
+    def fit_predict(self, hits, origins):
+        self.labels_ = (np.arange(len(hits)) < self.split).astype(np.int64)
+        self.n_clusters_ = 2
+        return self.labels_
+
+
+def test_tiny_clusters_join_the_nearest_expert(data):
+    model = GPMixture(FIXED, clustering=FirstHits(5), min_hits=6, random_state=0).fit(*data)
+    assert model.n_clusters_ == 2 and model.n_experts_ == 1
+    kept = GPMixture(FIXED, clustering=FirstHits(5), min_hits=5, random_state=0).fit(*data)
+    assert kept.n_experts_ == 2
+    assert (kept.labels_[:5] != kept.labels_[5]).all()
+
+
+def test_works_with_predict_grid_pickle_and_clone(fitted):
+    grid = predict_grid(fitted, [-2.0, -2.0], [2.0, 2.0], 0.5)
+    assert grid.shape == (8, 8) and ((grid >= 0) & (grid <= 1)).all()
+    again = pickle.loads(pickle.dumps(fitted))
+    X = np.array([[0.0, 0.0], [3.0, -1.0]])
+    assert_array_equal(again.predict_proba(X), fitted.predict_proba(X))
+    assert clone(fitted).get_params()["combine"] == fitted.combine
+
+
+def test_probabilities_separate_walls_from_free_space(fitted, data):
+    hits, starts, ends = data
+    free = starts + 0.5 * (ends - starts)
+    assert fitted.predict_proba(hits).mean() > 0.6 > 0.4 > fitted.predict_proba(free).mean()
+
+
+@pytest.mark.parametrize("params, exc, match", [
+    (dict(clustering="kmeans"), ValueError, "clustering must be one of"),
+    (dict(clustering=3), TypeError, "clustering must be"),
+    (dict(combine="mean"), ValueError, "combine must be one of"),
+    (dict(hyperparameters="all"), ValueError, "hyperparameters must be one of"),
+    (dict(update_experts="never"), ValueError, "update_experts must be one of"),
+    (dict(expert="gpomik"), TypeError, "expert must be a GPOMIK"),
+    (dict(min_hits=0), ValueError, "min_hits"),
+    (dict(max_cluster_size=1.5), TypeError, "max_cluster_size"),
+    (dict(prior_tol=-1.0), ValueError, "prior_tol"),
+    (dict(n_jobs="two"), ValueError, "n_jobs"),
+    (dict(random_state="x"), TypeError, "random_state"),
+])
+def test_bad_parameters(data, params, exc, match):
+    with pytest.raises(exc, match=match):
+        GPMixture(**params).fit(*data)
+
+
+def test_bad_data(data):
+    hits, starts, ends = data
+    with pytest.raises(ValueError, match="needs both hits and beams"):
+        GPMixture().fit(None, starts, ends)
+    with pytest.raises(ValueError, match="needs both hits and beams"):
+        GPMixture().fit(hits, None, None)
+    with pytest.raises(ValueError, match="hits"):
+        GPMixture().fit(np.full((3, 2), np.nan), starts, ends)
+    with pytest.raises(ValueError, match="segment_ends"):
+        GPMixture().fit(hits, starts, ends[:-1])
+    with pytest.raises(ValueError, match="hits"):
+        GPMixture(clustering="line").fit(np.c_[hits, hits[:, :1]], np.c_[starts, starts[:, :1]],
+                                         np.c_[ends, ends[:, :1]])
+
+
+def test_not_fitted():
+    model = GPMixture()
+    for call in (lambda: model.predict([[0.0, 0.0]]), lambda: model.predict_proba([[0.0, 0.0]]),
+                 lambda: model.update([[0.0, 0.0]], None, None), lambda: model.n_experts_):
+        with pytest.raises(NotFittedError):
+            call()
+
+
+def test_predict_checks_queries(fitted):
+    with pytest.raises(ValueError, match="X must have shape"):
+        fitted.predict([[0.0, 0.0, 0.0]])
+    with pytest.raises(TypeError, match="return_var"):
+        fitted.predict([[0.0, 0.0]], return_var="yes")
