@@ -225,9 +225,15 @@ class GPMixture(BaseEstimator):
         their defaults, or an instance of one of them (or any object with
         ``fit_predict(hits, origins)`` and ``partial_fit(hits, origins)``),
         which is cloned.
-    combine : {"bcm", "tresp", "rbcm", "gpoe"}, default="rbcm"
+    combine : {"bcm", "tresp", "rbcm", "gpoe"}, default="gpoe"
         The committee rule.
-    min_hits : int, default=3
+    hyperparameters : {"shared", "own"}, default="shared"
+        ``"shared"``: one set for every expert, maximising the sum of the
+        experts' log marginal likelihoods (Deisenroth & Ng 2015), fitted on
+        whole experts drawn at random until the template's `max_optimize`
+        observations; ``"own"``: each expert maximises its own (the mixture
+        paper), which over-fits small clusters (see the user guide).
+    min_hits : int, default=5
         Fewest hits of a cluster with its own expert.
     max_cluster_size : int, default=1000
         Most observations of one expert at :meth:`fit`; also the experts'
@@ -285,8 +291,8 @@ class GPMixture(BaseEstimator):
     (True, True)
     """
 
-    def __init__(self, expert=None, *, clustering="line", combine="rbcm",
-                 hyperparameters="shared", min_hits=3, max_cluster_size=1000, prior_tol=1e-3,
+    def __init__(self, expert=None, *, clustering="line", combine="gpoe",
+                 hyperparameters="shared", min_hits=5, max_cluster_size=1000, prior_tol=1e-3,
                  update_experts="cholesky", max_optimize=1000, n_jobs=None, random_state=None):
         self.expert = expert
         self.clustering = clustering
