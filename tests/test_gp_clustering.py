@@ -134,6 +134,24 @@ def test_lone_corner_hit_does_not_bridge_two_walls():
     assert lt.n_clusters_ == 2
 
 
+@pytest.mark.parametrize("hits", [[[1.0, 1.0]], [[1.0, 1.0], [9.0, 9.0]]])
+def test_line_tracking_lone_hits_are_clusters(hits):
+    # a lone hit far from every line is a cluster of its own (the tiny-cluster rule
+    # of merge_small_clusters deals with it later)
+    lt = LineTracking().fit(hits, np.zeros((len(hits), 2)))
+    assert_array_equal(lt.labels_, np.arange(len(hits)))
+
+
+def test_line_tracking_lone_far_hit_beside_a_wall():
+    hits, origins = scan([((-5, 2), (5, 2))], (0, 0), n_beams=40)
+    hits = np.vstack([hits, [[0.0, -15.0]]])
+    origins = np.vstack([origins, [[0.0, 0.0]]])
+    labels = LineTracking().fit_predict(hits, origins)
+    assert len(set(labels[:-1])) == 1 and labels[-1] != labels[0]
+    lt = LineTracking().fit(hits[:-1], origins[:-1])
+    assert_array_equal(lt.partial_fit(hits[-1:] + [[0.0, -1.0]], [[0.0, 0.0]]), [1])
+
+
 def test_line_tracking_partial_fit_keeps_old_labels_and_opens_new_ones():
     wall, far = ((-5, 2), (5, 2)), ((8, -5), (8, 5))
     h1, o1 = scans([wall], [(-3, 0), (0, 0)], n_beams=40)
@@ -149,6 +167,24 @@ def test_line_tracking_partial_fit_keeps_old_labels_and_opens_new_ones():
     assert set(new[on_wall]) == {0}
     assert set(new[~on_wall]) == {1} and lt.n_clusters_ == 2
     assert lt.lines_.n_points.tolist() == [np.sum(lt.labels_ == 0), np.sum(~on_wall)]
+
+
+def test_line_tracking_box_streamed_pose_by_pose():
+    lt = LineTracking()
+    parts = [scan(BOX, o, n_beams=180) for o in CORNERS]
+    for hits, origins in parts:
+        lt.partial_fit(hits, origins)
+    assert lt.n_clusters_ == 4
+    _one_label_per_group(lt.labels_, _face(np.vstack([p[0] for p in parts])))
+
+
+def test_line_tracking_partial_fit_short_line_joins_a_new_cluster():
+    wall, far = ((-5, 2), (5, 2)), ((8, -5), (8, 5))
+    lt = LineTracking().fit(*scans([wall], [(-3, 0), (0, 0)], n_beams=40))
+    hits, origins = scans([wall, far], [(3, 0)], n_beams=60)
+    hits = np.vstack([hits, [[8.05, 6.0]]])           # a lone hit beyond the new wall's end
+    new = lt.partial_fit(hits, np.vstack([origins, [[3.0, 0.0]]]))
+    assert new[-1] == 1 and set(new[np.isclose(hits[:, 0], 8)]) == {1}
 
 
 @pytest.mark.parametrize("hits, match", [

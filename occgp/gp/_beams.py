@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 from scipy.special import erf, erfc
 
 from .._validation import as_numeric, as_points, check_int
-from ._clustering import _segment_distance
+from ._clustering import _best_per_row, _segment_distance
 from ._integral import _check_kernel, _check_quadrature, _covariance, as_segments
 from ._kernels import SquaredExponential
 from ._limits import check_coordinates, check_segments, threads
@@ -351,10 +351,8 @@ def _most_similar(kernel, quadrature, fs, fe, rs, re, n_threads):
             i = np.r_[i, np.arange(len(rows))]
             j = np.r_[j, col]
             S = np.r_[S, value]
-            order = np.lexsort((j, -S, i))
-            i, j, S = i[order], j[order], S[order]
-            top = np.r_[True, i[1:] != i[:-1]]
-            value, col = S[top], j[top]
+            _, col, value = _best_per_row(i, j, -S)       # every row is present
+            value = -value
         best[rows] = np.where(value > 0, col, -1)
     lost = np.flatnonzero(best < 0)
     if len(lost):
@@ -372,12 +370,9 @@ def _nearest_segment(fs, fe, rs, re):
     bound = _segment_distance(fs, fe, rs[nn], re[nn])
     # any nearer segment has its midpoint within bound + both half-lengths
     i, j = _pairs(tree, f_mid, bound + f_half + r_half_max + 1e-12 * (1 + bound))
-    d = _segment_distance(fs[i], fe[i], rs[j], re[j])
-    order = np.lexsort((j, d, i))
-    i, j = i[order], j[order]
-    first = np.r_[True, i[1:] != i[:-1]]
+    rows, picks, _ = _best_per_row(i, j, _segment_distance(fs[i], fe[i], rs[j], re[j]))
     out = nn.astype(np.int64)
-    out[i[first]] = j[first]
+    out[rows] = picks
     return out
 
 
@@ -458,12 +453,8 @@ def merge_small_clusters(labels: ArrayLike, points: ArrayLike, is_hit: ArrayLike
     if lone.any():
         anchor = np.flatnonzero(~lone)
         dist, nearest = cKDTree(points[anchor]).query(points[lone], k=1)
-        target = cluster[anchor[nearest]]
-        source = cluster[lone]
-        order = np.lexsort((target, dist, source))
-        source, target = source[order], target[order]
-        first = np.r_[True, source[1:] != source[:-1]]
+        source, target, _ = _best_per_row(cluster[lone], cluster[anchor[nearest]], dist)
         into = np.arange(k)
-        into[source[first]] = target[first]
+        into[source] = target
         out = into[cluster]
     return rank[out].astype(np.int64)

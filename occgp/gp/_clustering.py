@@ -109,6 +109,19 @@ def _components(n, i, j):
     return comp.astype(np.int64)
 
 
+def _best_per_row(i, j, score):
+    """For each distinct `i`, the `j` of lowest `score` (ties: lowest `j`).
+
+    Returns (rows, picks, scores), rows ascending.
+    """
+    if not len(i):
+        return i, j, score
+    order = np.lexsort((j, score, i))
+    i, j, score = i[order], j[order], score[order]
+    first = np.r_[True, i[1:] != i[:-1]]
+    return i[first], j[first], score[first]
+
+
 def _group_starts(labels):
     """(order, starts): `labels` sorted stably and where each group starts."""
     order = np.argsort(labels, kind="stable")
@@ -651,11 +664,8 @@ class LineTracking(_Clustering):
         i, j = _near_pairs(short.starts, short.ends, clusters.starts, clusters.ends,
                            reach=self._reach(params))
         ok, score = self._match(short, i, clusters, j, params, angle=False)
-        i, j, score = i[ok], j[ok], score[ok]
-        order = np.lexsort((j, score, i))
-        i, j = i[order], j[order]
-        first = np.r_[True, i[1:] != i[:-1]]
-        best[i[first]] = j[first]
+        rows, picks, _ = _best_per_row(i[ok], j[ok], score[ok])
+        best[rows] = picks
         return best
 
     # ------------------------------------------------------------- clusters
@@ -683,7 +693,7 @@ class LineTracking(_Clustering):
             cluster_of_line[free] = m + comp
         # short lines: join the best cluster (existing or new), or cluster among themselves
         if len(short_idx):
-            long_hits = cluster_of_line[line] >= 0
+            long_hits = cluster_of_line[line] >= m          # hits of the new long clusters
             sets = []
             if m:
                 sets.append(existing)
@@ -712,11 +722,8 @@ class LineTracking(_Clustering):
         i, j = _near_pairs(lines.starts, lines.ends, existing.starts, existing.ends,
                            reach=self._reach(params))
         ok, score = self._match(lines, i, existing, j, params)
-        i, j, score = i[ok], j[ok], score[ok]
-        order = np.lexsort((j, score, i))
-        i, j = i[order], j[order]
-        first = np.r_[True, i[1:] != i[:-1]]
-        best[i[first]] = j[first]
+        rows, picks, _ = _best_per_row(i[ok], j[ok], score[ok])
+        best[rows] = picks
         return best
 
     def _fit(self, hits, origins, params):
@@ -1122,11 +1129,8 @@ class PlaneClustering(_Clustering):
                 kind[q], normal[q], direction[q], old["normal"][p], params)
             if not ok.any():
                 break
-            q, p, dist = q[ok], p[ok], dist[ok]
-            order = np.lexsort((p, dist, q))
-            q, p = q[order], p[order]
-            first = np.r_[True, q[1:] != q[:-1]]
-            owner[n_old + q[first]] = p[first]
+            q, p, _ = _best_per_row(q[ok], p[ok], dist[ok])
+            owner[n_old + q] = p
         labels = owner[n_old:].copy()
         joined = labels >= 0
         new = dict(old)
