@@ -301,7 +301,8 @@ def test_dirichlet_process_rejects_bad_dimensions():
     with pytest.raises(ValueError, match=r"hits must have shape \(n_hits, D\) with D in 1..3"):
         DirichletProcessClustering().fit(np.zeros((3, 4)), np.zeros((3, 4)))
     dp = DirichletProcessClustering(random_state=0).fit(np.eye(3)[:, :2], np.zeros((3, 2)))
-    with pytest.raises(ValueError, match=r"hits must have shape \(n_points, 2\)"):
+    with pytest.raises(ValueError, match=r"hits must have shape \(n_hits, 2\) \(the "
+                                         r"dimension of the first fit\), got \(2, 3\)"):
         dp.partial_fit(np.zeros((2, 3)), np.zeros((2, 3)))
 
 
@@ -509,6 +510,8 @@ def test_assign_beams_without_beams_or_without_returns():
     (lambda: assign_beams([-1], [[1.0, 0]], [[0, 0]], [[1.0, 0]]), ValueError,
      "hit_labels must be non-negative"),
     (lambda: assign_beams([0.5], [[1.0, 0]], [[0, 0]], [[1.0, 0]]), TypeError,
+     "hit_labels must hold integers, got dtype float64"),
+    (lambda: assign_beams(["a"], [[1.0, 0]], [[0, 0]], [[1.0, 0]]), TypeError,
      "hit_labels must hold real numbers"),
     (lambda: assign_beams([0], [[1.0, 0]], [[0, 0, 0]], [[1.0, 0, 0]]), ValueError,
      r"segment_starts must have shape \(n_points, 2\)"),
@@ -572,6 +575,8 @@ def test_merge_small_clusters_with_no_cluster_kept_gives_one_cluster():
     (([0, 1], np.zeros((2, 2)), [1, 0]), TypeError, "is_hit must hold real numbers or booleans"),
     (([0, 1], np.zeros((2, 2)), [True]), ValueError, r"is_hit must have shape \(2,\)"),
     (([0, -1], np.zeros((2, 2)), [True, False]), ValueError, "labels must be non-negative"),
+    (([[0, 1]], np.zeros((2, 2)), [True, False]), ValueError, r"labels must have shape \(n,\)"),
+    (([0.0, 1.0], np.zeros((2, 2)), [True, False]), TypeError, "labels must hold integers"),
     (([0, 1], [[0, 0], [np.nan, 0]], [True, False]), ValueError, "points must be finite"),
     (([0, 1], np.zeros((2, 2)), [True, False], 0), ValueError, "min_hits must be a positive"),
 ])
@@ -591,3 +596,25 @@ def test_segment_distance_against_sampling():
     b = q0 + u * (q1 - q0)
     sampled = np.linalg.norm(a[:, None] - b[None], axis=-1).min(axis=(0, 1))
     assert (d <= sampled + 1e-12).all() and np.allclose(d, sampled, atol=0.05)
+
+
+@pytest.mark.parametrize("make", [LineTracking, lambda: DirichletProcessClustering(random_state=0),
+                                  lambda: PlaneClustering(random_state=0)])
+def test_clusterers_pickle_and_continue_alike(make):
+    import pickle
+
+    rng = np.random.default_rng(10)
+    model = make()
+    dim = 3 if isinstance(model, PlaneClustering) else 2
+    if dim == 2:
+        hits, origins = scans(BOX, CORNERS[:2], n_beams=90)
+        new, new_origins = scan(BOX, CORNERS[2], n_beams=90)
+    else:
+        hits = _corner(6)
+        origins = np.ones_like(hits)
+        new = _corner(6) + rng.normal(0, 0.001, hits.shape)
+        new_origins = np.ones_like(new)
+    model.fit(hits, origins)
+    copy = pickle.loads(pickle.dumps(model))
+    assert_array_equal(copy.partial_fit(new, new_origins), model.partial_fit(new, new_origins))
+    assert_array_equal(copy.labels_, model.labels_)
