@@ -446,7 +446,9 @@ def merge_small_clusters(labels: ArrayLike, points: ArrayLike, is_hit: ArrayLike
         raise ValueError(f"points must have shape ({n}, D) with D in 1..3 (one row per label), "
                          f"got {arr.shape}")
     points = as_points(arr, "points", arr.shape[1])
-    hit = as_numeric(is_hit, "is_hit", kinds="b")
+    hit = as_numeric(is_hit, "is_hit", kinds="iufb")
+    if hit.dtype != bool:
+        raise TypeError(f"is_hit must hold booleans, got dtype {hit.dtype}")
     if hit.shape != (n,):
         raise ValueError(f"is_hit must have shape ({n},), got {hit.shape}")
     min_hits = check_int(min_hits, "min_hits", low=1)

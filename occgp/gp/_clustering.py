@@ -92,6 +92,15 @@ def _check_random_state(random_state):
     return int(random_state)
 
 
+def _check_at_least(value, name, low, high=None):
+    """An int in [low, high] (check_int's type check, a message that says the bounds)."""
+    v = check_int(value, name)
+    if v < low or (high is not None and v > high):
+        want = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise ValueError(f"{name} must be an int {want}, got {v}")
+    return v
+
+
 def _check_angle(value, name):
     return check_real(value, name, low=0.0, high=90.0, low_open=False, high_open=False)
 
@@ -258,14 +267,15 @@ class DirichletProcessClustering(_Clustering):
         The concentration α of the Dirichlet process (scikit-learn's
         ``weight_concentration_prior``); larger values give more clusters.
     max_clusters : int, default=50
-        Truncation of the process: at most this many clusters per fit.
+        Truncation of the process: at most this many clusters per fit (at
+        most 1000: the fit holds ``n_hits x max_clusters`` responsibilities).
     covariance_type : {"full", "tied", "diag", "spherical"}, default="full"
     max_iter : int, default=500
-        Most variational iterations per fit. A fit that stops before
+        Most variational iterations per fit (at most 100,000). A fit that stops before
         converging is kept (``converged_`` is False); scikit-learn's
         ConvergenceWarning is not raised.
     n_init : int, default=1
-        Initialisations per fit; the best lower bound wins.
+        Initialisations per fit (at most 100); the best lower bound wins.
     random_state : int, numpy Generator, RandomState or None, default=None
         Seeds the k-means initialisation; an int makes the result
         reproducible.
@@ -325,11 +335,11 @@ class DirichletProcessClustering(_Clustering):
     def _check_params(self):
         return dict(
             concentration=check_real(self.concentration, "concentration", low=0.0),
-            max_clusters=check_int(self.max_clusters, "max_clusters", low=1),
+            max_clusters=check_int(self.max_clusters, "max_clusters", low=1, high=1000),
             covariance_type=check_choice(self.covariance_type, "covariance_type",
                                          ("full", "tied", "diag", "spherical")),
-            max_iter=check_int(self.max_iter, "max_iter", low=1),
-            n_init=check_int(self.n_init, "n_init", low=1),
+            max_iter=check_int(self.max_iter, "max_iter", low=1, high=100_000),
+            n_init=check_int(self.n_init, "n_init", low=1, high=100),
             random_state=_check_random_state(self.random_state),
             covariance_prior=None if self.covariance_prior is None else
             check_real(self.covariance_prior, "covariance_prior", low=0.0))
@@ -613,7 +623,7 @@ class LineTracking(_Clustering):
             gap=check_real(self.gap_threshold, "gap_threshold", low=0.0),
             cos_angle=np.cos(np.radians(_check_angle(self.merge_angle, "merge_angle"))),
             merge=check_real(self.merge_distance, "merge_distance", low=0.0),
-            min_points=check_int(self.min_points, "min_points", low=2))
+            min_points=_check_at_least(self.min_points, "min_points", 2))
 
     # ------------------------------------------------------------- tracking
     @staticmethod
@@ -882,15 +892,21 @@ class Planes(NamedTuple):
     is_plane: NDArray[np.bool_]
 
 
+#: Most neighbours per hit (PlaneClustering's n_neighbors), and hits whose
+#: neighbourhoods are analysed at once (bounds the memory of the PCA).
+_MAX_NEIGHBORS = 100
+_PCA_BLOCK = 20_000
 #: Kinds of a hit's neighbourhood (its local principal spreads against distance_threshold).
 _POINT, _LINE, _PLANE = 0, 1, 2
 
 
 def _local_shape(points, neighbours, distance, tan):
     """Normal, main direction, kind and curvature of each point's neighbourhood (PCA)."""
-    P = points[neighbours]
-    Q = P - P.mean(axis=1, keepdims=True)
-    C = np.einsum("nki,nkj->nij", Q, Q) / neighbours.shape[1]
+    C = np.empty((len(neighbours), 3, 3))
+    for lo in range(0, len(neighbours), _PCA_BLOCK):
+        P = points[neighbours[lo:lo + _PCA_BLOCK]]
+        Q = P - P.mean(axis=1, keepdims=True)
+        C[lo:lo + _PCA_BLOCK] = np.einsum("nki,nkj->nij", Q, Q) / neighbours.shape[1]
     w, v = np.linalg.eigh(C)
     w = np.maximum(w, 0.0)
     spread = np.sqrt(w)
@@ -977,7 +993,7 @@ class PlaneClustering(_Clustering):
         Largest angle (degrees, in [0, 90]) between normals that agree.
     n_neighbors : int, default=10
         Neighbours of each hit (itself excluded) for its local shape and
-        the graph; at least 2.
+        the graph; 2 to 100.
     min_region_size : int, default=30
         Smallest region kept as a plane.
     concentration : float, default=1.0
@@ -1045,7 +1061,7 @@ class PlaneClustering(_Clustering):
         params = dict(
             distance=check_real(self.distance_threshold, "distance_threshold", low=0.0),
             cos=np.cos(angle), sin=np.sin(angle), tan=np.tan(angle),
-            k=check_int(self.n_neighbors, "n_neighbors", low=2),
+            k=_check_at_least(self.n_neighbors, "n_neighbors", 2, _MAX_NEIGHBORS),
             min_size=check_int(self.min_region_size, "min_region_size", low=1),
             n_jobs=check_n_jobs(self.n_jobs))
         params["dp"] = DirichletProcessClustering(concentration=self.concentration,
