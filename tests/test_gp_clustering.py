@@ -134,6 +134,24 @@ def test_lone_corner_hit_does_not_bridge_two_walls():
     assert lt.n_clusters_ == 2
 
 
+@pytest.mark.parametrize("hits", [[[1.0, 1.0]], [[1.0, 1.0], [9.0, 9.0]]])
+def test_line_tracking_lone_hits_are_clusters(hits):
+    # a lone hit far from every line is a cluster of its own (the tiny-cluster rule
+    # of merge_small_clusters deals with it later)
+    lt = LineTracking().fit(hits, np.zeros((len(hits), 2)))
+    assert_array_equal(lt.labels_, np.arange(len(hits)))
+
+
+def test_line_tracking_lone_far_hit_beside_a_wall():
+    hits, origins = scan([((-5, 2), (5, 2))], (0, 0), n_beams=40)
+    hits = np.vstack([hits, [[0.0, -15.0]]])
+    origins = np.vstack([origins, [[0.0, 0.0]]])
+    labels = LineTracking().fit_predict(hits, origins)
+    assert len(set(labels[:-1])) == 1 and labels[-1] != labels[0]
+    lt = LineTracking().fit(hits[:-1], origins[:-1])
+    assert_array_equal(lt.partial_fit(hits[-1:] + [[0.0, -1.0]], [[0.0, 0.0]]), [1])
+
+
 def test_line_tracking_partial_fit_keeps_old_labels_and_opens_new_ones():
     wall, far = ((-5, 2), (5, 2)), ((8, -5), (8, 5))
     h1, o1 = scans([wall], [(-3, 0), (0, 0)], n_beams=40)
@@ -149,6 +167,24 @@ def test_line_tracking_partial_fit_keeps_old_labels_and_opens_new_ones():
     assert set(new[on_wall]) == {0}
     assert set(new[~on_wall]) == {1} and lt.n_clusters_ == 2
     assert lt.lines_.n_points.tolist() == [np.sum(lt.labels_ == 0), np.sum(~on_wall)]
+
+
+def test_line_tracking_box_streamed_pose_by_pose():
+    lt = LineTracking()
+    parts = [scan(BOX, o, n_beams=180) for o in CORNERS]
+    for hits, origins in parts:
+        lt.partial_fit(hits, origins)
+    assert lt.n_clusters_ == 4
+    _one_label_per_group(lt.labels_, _face(np.vstack([p[0] for p in parts])))
+
+
+def test_line_tracking_partial_fit_short_line_joins_a_new_cluster():
+    wall, far = ((-5, 2), (5, 2)), ((8, -5), (8, 5))
+    lt = LineTracking().fit(*scans([wall], [(-3, 0), (0, 0)], n_beams=40))
+    hits, origins = scans([wall, far], [(3, 0)], n_beams=60)
+    hits = np.vstack([hits, [[8.05, 6.0]]])           # a lone hit beyond the new wall's end
+    new = lt.partial_fit(hits, np.vstack([origins, [[3.0, 0.0]]]))
+    assert new[-1] == 1 and set(new[np.isclose(hits[:, 0], 8)]) == {1}
 
 
 @pytest.mark.parametrize("hits, match", [
@@ -174,7 +210,7 @@ def test_clusterers_reject_mismatched_origins_and_non_numbers():
     (dict(gap_threshold=np.inf), ValueError, "gap_threshold must lie in"),
     (dict(merge_angle=95.0), ValueError, r"merge_angle must lie in \[0.0, 90.0\]"),
     (dict(merge_distance="1"), TypeError, "merge_distance must be a real number"),
-    (dict(min_points=1), ValueError, "min_points must be"),
+    (dict(min_points=1), ValueError, "min_points must be an int >= 2, got 1"),
     (dict(min_points=2.5), TypeError, "min_points must be"),
 ])
 def test_line_tracking_rejects_bad_params(params, error, match):
@@ -249,12 +285,15 @@ def test_dirichlet_process_partial_fit_joins_known_blobs_and_opens_new_ones():
 
 @pytest.mark.parametrize("params, error, match", [
     (dict(concentration=0.0), ValueError, "concentration must lie in"),
-    (dict(max_clusters=0), ValueError, "max_clusters must be a positive int"),
+    (dict(max_clusters=0), ValueError, r"max_clusters must lie in \[1, 1000\], got 0"),
     (dict(covariance_type="round"), ValueError, "covariance_type must be one of"),
     (dict(max_iter=True), TypeError, "max_iter must be"),
     (dict(random_state="a"), TypeError, "random_state must be None, an int"),
     (dict(random_state=-1), ValueError, r"random_state must lie in \[0, 2\*\*32 - 1\]"),
     (dict(covariance_prior=-1.0), ValueError, "covariance_prior must lie in"),
+    (dict(max_clusters=10 ** 6), ValueError, r"max_clusters must lie in \[1, 1000\]"),
+    (dict(max_iter=10 ** 9), ValueError, r"max_iter must lie in \[1, 100000\]"),
+    (dict(n_init=1000), ValueError, r"n_init must lie in \[1, 100\]"),
 ])
 def test_dirichlet_process_rejects_bad_params(params, error, match):
     with pytest.raises(error, match=match):
@@ -265,7 +304,8 @@ def test_dirichlet_process_rejects_bad_dimensions():
     with pytest.raises(ValueError, match=r"hits must have shape \(n_hits, D\) with D in 1..3"):
         DirichletProcessClustering().fit(np.zeros((3, 4)), np.zeros((3, 4)))
     dp = DirichletProcessClustering(random_state=0).fit(np.eye(3)[:, :2], np.zeros((3, 2)))
-    with pytest.raises(ValueError, match=r"hits must have shape \(n_points, 2\)"):
+    with pytest.raises(ValueError, match=r"hits must have shape \(n_hits, 2\) \(the "
+                                         r"dimension of the first fit\), got \(2, 3\)"):
         dp.partial_fit(np.zeros((2, 3)), np.zeros((2, 3)))
 
 
@@ -350,7 +390,8 @@ def test_plane_clustering_partial_fit_grows_the_floor(room_scans):
 
 @pytest.mark.parametrize("params, error, match", [
     (dict(angle_threshold=-1.0), ValueError, "angle_threshold must lie in"),
-    (dict(n_neighbors=1), ValueError, "n_neighbors must lie in|n_neighbors must be"),
+    (dict(n_neighbors=1), ValueError, r"n_neighbors must be an int in \[2, 100\], got 1"),
+    (dict(n_neighbors=10 ** 9), ValueError, r"n_neighbors must be an int in \[2, 100\]"),
     (dict(min_region_size=0), ValueError, "min_region_size must be a positive int"),
     (dict(concentration=-2.0), ValueError, "concentration must lie in"),
     (dict(n_jobs=0), ValueError, "n_jobs must be None"),
@@ -473,6 +514,8 @@ def test_assign_beams_without_beams_or_without_returns():
     (lambda: assign_beams([-1], [[1.0, 0]], [[0, 0]], [[1.0, 0]]), ValueError,
      "hit_labels must be non-negative"),
     (lambda: assign_beams([0.5], [[1.0, 0]], [[0, 0]], [[1.0, 0]]), TypeError,
+     "hit_labels must hold integers, got dtype float64"),
+    (lambda: assign_beams(["a"], [[1.0, 0]], [[0, 0]], [[1.0, 0]]), TypeError,
      "hit_labels must hold real numbers"),
     (lambda: assign_beams([0], [[1.0, 0]], [[0, 0, 0]], [[1.0, 0, 0]]), ValueError,
      r"segment_starts must have shape \(n_points, 2\)"),
@@ -533,9 +576,11 @@ def test_merge_small_clusters_with_no_cluster_kept_gives_one_cluster():
 
 @pytest.mark.parametrize("args, error, match", [
     (([0, 1], np.zeros((3, 2)), [True, False]), ValueError, r"points must have shape \(2, D\)"),
-    (([0, 1], np.zeros((2, 2)), [1, 0]), TypeError, "is_hit must hold real numbers or booleans"),
+    (([0, 1], np.zeros((2, 2)), [1, 0]), TypeError, "is_hit must hold booleans, got dtype int"),
     (([0, 1], np.zeros((2, 2)), [True]), ValueError, r"is_hit must have shape \(2,\)"),
     (([0, -1], np.zeros((2, 2)), [True, False]), ValueError, "labels must be non-negative"),
+    (([[0, 1]], np.zeros((2, 2)), [True, False]), ValueError, r"labels must have shape \(n,\)"),
+    (([0.0, 1.0], np.zeros((2, 2)), [True, False]), TypeError, "labels must hold integers"),
     (([0, 1], [[0, 0], [np.nan, 0]], [True, False]), ValueError, "points must be finite"),
     (([0, 1], np.zeros((2, 2)), [True, False], 0), ValueError, "min_hits must be a positive"),
 ])
@@ -555,3 +600,25 @@ def test_segment_distance_against_sampling():
     b = q0 + u * (q1 - q0)
     sampled = np.linalg.norm(a[:, None] - b[None], axis=-1).min(axis=(0, 1))
     assert (d <= sampled + 1e-12).all() and np.allclose(d, sampled, atol=0.05)
+
+
+@pytest.mark.parametrize("make", [LineTracking, lambda: DirichletProcessClustering(random_state=0),
+                                  lambda: PlaneClustering(random_state=0)])
+def test_clusterers_pickle_and_continue_alike(make):
+    import pickle
+
+    rng = np.random.default_rng(10)
+    model = make()
+    dim = 3 if isinstance(model, PlaneClustering) else 2
+    if dim == 2:
+        hits, origins = scans(BOX, CORNERS[:2], n_beams=90)
+        new, new_origins = scan(BOX, CORNERS[2], n_beams=90)
+    else:
+        hits = _corner(6)
+        origins = np.ones_like(hits)
+        new = _corner(6) + rng.normal(0, 0.001, hits.shape)
+        new_origins = np.ones_like(new)
+    model.fit(hits, origins)
+    copy = pickle.loads(pickle.dumps(model))
+    assert_array_equal(copy.partial_fit(new, new_origins), model.partial_fit(new, new_origins))
+    assert_array_equal(copy.labels_, model.labels_)

@@ -1,4 +1,4 @@
-"""Clustering of laser hits for the mixture of GP experts (Kim & Kim 2013, §3.1).
+"""Clustering of laser hits for the mixture of GP experts (Kim & Kim 2022, §3.1).
 
 Every clusterer follows one protocol: ``fit_predict(hits, origins)`` labels the
 hits ``0..k-1`` (``origins`` is the sensor position of each hit; consecutive
@@ -30,7 +30,8 @@ from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import threadpool_limits
 
 from .. import _linetrack
-from .._validation import as_numeric, as_points, check_choice, check_int, check_real
+from .._validation import (as_numeric, as_points, check_choice, check_int, check_n_jobs,
+                           check_real, n_threads)
 
 __all__ = ["DirichletProcessClustering", "LineTracking", "PlaneClustering", "Lines", "Planes"]
 
@@ -52,6 +53,9 @@ def _check_hits(hits, origins, dims, what="", dim=None):
                 f"(n_hits, D) with D in {dims[0]}..{dims[-1]}"
             raise ValueError(f"hits must have shape {want}{what}, got {arr.shape}")
         dim = arr.shape[1]
+    elif arr.ndim != 2 or arr.shape[1] != dim:
+        raise ValueError(f"hits must have shape (n_hits, {dim}) (the dimension of the first "
+                         f"fit), got {arr.shape}")
     hits = as_points(arr, "hits", dim)
     if not len(hits):
         raise ValueError("hits must hold at least one hit, got 0 rows")
@@ -88,6 +92,15 @@ def _check_random_state(random_state):
     return int(random_state)
 
 
+def _check_at_least(value, name, low, high=None):
+    """An int in [low, high] (check_int's type check, a message that says the bounds)."""
+    v = check_int(value, name)
+    if v < low or (high is not None and v > high):
+        want = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise ValueError(f"{name} must be an int {want}, got {v}")
+    return v
+
+
 def _check_angle(value, name):
     return check_real(value, name, low=0.0, high=90.0, low_open=False, high_open=False)
 
@@ -107,6 +120,19 @@ def _components(n, i, j):
     graph = coo_matrix((np.ones(len(i), dtype=np.int8), (i, j)), shape=(n, n))
     _, comp = connected_components(graph, directed=False)
     return comp.astype(np.int64)
+
+
+def _best_per_row(i, j, score):
+    """For each distinct `i`, the `j` of lowest `score` (ties: lowest `j`).
+
+    Returns (rows, picks, scores), rows ascending.
+    """
+    if not len(i):
+        return i, j, score
+    order = np.lexsort((j, score, i))
+    i, j, score = i[order], j[order], score[order]
+    first = np.r_[True, i[1:] != i[:-1]]
+    return i[first], j[first], score[first]
 
 
 def _group_starts(labels):
@@ -140,6 +166,16 @@ class _Clustering(BaseEstimator):
         Returns
         -------
         self
+
+        Raises
+        ------
+        ValueError
+            If `hits` is empty, of the wrong shape or dimension for the
+            method, holds NaN or inf or coordinates beyond 1e10 m, if
+            `origins` does not have the shape of `hits`, or on a bad
+            parameter.
+        TypeError
+            On non-numeric input or a parameter of the wrong type.
         """
         params = self._check_params()
         hits, origins = self._check(hits, origins)
@@ -151,7 +187,10 @@ class _Clustering(BaseEstimator):
         return self
 
     def fit_predict(self, hits: ArrayLike, origins: ArrayLike) -> NDArray[np.int64]:
-        """Cluster `hits` from scratch and return their labels (int64, 0..k-1)."""
+        """Cluster `hits` from scratch and return their labels (int64, 0..k-1).
+
+        The same as ``fit(hits, origins).labels_`` (a copy); raises as :meth:`fit`.
+        """
         return self.fit(hits, origins).labels_.copy()
 
     def partial_fit(self, hits: ArrayLike, origins: ArrayLike) -> NDArray[np.int64]:
@@ -171,6 +210,12 @@ class _Clustering(BaseEstimator):
         -------
         labels : ndarray of shape (n_new,), dtype int64
             The labels of the new hits; :attr:`labels_` grows by them.
+
+        Raises
+        ------
+        ValueError, TypeError
+            As :meth:`fit`, and if D differs from the first call's. A rejected
+            update leaves the clusterer unchanged.
         """
         if not hasattr(self, "labels_"):
             return self.fit_predict(hits, origins)
@@ -222,14 +267,15 @@ class DirichletProcessClustering(_Clustering):
         The concentration α of the Dirichlet process (scikit-learn's
         ``weight_concentration_prior``); larger values give more clusters.
     max_clusters : int, default=50
-        Truncation of the process: at most this many clusters per fit.
+        Truncation of the process: at most this many clusters per fit (at
+        most 1000: the fit holds ``n_hits x max_clusters`` responsibilities).
     covariance_type : {"full", "tied", "diag", "spherical"}, default="full"
     max_iter : int, default=500
-        Most variational iterations per fit. A fit that stops before
+        Most variational iterations per fit (at most 100,000). A fit that stops before
         converging is kept (``converged_`` is False); scikit-learn's
         ConvergenceWarning is not raised.
     n_init : int, default=1
-        Initialisations per fit; the best lower bound wins.
+        Initialisations per fit (at most 100); the best lower bound wins.
     random_state : int, numpy Generator, RandomState or None, default=None
         Seeds the k-means initialisation; an int makes the result
         reproducible.
@@ -251,13 +297,20 @@ class DirichletProcessClustering(_Clustering):
         One per fit (:meth:`fit`, then each :meth:`partial_fit` with hits
         that joined no cluster), fitted on scaled hits.
 
+    Notes
+    -----
+    On ``room_2d().scan()`` (351 hits) the defaults give 3–4 clusters
+    depending on the seed (Kim & Kim report 8 on their room): the default
+    prior makes components as broad as the data. ``covariance_prior=1.0``
+    gives 11–12. A fit of 10,000 2D hits (``room_2d().scan(n_poses=750)``)
+    takes about 2 s on 2 cores (18 clusters).
+
     References
     ----------
-    S. Kim, J. Kim, "Occupancy mapping and surface reconstruction using local
-    Gaussian processes with Kinect sensors" / "Building occupancy maps with a
-    mixture of Gaussian processes", ICRA 2012, §3.1.1; D. Blei, M. Jordan,
-    "Variational inference for Dirichlet process mixtures", Bayesian Analysis
-    1 (2006).
+    S. Kim, J. Kim, "Efficient clustering for continuous occupancy mapping
+    using a mixture of Gaussian processes", Sensors 22(18), 6832 (2022),
+    §3.1.1; D. Blei, M. Jordan, "Variational inference for Dirichlet process
+    mixtures", Bayesian Analysis 1(1), 2006.
 
     Examples
     --------
@@ -282,11 +335,11 @@ class DirichletProcessClustering(_Clustering):
     def _check_params(self):
         return dict(
             concentration=check_real(self.concentration, "concentration", low=0.0),
-            max_clusters=check_int(self.max_clusters, "max_clusters", low=1),
+            max_clusters=check_int(self.max_clusters, "max_clusters", low=1, high=1000),
             covariance_type=check_choice(self.covariance_type, "covariance_type",
                                          ("full", "tied", "diag", "spherical")),
-            max_iter=check_int(self.max_iter, "max_iter", low=1),
-            n_init=check_int(self.n_init, "n_init", low=1),
+            max_iter=check_int(self.max_iter, "max_iter", low=1, high=100_000),
+            n_init=check_int(self.n_init, "n_init", low=1, high=100),
             random_state=_check_random_state(self.random_state),
             covariance_prior=None if self.covariance_prior is None else
             check_real(self.covariance_prior, "covariance_prior", low=0.0))
@@ -518,12 +571,26 @@ class LineTracking(_Clustering):
         The fitted line of each cluster: ``centroid``, ``direction``,
         ``extent`` (``t_min, t_max`` along the direction) and ``n_points``.
 
+    Notes
+    -----
+    On ``room_2d().scan()`` (351 hits, 26 scans) the defaults give 26
+    clusters (23 once :func:`merge_small_clusters` has folded those that
+    cannot train a classifier); Kim & Kim report 18 on their room. A fit of
+    10,000 hits (``room_2d().scan(n_poses=750)``, 3,313 lines, 38 clusters)
+    takes about 0.2 s on 2 cores, of which the tracking is 1.4 ms (the
+    compiled loop 0.13 ms, against 15–20 ms in pure Python) and the rest the
+    vectorised merging; :meth:`partial_fit` scan by scan costs about 1 ms a
+    scan. Updates cannot merge clusters, so a map built scan by scan has
+    more of them than one fit at once (119 against 38 there; 53 against 26
+    on the 26-pose scan).
+
     References
     ----------
     A. Siadat, A. Kaske, S. Klausmann, M. Dufaut, R. Husson, "An optimized
     segmentation method for a 2D laser-scanner applied to mobile robot
-    navigation", IFAC ICICA 1997; S. Kim, J. Kim, "Building occupancy maps
-    with a mixture of Gaussian processes", ICRA 2012, Algorithm 1.
+    navigation", IFAC ICICA 1997; S. Kim, J. Kim, "Efficient clustering for
+    continuous occupancy mapping using a mixture of Gaussian processes",
+    Sensors 22(18), 6832 (2022), §3.1.2, Algorithm 1.
 
     Examples
     --------
@@ -556,7 +623,7 @@ class LineTracking(_Clustering):
             gap=check_real(self.gap_threshold, "gap_threshold", low=0.0),
             cos_angle=np.cos(np.radians(_check_angle(self.merge_angle, "merge_angle"))),
             merge=check_real(self.merge_distance, "merge_distance", low=0.0),
-            min_points=check_int(self.min_points, "min_points", low=2))
+            min_points=_check_at_least(self.min_points, "min_points", 2))
 
     # ------------------------------------------------------------- tracking
     @staticmethod
@@ -651,11 +718,8 @@ class LineTracking(_Clustering):
         i, j = _near_pairs(short.starts, short.ends, clusters.starts, clusters.ends,
                            reach=self._reach(params))
         ok, score = self._match(short, i, clusters, j, params, angle=False)
-        i, j, score = i[ok], j[ok], score[ok]
-        order = np.lexsort((j, score, i))
-        i, j = i[order], j[order]
-        first = np.r_[True, i[1:] != i[:-1]]
-        best[i[first]] = j[first]
+        rows, picks, _ = _best_per_row(i[ok], j[ok], score[ok])
+        best[rows] = picks
         return best
 
     # ------------------------------------------------------------- clusters
@@ -683,12 +747,12 @@ class LineTracking(_Clustering):
             cluster_of_line[free] = m + comp
         # short lines: join the best cluster (existing or new), or cluster among themselves
         if len(short_idx):
-            new_hits = cluster_of_line[line] >= m  # hits of the new clusters' long lines
+            long_hits = cluster_of_line[line] >= m          # hits of the new long clusters
             sets = []
             if m:
                 sets.append(existing)
             if n_new:
-                sets.append(_line_set(hits[new_hits], cluster_of_line[line[new_hits]] - m,
+                sets.append(_line_set(hits[long_hits], cluster_of_line[line[long_hits]] - m,
                                       n_new))
             clusters = _LineSet(*(np.concatenate(parts) for parts in zip(*sets))) \
                 if sets else None
@@ -712,11 +776,8 @@ class LineTracking(_Clustering):
         i, j = _near_pairs(lines.starts, lines.ends, existing.starts, existing.ends,
                            reach=self._reach(params))
         ok, score = self._match(lines, i, existing, j, params)
-        i, j, score = i[ok], j[ok], score[ok]
-        order = np.lexsort((j, score, i))
-        i, j = i[order], j[order]
-        first = np.r_[True, i[1:] != i[:-1]]
-        best[i[first]] = j[first]
+        rows, picks, _ = _best_per_row(i[ok], j[ok], score[ok])
+        best[rows] = picks
         return best
 
     def _fit(self, hits, origins, params):
@@ -831,15 +892,21 @@ class Planes(NamedTuple):
     is_plane: NDArray[np.bool_]
 
 
+#: Most neighbours per hit (PlaneClustering's n_neighbors), and hits whose
+#: neighbourhoods are analysed at once (bounds the memory of the PCA).
+_MAX_NEIGHBORS = 100
+_PCA_BLOCK = 20_000
 #: Kinds of a hit's neighbourhood (its local principal spreads against distance_threshold).
 _POINT, _LINE, _PLANE = 0, 1, 2
 
 
 def _local_shape(points, neighbours, distance, tan):
     """Normal, main direction, kind and curvature of each point's neighbourhood (PCA)."""
-    P = points[neighbours]
-    Q = P - P.mean(axis=1, keepdims=True)
-    C = np.einsum("nki,nkj->nij", Q, Q) / neighbours.shape[1]
+    C = np.empty((len(neighbours), 3, 3))
+    for lo in range(0, len(neighbours), _PCA_BLOCK):
+        P = points[neighbours[lo:lo + _PCA_BLOCK]]
+        Q = P - P.mean(axis=1, keepdims=True)
+        C[lo:lo + _PCA_BLOCK] = np.einsum("nki,nkj->nij", Q, Q) / neighbours.shape[1]
     w, v = np.linalg.eigh(C)
     w = np.maximum(w, 0.0)
     spread = np.sqrt(w)
@@ -875,13 +942,16 @@ class PlaneClustering(_Clustering):
 
     The 3D counterpart of line tracking (Kim & Kim's future work):
 
-    1. **Local shape.** Each hit's `n_neighbors` nearest hits
-       (:class:`scipy.spatial.cKDTree`) are analysed by PCA. A neighbourhood
-       whose second principal spread (standard deviation) is at least
-       `distance_threshold` is *planar* and gives the hit a normal; one that
-       only spreads along one direction (a single row of a sparse LiDAR) is
-       *linear* and gives a direction; otherwise the hit is *point-like*.
-       The curvature is the smallest eigenvalue over their sum.
+    1. **Local shape.** Each hit's `n_neighbors` nearest hits (and itself;
+       :class:`scipy.spatial.cKDTree`) are analysed by PCA, with principal
+       spreads (standard deviations) ``s0 <= s1 <= s2``. The neighbourhood
+       is *planar*, and gives the hit a normal, when it is thin
+       (``s0 <= distance_threshold`` and ``s0 <= tan(angle_threshold) * s1``,
+       so that the normal is known to about the angle threshold) and wide
+       (``s1 >= distance_threshold``); *linear*, giving a direction, when
+       only ``s2`` reaches `distance_threshold` (one row of a sparse LiDAR);
+       otherwise (a corner, an edge, a lone hit) *point-like*. The curvature
+       is ``s0^2 / (s0^2 + s1^2 + s2^2)``.
     2. **Region growing.** Planar hits are seeds in order of increasing
        curvature. A region starts with the seed's plane and grows
        breadth-first over the k-NN graph: a neighbour joins when it lies
@@ -902,14 +972,17 @@ class PlaneClustering(_Clustering):
 
     Labels are numbered in order of each cluster's first hit. In
     :meth:`partial_fit` the new hits' shapes are computed with neighbours
-    among all hits so far; a new hit joins the plane it is nearest to among
-    those it lies within `distance_threshold` of, agrees with (as in step 2)
-    and lies within the bounding box of (grown by the margin of the fit);
-    the planes are refit. The other new hits are clustered among themselves
-    as in :meth:`fit` (steps 2–4, over their own k-NN graph) and get new
-    labels. Existing clusters never merge, and Dirichlet-process clusters
-    never grow. The hits are kept (``n_hits x 3`` floats) for the
-    neighbourhoods of later updates.
+    among all hits so far, and the existing planes grow into the new hits
+    over that k-NN graph: a new hit that has a hit of a plane among its
+    neighbours (so it lies within the plane's extent, grown by one
+    neighbourhood) joins it when it lies within `distance_threshold` of the
+    plane and agrees with it (as in step 2), the nearest plane winning, and
+    so on breadth-first; the planes are then refit. The other new hits are
+    clustered among themselves as in :meth:`fit` (steps 2–4, over their own
+    k-NN graph) and get new labels. Existing clusters never merge, and
+    Dirichlet-process clusters never grow. The hits are kept
+    (``n_hits x 3`` floats) for the neighbourhoods of later updates, and
+    each update rebuilds the k-d tree of all of them.
 
     Parameters
     ----------
@@ -920,7 +993,7 @@ class PlaneClustering(_Clustering):
         Largest angle (degrees, in [0, 90]) between normals that agree.
     n_neighbors : int, default=10
         Neighbours of each hit (itself excluded) for its local shape and
-        the graph; at least 2.
+        the graph; 2 to 100.
     min_region_size : int, default=30
         Smallest region kept as a plane.
     concentration : float, default=1.0
@@ -941,6 +1014,15 @@ class PlaneClustering(_Clustering):
     planes_ : Planes
         ``centroid``, ``normal``, ``lower``, ``upper``, ``n_points`` and
         ``is_plane`` of each cluster.
+
+    Notes
+    -----
+    On ``structured_room(0)`` scanned from 4 poses by a 64 x 4 LiDAR (862
+    hits, as in ``bench/bench_gp.py``) the defaults give 19 clusters, 7 of
+    them planes (the floor, the four walls, the partition and the table
+    top); the furniture's other faces, with a few hits each, go to the
+    fallback. 10,000 hits (the same poses, a 256 x 12 LiDAR) take about
+    0.3 s on 2 cores (33 clusters, 19 planes).
 
     References
     ----------
@@ -975,13 +1057,11 @@ class PlaneClustering(_Clustering):
         self.n_jobs = n_jobs
 
     def _check_params(self):
-        from .._validation import check_n_jobs
-
         angle = np.radians(_check_angle(self.angle_threshold, "angle_threshold"))
         params = dict(
             distance=check_real(self.distance_threshold, "distance_threshold", low=0.0),
             cos=np.cos(angle), sin=np.sin(angle), tan=np.tan(angle),
-            k=check_int(self.n_neighbors, "n_neighbors", low=2),
+            k=_check_at_least(self.n_neighbors, "n_neighbors", 2, _MAX_NEIGHBORS),
             min_size=check_int(self.min_region_size, "min_region_size", low=1),
             n_jobs=check_n_jobs(self.n_jobs))
         params["dp"] = DirichletProcessClustering(concentration=self.concentration,
@@ -995,7 +1075,7 @@ class PlaneClustering(_Clustering):
         tree = cKDTree(points)
         k = min(k + 1, len(points))
         dist, nb = tree.query(points if queries is None else queries, k=k,
-                              workers=-1 if n_jobs is None or n_jobs < 0 else n_jobs)
+                              workers=n_threads(n_jobs))
         return dist.reshape(len(nb), -1), nb.reshape(len(nb), -1)
 
     @staticmethod
@@ -1122,11 +1202,8 @@ class PlaneClustering(_Clustering):
                 kind[q], normal[q], direction[q], old["normal"][p], params)
             if not ok.any():
                 break
-            q, p, dist = q[ok], p[ok], dist[ok]
-            order = np.lexsort((p, dist, q))
-            q, p = q[order], p[order]
-            first = np.r_[True, q[1:] != q[:-1]]
-            owner[n_old + q[first]] = p[first]
+            q, p, _ = _best_per_row(q[ok], p[ok], dist[ok])
+            owner[n_old + q] = p
         labels = owner[n_old:].copy()
         joined = labels >= 0
         new = dict(old)
