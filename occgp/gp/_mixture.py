@@ -21,7 +21,7 @@ from sklearn.base import BaseEstimator, clone
 from sklearn.utils.validation import check_is_fitted
 
 from .._validation import as_points, check_bool, check_choice, check_int, check_n_jobs, check_real
-from ._beams import assign_beams, merge_small_clusters
+from ._beams import _row_index, assign_beams, merge_small_clusters
 from ._clustering import DirichletProcessClustering, LineTracking, PlaneClustering
 from ._committee import COMBINE_RULES, Committee
 from ._gpomik import GPOMIK, _spatial_groups
@@ -45,25 +45,14 @@ _DENSE_SIZE = 400
 _BLOCK = 4096
 
 
-def _row_keys(a):
-    """Rows of a float array as hashable bytes (exact equality)."""
-    a = np.ascontiguousarray(a, dtype=np.float64) + 0.0  # -0.0 and 0.0 are one row
-    return a.view(np.dtype((np.void, a.dtype.itemsize * a.shape[1]))).ravel()
-
-
 def hit_origins(hits, segment_starts, segment_ends):
     """The sensor position of each hit: the start of the first beam ending exactly on it.
 
     A hit that ends no beam is its own origin (a scan of one hit).
     """
     origins = hits.copy()
-    if not len(segment_ends) or not len(hits):
-        return origins
-    keys, first = np.unique(_row_keys(segment_ends), return_index=True)
-    hk = _row_keys(hits)
-    pos = np.clip(np.searchsorted(keys, hk), 0, len(keys) - 1)
-    found = keys[pos] == hk
-    origins[found] = segment_starts[first[pos[found]]]
+    beam = _row_index(hits, segment_ends)
+    origins[beam >= 0] = segment_starts[beam[beam >= 0]]
     return origins
 
 
