@@ -9,8 +9,9 @@ from numpy.testing import assert_array_equal
 from occgp import _linetrack
 from occgp.gp import Matern32, SquaredExponential, integral_kernel
 from occgp.gp._beams import assign_beams, merge_small_clusters
-from occgp.gp._clustering import (DirichletProcessClustering, LineTracking, PlaneClustering,
-                                  _segment_distance)
+from occgp.gp._clustering import DirichletProcessClustering, _segment_distance
+from occgp.gp._lines import LineTracking
+from occgp.gp._planes import PlaneClustering
 
 
 # ------------------------------------------------------------------ hand-made scans

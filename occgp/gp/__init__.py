@@ -18,7 +18,9 @@
 """
 
 from ._beams import assign_beams, merge_small_clusters
-from ._clustering import DirichletProcessClustering, LineTracking, PlaneClustering
+from ._clustering import DirichletProcessClustering
+from ._lines import LineTracking
+from ._planes import PlaneClustering
 from ._committee import COMBINE_RULES, combine_predictions
 from ._gpom import GPOM
 from ._gpomik import GPOMIK

@@ -22,7 +22,9 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._validation import as_points, check_bool, check_choice, check_int, check_n_jobs, check_real
 from ._beams import _row_index, assign_beams, merge_small_clusters
-from ._clustering import DirichletProcessClustering, LineTracking, PlaneClustering
+from ._clustering import DirichletProcessClustering
+from ._lines import LineTracking
+from ._planes import PlaneClustering
 from ._committee import COMBINE_RULES, Committee
 from ._gpomik import GPOMIK, _spatial_groups
 from ._gpr import optimize_shared_hyperparameters
