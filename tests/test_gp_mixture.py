@@ -265,3 +265,21 @@ def test_predict_checks_queries(fitted):
         fitted.predict([[0.0, 0.0, 0.0]])
     with pytest.raises(TypeError, match="return_var"):
         fitted.predict([[0.0, 0.0]], return_var="yes")
+
+
+def test_plane_clusters_in_3d():
+    from occgp.datasets import LidarSensor, simulate_scans, structured_room
+    scene = structured_room(0)
+    lo, hi = scene.interior_bounds
+    poses = np.array([[lo[0] + 2.5, lo[1] + 2.0, 1.0], [lo[0] + 7.5, lo[1] + 5.0, 1.0]])
+    scans = simulate_scans(scene, poses, LidarSensor(n_horizontal=48, n_vertical=4,
+                                                     max_range=8.0), seed=0, progress=False)
+    first, second = (observations_from_scans([s]) for s in scans)
+    model = GPMixture(FIXED, clustering="plane", random_state=0).fit(*first)
+    assert model.n_experts_ > 1
+    model.update(*second)
+    X = np.random.default_rng(0).uniform(lo, hi, (200, 3))
+    p = model.predict_proba(X)
+    assert p.shape == (200,) and ((p > 0) & (p < 1)).all()
+    hits = np.vstack([first[0], second[0]])
+    assert model.predict_proba(hits).mean() > 0.5
