@@ -166,6 +166,16 @@ def test_update_touches_only_the_experts_that_got_observations(how):
         assert sum(c.size for c in gp.cells_) == sizes[e]
 
 
+def test_new_experts_of_an_update_share_the_fitted_hyperparameters():
+    first, second = split_scans(3, 10)
+    model = GPMixture(GPOMIK(n_restarts=0), random_state=0).fit(*first)
+    n_before = model.n_experts_
+    model.update(*second)
+    assert model.n_experts_ > n_before
+    for gp in model.experts_:
+        assert gp.kernel_ == model.kernel_ and gp.noise_ == model.noise_
+
+
 def test_cholesky_update_of_an_expert_equals_its_refit_with_fixed_hyperparameters(queries):
     first, second = split_scans()
     grown = GPMixture(FIXED, random_state=0).fit(*first).update(*second)

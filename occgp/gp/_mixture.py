@@ -262,6 +262,9 @@ class GPMixture(BaseEstimator):
         The fitted clustering.
     plsc_ : tuple of float
         PLSC's ``(a, b)`` on the committee's predictions.
+    kernel_, noise_ : kernel and float, or None
+        The shared hyper-parameters (None with ``hyperparameters="own"``;
+        each expert has its own ``kernel_`` and ``noise_``).
     n_dims_ : int
     updated_experts_ : ndarray of int
         The experts the last :meth:`update` changed or created (all of them
@@ -414,6 +417,7 @@ class GPMixture(BaseEstimator):
                 groups.append(np.sort(idx[part]))
         if self.hyperparameters == "shared":
             template = self._shared_template(template, obs, groups, np.random.default_rng(seed))
+        self._expert_template = template  # what update() fits new experts with
         experts = self._parallel()(
             delayed(_fit_expert)(template, _order(obs.take(idx)), self._expert_seed(e))
             for e, idx in enumerate(groups))
@@ -572,7 +576,8 @@ class GPMixture(BaseEstimator):
             As :meth:`fit`; the model is then unchanged.
         """
         check_is_fitted(self, "experts_")
-        template = self._check_params()
+        self._check_params()
+        template = self._expert_template
         new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
         n_hits = int(np.count_nonzero(new.labels > 0))
         if not len(new.y):
