@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import multiprocessing
 import resource
-import time
 
 import joblib
 import numpy as np
@@ -37,32 +36,13 @@ import numpy as np
 from occgp.datasets import LidarSensor, floor_plan_2d, room_2d, simulate_scans, structured_room
 from occgp.gp import (GPOM, GPOMIK, COMBINE_RULES, GPMixture, OccupancyGrid, grid_points,
                       observations_from_scans)
-from occgp.metrics import roc_auc, roc_curve
+from occgp.metrics import roc_auc
+
+from bench_gp import fpr_at_tpr, table, timed  # the GP bench's table helpers (same folder)
 
 
 #: Poses of floor_plan_2d() that give about n observations (32 a pose).
 POSES = {1000: 31, 2000: 62, 5000: 154, 10000: 310, 20000: 619}
-
-
-def fpr_at_tpr(truth, prob, tpr_target=0.9):
-    fpr, tpr, _ = roc_curve(truth, prob, drop_intermediate=False)
-    return float(fpr[np.searchsorted(tpr, tpr_target)])
-
-
-def table(rows, columns):
-    widths = [max(len(c), *(len(f"{r[i]}") for r in rows)) for i, c in enumerate(columns)]
-    print("  ".join(c.ljust(w) for c, w in zip(columns, widths)))
-    print("  ".join("-" * w for w in widths))
-    for r in rows:
-        print("  ".join(f"{v}".rjust(w) if not isinstance(v, str) else v.ljust(w)
-                        for v, w in zip(r, widths)))
-    print(flush=True)
-
-
-def timed(fn):
-    t = time.perf_counter()
-    out = fn()
-    return out, time.perf_counter() - t
 
 
 def describe(model):
