@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, clone
 from sklearn.utils.validation import check_is_fitted
+from threadpoolctl import threadpool_limits
 
 from .._validation import as_points, check_bool, check_choice, check_int, check_n_jobs, check_real
 from ._beams import _row_index, assign_beams, merge_small_clusters
@@ -122,9 +123,11 @@ class _Reach:
 
 
 def _fit_expert(template, obs, seed):
+    """A clone of `template` fitted on `obs`, with one BLAS thread (the same in any worker)."""
     expert = clone(template).set_params(random_state=seed)
     n_hits = int(np.count_nonzero(obs.labels > 0))
-    return expert.fit(obs.starts[:n_hits], obs.starts[n_hits:], obs.ends[n_hits:])
+    with threadpool_limits(1):
+        return expert.fit(obs.starts[:n_hits], obs.starts[n_hits:], obs.ends[n_hits:])
 
 
 def _inverse(cell):
@@ -140,8 +143,14 @@ def _predict_expert(expert, X):
 
     A single-cell expert of at most `_DENSE_SIZE` observations is evaluated
     densely (its cross-covariance in blocks of `_BLOCK` queries): the same
-    values as :meth:`GPOMIK.predict`, without its tiles' bookkeeping.
+    values as :meth:`GPOMIK.predict`, without its tiles' bookkeeping. BLAS
+    runs on one thread, so the values do not depend on the joblib backend.
     """
+    with threadpool_limits(1):
+        return _predict_dense(expert, X)
+
+
+def _predict_dense(expert, X):
     if len(expert.cells_) > 1 or expert.cells_[0].size > _DENSE_SIZE:
         return expert.predict(X, return_var=True)
     cell = expert.cells_[0]
@@ -393,6 +402,10 @@ class GPMixture(BaseEstimator):
         TypeError
             On non-numeric input or parameters of the wrong type.
         """
+        with threadpool_limits(1):  # one BLAS thread: the same values in every worker
+            return self._fit(hits, segment_starts, segment_ends)
+
+    def _fit(self, hits, segment_starts, segment_ends):
         template = self._check_params()
         rng = generator(self.random_state)
         seed = int(rng.integers(2 ** 32))
@@ -454,7 +467,7 @@ class GPMixture(BaseEstimator):
             kernel, noise, _ = optimize_shared_hyperparameters(
                 kernel, noise, noise_bounds, parts, _check_quadrature(template.quadrature),
                 n_restarts=template.n_restarts, rng=rng,
-                n_threads=max(threads(template.n_jobs), threads(self.n_jobs)))
+                n_threads=threads(template.n_jobs))
         self.kernel_, self.noise_ = kernel, noise
         return clone(template).set_params(kernel=kernel, noise=noise, optimizer=False)
 
@@ -509,7 +522,8 @@ class GPMixture(BaseEstimator):
         check_is_fitted(self, "experts_")
         X = as_points(X, "X", self.n_dims_)
         return_var = check_bool(return_var, "return_var")
-        mean, var = self._committee(X)[0].result()
+        with threadpool_limits(1):
+            mean, var = self._committee(X)[0].result()
         return (mean, var) if return_var else mean
 
     def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
@@ -576,6 +590,10 @@ class GPMixture(BaseEstimator):
             As :meth:`fit`; the model is then unchanged.
         """
         check_is_fitted(self, "experts_")
+        with threadpool_limits(1):
+            return self._update(hits, segment_starts, segment_ends)
+
+    def _update(self, hits, segment_starts, segment_ends):
         self._check_params()
         template = self._expert_template
         new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
