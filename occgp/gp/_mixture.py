@@ -473,6 +473,7 @@ class GPMixture(BaseEstimator):
 
     @property
     def n_experts_(self) -> int:
+        """Number of experts (``len(experts_)``)."""
         check_is_fitted(self, "experts_")
         return len(self.experts_)
 
