@@ -211,7 +211,10 @@ class GPMixture(BaseEstimator):
     5. **PLSC** (``a``, ``b``) is fitted on the committee's leave-one-out
        predictions: at each hit, and at a random point of each beam, every
        expert predicts and the observation's own expert predicts without it
-       (a rank-one downdate).
+       (a rank-one downdate). With a single expert the merged latent mean and
+       variance are that GPOMIK's; the probabilities differ from its own only
+       through this fit (GPOMIK fits PLSC on its beams' integrals per unit
+       length).
 
     Parameters
     ----------
