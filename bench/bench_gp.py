@@ -102,16 +102,20 @@ def room_2d_table(n_jobs, quick):
     return fitted
 
 
-def room_3d_table(n_jobs):
+def room_3d_data():
+    """The structured room scanned from 4 poses by a sparse LiDAR, and 20,000 test points."""
     scene = structured_room(0)
     lo, hi = scene.interior_bounds
     poses = np.array([[2.5, 2.0, 1.0], [7.5, 2.0, 1.0], [2.5, 5.0, 1.0], [7.5, 5.0, 1.0]]) \
         + np.r_[lo[0], lo[1], 0.0] * [1, 1, 0]
     sensor = LidarSensor(n_horizontal=64, n_vertical=4, max_range=8.0)
     scans = simulate_scans(scene, poses, sensor, seed=0, progress=False)
-    rng = np.random.default_rng(1)
-    Q = rng.uniform(lo, hi, (20_000, 3))
-    truth = scene.occupancy(Q)
+    Q = np.random.default_rng(1).uniform(lo, hi, (20_000, 3))
+    return scans, Q, scene.occupancy(Q)
+
+
+def room_3d_table(n_jobs):
+    scans, Q, truth = room_3d_data()
     per_scan = [observations_from_scans([s]) for s in scans]
     n_obs = sum(len(h) + len(s) for h, s, _ in per_scan)
     print(f"== 3D room: {len(scans)} scans, {n_obs} observations (hits + beams); "

@@ -35,12 +35,12 @@ import threading
 import joblib
 import numpy as np
 
-from occgp.datasets import LidarSensor, floor_plan_2d, room_2d, simulate_scans, structured_room
+from occgp.datasets import floor_plan_2d, room_2d
 from occgp.gp import (GPOM, GPOMIK, COMBINE_RULES, GPMixture, OccupancyGrid, grid_points,
                       observations_from_scans)
 from occgp.metrics import roc_auc
 
-from bench_gp import fpr_at_tpr, table, timed  # the GP bench's table helpers (same folder)
+from bench_gp import fpr_at_tpr, room_3d_data, table, timed  # the GP bench's (same folder)
 
 
 #: Poses of floor_plan_2d() that give about n observations (32 a pose).
@@ -178,15 +178,8 @@ def scaling_table(n_jobs, sizes, single_max):
 
 # ---------------------------------------------------------------------- 3D
 def room_3d_table(n_jobs):
-    scene = structured_room(0)
-    lo, hi = scene.interior_bounds
-    poses = np.array([[2.5, 2.0, 1.0], [7.5, 2.0, 1.0], [2.5, 5.0, 1.0], [7.5, 5.0, 1.0]]) \
-        + np.r_[lo[0], lo[1], 0.0] * [1, 1, 0]
-    sensor = LidarSensor(n_horizontal=64, n_vertical=4, max_range=8.0)
-    scans = simulate_scans(scene, poses, sensor, seed=0, progress=False)
+    scans, Q, truth = room_3d_data()
     hits, starts, ends = observations_from_scans(scans)
-    Q = np.random.default_rng(1).uniform(lo, hi, (20_000, 3))
-    truth = scene.occupancy(Q)
     print(f"== 3D structured room: {len(hits)} hits, {len(starts)} beams; {len(Q)} random test "
           f"points ({truth.mean():.1%} occupied) ==")
     rows = []
