@@ -196,6 +196,16 @@ def test_cholesky_update_of_an_expert_equals_its_refit_with_fixed_hyperparameter
     assert_allclose(v0, v1, atol=1e-8)
 
 
+def test_update_with_beams_only_grows_the_experts_of_similar_beams(data):
+    hits, starts, ends = data
+    model = GPMixture(FIXED, random_state=0).fit(hits, starts, ends)
+    n_obs = len(model.labels_)
+    far = starts[:3] + 0.5 * (ends[:3] - starts[:3])   # three short free beams
+    model.update(None, starts[:3], far)
+    assert len(model.labels_) == n_obs + 3
+    assert set(model.updated_experts_.tolist()) == set(model.labels_[n_obs:].tolist())
+
+
 def test_rejected_update_leaves_the_model_unchanged(data):
     model = GPMixture(FIXED, random_state=0).fit(*data)
     state = pickle.dumps(model)

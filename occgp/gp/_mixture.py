@@ -361,7 +361,10 @@ class GPMixture(BaseEstimator):
         starts, ends = obs.starts[n_hits:], obs.ends[n_hits:]
         origins = hit_origins(hits, starts, ends)
         fit = clustering.partial_fit if partial else clustering.fit_predict
-        hit_labels = np.asarray(fit(hits, origins), dtype=np.int64)
+        if partial and not len(hits):  # beams only: they join the clusters of earlier beams
+            hit_labels = np.empty(0, dtype=np.int64)
+        else:
+            hit_labels = np.asarray(fit(hits, origins), dtype=np.int64)
         kernel = self._template.kernel
         quadrature = self._template.quadrature
         if partial:  # returning beams of earlier calls are candidates too
