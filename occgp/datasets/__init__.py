@@ -12,6 +12,11 @@ a 180-degree, 17-beam, 8 m laser along a 26-pose path
 rooms, corridors and furniture (60 x 40 m by default, :class:`FloorPlan2D`)
 with a path through every room, for scaling studies: the same laser gives
 about 32 observations per pose, 20,000 at 619 poses.
+:func:`tetromino_scene` builds the k-NN paper's tetromino layouts of box pairs
+(:class:`TetrominoScene`), which :func:`simulate_stereo` orbits with a noisy
+:class:`StereoCamera` (depth noise growing with depth squared, speckle,
+missing blobs on weak texture, :func:`voxel_filter` at 0.1 m);
+:func:`stereo_datasets` lists the 20 data sets at several noise levels.
 
 Readers
 -------
@@ -46,6 +51,15 @@ from ._scan import Scan
 from ._scene2d import LaserScan2D, Scene2D, room_2d
 from ._scenes import Scene, make_scene, structured_room, unstructured_room
 from ._simulate import LidarSensor, free_path, simulate_scans
+from ._stereo import (
+    StereoCamera,
+    StereoDataset,
+    TetrominoScene,
+    simulate_stereo,
+    stereo_datasets,
+    tetromino_scene,
+    voxel_filter,
+)
 
 __all__ = [
     "Scan",
@@ -71,4 +85,11 @@ __all__ = [
     "LidarSensor",
     "simulate_scans",
     "free_path",
+    "TetrominoScene",
+    "tetromino_scene",
+    "StereoCamera",
+    "simulate_stereo",
+    "StereoDataset",
+    "stereo_datasets",
+    "voxel_filter",
 ]
