@@ -84,12 +84,7 @@ def _split(rng, length, lo=ROOM_SIZE[0], hi=ROOM_SIZE[1]):
     n_min = max(int(np.ceil(length / hi - 1e-9)), 1)
     n_max = max(int(np.floor(length / lo + 1e-9)), n_min)
     n = int(np.clip(round(length / rng.uniform(6.0, 9.0)), n_min, n_max))
-    for _ in range(20):
-        u = rng.uniform(0.5, 1.5, n)
-        widths = lo + (length - lo * n) * u / u.sum()
-        if widths.max() <= hi:
-            return widths
-    return np.full(n, length / n)
+    return _split_fixed(rng, length, n, lo, hi, spread=0.5)
 
 
 def _wall(lo, hi, axis, line, t, gaps):
@@ -506,10 +501,11 @@ def floor_plan_2d(seed: int = 0, *, width: float = 60.0, height: float = 40.0,
                        corridors, door_arr)
 
 
-def _split_fixed(rng, length, n, lo=ROOM_SIZE[0], hi=ROOM_SIZE[1]):
-    """`n` widths in [lo, hi] adding up to `length` (lo * n <= length <= hi * n)."""
+def _split_fixed(rng, length, n, lo=ROOM_SIZE[0], hi=ROOM_SIZE[1], spread=0.3):
+    """`n` widths in [lo, hi] adding up to `length` (lo * n <= length <= hi * n), drawn
+    around equal shares by factors in [1 - spread, 1 + spread]."""
     for _ in range(20):
-        u = rng.uniform(0.7, 1.3, n)
+        u = rng.uniform(1.0 - spread, 1.0 + spread, n)
         widths = lo + (length - lo * n) * u / u.sum()
         if widths.max() <= hi:
             return widths
