@@ -89,7 +89,7 @@ class Committee:
 
     def add(self, index: NDArray[np.intp], mean: NDArray[np.float64], var: NDArray[np.float64],
             prior_var) -> None:
-        """Add one expert's latent `mean` and `var` at the queries `index`.
+        """Add one expert's latent `mean` and `var` at the distinct queries `index`.
 
         `prior_var` is that expert's prior variance there (a scalar or an
         array like `var`); `var` is clipped to ``[1e-12 prior, prior]``.
@@ -98,17 +98,17 @@ class Committee:
         var = np.clip(var, _VAR_FLOOR * prior_var, prior_var)
         gain = 1.0 / var - 1.0 / prior_var
         if self.rule in ("bcm", "tresp"):
-            np.add.at(self._precision, index, gain)
-            np.add.at(self._weighted_mean, index, mean / var)
+            self._precision[index] += gain
+            self._weighted_mean[index] += mean / var
             return
         beta = 0.5 * np.log(prior_var / var)
         if self.rule == "rbcm":
-            np.add.at(self._precision, index, beta * gain)
-            np.add.at(self._weighted_mean, index, beta * mean / var)
+            self._precision[index] += beta * gain
+            self._weighted_mean[index] += beta * mean / var
         else:  # gpoe: normalised in result()
-            np.add.at(self._weights, index, beta)
-            np.add.at(self._precision, index, beta / var)
-            np.add.at(self._weighted_mean, index, beta * mean / var)
+            self._weights[index] += beta
+            self._precision[index] += beta / var
+            self._weighted_mean[index] += beta * mean / var
 
     def result(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The merged latent mean and variance at every query."""

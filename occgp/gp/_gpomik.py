@@ -48,6 +48,13 @@ class _Cell:
     def size(self) -> int:
         return len(self.obs.y)
 
+    def inverse(self):
+        """``K^-1`` (noise included), computed once from the factor and kept."""
+        if self.kinv is None:
+            Linv = sl.solve_triangular(self.L, np.eye(self.size), lower=True, check_finite=False)
+            self.kinv = Linv.T @ Linv
+        return self.kinv
+
     def bounds(self, margin):
         pts = np.vstack([self.obs.starts, self.obs.ends])
         return pts.min(axis=0) - margin, pts.max(axis=0) + margin
@@ -519,9 +526,7 @@ default="clenshaw-curtis"
         var = np.empty(len(X)) if return_var else None
         if not len(X):
             return mean, var
-        if return_var and cell.kinv is None:
-            Linv = sl.solve_triangular(cell.L, np.eye(cell.size), lower=True, check_finite=False)
-            cell.kinv = Linv.T @ Linv
+        kinv = cell.inverse() if return_var else None
         Xs = np.ascontiguousarray(X * inv)
         A = np.ascontiguousarray(cell.obs.starts * inv)
         V = np.ascontiguousarray((cell.obs.ends - cell.obs.starts) * inv)
@@ -552,7 +557,7 @@ default="clenshaw-curtis"
                 Ks = variance * out[out_ptr[t - t0]:out_ptr[t - t0 + 1]].reshape(len(q), -1)
                 mean[q] = Ks @ cell.alpha[near[t]]
                 if return_var:
-                    quad = np.einsum("ij,ij->i", Ks @ cell.kinv[np.ix_(near[t], near[t])], Ks)
+                    quad = np.einsum("ij,ij->i", Ks @ kinv[np.ix_(near[t], near[t])], Ks)
                     var[q] = np.maximum(prior - quad, 0.0)
             t0 = t1
         return mean, var

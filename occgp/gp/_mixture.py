@@ -13,7 +13,6 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-import scipy.linalg as sl
 from joblib import Parallel, delayed
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
@@ -130,20 +129,13 @@ def _fit_expert(template, obs, seed):
         return expert.fit(obs.starts[:n_hits], obs.starts[n_hits:], obs.ends[n_hits:])
 
 
-def _inverse(cell):
-    """``C^-1`` of a GPOMIK cell (kept on the cell, as GPOMIK's predict does)."""
-    if cell.kinv is None:
-        Linv = sl.solve_triangular(cell.L, np.eye(cell.size), lower=True, check_finite=False)
-        cell.kinv = Linv.T @ Linv
-    return cell.kinv
-
-
 def _predict_expert(expert, X):
     """Latent mean and variance of `expert` at `X`.
 
     A single-cell expert of at most `_DENSE_SIZE` observations is evaluated
     densely (its cross-covariance in blocks of `_BLOCK` queries): the same
-    values as :meth:`GPOMIK.predict`, without its tiles' bookkeeping. BLAS
+    values as :meth:`GPOMIK.predict` up to rounding (1e-15), without its tiles'
+    bookkeeping. BLAS
     runs on one thread, so the values do not depend on the joblib backend.
     """
     with threadpool_limits(1):
@@ -154,7 +146,7 @@ def _predict_dense(expert, X):
     if len(expert.cells_) > 1 or expert.cells_[0].size > _DENSE_SIZE:
         return expert.predict(X, return_var=True)
     cell = expert.cells_[0]
-    kinv = _inverse(cell)
+    kinv = cell.inverse()
     prior = float(expert.kernel_.variance)
     mean, var = np.empty(len(X)), np.empty(len(X))
     for i in range(0, len(X), _BLOCK):
@@ -698,7 +690,7 @@ def _downdated(gp, X, pos):
     downdate: ``mean - c_i alpha_i / [C^-1]_ii`` and ``var + c_i^2 / [C^-1]_ii``.
     """
     cell = gp.cells_[0]
-    kinv = _inverse(cell)
+    kinv = cell.inverse()
     k = _covariance(gp.kernel_, gp._quadrature, cell.obs.starts, cell.obs.ends, X, X,
                     n_threads=gp._n_threads)
     c = kinv @ k
