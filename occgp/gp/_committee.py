@@ -70,16 +70,15 @@ class Committee:
 
     def __init__(self, rule: str, prior_vars: ArrayLike, n: int):
         self.rule = check_choice(rule, "combine", COMBINE_RULES)
-        prior_vars = np.asarray(prior_vars, dtype=np.float64)
-        if prior_vars.ndim == 1:
-            prior_vars = np.broadcast_to(prior_vars[:, None], (len(prior_vars), n))
+        inv = 1.0 / np.asarray(prior_vars, dtype=np.float64)
         self.n = n
-        inv = 1.0 / prior_vars
+        # one prior per expert (point queries): reduce over the experts once, not per query
+        mean_inv = np.full(n, inv.mean()) if inv.ndim == 1 else inv.mean(axis=0)
         #: The committee's prior variance at each query.
-        self.prior = 1.0 / inv.mean(axis=0)
+        self.prior = 1.0 / mean_inv
         # precision and precision-weighted mean; entropy weights for gpoe
         if self.rule == "bcm":
-            self._precision = inv.sum(axis=0)
+            self._precision = np.full(n, inv.sum()) if inv.ndim == 1 else inv.sum(axis=0)
         elif self.rule == "gpoe":
             self._precision = np.zeros(n)
             self._weights = np.zeros(n)
