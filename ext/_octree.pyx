@@ -11,16 +11,17 @@ a per-tree lock serialises the operations on one tree.
 cimport cython
 from cython.operator cimport dereference as deref, preincrement as inc
 from libc.math cimport floor, isfinite
-from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
+from libc.stdint cimport int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 from libc.string cimport memcpy
 from libcpp.memory cimport unique_ptr
 from libcpp.string cimport string
+from libcpp.unordered_map cimport unordered_map
 from libcpp.vector cimport vector
 from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 from _keys cimport (
-    KEY_DEPTH as _DEPTH, KEY_MAX_VAL as _MAX_VAL, KEYRAY_SAFE_CELLS, ray_codes, in_range_mask,
-    set_sensor_model, unpack_key as _unpack,
+    KEY_DEPTH as _DEPTH, KEY_MAX_VAL as _MAX_VAL, KEYRAY_SAFE_CELLS, effective_end, ray_codes,
+    in_range_mask, pack_key as _pack, set_sensor_model, unpack_key as _unpack,
 )
 from _scan cimport ScanCell, ScanStats, scan_result, scan_updates, scan_weights
 from liboctomap cimport (
@@ -154,6 +155,134 @@ cdef class _OcTree:
                     apply_updates(tree[0], cells, scratch)
                 clock_gettime(CLOCK_MONOTONIC, &done)
         return scan_result(stats, found.size(), done)
+
+    def _knn_cells(self, const float[:, ::1] points, const float[::1] origin,
+                   double sensor_range, bint culling, int superray_threshold=0,
+                   uint64_t max_cells=0):
+        """A scan's cells for the k-NN inverse sensor model, one class per cell.
+
+        The rays to the points within `sensor_range` (the *near* points: not
+        truncated by liboctomap's computeUpdate rule) and the rays to the other
+        points, cut at `sensor_range`, are traversed as two scans of
+        :func:`scan_updates` (scan mode). Each cell gets one class: 0 if a near
+        point lies in it, else 1 if a ray to a near point crosses it, else 2
+        (crossed by cut rays only). With `culling`, each traversal skips its
+        culling region: fully free cells holding no near point, whose l_in or
+        l_out update (both <= 0) changes nothing.
+
+        Returns (near, keys, kinds, point_cell, stats): near (n,) bool; keys
+        (m,) uint64 packed keys (x in the low 16 bits); kinds (m,) uint8;
+        point_cell (n_near,) int64, the row of `keys` holding each near point;
+        stats as :meth:`_insert_batch` returns them (the two traversals added).
+        Returns None when a ray end lies outside the key range or a ray cannot
+        be walked, and "too many cells" past `max_cells` (> 0).
+        """
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t i, j, n = points.shape[0], n_near = 0, n_far = 0
+        cdef point3d o = point3d(origin[0], origin[1], origin[2])
+        cdef point3d end
+        near = np.zeros(n, dtype=np.bool_)
+        cdef uint8_t[::1] near_v = near.view(np.uint8)
+        with nogil:
+            for i in range(n):
+                near_v[i] = not effective_end(
+                    o, point3d(points[i, 0], points[i, 1], points[i, 2]), sensor_range, &end)
+                n_near += near_v[i]
+        n_far = n - n_near
+        near_pts = np.empty((n_near, 3), dtype=np.float32)
+        far_pts = np.empty((n_far, 3), dtype=np.float32)
+        cdef float[:, ::1] a_v = near_pts
+        cdef float[:, ::1] b_v = far_pts
+        cdef vector[ScanCell] found_a, found_b
+        cdef ScanStats sa, sb
+        cdef timespec done
+        cdef unordered_map[uint64_t, Py_ssize_t] row
+        cdef unordered_map[uint64_t, Py_ssize_t].iterator it
+        cdef Py_ssize_t m = 0, ia = 0, ib = 0
+        cdef OcTreeKey key
+        with self._lock:
+            with nogil:
+                for i in range(n):
+                    if near_v[i]:
+                        a_v[ia, 0] = points[i, 0]
+                        a_v[ia, 1] = points[i, 1]
+                        a_v[ia, 2] = points[i, 2]
+                        ia += 1
+                    else:
+                        b_v[ib, 0] = points[i, 0]
+                        b_v[ib, 1] = points[i, 1]
+                        b_v[ib, 2] = points[i, 2]
+                        ib += 1
+                _empty_stats(&sa)
+                _empty_stats(&sb)
+                if n_near:
+                    scan_updates(tree, a_v, o, -1.0, False, culling, NULL,
+                                 superray_threshold, _fully_free, tree, self._counts,
+                                 &self._counts_dirty, found_a, &sa, False, max_cells)
+                if n_far and not sa.bad_ends and not sa.too_many:
+                    scan_updates(tree, b_v, o, sensor_range, False, culling, NULL,
+                                 superray_threshold, _fully_free, tree, self._counts,
+                                 &self._counts_dirty, found_b, &sb, False, max_cells)
+                clock_gettime(CLOCK_MONOTONIC, &done)
+        if sa.bad_ends or sb.bad_ends:
+            return None
+        if (sa.too_many or sb.too_many
+                or (max_cells and found_a.size() + found_b.size() > max_cells)):
+            return "too many cells"
+        keys = np.empty(found_a.size() + found_b.size(), dtype=np.uint64)
+        kinds = np.empty(found_a.size() + found_b.size(), dtype=np.uint8)
+        point_cell = np.empty(n_near, dtype=np.int64)
+        cdef uint64_t[::1] keys_v = keys
+        cdef uint8_t[::1] kinds_v = kinds
+        cdef int64_t[::1] pc_v = point_cell
+        with nogil:
+            row.reserve(found_a.size() + found_b.size())
+            for j in range(<Py_ssize_t>found_a.size()):
+                row[found_a[j].key] = m
+                keys_v[m] = found_a[j].key
+                # scan mode: l_hit (> 0) where a near point ends, l_miss (< 0) elsewhere
+                kinds_v[m] = 0 if found_a[j].update > 0 else 1
+                m += 1
+            for j in range(<Py_ssize_t>found_b.size()):
+                if row.count(found_b[j].key):
+                    continue
+                keys_v[m] = found_b[j].key
+                kinds_v[m] = 2
+                m += 1
+            key[0] = key[1] = key[2] = 0
+            for i in range(n_near):
+                tree.coordToKeyChecked(point3d(a_v[i, 0], a_v[i, 1], a_v[i, 2]), key)
+                it = row.find(_pack(key))
+                pc_v[i] = deref(it).second if it != row.end() else -1
+        stats = _sum_stats(scan_result(sa, found_a.size(), done),
+                           scan_result(sb, found_b.size(), done))
+        return near, keys[:m], kinds[:m], point_cell, stats
+
+    def _apply_cells(self, const uint64_t[::1] keys, const float[::1] updates):
+        """Add ``updates[i]`` to the cell of packed key ``keys[i]`` (keys distinct), as
+        liboctomap's updateNode does (clamped), in one pass over the tree; returns the
+        number of cells not aborted early."""
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t j, n = keys.shape[0]
+        cdef vector[CellUpdate] cells, scratch
+        cdef OcTreeKey key
+        cdef size_t applied = 0
+        with self._lock:
+            with nogil:
+                cells.resize(n)
+                for j in range(n):
+                    key = _unpack(keys[j])
+                    cells[j].code = morton_code(key[0], key[1], key[2])
+                    cells[j].update = updates[j]
+                applied = apply_updates(tree[0], cells, scratch)
+        return applied
+
+    def _log_odds_thresholds(self):
+        """(clamping min, clamping max, occupancy threshold, hit, miss) as the tree
+        holds them: float32 log-odds."""
+        cdef OcTree* tree = self._get()
+        return (tree.getClampingThresMinLog(), tree.getClampingThresMaxLog(),
+                tree.getOccupancyThresLog(), tree.getProbHitLog(), tree.getProbMissLog())
 
     def _set_values(self, const uint16_t[:, ::1] keys, const float[::1] log_odds):
         """Set each finest cell's log-odds (liboctomap's setNodeValue, which clamps to the
@@ -354,6 +483,43 @@ cdef class _OcTree:
             with self._lock:
                 tree.clear()
             raise ValueError("liboctomap could not read the tree data")
+
+
+cdef inline void _empty_stats(ScanStats* stats) noexcept nogil:
+    """The statistics of a traversal that did not run."""
+    cdef int k
+    stats.region_cells = -1
+    stats.rays = 0
+    stats.traversed_cells = 0
+    stats.unnecessary = -1
+    stats.bad_ends = 0
+    stats.too_many = False
+    for k in range(5):
+        clock_gettime(CLOCK_MONOTONIC, &stats.clock[k])
+
+
+def _sum_stats(a, b):
+    """Two traversals' statistics (see :func:`scan_result`) as one scan's."""
+    region = -1 if a[0] < 0 and b[0] < 0 else max(a[0], 0) + max(b[0], 0)
+    return (region, a[1] + b[1], a[2] + b[2], a[3] + b[3],
+            tuple(x + y for x, y in zip(a[4], b[4])), -1)
+
+
+def _welford(const double[::1] values, long count, double mean, double m2):
+    """Welford's update of (count, mean, sum of squared deviations) by `values`, in
+    order; non-finite values are skipped."""
+    cdef Py_ssize_t i
+    cdef double delta, s
+    with nogil:
+        for i in range(values.shape[0]):
+            s = values[i]
+            if not isfinite(s):
+                continue
+            count += 1
+            delta = s - mean
+            mean += delta / count
+            m2 += delta * (s - mean)
+    return count, mean, m2
 
 
 cdef bint _fully_free(void* tree, const OcTreeKey& key) noexcept nogil:

@@ -1,0 +1,365 @@
+"""Parameter search for the log-odds maps: every combination of a grid, replayed.
+
+:func:`grid_search` scores each parameter combination of the k-NN model
+(:class:`occgp.KNNMap`) or of OctoMap by the area under its TPR–FDR curve
+against ground truth, as Miao, Hunter and Georgilas do: the map's cells are
+classified at each occupancy threshold ``p_t`` of a grid, giving one
+operating point (FDR, TPR) per threshold. The maps are not built one by one:
+a :class:`occgp.knn.ScanReplay` holds what they share and replays each
+combination exactly (see there).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+from joblib import Parallel, delayed
+from numpy.typing import ArrayLike, NDArray
+
+from ._validation import check_choice, check_int, check_n_jobs, check_real, n_threads
+from .knn import KNNMap, ScanReplay, check_knn_params, check_octomap_params, log_odds
+
+__all__ = ["grid_search", "GridSearchResult", "cell_labels", "KNN_GRID", "OCTOMAP_GRID",
+           "KNN_WEIGHT_GRID", "THRESHOLDS"]
+
+
+def _steps(low: float, high: float, step: float) -> tuple[float, ...]:
+    """The paper's parameter set {low + (i - 1) step} up to `high` (rounded to 1e-9)."""
+    n = int(math.floor((high - low) / step + 1e-9)) + 1
+    return tuple(round(low + i * step, 9) for i in range(n))
+
+
+#: The occupancy thresholds p_t of Miao et al.'s Table 1: 0.02 to 0.98 by 0.12.
+THRESHOLDS = _steps(0.02, 0.98, 0.12)
+#: Miao et al.'s Table 1, optimisation (k and the clamping fixed): with the
+#: constraints of Eq. 12 and the 9 thresholds, 4,050 combinations.
+KNN_GRID = {"k": (1,), "p_u": _steps(0.02, 0.98, 0.12), "p_l": _steps(0.02, 0.98, 0.12),
+            "p_m": _steps(0.02, 0.38, 0.12), "p_m_out": _steps(0.02, 0.38, 0.12),
+            "p_min": (0.02,), "p_max": (0.98,)}
+#: OctoMap's grid of the same table: with the 9 thresholds, 180 combinations.
+OCTOMAP_GRID = {"prob_hit": _steps(0.5, 0.98, 0.12), "prob_miss": _steps(0.02, 0.38, 0.12), "clamping_min": (0.02,),
+                "clamping_max": (0.98,)}
+#: Table 1's grid for the parameter weights (k, p_max and p_min varied too).
+KNN_WEIGHT_GRID = {"k": (1, 3, 5, 7), "p_u": _steps(0.02, 0.98, 0.12),
+                   "p_l": _steps(0.02, 0.98, 0.12), "p_m": _steps(0.02, 0.38, 0.12),
+                   "p_m_out": _steps(0.02, 0.38, 0.12), "p_min": _steps(0.02, 0.38, 0.12),
+                   "p_max": _steps(0.5, 0.98, 0.12)}
+_KNN_KEYS = ("k", "p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max")
+_OCTOMAP_KEYS = ("prob_hit", "prob_miss", "clamping_min", "clamping_max")
+
+
+class GridSearchResult(NamedTuple):
+    """The result of :func:`grid_search`.
+
+    Attributes
+    ----------
+    results : list of dict
+        One row per parameter combination (constraints met), in grid order:
+        its parameters, ``auc`` (area under the TPR–FDR curve), and
+        ``thresholds``, ``tpr``, ``fdr`` (tuples, one entry per threshold
+        with a defined FDR, decreasing thresholds).
+    best_params : dict
+        The parameters of the row with the highest ``auc`` (the first on ties).
+    best_score : float
+        Its ``auc``.
+    best_index : int
+        Its row.
+    n_rejected : int
+        Combinations of the grid dropped by the constraints.
+    seconds : float
+        Wall time of the search (the replay's set-up included when the search
+        made it).
+    """
+
+    results: list[dict[str, Any]]
+    best_params: dict[str, Any]
+    best_score: float
+    best_index: int
+    n_rejected: int
+    seconds: float
+
+    def operating_points(self) -> list[dict[str, Any]]:
+        """One row per (combination, threshold): the parameters, ``p_t``, ``tpr``,
+        ``fdr`` — e.g. the samples of :func:`occgp.evaluation.nca_feature_weights`."""
+        rows = []
+        for row in self.results:
+            params = {k: v for k, v in row.items() if k not in ("auc", "thresholds", "tpr",
+                                                                   "fdr")}
+            for t, tpr, fdr in zip(row["thresholds"], row["tpr"], row["fdr"]):
+                rows.append({**params, "p_t": t, "tpr": tpr, "fdr": fdr})
+        return rows
+
+
+def cell_labels(scene: Any, centres: ArrayLike, resolution: float, *,
+                samples: int = 4) -> NDArray[np.bool_]:
+    """Ground truth of octree cells: whether a solid of `scene` reaches into each cell.
+
+    A cell (edge `resolution`, centred at a row of `centres`) is occupied when
+    ``scene.occupancy`` holds at one of its ``samples**3`` sub-cell centres, so
+    a cell that a surface crosses counts as occupied whichever side of the
+    surface its centre lies on. Cells whose centre is farther than half a
+    cell diagonal from every surface (``scene.signed_distance``, when the
+    scene has it) take the centre's label without sampling.
+
+    Parameters
+    ----------
+    scene : object
+        With ``occupancy(points) -> bool array``; optionally
+        ``signed_distance(points)``.
+    centres : array-like of shape (n_cells, 3)
+    resolution : float
+        Cell edge, metres, > 0.
+    samples : int, default=4
+        Sub-cell samples per axis, in [1, 16].
+
+    Returns
+    -------
+    labels : ndarray of bool, shape (n_cells,)
+    """
+    from ._validation import as_points
+    centres = as_points(centres, "centres")
+    resolution = check_real(resolution, "resolution", low=0.0)
+    samples = check_int(samples, "samples", low=1, high=16)
+    labels = np.asarray(scene.occupancy(centres), dtype=bool)
+    if labels.shape != (len(centres),):
+        raise ValueError(f"scene.occupancy(points) must return shape ({len(centres)},), "
+                         f"got {labels.shape}")
+    near = np.arange(len(centres))
+    if hasattr(scene, "signed_distance"):
+        sd = np.asarray(scene.signed_distance(centres), dtype=np.float64)
+        near = np.flatnonzero(np.abs(sd) <= 0.5 * math.sqrt(3) * resolution * (1 + 1e-9))
+    offsets = (np.arange(samples) + 0.5) / samples - 0.5
+    grid = np.stack(np.meshgrid(offsets, offsets, offsets, indexing="ij"), -1).reshape(-1, 3)
+    for start in range(0, len(near), 20_000):
+        rows = near[start:start + 20_000]
+        pts = (centres[rows, None, :] + resolution * grid[None]).reshape(-1, 3)
+        hit = np.asarray(scene.occupancy(pts), dtype=bool).reshape(len(rows), -1)
+        labels[rows] |= hit.any(axis=1)
+    return labels
+
+
+def _combinations(param_grid, keys, defaults):
+    grids = [param_grid] if isinstance(param_grid, Mapping) else list(param_grid)
+    if not grids:
+        raise ValueError("param_grid must be a dict of parameter lists, or a list of them")
+    combos = []
+    for g, grid in enumerate(grids):
+        if not isinstance(grid, Mapping):
+            raise TypeError(f"param_grid must be a dict or a list of dicts, got "
+                            f"{type(grid).__name__} at {g}")
+        unknown = sorted(set(grid) - set(keys))
+        if unknown:
+            raise ValueError(f"param_grid holds unknown parameters {unknown}; this method "
+                             f"takes {list(keys)}")
+        values = []
+        for key in keys:
+            v = grid.get(key, (defaults[key],))
+            if isinstance(v, (str, bytes)) or not np.iterable(v):
+                v = (v,)
+            v = list(v)
+            if not v:
+                raise ValueError(f"param_grid[{key!r}] is empty")
+            values.append(v)
+        combos.extend(dict(zip(keys, c)) for c in itertools.product(*values))
+    return combos
+
+
+def _curve(values, labels, thresholds):
+    """TPR and FDR at each threshold (log-odds, float32), NaN FDR dropped."""
+    pos = labels.sum()
+    tpr, fdr, kept = [], [], []
+    for t, lt in thresholds:
+        occ = values >= lt
+        tp = int(np.count_nonzero(occ & labels))
+        n = int(np.count_nonzero(occ))
+        if n == 0:
+            continue
+        tpr.append(tp / pos)
+        fdr.append((n - tp) / n)
+        kept.append(t)
+    return kept, tpr, fdr
+
+
+def _auc(tpr, fdr):
+    """Trapezoid area along (0, 0), the operating points by decreasing threshold, (1, 1)
+    (the convention of :func:`occgp.metrics.tpr_fdr_auc`)."""
+    x = np.r_[0.0, fdr, 1.0]
+    y = np.r_[0.0, tpr, 1.0]
+    return float(np.trapezoid(y, x))
+
+
+def _score_chunk(replay, labels, method, combos, thresholds, batch_size):
+    rows = []
+    for start in range(0, len(combos), batch_size):
+        batch = combos[start:start + batch_size]
+        if method == "knn":
+            values = replay.knn_log_odds(batch)
+            bounds = [(p["p_min"], p["p_max"]) for p in batch]
+        else:
+            values = replay.octomap_log_odds(batch)
+            bounds = [(p["clamping_min"], p["clamping_max"]) for p in batch]
+        for b, params in enumerate(batch):
+            lo, hi = bounds[b]
+            if thresholds is None:
+                from .metrics import _tpr_fdr_auc
+                prob = 1.0 - 1.0 / (1.0 + np.exp(values[b].astype(np.float64)))
+                rows.append({**params, "auc": _tpr_fdr_auc(labels, prob), "thresholds": (),
+                             "tpr": (), "fdr": ()})
+                continue
+            ts = [(t, np.float32(log_odds(t))) for t in sorted(thresholds, reverse=True)
+                  if lo - 1e-12 <= t <= hi + 1e-12]
+            kept, tpr, fdr = _curve(values[b], labels, ts)
+            rows.append({**params, "auc": _auc(tpr, fdr), "thresholds": tuple(kept),
+                         "tpr": tuple(tpr), "fdr": tuple(fdr)})
+    return rows
+
+
+def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
+                param_grid: Mapping[str, Sequence[Any]] | Sequence[Mapping[str, Sequence[Any]]],
+                *, method: str = "knn", resolution: float = 0.1, sensor_range: float = 4.0,
+                thresholds: Sequence[float] | None = THRESHOLDS, batch_size: int = 32,
+                n_jobs: int | None = None) -> GridSearchResult:
+    """Score every combination of a parameter grid by its map's TPR–FDR AUC.
+
+    Miao et al.'s search: each combination's map (:class:`occgp.KNNMap` for
+    ``method="knn"``, OctoMap's ``insertPointCloud`` with ``max_range =
+    sensor_range`` for ``"octomap"``) is built from the scans, every cell it
+    holds is classified at each threshold ``p_t`` of `thresholds` within the
+    clamping bounds (``p_min <= p_t <= p_max``), and the operating points
+    (FDR, TPR) give the curve's area. The maps are replayed from a
+    :class:`~occgp.knn.ScanReplay` (exactly the maps the classes build), so
+    the scans are traversed and scored by k-NN once for the whole grid.
+
+    Parameters
+    ----------
+    scans : ScanReplay or iterable of (points, origin)
+        The data set; scans are made into a ``ScanReplay(scans, resolution,
+        sensor_range=sensor_range, ks=<the grid's k values>)``. Pass a
+        ScanReplay to share it between searches (its resolution and range
+        then apply, and its ks must hold the grid's).
+    truth : array-like of bool of shape (n_cells,), or a scene
+        Ground truth of the replay's cells (:attr:`ScanReplay.keys` order), or
+        an object with ``occupancy(points)`` labelled by :func:`cell_labels`.
+        Must hold an occupied cell.
+    param_grid : dict or list of dict
+        Parameter name -> sequence of values, all combinations taken (a list
+        of dicts: the union of their grids). ``"knn"`` takes ``k``, ``p_u``,
+        ``p_l``, ``p_m``, ``p_m_out``, ``p_min``, ``p_max``; ``"octomap"``
+        ``prob_hit``, ``prob_miss``, ``clamping_min``, ``clamping_max``. A
+        parameter left out takes its default (:class:`occgp.KNNMap`,
+        :class:`occgp.OccupancyOctree`). Combinations breaking the
+        constraints (:func:`occgp.knn.check_knn_params`; OctoMap's parameter
+        ranges) are dropped and counted. :data:`KNN_GRID` and
+        :data:`OCTOMAP_GRID` are the paper's.
+    method : {"knn", "octomap"}, default="knn"
+    resolution : float, default=0.1
+    sensor_range : float, default=4.0
+    thresholds : sequence of float or None, default=THRESHOLDS
+        The thresholds ``p_t`` (probabilities) of each curve; None: every
+        distinct value of the map (:func:`occgp.metrics.tpr_fdr_auc`).
+    batch_size : int, default=32
+        Combinations replayed at once (memory: ``batch_size * n_cells * 8``
+        bytes).
+    n_jobs : int or None, default=None
+        Workers through joblib (processes by default;
+        ``joblib.parallel_config(backend="dask")`` spreads them over a dask
+        cluster). The result does not depend on it.
+
+    Returns
+    -------
+    result : GridSearchResult
+
+    Raises
+    ------
+    ValueError
+        For an unknown parameter, an empty grid or one with no combination
+        left by the constraints, labels of the wrong shape or without an
+        occupied cell, or a bad `method`, `thresholds` or `batch_size`.
+
+    Examples
+    --------
+    >>> from occgp.datasets import StereoCamera, simulate_stereo, tetromino_scene
+    >>> scene = tetromino_scene("O")
+    >>> scans = simulate_stereo(scene, StereoCamera(48, 27), n_frames=3)
+    >>> res = grid_search(scans, scene, {"p_u": [0.74, 0.98], "p_l": [0.26, 0.5]})
+    >>> len(res.results), res.n_rejected, sorted(res.best_params)[:3]
+    (4, 0, ['k', 'p_l', 'p_m'])
+    """
+    t0 = time.perf_counter()
+    method = check_choice(method, "method", ("knn", "octomap"))
+    batch_size = check_int(batch_size, "batch_size", low=1, high=100_000)
+    n_jobs = check_n_jobs(n_jobs)
+    if thresholds is not None:
+        if isinstance(thresholds, (str, bytes)) or not np.iterable(thresholds):
+            raise TypeError("thresholds must be a sequence of probabilities or None")
+        thresholds = tuple(check_real(t, f"thresholds[{i}]", low=0.0, high=1.0)
+                           for i, t in enumerate(thresholds))
+        if not thresholds:
+            raise ValueError("thresholds must hold at least one threshold (or be None)")
+    if method == "knn":
+        d = KNNMap(resolution if not isinstance(scans, ScanReplay) else scans.resolution)
+        defaults = {k: getattr(d, k) for k in ("k", "p_u", "p_l", "p_m", "p_m_out")}
+        defaults.update(p_min=d.clamping_min, p_max=d.clamping_max)
+        combos = _combinations(param_grid, _KNN_KEYS, defaults)
+    else:
+        defaults = dict(prob_hit=0.7, prob_miss=0.4, clamping_min=0.1192, clamping_max=0.971)
+        combos = _combinations(param_grid, _OCTOMAP_KEYS, defaults)
+    kept = []
+    for c in combos:
+        try:
+            if method == "knn":
+                q = check_knn_params({**c, "p_t": c["p_min"], "sensor_range": sensor_range})
+                kept.append({key: q[key] for key in _KNN_KEYS})
+            else:
+                kept.append(check_octomap_params(c))
+        except ValueError:
+            continue
+    n_rejected = len(combos) - len(kept)
+    if not kept:
+        raise ValueError(f"no combination of param_grid meets the constraints "
+                         f"({len(combos)} tried)")
+    if isinstance(scans, ScanReplay):
+        replay = scans
+    else:
+        ks = sorted({c["k"] for c in kept}) if method == "knn" else [1]
+        replay = ScanReplay(scans, resolution, sensor_range=sensor_range, ks=ks, n_jobs=n_jobs)
+    if hasattr(truth, "occupancy"):
+        labels = cell_labels(truth, replay.centres, replay.resolution)
+    else:
+        labels = np.asarray(truth)
+        if labels.dtype.kind not in "biu":
+            raise TypeError(f"truth must be booleans or a scene, got dtype {labels.dtype}")
+        if labels.shape != (replay.n_cells,):
+            raise ValueError(f"truth must have shape ({replay.n_cells},) (the replay's "
+                             f"cells), got {labels.shape}")
+        labels = labels.astype(bool)
+    if not labels.any():
+        raise ValueError(f"truth holds no occupied cell among the {replay.n_cells} cells "
+                         "the scans reach: the TPR is undefined")
+    workers = n_threads(n_jobs)
+    chunks = [kept[i::workers * 2] for i in range(workers * 2)] if workers > 1 else [kept]
+    chunks = [c for c in chunks if c]
+    if len(chunks) == 1:
+        parts = [_score_chunk(replay, labels, method, chunks[0], thresholds, batch_size)]
+    else:
+        parts = Parallel(n_jobs=n_jobs)(
+            delayed(_score_chunk)(replay, labels, method, c, thresholds, batch_size)
+            for c in chunks)
+    # back to grid order
+    order = {id(c): None for c in kept}
+    by_combo = {}
+    for chunk, rows in zip(chunks, parts):
+        for c, row in zip(chunk, rows):
+            by_combo[id(c)] = row
+    results = [by_combo[k] for k in order]
+    aucs = np.array([r["auc"] for r in results])
+    best = int(np.argmax(aucs))
+    best_params = {k: v for k, v in results[best].items()
+                   if k not in ("auc", "thresholds", "tpr", "fdr")}
+    return GridSearchResult(results, best_params, float(aucs[best]), best, n_rejected,
+                            time.perf_counter() - t0)

@@ -1,0 +1,572 @@
+"""The k-NN inverse sensor model on the octree (Miao, Hunter and Georgilas, 2022).
+
+OctoMap gives every cell that holds a point the same ``prob_hit``. The k-NN
+model scores each point of a scan by the mean distance ``s`` to its ``k``
+nearest neighbours in the same scan and turns the score into an occupancy
+probability through the CDF of ``s``: isolated points (stereo speckle, far
+outliers) get a low probability, and can lower a cell's occupancy.
+
+:class:`KNNMap` is the map; :class:`ScanReplay` holds what a data set's maps
+share under every parameter value (the cells of each scan, the k-NN distances),
+so that :func:`occgp.evaluation.grid_search` replays thousands of parameter
+combinations as vectorised updates, each exactly the map :class:`KNNMap` or
+:class:`~occgp.OccupancyOctree` would build.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+from scipy.special import ndtr
+
+from ._octree import _welford
+from ._validation import (
+    check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
+)
+from .octree import OccupancyOctree
+
+__all__ = ["KNNMap", "ScanReplay", "check_knn_params", "check_octomap_params", "KNN_PARAMS", "OCTOMAP_PARAMS"]
+
+#: The parameters of the k-NN model, as :class:`KNNMap` takes them.
+KNN_PARAMS = ("k", "p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "p_t", "sensor_range")
+#: OctoMap's parameters, as :class:`~occgp.OccupancyOctree` takes them.
+OCTOMAP_PARAMS = ("prob_hit", "prob_miss", "clamping_min", "clamping_max",
+                  "occupancy_threshold")
+CDFS = ("normal", "truncated")
+MAX_K = 1000
+_MAX_RANGE = 1e15
+# the underlying tree's own sensor model: used only to tell end cells (l_hit > 0)
+# from crossed cells (l_miss < 0) in the traversal, never to update the map
+_CLASS_HIT, _CLASS_MISS = 0.7, 0.4
+
+
+def log_odds(p: float) -> float:
+    """liboctomap's ``logodds``: ``(float) log(p / (1 - p))`` (libm's log, float32)."""
+    return float(np.float32(math.log(p / (1.0 - p))))
+
+
+def check_knn_params(params: dict[str, Any]) -> dict[str, Any]:
+    """Validate the k-NN model's parameters (Miao et al., Eq. 12); return them typed.
+
+    The rules, each raising ValueError naming the parameters:
+
+    * ``k``: an int in [1, 1000];
+    * ``p_u`` and ``p_l`` in (0, 1), ``p_u >= p_l`` (the CDF maps the
+      smallest scores to ``p_u``, the largest to ``p_l``);
+    * ``0 < p_min <= p_m <= p_m_out < 0.5``: a ray whose end point lies beyond
+      the sensor range is less trustworthy, so its miss probability ``p_m_out``
+      is nearer 0.5 than ``p_m``; both lie above the lower clamp;
+    * ``p_min <= p_t <= p_max < 1``;
+    * ``sensor_range``: finite, in (0, 1e15] metres.
+    """
+    out = dict(params)
+    out["k"] = check_int(params["k"], "k", low=1, high=MAX_K)
+    for name in ("p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "p_t"):
+        out[name] = check_real(params[name], name, low=0.0, high=1.0)
+    out["sensor_range"] = check_real(params["sensor_range"], "sensor_range", low=0.0,
+                                     high=_MAX_RANGE, high_open=False)
+    rules = [
+        ("p_u", "p_l", "p_u >= p_l"),
+        ("p_m", "p_min", "p_m >= p_min"),
+        ("p_m_out", "p_m", "p_m_out >= p_m"),
+        ("p_t", "p_min", "p_t >= p_min"),
+        ("p_max", "p_t", "p_max >= p_t"),
+    ]
+    for big, small, rule in rules:
+        if out[big] < out[small]:
+            raise ValueError(f"the k-NN parameters must satisfy {rule} (Miao et al., Eq. 12), "
+                             f"got {big}={out[big]!r} and {small}={out[small]!r}")
+    if out["p_m_out"] >= 0.5:
+        raise ValueError(f"p_m_out must be below 0.5 (a miss lowers occupancy), "
+                         f"got {out['p_m_out']!r}")
+    return out
+
+
+def check_octomap_params(params: dict[str, Any]) -> dict[str, float]:
+    """OctoMap's ``prob_hit``, ``prob_miss``, ``clamping_min``, ``clamping_max`` checked
+    as :class:`~occgp.OccupancyOctree` checks them, except that ``prob_hit = 0.5`` (a hit
+    that carries no evidence, the first value of Miao et al.'s grid) is allowed."""
+    from ._logodds_map import check_params
+    hit = check_real(params["prob_hit"], "prob_hit", low=0.5, high=1.0, low_open=False)
+    q = check_params({"resolution": 1.0, "occupancy_threshold": 0.5, **params,
+                      "prob_hit": 0.7})
+    return {"prob_hit": hit, "prob_miss": q["prob_miss"], "clamping_min": q["clamping_min"],
+            "clamping_max": q["clamping_max"]}
+
+
+def mean_knn_distances(points: NDArray[np.float64], ks: Sequence[int],
+                       workers: int = 1) -> NDArray[np.float64]:
+    """Mean distance of each point to its k nearest other points, for each k in `ks`.
+
+    Returns shape (n_points, len(ks)); inf where the scan holds at most k points.
+    The means are running sums of the sorted distances, so every k gives the
+    same value whatever the other ks are.
+    """
+    n = len(points)
+    kmax = max(ks)
+    out = np.full((n, len(ks)), np.inf)
+    if n < 2:
+        return out
+    dist, _ = cKDTree(points).query(points, k=min(kmax, n - 1) + 1, workers=workers)
+    # column 0 is the point itself (or a duplicate, at the same distance 0)
+    csum = np.cumsum(dist[:, 1:], axis=1)
+    for j, k in enumerate(ks):
+        if k <= n - 1:
+            out[:, j] = csum[:, k - 1] / k
+    return out
+
+
+def point_log_odds(s: NDArray[np.float64], count: int, mean: float, m2: float, p_u: float,
+                   p_l: float, cdf: str = "normal") -> NDArray[np.float64]:
+    """logit(p(s)) with p(s) = p_u - (p_u - p_l) F(s), F the normal CDF of (mean, std).
+
+    ``std = sqrt(m2 / count)`` (Welford's). With ``std == 0`` F is the step at
+    `mean` (0.5 on it); a score of inf (too few neighbours) gets F = 1, p = p_l.
+    ``cdf="truncated"`` truncates the normal at s = 0 (distances are >= 0).
+    """
+    std = math.sqrt(m2 / count) if count > 0 else 0.0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if std > 0:
+            z = (s - mean) / std
+            f = ndtr(z)
+            if cdf == "truncated":
+                f0 = ndtr(-mean / std)
+                f = np.clip((f - f0) / (1.0 - f0), 0.0, 1.0) if f0 < 1.0 else np.ones_like(f)
+        else:
+            f = np.where(s > mean, 1.0, np.where(s < mean, 0.0, 0.5))
+    f = np.where(np.isfinite(s), f, 1.0)
+    p = p_u - (p_u - p_l) * f
+    return np.log(p / (1.0 - p))
+
+
+class KNNMap(OccupancyOctree):
+    """Occupancy octree updated by the k-NN inverse sensor model (Miao et al.).
+
+    Per scan (:meth:`insert_scan`), the points within `sensor_range` of the
+    origin (the *near* points, by liboctomap's own range test) are scored by
+    ``s``, the mean distance to their `k` nearest neighbours among the scan's
+    near points (:class:`scipy.spatial.cKDTree`). The mean and standard
+    deviation of ``s`` are updated by Welford's algorithm over every point the
+    map has seen (they are part of the map's state: pickled, restored and
+    continued), and each point gets
+
+    .. math:: p(s) = p_u - (p_u - p_l)\\,\\Phi\\big((s - \\mu) / \\sigma\\big).
+
+    Each cell of the scan gets one update, clamped to ``[p_min, p_max]`` as
+    liboctomap clamps (the map is liboctomap's ``OcTree``, so every query,
+    leaf iterator, ``.bt``/``.ot`` file and pickle of
+    :class:`~occgp.OccupancyOctree` works):
+
+    * a cell holding near points: :math:`\\sum_j \\operatorname{logit} p(s_j)`
+      over its points (may be negative: noise lowers occupancy);
+    * else a cell crossed by a ray to a near point: ``l_in = logit(p_m)``;
+    * else a cell crossed only by rays to points beyond `sensor_range`, which
+      are cut there (their end cells are not updated): ``l_out =
+      logit(p_m_out)``.
+
+    Cells are occupied at ``p >= p_t``. Rays are traversed as liboctomap's
+    ``computeRayKeys`` traverses them, by occgp's compiled scan pipeline: the
+    culling region and super rays apply (free updates are <= 0, so the
+    culling region's fully free cells are left as they are) and give the same
+    map, cell for cell.
+
+    Parameters
+    ----------
+    resolution : float, default=0.1
+        Edge length of the smallest cells, metres (as for
+        :class:`~occgp.OccupancyOctree`).
+    k : int, default=1
+        Number of nearest neighbours, in [1, 1000].
+    p_u, p_l : float, default=0.86, 0.38
+        Probability of the best-supported and of the most isolated points;
+        ``1 > p_u >= p_l > 0``.
+    p_m : float, default=0.26
+        Miss probability of cells crossed by rays to near points (``l_in``).
+    p_m_out : float, default=0.38
+        Miss probability of cells crossed only by rays cut at the sensor range
+        (``l_out``); ``0 < p_min <= p_m <= p_m_out < 0.5``.
+    p_min, p_max : float, default=0.02, 0.98
+        Clamping bounds (probabilities); ``p_min <= p_t <= p_max < 1``.
+    p_t : float, default=0.5
+        Occupancy threshold.
+    sensor_range : float, default=4.0
+        The range s_c, metres: points farther from the origin are not inserted,
+        their rays are cut here. In (0, 1e15].
+    cdf : {"normal", "truncated"}, default="normal"
+        F: the normal CDF of the paper, or the normal truncated at s = 0 (the
+        scores are distances), as the authors' code does.
+    n_jobs : int or None, default=None
+        Threads for the k-NN queries (``cKDTree.query(workers=)``); None: 1, -1:
+        every core.
+
+    Attributes
+    ----------
+    n_scores_ : int
+        Number of finite scores the statistics hold.
+    score_mean_, score_std_ : float
+        Welford's mean and standard deviation of the scores (NaN before any).
+    last_insert_ : dict
+        As :class:`~occgp.OccupancyOctree`'s, plus ``near_points`` and
+        ``knn_seconds``.
+
+    Notes
+    -----
+    The constraints on the probabilities are the paper's Eq. 12, read with its
+    text: the rays whose end points lie beyond the range are the less reliable
+    ones, so ``p_m_out >= p_m``. A scan whose near points are at most `k` gives
+    its points the score inf (no k neighbours): they count as isolated
+    (``p = p_l``) and do not enter the statistics. The statistics follow the
+    scans in insertion order, with the current scan's scores included before
+    its points are scored.
+
+    References
+    ----------
+    .. [1] Y. Miao, A. Hunter and I. Georgilas, "An occupancy mapping method
+       based on k-nearest neighbours", Sensors 22(1), 139, 2022.
+    .. [2] B. P. Welford, "Note on a method for calculating corrected sums of
+       squares and products", Technometrics 4(3), 1962.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from occgp import KNNMap
+    >>> rng = np.random.default_rng(0)
+    >>> wall = np.column_stack([np.full(200, 2.0), rng.uniform(-1, 1, (200, 2))])
+    >>> speckle = rng.uniform([0.5, -1, -1], [1.5, 1, 1], (5, 3))
+    >>> m = KNNMap(0.1).insert_scan(np.vstack([wall, speckle]), [0.0, 0.0, 0.0])
+    >>> bool(m.is_occupied(wall).mean() > 0.9), int(m.is_occupied(speckle).sum())
+    (True, 0)
+    """
+
+    _kind = "octree"
+
+    def __init__(self, resolution: float = 0.1, *, k: int = 1, p_u: float = 0.86,
+                 p_l: float = 0.38, p_m: float = 0.26, p_m_out: float = 0.38,
+                 p_min: float = 0.02, p_max: float = 0.98, p_t: float = 0.5,
+                 sensor_range: float = 4.0, cdf: str = "normal",
+                 n_jobs: int | None = None) -> None:
+        params = check_knn_params(dict(k=k, p_u=p_u, p_l=p_l, p_m=p_m, p_m_out=p_m_out,
+                                       p_min=p_min, p_max=p_max, p_t=p_t,
+                                       sensor_range=sensor_range))
+        self._params = {"resolution": check_resolution(resolution), **params,
+                        "cdf": check_choice(cdf, "cdf", CDFS),
+                        "n_jobs": check_n_jobs(n_jobs)}
+        self._setup(self._params["resolution"], _CLASS_HIT, _CLASS_MISS, params["p_min"],
+                    params["p_max"], params["p_t"])
+        self._superray_skip = 0
+        self._superray_pause = self.SUPERRAY_BACKOFF
+        self._scores = (0, 0.0, 0.0)       # Welford: count, mean, sum of squared deviations
+
+    def __repr__(self) -> str:
+        return (f"KNNMap(resolution={self.resolution!r}, k={self.k}, "
+                f"num_leaves={self.num_leaves})")
+
+    # ------------------------------------------------------------------ parameters
+    k = property(lambda self: self._params["k"], doc="Number of nearest neighbours.")
+    p_u = property(lambda self: self._params["p_u"], doc="Upper probability of a point.")
+    p_l = property(lambda self: self._params["p_l"], doc="Lower probability of a point.")
+    p_m = property(lambda self: self._params["p_m"], doc="Miss probability within range.")
+    p_m_out = property(lambda self: self._params["p_m_out"],
+                       doc="Miss probability of rays cut at the sensor range.")
+    sensor_range = property(lambda self: self._params["sensor_range"],
+                            doc="The range s_c, metres.")
+    cdf = property(lambda self: self._params["cdf"], doc="The score CDF's kind.")
+
+    @property
+    def prob_hit(self) -> float:
+        raise AttributeError("KNNMap has no prob_hit: a cell holding points gets the sum "
+                             "of its points' logit(p(s)) (see p_u, p_l)")
+
+    @property
+    def prob_miss(self) -> float:
+        raise AttributeError("KNNMap has no prob_miss: see p_m and p_m_out")
+
+    @property
+    def clamping_min(self) -> float:
+        return self._params["p_min"]
+
+    @property
+    def clamping_max(self) -> float:
+        return self._params["p_max"]
+
+    @property
+    def occupancy_threshold(self) -> float:
+        return self._params["p_t"]
+
+    @property
+    def n_scores_(self) -> int:
+        return self._scores[0]
+
+    @property
+    def score_mean_(self) -> float:
+        return self._scores[1] if self._scores[0] else math.nan
+
+    @property
+    def score_std_(self) -> float:
+        n, _, m2 = self._scores
+        return math.sqrt(m2 / n) if n else math.nan
+
+    # ------------------------------------------------------------------ updates
+    def insert_scan(self, points: ArrayLike, origin: ArrayLike, *, method: str = "auto",
+                    superray_threshold: int = 20) -> "KNNMap":
+        """Integrate one point cloud with the k-NN inverse sensor model.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            The cloud in the world frame, metres; finite. Points beyond
+            `sensor_range` only cut rays. An empty scan changes nothing.
+        origin : array-like of shape (3,)
+            Sensor position, metres.
+        method : {"auto", "plain", "culling", "superray", "superray+culling"}, \
+default="auto"
+            How rays are traversed, as for
+            :meth:`occgp.OccupancyOctree.insert_scan`; every method gives the
+            same map.
+        superray_threshold : int, default=20
+            With the super-ray methods, the fewest end points a cell must hold
+            for its rays to be grouped; at least 1.
+
+        Returns
+        -------
+        self : KNNMap
+
+        Raises
+        ------
+        TypeError
+            If `points` or `origin` does not hold real numbers.
+        ValueError
+            If `points` is not of shape (n_points, 3), `origin` not of shape
+            (3,), either holds NaN or inf, a ray end (after the cut at
+            `sensor_range`) lies outside the key range, the scan reaches more
+            than :attr:`MAX_SCAN_CELLS` cells, or `method` is invalid. The map
+            and its statistics are then unchanged.
+        """
+        method, threshold = self._check_method(method, superray_threshold)
+        scan = self._validated_scan(points, origin, self.sensor_range, "scan",
+                                    check_ends=False)
+        if scan is None:
+            return self
+        pts, org, rng, _ = scan
+        threshold = self._adaptive_threshold(method, threshold)
+        out = self._knn_cells(pts, org, rng, method.endswith("culling"), threshold,
+                              self._max_scan_cells())
+        if out is None or isinstance(out, str):
+            self._record_insert(out, pts, org, rng, method, threshold)   # raises
+        near, keys, kinds, point_cell, stats = out
+        t0 = time.perf_counter()
+        near_pts = pts[near].astype(np.float64)
+        s = mean_knn_distances(near_pts, [self.k], n_threads(self._params["n_jobs"]))[:, 0]
+        scores = _welford(s, *self._scores)
+        updates = scan_updates(kinds, point_cell, point_log_odds(
+            s, *scores, self.p_u, self.p_l, self.cdf), log_odds(self.p_m),
+            log_odds(self.p_m_out))
+        seconds = time.perf_counter() - t0
+        self._apply_cells(keys, updates)
+        self._scores = scores
+        self._record_insert(stats, pts, org, rng, method, threshold)
+        self.last_insert_["updated_cells"] = len(keys)
+        self.last_insert_["near_points"] = len(s)
+        self.last_insert_["knn_seconds"] = seconds
+        return self
+
+    # ------------------------------------------------------------------ state
+    def __reduce__(self):
+        return (_rebuild_knn, (type(self), self.get_params(), self.to_bytes("ot"),
+                               self._scores))
+
+    def _sensor_params(self) -> dict:
+        return {k: v for k, v in self._params.items() if k != "resolution"}
+
+
+def scan_updates(kinds: NDArray[np.uint8], point_cell: NDArray[np.int64],
+                 point_values: NDArray[np.float64], l_in: float,
+                 l_out: float) -> NDArray[np.float32]:
+    """One scan's update per cell: the float32 sum of the point values of the cells
+    holding points (kind 0, summed in point order in double precision), else l_in
+    (kind 1) or l_out (kind 2)."""
+    updates = np.where(kinds == 1, np.float32(l_in), np.float32(l_out)).astype(np.float32)
+    held = kinds == 0
+    sums = np.bincount(point_cell, point_values, minlength=len(kinds))
+    updates[held] = sums[held].astype(np.float32)
+    return updates
+
+
+def _rebuild_knn(cls, params: dict, data: bytes, scores: tuple) -> KNNMap:
+    tree = cls.from_bytes(data, **{k: v for k, v in params.items() if k != "resolution"})
+    tree._scores = tuple(scores)
+    return tree
+
+
+class ScanReplay:
+    """What every map of a data set shares, for replaying many parameter values.
+
+    The cells each scan updates and their classes (holding near points,
+    crossed by rays to near points, crossed by cut rays only), which point
+    lies in which cell, the k-NN scores of the points and their running
+    Welford statistics do not depend on the probabilities: they are computed
+    once here (without the culling region, whose cells depend on the map), and
+    :meth:`knn_log_odds` / :meth:`octomap_log_odds` replay each scan as one
+    vectorised, clamped float32 update per cell, in scan order, for a batch of
+    parameter combinations. The result equals, cell for cell and bit for bit,
+    the map that :class:`KNNMap` (or :class:`~occgp.OccupancyOctree` with
+    ``max_range=sensor_range``, liboctomap's ``insertPointCloud``) builds from
+    the same scans.
+
+    Parameters
+    ----------
+    scans : iterable of (points, origin)
+        The data set, in insertion order.
+    resolution : float, default=0.1
+    sensor_range : float, default=4.0
+        The range s_c (OctoMap's ``max_range``), metres.
+    ks : sequence of int, default=(1,)
+        The values of k to score points for.
+    cdf : {"normal", "truncated"}, default="normal"
+    n_jobs : int or None, default=None
+        Threads for the k-NN queries.
+
+    Attributes
+    ----------
+    keys : ndarray of uint64, shape (n_cells,)
+        Every cell the scans update (packed keys, x in the low 16 bits), sorted.
+    centres : ndarray of shape (n_cells, 3)
+        Their centres, metres.
+    n_scans : int
+    n_points : int
+        Points in the scans; ``n_near`` of them within range.
+    """
+
+    def __init__(self, scans: Iterable[Sequence[Any]], resolution: float = 0.1, *,
+                 sensor_range: float = 4.0, ks: Sequence[int] = (1,), cdf: str = "normal",
+                 n_jobs: int | None = None) -> None:
+        if isinstance(ks, (int, np.integer)):
+            ks = (ks,)
+        self.ks = tuple(check_int(k, "ks", low=1, high=MAX_K) for k in ks)
+        if not self.ks:
+            raise ValueError("ks must hold at least one k")
+        self.resolution = check_resolution(resolution)
+        self.sensor_range = check_real(sensor_range, "sensor_range", low=0.0,
+                                       high=_MAX_RANGE, high_open=False)
+        self.cdf = check_choice(cdf, "cdf", CDFS)
+        workers = n_threads(check_n_jobs(n_jobs))
+        probe = KNNMap(self.resolution, sensor_range=self.sensor_range)
+        local = []
+        self.n_points = self.n_near = 0
+        stats = [(0, 0.0, 0.0)] * len(self.ks)
+        for i, scan in enumerate(scans):
+            try:
+                points, origin = scan
+            except (TypeError, ValueError):
+                raise TypeError(f"scans[{i}] must be a (points, origin) pair") from None
+            got = probe._validated_scan(points, origin, self.sensor_range, "scan",
+                                        check_ends=False)
+            if got is None:
+                continue
+            pts, org, rng, _ = got
+            out = probe._knn_cells(pts, org, rng, False, 20, probe._max_scan_cells())
+            if out is None or isinstance(out, str):
+                try:
+                    probe._record_insert(out, pts, org, rng, "superray", 20)
+                except ValueError as exc:
+                    raise ValueError(f"scans[{i}]: {exc}") from None
+            near, keys, kinds, point_cell, _ = out
+            s = mean_knn_distances(pts[near].astype(np.float64), self.ks, workers)
+            per_k = []
+            for j in range(len(self.ks)):
+                stats[j] = _welford(np.ascontiguousarray(s[:, j]), *stats[j])
+                per_k.append(stats[j])
+            local.append((keys, kinds, point_cell, s, per_k))
+            self.n_points += len(pts)
+            self.n_near += len(s)
+        self.n_scans = len(local)
+        all_keys = np.concatenate([x[0] for x in local]) if local else np.empty(0, np.uint64)
+        self.keys = np.unique(all_keys)
+        self._scans = [(np.searchsorted(self.keys, keys).astype(np.int64), kinds, point_cell,
+                        s, per_k) for keys, kinds, point_cell, s, per_k in local]
+        k3 = np.column_stack([(self.keys >> np.uint64(16 * a)) & np.uint64(0xFFFF)
+                              for a in range(3)]).astype(np.float64)
+        self.centres = (k3 - 32768 + 0.5) * self.resolution
+
+    @property
+    def n_cells(self) -> int:
+        return len(self.keys)
+
+    def knn_log_odds(self, params: Sequence[dict[str, Any]]) -> NDArray[np.float32]:
+        """Final log-odds of every cell (rows: the combinations, columns: :attr:`keys`)
+        of the KNNMap each parameter dict builds. Each dict holds ``k`` (one of
+        :attr:`ks`), ``p_u``, ``p_l``, ``p_m``, ``p_m_out``, ``p_min``, ``p_max``
+        (checked as :func:`check_knn_params` checks them, with ``p_t`` and
+        ``sensor_range`` left out: the threshold does not change log-odds)."""
+        checked = [self._check_knn(p, i) for i, p in enumerate(params)]
+        kidx = np.array([self.ks.index(p["k"]) for p in checked])
+        l_in = np.array([log_odds(p["p_m"]) for p in checked], dtype=np.float32)
+        l_out = np.array([log_odds(p["p_m_out"]) for p in checked], dtype=np.float32)
+        triples = sorted({(int(kidx[b]), p["p_u"], p["p_l"]) for b, p in enumerate(checked)})
+        which = {t: i for i, t in enumerate(triples)}
+        rows = np.array([which[(int(kidx[b]), p["p_u"], p["p_l"])]
+                         for b, p in enumerate(checked)])
+
+        def updates(scan):
+            _, kinds, point_cell, s, per_k = scan
+            free = np.where(kinds[None, :] == 1, l_in[:, None], l_out[:, None])
+            held = np.flatnonzero(kinds == 0)
+            sums = np.empty((len(triples), len(held)), dtype=np.float32)
+            for i, (j, p_u, p_l) in enumerate(triples):
+                values = point_log_odds(s[:, j], *per_k[j], p_u, p_l, self.cdf)
+                sums[i] = np.bincount(point_cell, values, minlength=len(kinds))[held]
+            free[:, held] = sums[rows]
+            return free
+
+        return self._replay(checked, updates)
+
+    def octomap_log_odds(self, params: Sequence[dict[str, Any]]) -> NDArray[np.float32]:
+        """Like :meth:`knn_log_odds` for OctoMap (``prob_hit``, ``prob_miss``,
+        ``clamping_min``, ``clamping_max``): liboctomap's ``insertPointCloud`` with
+        ``max_range=sensor_range``, one update per cell (hit wins)."""
+        checked = []
+        for i, p in enumerate(params):
+            try:
+                q = check_octomap_params(p)
+            except (KeyError, TypeError, ValueError) as exc:
+                raise type(exc)(f"params[{i}]: {exc}") from None
+            checked.append({"p_min": q["clamping_min"], "p_max": q["clamping_max"],
+                            "l_hit": log_odds(q["prob_hit"]),
+                            "l_miss": log_odds(q["prob_miss"])})
+        l_hit = np.array([p["l_hit"] for p in checked], dtype=np.float32)
+        l_miss = np.array([p["l_miss"] for p in checked], dtype=np.float32)
+
+        def updates(scan):
+            kinds = scan[1]
+            return np.where(kinds[None, :] == 0, l_hit[:, None], l_miss[:, None])
+
+        return self._replay(checked, updates)
+
+    def _check_knn(self, p: dict[str, Any], i: int) -> dict[str, Any]:
+        try:
+            q = check_knn_params({"p_t": p.get("p_min", 0.5), "sensor_range": self.sensor_range,
+                                  **p})
+        except KeyError as exc:
+            raise ValueError(f"params[{i}] lacks the k-NN parameter {exc}") from None
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"params[{i}]: {exc}") from None
+        if q["k"] not in self.ks:
+            raise ValueError(f"params[{i}]: k={q['k']} was not scored; this ScanReplay "
+                             f"holds ks={self.ks}")
+        return q
+
+    def _replay(self, checked, updates) -> NDArray[np.float32]:
+        lo = np.array([log_odds(p["p_min"]) for p in checked], dtype=np.float32)[:, None]
+        hi = np.array([log_odds(p["p_max"]) for p in checked], dtype=np.float32)[:, None]
+        values = np.zeros((len(checked), self.n_cells), dtype=np.float32)
+        for scan in self._scans:
+            cells = scan[0]
+            u = updates(scan).astype(np.float32, copy=False)
+            values[:, cells] = np.minimum(np.maximum(values[:, cells] + u, lo), hi)
+        return values
