@@ -1,7 +1,8 @@
 """occgp: occupancy mapping from range sensors.
 
 The OctoMap octree under a numpy API (:class:`OccupancyOctree`), kernel
-inference on cells (:class:`BGKMap`, :class:`AKIMap`), synthetic
+inference on cells (:class:`BGKMap`, :class:`AKIMap`), the k-NN inverse
+sensor model (:class:`KNNMap`), synthetic
 scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
 (:mod:`occgp.metrics`, :mod:`occgp.evaluation`) for every mapping method.
 """
@@ -10,9 +11,10 @@ import logging
 
 from .grid import GridMap
 from .kernel import AKIMap, BGKMap
+from .knn import KNNMap
 from .octree import Leaves, OccupancyOctree
 
 __version__ = "0.1.0.dev0"
-__all__ = ["OccupancyOctree", "GridMap", "Leaves", "AKIMap", "BGKMap", "__version__"]
+__all__ = ["OccupancyOctree", "GridMap", "Leaves", "AKIMap", "BGKMap", "KNNMap", "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())

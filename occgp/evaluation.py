@@ -23,12 +23,17 @@ from numpy.typing import ArrayLike, NDArray
 from tqdm.auto import tqdm
 
 from ._nca import NCAResult, nca_feature_weights
+from ._search import (
+    KNN_GRID, KNN_WEIGHT_GRID, OCTOMAP_GRID, THRESHOLDS, GridSearchResult, cell_labels, grid_search,
+)
 from ._validation import as_point, as_points, check_real, check_seed
 from .metrics import score_all
 
 __all__ = ["TestSet", "MapResult", "held_out_split", "grid_test_set", "evaluate_map",
            "run_method", "compare_methods", "equal_time_comparison", "format_table",
-           "rows_to_records", "nca_feature_weights", "NCAResult"]
+           "rows_to_records", "nca_feature_weights", "NCAResult", "grid_search",
+           "GridSearchResult", "cell_labels", "KNN_GRID", "OCTOMAP_GRID", "KNN_WEIGHT_GRID",
+           "THRESHOLDS"]
 
 _logger = logging.getLogger("occgp")
 _clock = time.perf_counter  # the timer of `run_method` (tests replace it)
