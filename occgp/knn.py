@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
-from scipy.special import ndtr
+from scipy.spatial import cKDTree  # type: ignore[import-untyped]
+from scipy.special import ndtr  # type: ignore[import-untyped]
 
 from ._octree import _welford
 from ._validation import (
@@ -313,8 +313,8 @@ class KNNMap(OccupancyOctree):
         return math.sqrt(m2 / n) if n else math.nan
 
     # ------------------------------------------------------------------ updates
-    def insert_scan(self, points: ArrayLike, origin: ArrayLike, *, method: str = "auto",
-                    superray_threshold: int = 20) -> "KNNMap":
+    def insert_scan(self, points: ArrayLike, origin: ArrayLike, *,  # type: ignore[override]
+                    method: str = "auto", superray_threshold: int = 20) -> "KNNMap":
         """Integrate one point cloud with the k-NN inverse sensor model.
 
         Parameters
@@ -359,6 +359,7 @@ default="auto"
                               self._max_scan_cells())
         if out is None or isinstance(out, str):
             self._record_insert(out, pts, org, rng, method, threshold)   # raises
+            raise AssertionError("unreachable")
         near, keys, kinds, point_cell, stats = out
         t0 = time.perf_counter()
         near_pts = pts[near].astype(np.float64)
@@ -446,9 +447,8 @@ class ScanReplay:
     def __init__(self, scans: Iterable[Sequence[Any]], resolution: float = 0.1, *,
                  sensor_range: float = 4.0, ks: Sequence[int] = (1,), cdf: str = "normal",
                  n_jobs: int | None = None) -> None:
-        if isinstance(ks, (int, np.integer)):
-            ks = (ks,)
-        self.ks = tuple(check_int(k, "ks", low=1, high=MAX_K) for k in ks)
+        k_values = (ks,) if isinstance(ks, (int, np.integer)) else ks
+        self.ks = tuple(check_int(k, "ks", low=1, high=MAX_K) for k in k_values)
         if not self.ks:
             raise ValueError("ks must hold at least one k")
         self.resolution = check_resolution(resolution)
@@ -476,6 +476,7 @@ class ScanReplay:
                     probe._record_insert(out, pts, org, rng, "superray", 20)
                 except ValueError as exc:
                     raise ValueError(f"scans[{i}]: {exc}") from None
+                raise AssertionError("unreachable")
             near, keys, kinds, point_cell, _ = out
             s = mean_knn_distances(pts[near].astype(np.float64), self.ks, workers)
             per_k = []
