@@ -177,3 +177,55 @@ def leaf_values(tree) -> dict[tuple, np.float32]:
     assert np.all(np.isclose(sizes, tree.resolution))
     keys = np.floor(centers / tree.resolution).astype(np.int64) + MAX_VAL
     return {tuple(k): v for k, v in zip(keys.tolist(), values)}
+
+
+def knn_reference(scans, resolution, *, k, p_u, p_l, p_m, p_m_out, p_min, p_max,
+                  sensor_range):
+    """Cell key → float32 log-odds after inserting `scans` with the k-NN inverse sensor
+    model: brute-force neighbours, Welford one point at a time, the normal CDF from
+    ``math.erfc``, the ray port above, one clamped update per cell and scan."""
+    rf = 1.0 / resolution
+    l_in, l_out = logodds32(p_m), logodds32(p_m_out)
+    lo, hi = logodds32(p_min), logodds32(p_max)
+    values: dict[tuple, np.float32] = {}
+    count, mean, m2 = 0, 0.0, 0.0
+    for points, origin in scans:
+        o = [f32(c) for c in np.asarray(origin, np.float32)]
+        near, cut = [], []
+        for p in np.asarray(points, np.float32):
+            p = [f32(c) for c in p]
+            end, truncated = _ray_end(o, p, sensor_range)
+            (cut if truncated else near).append(end)
+        pts = np.array(near, dtype=np.float64).reshape(-1, 3)
+        scores = []
+        for i in range(len(pts)):
+            d = sorted(math.dist(pts[i], pts[j]) for j in range(len(pts)) if j != i)
+            scores.append(sum(d[:k]) / k if len(d) >= k else math.inf)
+        for s in scores:
+            if math.isfinite(s):
+                count += 1
+                delta = s - mean
+                mean += delta / count
+                m2 += delta * (s - mean)
+        std = math.sqrt(m2 / count) if count else 0.0
+        point_sum: dict[tuple, float] = defaultdict(float)
+        for p, s in zip(near, scores):
+            if not math.isfinite(s):
+                f = 1.0
+            elif std > 0:
+                f = 0.5 * math.erfc(-(s - mean) / (std * math.sqrt(2.0)))
+            else:
+                f = 1.0 if s > mean else (0.0 if s < mean else 0.5)
+            prob = p_u - (p_u - p_l) * f
+            point_sum[tuple(_key(c, rf) for c in p)] += math.log(prob / (1.0 - prob))
+        update: dict[tuple, np.float32] = {key: f32(v) for key, v in point_sum.items()}
+        for end in near:
+            for key in ray_keys(o, end, resolution):
+                update.setdefault(key, l_in)
+        for end in cut:
+            for key in ray_keys(o, end, resolution):
+                update.setdefault(key, l_out)
+        for key, delta in update.items():
+            value = f32(values.get(key, f32(0.0)) + delta)
+            values[key] = lo if value < lo else (hi if value > hi else value)
+    return values
