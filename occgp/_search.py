@@ -22,7 +22,7 @@ from joblib import Parallel, delayed
 from numpy.typing import ArrayLike, NDArray
 
 from ._validation import check_choice, check_int, check_n_jobs, check_real, n_threads
-from .knn import KNNMap, ScanReplay, check_knn_params, check_octomap_params, log_odds
+from .knn import KNNMap, ScanReplay, check_knn_params, check_octomap_params, _log_odds
 
 __all__ = ["grid_search", "GridSearchResult", "cell_labels", "KNN_GRID", "OCTOMAP_GRID",
            "KNN_WEIGHT_GRID", "THRESHOLDS"]
@@ -211,7 +211,7 @@ def _score_chunk(replay, labels, method, combos, thresholds, batch_size):
                 rows.append({**params, "auc": _tpr_fdr_auc(labels, prob), "thresholds": (),
                              "tpr": (), "fdr": ()})
                 continue
-            ts = [(t, np.float32(log_odds(t))) for t in sorted(thresholds, reverse=True)
+            ts = [(t, np.float32(_log_odds(t))) for t in sorted(thresholds, reverse=True)
                   if lo - 1e-12 <= t <= hi + 1e-12]
             kept, tpr, fdr = _curve(values[b], labels, ts)
             rows.append({**params, "auc": _auc(tpr, fdr), "thresholds": tuple(kept),

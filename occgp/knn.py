@@ -31,13 +31,9 @@ from ._validation import (
 )
 from .octree import OccupancyOctree
 
-__all__ = ["KNNMap", "ScanReplay", "check_knn_params", "check_octomap_params", "KNN_PARAMS", "OCTOMAP_PARAMS"]
+__all__ = ["KNNMap", "ScanReplay", "check_knn_params", "check_octomap_params",
+           "mean_knn_distances", "point_log_odds"]
 
-#: The parameters of the k-NN model, as :class:`KNNMap` takes them.
-KNN_PARAMS = ("k", "p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "p_t", "sensor_range")
-#: OctoMap's parameters, as :class:`~occgp.OccupancyOctree` takes them.
-OCTOMAP_PARAMS = ("prob_hit", "prob_miss", "clamping_min", "clamping_max",
-                  "occupancy_threshold")
 CDFS = ("normal", "truncated")
 MAX_K = 1000
 _MAX_RANGE = 1e15
@@ -46,7 +42,7 @@ _MAX_RANGE = 1e15
 _CLASS_HIT, _CLASS_MISS = 0.7, 0.4
 
 
-def log_odds(p: float) -> float:
+def _log_odds(p: float) -> float:
     """liboctomap's ``logodds``: ``(float) log(p / (1 - p))`` (libm's log, float32)."""
     return float(np.float32(math.log(p / (1.0 - p))))
 
@@ -365,9 +361,9 @@ default="auto"
         near_pts = pts[near].astype(np.float64)
         s = mean_knn_distances(near_pts, [self.k], n_threads(self._params["n_jobs"]))[:, 0]
         scores = _welford(s, *self._scores)
-        updates = scan_updates(kinds, point_cell, point_log_odds(
-            s, *scores, self.p_u, self.p_l, self.cdf), log_odds(self.p_m),
-            log_odds(self.p_m_out))
+        updates = _cell_updates(kinds, point_cell, point_log_odds(
+            s, *scores, self.p_u, self.p_l, self.cdf), _log_odds(self.p_m),
+            _log_odds(self.p_m_out))
         seconds = time.perf_counter() - t0
         self._apply_cells(keys, updates)
         self._scores = scores
@@ -386,7 +382,7 @@ default="auto"
         return {k: v for k, v in self._params.items() if k != "resolution"}
 
 
-def scan_updates(kinds: NDArray[np.uint8], point_cell: NDArray[np.int64],
+def _cell_updates(kinds: NDArray[np.uint8], point_cell: NDArray[np.int64],
                  point_values: NDArray[np.float64], l_in: float,
                  l_out: float) -> NDArray[np.float32]:
     """One scan's update per cell: the float32 sum of the point values of the cells
@@ -507,8 +503,8 @@ class ScanReplay:
         ``sensor_range`` left out: the threshold does not change log-odds)."""
         checked = [self._check_knn(p, i) for i, p in enumerate(params)]
         kidx = np.array([self.ks.index(p["k"]) for p in checked])
-        l_in = np.array([log_odds(p["p_m"]) for p in checked], dtype=np.float32)
-        l_out = np.array([log_odds(p["p_m_out"]) for p in checked], dtype=np.float32)
+        l_in = np.array([_log_odds(p["p_m"]) for p in checked], dtype=np.float32)
+        l_out = np.array([_log_odds(p["p_m_out"]) for p in checked], dtype=np.float32)
         triples = sorted({(int(kidx[b]), p["p_u"], p["p_l"]) for b, p in enumerate(checked)})
         which = {t: i for i, t in enumerate(triples)}
         rows = np.array([which[(int(kidx[b]), p["p_u"], p["p_l"])]
@@ -538,8 +534,8 @@ class ScanReplay:
             except (KeyError, TypeError, ValueError) as exc:
                 raise type(exc)(f"params[{i}]: {exc}") from None
             checked.append({"p_min": q["clamping_min"], "p_max": q["clamping_max"],
-                            "l_hit": log_odds(q["prob_hit"]),
-                            "l_miss": log_odds(q["prob_miss"])})
+                            "l_hit": _log_odds(q["prob_hit"]),
+                            "l_miss": _log_odds(q["prob_miss"])})
         l_hit = np.array([p["l_hit"] for p in checked], dtype=np.float32)
         l_miss = np.array([p["l_miss"] for p in checked], dtype=np.float32)
 
@@ -563,8 +559,8 @@ class ScanReplay:
         return q
 
     def _replay(self, checked, updates) -> NDArray[np.float32]:
-        lo = np.array([log_odds(p["p_min"]) for p in checked], dtype=np.float32)[:, None]
-        hi = np.array([log_odds(p["p_max"]) for p in checked], dtype=np.float32)[:, None]
+        lo = np.array([_log_odds(p["p_min"]) for p in checked], dtype=np.float32)[:, None]
+        hi = np.array([_log_odds(p["p_max"]) for p in checked], dtype=np.float32)[:, None]
         values = np.zeros((len(checked), self.n_cells), dtype=np.float32)
         for scan in self._scans:
             cells = scan[0]

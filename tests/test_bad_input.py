@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 import occgp
-from occgp import AKIMap, BGKMap, GridMap, OccupancyOctree, datasets, evaluation, gp, metrics
+from occgp import (
+    AKIMap, BGKMap, GridMap, KNNMap, OccupancyOctree, datasets, evaluation, gp, metrics,
+)
 
 TABLE = pathlib.Path(__file__).resolve().parents[1] / "docs" / "bad_input.csv"
 
@@ -33,6 +35,7 @@ def namespace(tmp_path):
     ns["grid"] = GridMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
     ns["bgk"] = BGKMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
     ns["akimap"] = AKIMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
+    ns["knn"] = KNNMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0], [0, 1.1, 0]], [0, 0, 0])
     # a wall of 60 points 2 m in front of the origin
     ns["wall60"] = np.column_stack([np.full(60, 2.0), np.linspace(-1, 1, 60), np.zeros(60)])
     for name, content in make_files().items():
@@ -53,6 +56,8 @@ def make_files() -> dict[str, bytes]:
 
 def state(value):
     """A fingerprint of a map's contents (None for other values)."""
+    if isinstance(value, KNNMap):
+        return value.to_bytes("ot"), value._scores
     if isinstance(value, OccupancyOctree):
         return value.to_bytes("ot")
     if isinstance(value, GridMap):
