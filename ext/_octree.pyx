@@ -23,7 +23,7 @@ from _keys cimport (
     KEY_DEPTH as _DEPTH, KEY_MAX_VAL as _MAX_VAL, KEYRAY_SAFE_CELLS, effective_end, ray_codes,
     in_range_mask, pack_key as _pack, set_sensor_model, unpack_key as _unpack,
 )
-from _scan cimport ScanCell, ScanStats, scan_result, scan_updates, scan_weights
+from _scan cimport ScanCell, ScanStats, empty_stats, scan_result, scan_updates, scan_weights
 from liboctomap cimport (
     OcTree, OcTreeKey, OcTreeNode, Pointcloud, istringstream, key_type, ostringstream, point3d,
 )
@@ -213,8 +213,8 @@ cdef class _OcTree:
                         b_v[ib, 1] = points[i, 1]
                         b_v[ib, 2] = points[i, 2]
                         ib += 1
-                _empty_stats(&sa)
-                _empty_stats(&sb)
+                empty_stats(&sa)
+                empty_stats(&sb)
                 if n_near:
                     scan_updates(tree, a_v, o, -1.0, False, culling, NULL,
                                  superray_threshold, _fully_free, tree, self._counts,
@@ -483,19 +483,6 @@ cdef class _OcTree:
             with self._lock:
                 tree.clear()
             raise ValueError("liboctomap could not read the tree data")
-
-
-cdef inline void _empty_stats(ScanStats* stats) noexcept nogil:
-    """The statistics of a traversal that did not run."""
-    cdef int k
-    stats.region_cells = -1
-    stats.rays = 0
-    stats.traversed_cells = 0
-    stats.unnecessary = -1
-    stats.bad_ends = 0
-    stats.too_many = False
-    for k in range(5):
-        clock_gettime(CLOCK_MONOTONIC, &stats.clock[k])
 
 
 def _sum_stats(a, b):

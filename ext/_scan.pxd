@@ -464,6 +464,19 @@ cdef inline long _build_region(FreeTest fully_free, void* map, const OcTreeKey& 
     return count
 
 
+cdef inline void empty_stats(ScanStats* stats) noexcept nogil:
+    """The statistics of a scan before (or without) its traversal, every clock now."""
+    cdef int k
+    stats.region_cells = -1
+    stats.rays = 0
+    stats.traversed_cells = 0
+    stats.unnecessary = -1
+    stats.bad_ends = 0
+    stats.too_many = False
+    for k in range(5):
+        clock_gettime(CLOCK_MONOTONIC, &stats.clock[k])
+
+
 cdef inline int scan_updates(
         OcTree* keys, const float[:, ::1] points, const point3d& o, double max_range,
         bint ray_mode, bint culling, const uint32_t* weights, int superray_threshold,
@@ -522,13 +535,7 @@ cdef inline int scan_updates(
     cdef bint more
     cdef double res = keys.getResolution(), rf = 1.0 / res
     cdef ScanCell cell
-    stats.region_cells = -1
-    stats.rays = 0
-    stats.traversed_cells = 0
-    stats.unnecessary = -1
-    stats.bad_ends = 0
-    stats.too_many = False
-    clock_gettime(CLOCK_MONOTONIC, &stats.clock[0])
+    empty_stats(stats)
     keys.coordToKeyChecked(o, ko)
     for axis in range(3):
         lo[axis] = hi[axis] = ko[axis]
