@@ -34,6 +34,9 @@ from .octree import OccupancyOctree
 __all__ = ["KNNMap", "ScanReplay", "check_knn_params", "check_octomap_params",
            "mean_knn_distances", "point_log_odds"]
 
+#: The parameters of the k-NN model, as :class:`KNNMap` takes them (``cdf`` and
+#: ``n_jobs`` aside).
+KNN_PARAMS = ("k", "p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "p_t", "sensor_range")
 CDFS = ("normal", "truncated")
 MAX_K = 1000
 _MAX_RANGE = 1e15
