@@ -96,30 +96,42 @@ class GridSearchResult(NamedTuple):
 
 
 def cell_labels(scene: Any, centres: ArrayLike, resolution: float, *,
-                samples: int = 4) -> NDArray[np.bool_]:
+                samples: int = 5) -> NDArray[np.bool_]:
     """Ground truth of octree cells: whether a solid of `scene` reaches into each cell.
 
     A cell (edge `resolution`, centred at a row of `centres`) is occupied when
-    ``scene.occupancy`` holds at one of its ``samples**3`` sub-cell centres, so
-    a cell that a surface crosses counts as occupied whichever side of the
-    surface its centre lies on. Cells whose centre is farther than half a
-    cell diagonal from every surface (``scene.signed_distance``, when the
-    scene has it) take the centre's label without sampling.
+    ``scene.occupancy`` holds at one of ``samples**3`` points of the closed
+    cell: a grid over it that includes its faces, widened by a millionth of
+    the cell. A cell that a surface crosses counts as occupied whichever
+    side of the surface its centre lies on, and a surface lying on a cell
+    border (a ground plane at z = 0) makes both cells beside it occupied: a
+    measured point on it may fall in either. Cells whose centre is farther
+    than half a cell diagonal from every surface (``scene.signed_distance``,
+    when the scene has it) take the centre's label without sampling.
 
     Parameters
     ----------
     scene : object
-        With ``occupancy(points) -> bool array``; optionally
+        With ``occupancy(points) -> bool array`` (closed solids); optionally
         ``signed_distance(points)``.
     centres : array-like of shape (n_cells, 3)
     resolution : float
         Cell edge, metres, > 0.
-    samples : int, default=4
-        Sub-cell samples per axis, in [1, 16].
+    samples : int, default=5
+        Sample points per axis, in [1, 16]; 1 tests the centre alone.
 
     Returns
     -------
     labels : ndarray of bool, shape (n_cells,)
+
+    Examples
+    --------
+    >>> class Ground:
+    ...     def occupancy(self, points):
+    ...         return points[:, 2] <= 0.0
+    >>> cell_labels(Ground(), [[0.05, 0.05, -0.05], [0.05, 0.05, 0.05],
+    ...                        [0.05, 0.05, 0.15]], 0.1).tolist()
+    [True, True, False]
     """
     from ._validation import as_points
     centres = as_points(centres, "centres")
@@ -129,11 +141,14 @@ def cell_labels(scene: Any, centres: ArrayLike, resolution: float, *,
     if labels.shape != (len(centres),):
         raise ValueError(f"scene.occupancy(points) must return shape ({len(centres)},), "
                          f"got {labels.shape}")
+    if samples == 1:
+        return labels
     near = np.arange(len(centres))
+    widen = 1.0 + 1e-6
     if hasattr(scene, "signed_distance"):
         sd = np.asarray(scene.signed_distance(centres), dtype=np.float64)
-        near = np.flatnonzero(np.abs(sd) <= 0.5 * math.sqrt(3) * resolution * (1 + 1e-9))
-    offsets = (np.arange(samples) + 0.5) / samples - 0.5
+        near = np.flatnonzero(np.abs(sd) <= 0.5 * math.sqrt(3) * resolution * widen)
+    offsets = np.linspace(-0.5, 0.5, samples) * widen
     grid = np.stack(np.meshgrid(offsets, offsets, offsets, indexing="ij"), -1).reshape(-1, 3)
     for start in range(0, len(near), 20_000):
         rows = near[start:start + 20_000]

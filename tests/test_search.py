@@ -123,6 +123,11 @@ def test_cell_labels_mark_cells_a_surface_crosses():
     # the wall starts at 1.95: the cell [1.8, 2.0) holds it, its centre does not
     assert cell_labels(Wall(), centres, 0.2).tolist() == [True, True, False]
     assert cell_labels(Wall(), centres, 0.2, samples=1).tolist() == [False, True, False]
+    # a surface on a cell border: both cells beside it
+    from occgp.datasets import tetromino_scene
+    scene = tetromino_scene("I")
+    z = np.array([[10.05, 10.05, -0.05], [10.05, 10.05, 0.05], [10.05, 10.05, 0.15]])
+    assert cell_labels(scene, z, 0.1).tolist() == [True, True, False]
 
 
 @pytest.mark.parametrize("kwargs, exc, match", [
