@@ -302,7 +302,8 @@ def runtime_table(details, prefixes, repeats):
                         lambda: KNNMap(RESOLUTION, k=k, sensor_range=SENSOR_RANGE), part))
             data.append((name, m, N, t_oct, t_knn))
     print(f"== 6. Run-time models (the paper's section 3.6): map builds from the first m "
-          f"scans of each data set; N = points inserted; each time the fastest of {repeats} build(s) ==")
+          f"scans of each data set; N = points inserted; each time the fastest of "
+          f"{repeats} build(s) ==")
     table([[name, m, N, f"{t:.3f}", *(f"{tk[k]:.3f}" for k in NCA_KS)]
            for name, m, N, t, tk in data],
           ["data set", "scans m", "N", "OctoMap [s]", *(f"k-NN k={k} [s]" for k in NCA_KS)])
