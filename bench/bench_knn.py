@@ -29,7 +29,7 @@ frames, clouds voxel-filtered at 0.1 m). Every map is a 0.1 m octree with a
    + c`` (N: points inserted).
 7. The issue's targets, met or missed, as measured above.
 
-Run: ``python bench/bench_knn.py`` (about 20 minutes on 2 cores);
+Run: ``python bench/bench_knn.py`` (about 15 minutes on 2 cores);
 ``--quick`` (6 data sets, NCA on one with 2,000 samples, one repeat set:
 under 3 minutes) for a smoke run; ``--plot fig5.png`` also draws table 3.
 """
