@@ -223,8 +223,10 @@ def nca_table(details, n_samples, n_jobs, seed=0):
             t0 = time.perf_counter()
             w = nca_feature_weights(X, y)
             t_nca = time.perf_counter() - t0
+            share = float(w.weights[0] / w.weights.sum()) if w.weights.sum() > 0 else 0.0
             out.append([name, metric.upper(), *(f"{v:.3f}" for v in w.normalized),
-                        "yes" if w.normalized[0] < 0.1 else "no", len(take), w.n_iter,
+                        f"{share:.3f}", "yes" if w.normalized[0] < 0.1 else "no",
+                        "yes" if share < 0.1 else "no", len(take), w.n_iter,
                         "yes" if w.converged else "no", f"{t_nca:.1f}"])
         notes.append(f"{name}: replay (ks = {NCA_KS}) {t_replay:.1f} s, {n_maps} maps drawn "
                      f"and searched in {t_search:.1f} s giving {len(points)} operating points, "
@@ -232,8 +234,10 @@ def nca_table(details, n_samples, n_jobs, seed=0):
     print(f"== 4. NCA parameter weights (Yang et al.'s NCA-FS, regression, standardised, "
           f"lambda = 1/n): {n_samples} random operating points of KNN_WEIGHT_GRID per data "
           f"set ({len(combos)} valid maps x their thresholds = {total} in all; maps drawn first, "
-          f"seeded, then the points among theirs); normalised weights (max 1) ==")
-    table(out, ["data set", "response", *NCA_FEATURES, "k < 0.1", "samples", "iterations",
+          f"seeded, then the points among theirs); weights normalised to a maximum of 1, and k's "
+          f"share of their sum ==")
+    table(out, ["data set", "response", *NCA_FEATURES, "k / sum", "k < 0.1 (max 1)",
+                "k < 0.1 (sum 1)", "samples", "iterations",
                 "converged", "NCA [s]"])
     for n in notes:
         print(f"  {n}")
