@@ -277,6 +277,19 @@ cdef class _OcTree:
                 applied = apply_updates(tree[0], cells, scratch)
         return applied
 
+    def _key_to_coord(self, const uint16_t[:, ::1] keys, unsigned depth):
+        """liboctomap's keyToCoord(key, depth) on each axis of each row: (n, 3) doubles."""
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t i, n = keys.shape[0]
+        cdef int axis
+        out = np.empty((n, 3))
+        cdef double[:, ::1] v = out
+        with nogil:
+            for i in range(n):
+                for axis in range(3):
+                    v[i, axis] = tree.keyToCoord(keys[i, axis], depth)
+        return out
+
     def _log_odds_thresholds(self):
         """(clamping min, clamping max, occupancy threshold, hit, miss) as the tree
         holds them: float32 log-odds."""

@@ -10,9 +10,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import _octomap_format as fmt
 from ._logodds_map import MODES, Leaves, LogOddsMap
-from ._octree import KEYRAY_CELLS, _check_binary_data, _check_full_data, _OcTree
+from ._octree import (
+    KEYRAY_CELLS, TREE_DEPTH, TREE_MAX_VAL, _check_binary_data, _check_full_data, _OcTree,
+)
 from ._validation import (
-    as_numeric, as_path, as_points, check_bool, check_choice, check_real, check_resolution,
+    as_numeric, as_path, as_points, check_bool, check_choice, check_int, check_real,
+    check_resolution,
 )
 
 __all__ = ["OccupancyOctree", "Leaves"]
@@ -245,6 +248,234 @@ default="auto"
         self._record_insert(self._insert_batch(
             pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold,
             False, self._max_scan_cells()), pts, org, rng, method, threshold)
+        return self
+
+    def update_cells(self, points: ArrayLike, log_odds: ArrayLike | None = None, *,
+                     occupied: ArrayLike | None = None) -> "OccupancyOctree":
+        """Add log-odds to the cells holding `points` (liboctomap's ``updateNode``).
+
+        Row ``i`` adds ``log_odds[i]`` to the finest cell holding ``points[i]``
+        and clamps it to ``[clamping_min, clamping_max]``, as
+        ``updateNode(point, log_odds[i])`` called for each row in order would:
+        a cell named twice gets its updates one after the other, clamped after
+        each. Cells are created where the map knew nothing (from log-odds 0).
+        The tree is walked once per round of distinct cells, not once per row.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Points in the cells to update, metres; inside the key range.
+        log_odds : float or array-like of shape (n_points,), optional
+            The log-odds to add (finite in single precision). Give it or
+            `occupied`.
+        occupied : bool or array-like of bool of shape (n_points,), optional
+            ``updateNode(point, occupied)``: add the log-odds of ``prob_hit``
+            where True, of ``prob_miss`` where False.
+
+        Returns
+        -------
+        self : OccupancyOctree
+
+        Raises
+        ------
+        TypeError
+            If an array does not hold numbers (booleans for `occupied`).
+        ValueError
+            If `points` is not of shape (n_points, 3), holds NaN or inf or lies
+            outside the key range, `log_odds` or `occupied` has the wrong shape
+            or non-finite values, or neither or both are given. The map is then
+            unchanged.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).update_cells([[0.05, 0.05, 0.05]] * 2, [2.0, 2.0])
+        >>> float(m.log_odds([[0.05, 0.05, 0.05]])[0])     # 4.0, clamped at logit(0.971)
+        3.511
+        """
+        keys = self.coord_to_key(points)
+        values = self._cell_values(len(keys), log_odds, occupied)
+        if len(keys) == 0:
+            return self
+        packed = _pack(keys)
+        order = np.argsort(packed, kind="stable")
+        sorted_keys = packed[order]
+        start = np.r_[True, sorted_keys[1:] != sorted_keys[:-1]]
+        group_start = np.maximum.accumulate(np.where(start, np.arange(len(order)), 0))
+        rank = np.arange(len(order)) - group_start      # the row's turn within its cell
+        by_round = np.lexsort((sorted_keys, rank))
+        bounds = np.searchsorted(rank[by_round], np.arange(rank.max() + 2))
+        rows = order[by_round]
+        for r in range(len(bounds) - 1):
+            take = rows[bounds[r]:bounds[r + 1]]
+            self._apply_cells(np.ascontiguousarray(packed[take]),
+                              np.ascontiguousarray(values[take]))
+        return self
+
+    def set_cells(self, points: ArrayLike, log_odds: ArrayLike) -> "OccupancyOctree":
+        """Set the log-odds of the cells holding `points` (liboctomap's ``setNodeValue``).
+
+        Each value is clamped to ``[clamping_min, clamping_max]`` as liboctomap
+        clamps it; a cell named twice keeps the last value. The inner nodes are
+        then re-evaluated and the tree pruned.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Points in the cells to set, metres; inside the key range.
+        log_odds : float or array-like of shape (n_points,)
+            The values (finite in single precision).
+
+        Returns
+        -------
+        self : OccupancyOctree
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`update_cells`; the map is then unchanged.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).set_cells([[0.05, 0.05, 0.05]], 1.0)
+        >>> float(m.log_odds([[0.05, 0.05, 0.05]])[0])
+        1.0
+        """
+        keys = self.coord_to_key(points)
+        values = self._cell_values(len(keys), log_odds, None)
+        if len(keys):
+            self._set_values(keys, values)
+        return self
+
+    def _cell_values(self, n: int, log_odds, occupied) -> np.ndarray:
+        """The float32 log-odds of :meth:`update_cells` / :meth:`set_cells`, checked."""
+        if (log_odds is None) == (occupied is None):
+            raise ValueError("give exactly one of log_odds and occupied")
+        if occupied is not None:
+            occ = np.asarray(occupied)
+            if occ.dtype != np.bool_:
+                raise TypeError(f"occupied must hold booleans, got dtype {occ.dtype}")
+            occ = np.broadcast_to(occ, (n,)) if occ.ndim == 0 else occ
+            if occ.shape != (n,):
+                raise ValueError(f"occupied must be a bool or of shape ({n},), got {occ.shape}")
+            hit, miss = self._log_odds_thresholds()[3:]
+            return np.where(occ, np.float32(hit), np.float32(miss)).astype(np.float32)
+        values = as_numeric(log_odds, "log_odds")
+        if values.ndim == 0:
+            values = np.full(n, values)
+        if values.shape != (n,):
+            raise ValueError(f"log_odds must be a number or of shape ({n},), "
+                             f"got {values.shape}")
+        with np.errstate(over="ignore"):
+            out = np.ascontiguousarray(values, dtype=np.float32)
+        if not np.isfinite(out).all():
+            bad = int(np.flatnonzero(~np.isfinite(out))[0])
+            raise ValueError(f"log_odds must be finite in single precision, got "
+                             f"{values[bad]!r} at row {bad}")
+        return out
+
+    def coord_to_key(self, points: ArrayLike) -> NDArray[np.uint16]:
+        """The 16-bit keys of the finest cells holding `points` (liboctomap's ``coordToKey``).
+
+        ``floor(coordinate / resolution) + 32768`` per axis, from the
+        single-precision coordinate as liboctomap computes it.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+
+        Returns
+        -------
+        keys : ndarray of uint16, shape (n_points, 3)
+
+        Raises
+        ------
+        ValueError
+            If `points` is malformed, not finite, or outside the key range.
+
+        Examples
+        --------
+        >>> OccupancyOctree(0.1).coord_to_key([[0.05, -0.05, 1.0]]).tolist()
+        [[32768, 32767, 32778]]
+        """
+        pts = self._as_float32_points(points, "points")
+        ok = self._in_range(pts)
+        if not ok.all():
+            self._raise_out_of_range("points", ok, "")
+        keys = np.floor(pts.astype(np.float64) * (1.0 / self.resolution)) + TREE_MAX_VAL
+        return np.ascontiguousarray(keys, dtype=np.uint16)
+
+    def key_to_coord(self, keys: ArrayLike, depth: int = TREE_DEPTH) -> NDArray[np.float64]:
+        """Centres of the cells of `keys` at `depth` (liboctomap's ``keyToCoord``).
+
+        Parameters
+        ----------
+        keys : array-like of int, shape (n_keys, 3)
+            Keys in [0, 65535].
+        depth : int, default=16
+            Tree depth of the cells: 16 is the finest (edge ``resolution``),
+            ``d`` gives the node of edge ``resolution * 2**(16 - d)`` holding
+            the key.
+
+        Returns
+        -------
+        centres : ndarray of shape (n_keys, 3)
+
+        Raises
+        ------
+        TypeError
+            If `keys` does not hold integers.
+        ValueError
+            If `keys` is not of shape (n_keys, 3), a key lies outside
+            [0, 65535], or `depth` outside [0, 16].
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1)
+        >>> m.key_to_coord(m.coord_to_key([[0.05, -0.05, 1.0]])).round(3).tolist()
+        [[0.05, -0.05, 1.05]]
+        """
+        depth = check_int(depth, "depth", low=0, high=TREE_DEPTH)
+        arr = as_numeric(keys, "keys", kinds="iu")
+        if arr.ndim != 2 or arr.shape[1] != 3:
+            raise ValueError(f"keys must have shape (n_keys, 3), got {arr.shape}")
+        if arr.size and (arr.min() < 0 or arr.max() > 2 * TREE_MAX_VAL - 1):
+            raise ValueError(f"keys must lie in [0, {2 * TREE_MAX_VAL - 1}], got "
+                             f"[{arr.min()}, {arr.max()}]")
+        return self._key_to_coord(np.ascontiguousarray(arr, dtype=np.uint16), depth)
+
+    def extract_points(self, occupied: bool = True) -> tuple[NDArray[np.float64],
+                                                            NDArray[np.float64]]:
+        """Centres and sizes of the occupied (or the free) leaves.
+
+        Parameters
+        ----------
+        occupied : bool, default=True
+            True: the leaves at or above the occupancy threshold; False: the
+            known leaves below it.
+
+        Returns
+        -------
+        centres : ndarray of shape (n_leaves, 3)
+        sizes : ndarray of shape (n_leaves,)
+            Edge of each leaf (pruned leaves are larger than the resolution).
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).insert_scan([[0.55, 0.05, 0.05]], [0.05, 0.05, 0.05])
+        >>> centres, sizes = m.extract_points()
+        >>> centres.round(2).tolist(), len(m.extract_points(occupied=False)[0])
+        ([[0.55, 0.05, 0.05]], 5)
+        """
+        occupied = check_bool(occupied, "occupied")
+        centres, sizes, values = self._leaves(False)
+        keep = (values >= np.float32(self._log_odds_thresholds()[2])) == occupied
+        return centres[keep], sizes[keep]
+
+    def to_max_likelihood(self) -> "OccupancyOctree":
+        """Set every cell to its clamping bound by its state (liboctomap's
+        ``toMaxLikelihood``): occupied cells to ``clamping_max``, free ones to
+        ``clamping_min``; then prune. Returns self."""
+        self._to_max_likelihood()
         return self
 
     # ------------------------------------------------------------------ queries
@@ -557,6 +788,12 @@ def _as_float32_directions(directions: ArrayLike) -> np.ndarray:
         u = d64[bad] / np.abs(d64[bad]).max(axis=1, keepdims=True)
         d[bad] = u / np.linalg.norm(u, axis=1, keepdims=True)
     return np.ascontiguousarray(d)
+
+
+def _pack(keys: np.ndarray) -> np.ndarray:
+    """Packed keys (x in the low 16 bits), as the compiled core hashes them."""
+    k = keys.astype(np.uint64)
+    return k[:, 0] | (k[:, 1] << np.uint64(16)) | (k[:, 2] << np.uint64(32))
 
 
 def _discretized(points: np.ndarray, resolution: float) -> np.ndarray:
