@@ -93,23 +93,56 @@ cdef class _OcTree:
 
     # ------------------------------------------------------------------ updates
     def _insert_point_cloud(self, const float[:, ::1] points, const float[::1] origin,
-                            double max_range, bint discretize):
-        """liboctomap's ``insertPointCloud`` (free/occupied key sets, one update per cell)."""
+                            double max_range, bint discretize, const float[:, ::1] bbox=None):
+        """liboctomap's ``insertPointCloud`` (free/occupied key sets, one update per cell),
+        limited to `bbox` (rows: min and max corner, keys checked by the caller) with
+        liboctomap's ``useBBXLimit`` when given."""
         cdef OcTree* tree = self._get()
         cdef Pointcloud cloud
         cdef Py_ssize_t i, n = points.shape[0]
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
+        cdef point3d lo, hi
+        cdef bint limit = bbox is not None
+        if limit:
+            lo = point3d(bbox[0, 0], bbox[0, 1], bbox[0, 2])
+            hi = point3d(bbox[1, 0], bbox[1, 1], bbox[1, 2])
         with self._lock:
             with nogil:
                 cloud.reserve(n)
                 for i in range(n):
                     cloud.push_back(points[i, 0], points[i, 1], points[i, 2])
-                tree.insertPointCloud(cloud, o, max_range, False, discretize)
+                if limit:
+                    tree.setBBXMin(lo)
+                    tree.setBBXMax(hi)
+                    tree.useBBXLimit(True)
+                try:
+                    tree.insertPointCloud(cloud, o, max_range, False, discretize)
+                finally:
+                    tree.useBBXLimit(False)
+
+    def _bbx_rays(self, const float[:, ::1] points, const float[::1] origin,
+                  double max_range, const float[:, ::1] bbox):
+        """Which rays liboctomap's insertPointCloud keeps under ``useBBXLimit``: the end
+        point lies in the box (its float comparison) and within `max_range` (< 0: none)."""
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef point3d o = point3d(origin[0], origin[1], origin[2])
+        cdef point3d p
+        keep = np.zeros(n, dtype=np.bool_)
+        cdef uint8_t[::1] k = keep.view(np.uint8)
+        with nogil:
+            for i in range(n):
+                p = point3d(points[i, 0], points[i, 1], points[i, 2])
+                k[i] = (p.x() >= bbox[0, 0] and p.y() >= bbox[0, 1] and p.z() >= bbox[0, 2]
+                        and p.x() <= bbox[1, 0] and p.y() <= bbox[1, 1]
+                        and p.z() <= bbox[1, 2]
+                        and (max_range < 0 or (p - o).norm() <= max_range))
+        return keep
 
     def _insert_batch(self, const float[:, ::1] points, const float[::1] origin,
                       double max_range, bint ray_mode, bint culling,
                       const uint32_t[::1] weights=None, int superray_threshold=0,
-                      bint diagnose=False, uint64_t max_cells=0):
+                      bint diagnose=False, uint64_t max_cells=0,
+                      const uint16_t[:, ::1] key_box=None):
         """Insert a scan through occgp's own key table, optionally culled.
 
         Every ray is traversed by liboctomap's ``computeRayKeys``; the cells are
@@ -125,7 +158,8 @@ cdef class _OcTree:
 
         Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
         seconds, unnecessary_traversals), seconds = (end points, pre-processing
-        (super rays and culling region), traversal, tree update); region_cells
+        (super rays and culling region), traversal, tree update). With `key_box`
+        (rows: lowest and highest key), cells outside it are left out. region_cells
         is -1 when culling was off or the scan's key box was too large to cull;
         unnecessary_traversals is -1 unless `diagnose` (slow) asks for it.
         Returns None, changing nothing, when a ray's end (after truncation)
@@ -141,6 +175,15 @@ cdef class _OcTree:
         cdef ScanStats stats
         cdef OcTreeKey key
         cdef timespec done
+        cdef bint boxed = key_box is not None
+        cdef int lo[3]
+        cdef int hi[3]
+        cdef int axis
+        cdef size_t m = 0
+        if boxed:
+            for axis in range(3):
+                lo[axis] = key_box[0, axis]
+                hi[axis] = key_box[1, axis]
         with self._lock:
             with nogil:
                 scan_updates(tree, points, o, max_range, ray_mode, culling, w,
@@ -150,11 +193,16 @@ cdef class _OcTree:
                     cells.resize(found.size())
                     for j in range(<Py_ssize_t>found.size()):
                         key = _unpack(found[j].key)
-                        cells[j].code = morton_code(key[0], key[1], key[2])
-                        cells[j].update = found[j].update
+                        if boxed and not (lo[0] <= key[0] <= hi[0] and lo[1] <= key[1] <= hi[1]
+                                          and lo[2] <= key[2] <= hi[2]):
+                            continue
+                        cells[m].code = morton_code(key[0], key[1], key[2])
+                        cells[m].update = found[j].update
+                        m += 1
+                    cells.resize(m)
                     apply_updates(tree[0], cells, scratch)
                 clock_gettime(CLOCK_MONOTONIC, &done)
-        return scan_result(stats, found.size(), done)
+        return scan_result(stats, m, done)
 
     def _knn_cells(self, const float[:, ::1] points, const float[::1] origin,
                    double sensor_range, bint culling, int superray_threshold=0,

@@ -110,6 +110,9 @@ cdef extern from "octomap/octomap.h" namespace "octomap" nogil:
         OcTreeNode* setNodeValue(const OcTreeKey& key, float log_odds_value,
                                  bool lazy_eval) except +
         void updateInnerOccupancy() except +
+        void useBBXLimit(bool enable)
+        void setBBXMin(point3d& min)
+        void setBBXMax(point3d& max)
         OcTreeNode* updateNode(const OcTreeKey& key, float log_odds_update,
                                bool lazy_eval) except +
         bool computeRayKeys(const point3d& origin, const point3d& end,

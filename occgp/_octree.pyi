@@ -16,12 +16,16 @@ class _OcTree:
     def _check_rays(self, points: NDArray[np.float32], origin: NDArray[np.float32],
                     max_range: float) -> tuple[NDArray[np.uint8], NDArray[np.int64]]: ...
     def _insert_point_cloud(self, points: NDArray[np.float32], origin: NDArray[np.float32],
-                            max_range: float, discretize: bool) -> None: ...
+                            max_range: float, discretize: bool,
+                            bbox: NDArray[np.float32] | None = None) -> None: ...
+    def _bbx_rays(self, points: NDArray[np.float32], origin: NDArray[np.float32],
+                  max_range: float, bbox: NDArray[np.float32]) -> NDArray[np.bool_]: ...
     def _insert_batch(self, points: NDArray[np.float32], origin: NDArray[np.float32],
                       max_range: float, ray_mode: bool, culling: bool,
                       weights: NDArray[np.uint32] | None = None,
                       superray_threshold: int = 0,
                       diagnose: bool = False, max_cells: int = 0,
+                      key_box: NDArray[np.uint16] | None = None,
                       ) -> tuple[int, int, int, int, tuple[float, float, float, float], int] | str | None: ...
     def _knn_cells(self, points: NDArray[np.float32], origin: NDArray[np.float32],
                    sensor_range: float, culling: bool, superray_threshold: int = 0,

@@ -119,6 +119,7 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         method: str = "auto",
         superray_threshold: int = 20,
         discretize: bool = False,
+        bbox: ArrayLike | None = None,
     ) -> "OccupancyOctree":
         """Integrate one range scan into the map.
 
@@ -183,6 +184,14 @@ default="auto"
             Only with ``mode="scan"`` and ``method="plain"`` (or ``"auto"``):
             cast one ray per distinct end cell, to its centre (liboctomap's
             ``discretize``), which is faster for dense scans.
+        bbox : array-like of shape (2, 3), default=None
+            ``[min_corner, max_corner]``: update only inside this box, as
+            liboctomap's ``useBBXLimit`` does. A ray counts only when its end
+            point lies in the box (a closed box, compared in single precision)
+            and within `max_range`; it marks its end cell occupied and its cells
+            inside the box free (rays ending outside the box, or cut at
+            `max_range`, change nothing). Every method gives liboctomap's map.
+            Both corners must lie in the key range.
 
         Returns
         -------
@@ -223,6 +232,7 @@ default="auto"
         if discretize and (mode != "scan" or method != "plain"):
             raise ValueError("discretize=True is only defined for mode='scan', method='plain'")
         liboctomap = mode == "scan" and method == "plain"
+        box = None if bbox is None else self._check_bbox(bbox)
         scan = self._validated_scan(points, origin, max_range, mode, check_ends=liboctomap)
         if scan is None:
             return self
@@ -236,7 +246,7 @@ default="auto"
             # within MAX_SCAN_CELLS: otherwise occgp's traversal, which checks it
             reach = cells.sum() + len(cells)
             if cells.max() <= KEYRAY_CELLS and reach <= self._max_scan_cells():
-                self._insert_point_cloud(pts, org, rng, bool(discretize))
+                self._insert_point_cloud(pts, org, rng, bool(discretize), box)
                 self.last_insert_: dict[str, float] = {"rays": len(pts)}
                 return self
             # a ray too long for liboctomap's key buffer (KEYRAY_CELLS): occgp's
@@ -244,11 +254,36 @@ default="auto"
             # insertPointCloud would give with a buffer large enough
             if discretize:
                 pts = _discretized(pts, self.resolution)
+        key_box = None
+        if box is not None:
+            # liboctomap keeps the rays that end in the box within range, and of their
+            # cells those in the box's keys
+            pts = np.ascontiguousarray(pts[self._bbx_rays(pts, org, rng, box)])
+            key_box = self.coord_to_key(box)
+            if len(pts) == 0:
+                self.last_insert_ = {"rays": 0}
+                return self
         threshold = self._adaptive_threshold(method, threshold)
         self._record_insert(self._insert_batch(
             pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold,
-            False, self._max_scan_cells()), pts, org, rng, method, threshold)
+            False, self._max_scan_cells(), key_box), pts, org, rng, method, threshold)
         return self
+
+    def _check_bbox(self, bbox: ArrayLike) -> np.ndarray:
+        """`bbox` as a float32 (2, 3) array: finite, min <= max, corners in key range."""
+        box = as_numeric(bbox, "bbox")
+        if box.shape != (2, 3):
+            raise ValueError(f"bbox must have shape (2, 3) (min and max corner), got {box.shape}")
+        with np.errstate(over="ignore"):
+            box32 = np.ascontiguousarray(box, dtype=np.float32)
+        if not np.isfinite(box32).all():
+            raise ValueError("bbox must be finite (in single precision)")
+        if (box32[0] > box32[1]).any():
+            raise ValueError(f"bbox must have min <= max on every axis, got {box.tolist()}")
+        ok = self._in_range(box32)
+        if not ok.all():
+            self._raise_out_of_range("bbox corners", ok, "")
+        return box32
 
     def update_cells(self, points: ArrayLike, log_odds: ArrayLike | None = None, *,
                      occupied: ArrayLike | None = None) -> "OccupancyOctree":

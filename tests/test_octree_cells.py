@@ -120,3 +120,44 @@ def test_bad_input_leaves_the_map_unchanged(call, exc, match):
     with pytest.raises(exc, match=match):
         call(m)
     assert m.to_bytes() == before
+
+
+# ---------------------------------------------------------------------- bbox
+BOX = np.array([[-1.0, -0.7, 0.1], [1.3, 0.9, 1.6]])
+
+
+@pytest.mark.parametrize("method", ["culling", "superray", "superray+culling"])
+@pytest.mark.parametrize("max_range", [None, 1.5])
+def test_bbox_insert_equals_liboctomap(method, max_range):
+    from test_culling import room_sequence
+    scans = room_sequence(np.random.default_rng(3), n_scans=6, n_points=600)
+    ref, other = OccupancyOctree(0.1), OccupancyOctree(0.1)
+    for points, origin in scans:
+        ref.insert_scan(points, origin, method="plain", bbox=BOX, max_range=max_range)
+        other.insert_scan(points, origin, method=method, bbox=BOX, max_range=max_range)
+    assert leaf_values(ref) == leaf_values(other)
+    lo, hi = ref.coord_to_key(BOX)
+    keys = np.array(list(leaf_values(ref)))
+    assert len(keys) and ((keys >= lo) & (keys <= hi)).all()
+
+
+def test_bbox_rays_ending_outside_change_nothing():
+    m = OccupancyOctree(0.1)
+    m.insert_scan([[3.0, 0.05, 0.5], [5.0, 5.0, 5.0]], [0.05, 0.05, 0.5], bbox=BOX)
+    assert m.num_leaves == 0
+    m.insert_scan([[1.0, 0.05, 0.5]], [-3.05, 0.05, 0.5], bbox=BOX, method="culling")
+    # the ray's cells inside the box only: x from -1.0 to its end cell at 1.0
+    centres = m.extract_points(occupied=False)[0]
+    assert centres[:, 0].min() > -1.0 and m.is_occupied([[1.0, 0.05, 0.5]])[0]
+
+
+@pytest.mark.parametrize("bbox, match", [
+    ([[0, 0, 0]], r"shape \(2, 3\)"), ([[1, 0, 0], [0, 1, 1]], "min <= max"),
+    ([[0, 0, 0], [np.inf, 1, 1]], "finite"), ([[0, 0, 0], [1e30, 1, 1]], "bbox corners"),
+])
+def test_bad_bbox(bbox, match):
+    m = OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0])
+    before = m.to_bytes()
+    with pytest.raises(ValueError, match=match):
+        m.insert_scan([[0.5, 0, 0]], [0, 0, 0], bbox=bbox)
+    assert m.to_bytes() == before
