@@ -45,6 +45,8 @@ cdef extern from "_octree_batch.h" namespace "occgp" nogil:
         uint64_t code
         float update
     uint64_t morton_code(unsigned x, unsigned y, unsigned z)
+    OcTreeKey morton_key(uint64_t code)
+    void sort_by_code(vector[CellUpdate]& cells, vector[CellUpdate]& scratch) except +
     size_t apply_updates(OcTree& tree, vector[CellUpdate]& cells,
                          vector[CellUpdate]& scratch) except +
 
@@ -59,6 +61,9 @@ cdef class _OcTree:
     # scans unless _counts_dirty) to spare allocating and clearing megabytes per scan
     cdef vector[uint32_t] _counts
     cdef bint _counts_dirty
+    # change detection (liboctomap's rule): packed key -> the cell was new
+    cdef bint _tracking
+    cdef unordered_map[uint64_t, bint] _changes
 
     def __cinit__(self, *args, **kwargs):
         self._lock = threading.Lock()
@@ -200,7 +205,7 @@ cdef class _OcTree:
                         cells[m].update = found[j].update
                         m += 1
                     cells.resize(m)
-                    apply_updates(tree[0], cells, scratch)
+                    self._apply_tracked(tree, cells, scratch)
                 clock_gettime(CLOCK_MONOTONIC, &done)
         return scan_result(stats, m, done)
 
@@ -322,7 +327,7 @@ cdef class _OcTree:
                     key = _unpack(keys[j])
                     cells[j].code = morton_code(key[0], key[1], key[2])
                     cells[j].update = updates[j]
-                applied = apply_updates(tree[0], cells, scratch)
+                applied = self._apply_tracked(tree, cells, scratch)
         return applied
 
     def _key_to_coord(self, const uint16_t[:, ::1] keys, unsigned depth):
@@ -338,6 +343,72 @@ cdef class _OcTree:
                     v[i, axis] = tree.keyToCoord(keys[i, axis], depth)
         return out
 
+    cdef size_t _apply_tracked(self, OcTree* tree, vector[CellUpdate]& cells,
+                               vector[CellUpdate]& scratch) except * nogil:
+        """apply_updates, recording the changes of liboctomap's change detection when on."""
+        cdef size_t j, applied
+        cdef vector[uint8_t] known, before
+        cdef OcTreeKey key
+        cdef OcTreeNode* node
+        if not self._tracking:
+            return apply_updates(tree[0], cells, scratch)
+        # apply_updates sorts the cells: sort first, so the states line up
+        sort_by_code(cells, scratch)
+        known.resize(cells.size())
+        before.resize(cells.size())
+        for j in range(cells.size()):
+            node = tree.search(morton_key(cells[j].code), 0)
+            known[j] = node != NULL
+            before[j] = node != NULL and tree.isNodeOccupied(node)
+        applied = apply_updates(tree[0], cells, scratch)
+        for j in range(cells.size()):
+            key = morton_key(cells[j].code)
+            node = tree.search(key, 0)
+            self._record(_pack(key), known[j], before[j], tree.isNodeOccupied(node))
+        return applied
+
+    cdef inline void _record(self, uint64_t key, bint known, bint before,
+                             bint after) noexcept nogil:
+        """liboctomap's rule: a new cell is recorded as new; a known cell whose state
+        flips is recorded (as not new), and a second flip of such a cell removes it."""
+        cdef unordered_map[uint64_t, bint].iterator it
+        if not known:
+            if self._changes.count(key) == 0:
+                self._changes[key] = True
+        elif before != after:
+            it = self._changes.find(key)
+            if it == self._changes.end():
+                self._changes[key] = False
+            elif not deref(it).second:
+                self._changes.erase(it)
+
+    def _set_tracking(self, bint enable):
+        with self._lock:
+            self._tracking = enable
+
+    def _is_tracking(self):
+        return self._tracking
+
+    def _changed(self):
+        """(packed keys uint64 (n,), new bool (n,)) of the recorded changes."""
+        cdef Py_ssize_t n, j = 0
+        cdef unordered_map[uint64_t, bint].iterator it
+        with self._lock:
+            n = self._changes.size()
+            keys = np.empty(n, dtype=np.uint64)
+            new = np.empty(n, dtype=np.bool_)
+            it = self._changes.begin()
+            while it != self._changes.end():
+                keys[j] = deref(it).first
+                new[j] = deref(it).second
+                j += 1
+                inc(it)
+        return keys, new
+
+    def _reset_changes(self):
+        with self._lock:
+            self._changes.clear()
+
     def _log_odds_thresholds(self):
         """(clamping min, clamping max, occupancy threshold, hit, miss) as the tree
         holds them: float32 log-odds."""
@@ -350,11 +421,20 @@ cdef class _OcTree:
         tree's bounds), then re-evaluate the inner nodes and prune."""
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t i
+        cdef OcTreeKey key
+        cdef OcTreeNode* node
+        cdef bint known, before
         with self._lock:
             with nogil:
                 for i in range(keys.shape[0]):
-                    tree.setNodeValue(OcTreeKey(keys[i, 0], keys[i, 1], keys[i, 2]),
-                                      log_odds[i], True)
+                    key = OcTreeKey(keys[i, 0], keys[i, 1], keys[i, 2])
+                    if self._tracking:
+                        node = tree.search(key, 0)
+                        known = node != NULL
+                        before = known and tree.isNodeOccupied(node)
+                    node = tree.setNodeValue(key, log_odds[i], True)
+                    if self._tracking:
+                        self._record(_pack(key), known, before, tree.isNodeOccupied(node))
                 tree.updateInnerOccupancy()
                 tree.prune()
 

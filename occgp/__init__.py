@@ -12,9 +12,9 @@ import logging
 from .grid import GridMap
 from .kernel import AKIMap, BGKMap
 from .knn import KNNMap
-from .octree import Leaves, OccupancyOctree
+from .octree import Changes, Leaves, OccupancyOctree
 
 __version__ = "0.1.0.dev0"
-__all__ = ["OccupancyOctree", "GridMap", "Leaves", "AKIMap", "BGKMap", "KNNMap", "__version__"]
+__all__ = ["OccupancyOctree", "GridMap", "Leaves", "Changes", "AKIMap", "BGKMap", "KNNMap", "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numbers
 import os
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -18,7 +19,18 @@ from ._validation import (
     check_resolution,
 )
 
-__all__ = ["OccupancyOctree", "Leaves"]
+__all__ = ["OccupancyOctree", "Leaves", "Changes"]
+
+
+class Changes(NamedTuple):
+    """The cells a map recorded as changed (see :attr:`OccupancyOctree.track_changes`)."""
+
+    #: Keys of the finest cells, uint16, shape (n, 3), sorted.
+    keys: NDArray[np.uint16]
+    #: Their centres, metres, shape (n, 3).
+    centres: NDArray[np.float64]
+    #: True where the cell was new (unknown before), False where its state flipped.
+    new: NDArray[np.bool_]
 
 
 
@@ -245,7 +257,10 @@ default="auto"
             # rays within liboctomap's key buffer, and a bound on the cells they reach
             # within MAX_SCAN_CELLS: otherwise occgp's traversal, which checks it
             reach = cells.sum() + len(cells)
-            if cells.max() <= KEYRAY_CELLS and reach <= self._max_scan_cells():
+            # (with change tracking, occgp's traversal, which gives the same map and
+            # records the changes)
+            if (cells.max() <= KEYRAY_CELLS and reach <= self._max_scan_cells()
+                    and not self._is_tracking()):
                 self._insert_point_cloud(pts, org, rng, bool(discretize), box)
                 self.last_insert_: dict[str, float] = {"rays": len(pts)}
                 return self
@@ -267,6 +282,59 @@ default="auto"
         self._record_insert(self._insert_batch(
             pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold,
             False, self._max_scan_cells(), key_box), pts, org, rng, method, threshold)
+        return self
+
+    # ------------------------------------------------------------------ changes
+    @property
+    def track_changes(self) -> bool:
+        """Whether the map records which cells change (liboctomap's change detection).
+
+        Set it to True to start recording: from then on, every update
+        (:meth:`insert_scan` by any method, :meth:`update_cells`,
+        :meth:`set_cells`) records, per finest cell, what liboctomap's
+        ``enableChangeDetection`` records: a cell the map did not know is
+        recorded as new; a known cell whose state (occupied or free) flips is
+        recorded, and removed again when it flips back. Read them with
+        :meth:`changed_cells`, clear them with :meth:`reset_changes`. The
+        record is not saved in files or pickles.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1)
+        >>> m.track_changes = True
+        >>> m = m.insert_scan([[0.35, 0.05, 0.05]], [0.05, 0.05, 0.05])
+        >>> changes = m.changed_cells()
+        >>> len(changes.keys), bool(changes.new.all())     # 3 free cells, 1 occupied
+        (4, True)
+        """
+        return bool(self._is_tracking())
+
+    @track_changes.setter
+    def track_changes(self, value: bool) -> None:
+        self._set_tracking(check_bool(value, "track_changes"))
+
+    def changed_cells(self) -> "Changes":
+        """The cells recorded since tracking began or :meth:`reset_changes`.
+
+        Returns
+        -------
+        changes : Changes
+            Named tuple ``(keys, centres, new)``: the finest cells' keys
+            (uint16, shape (n, 3), sorted), their centres and whether each
+            was new (unknown before) rather than flipped. Empty when
+            :attr:`track_changes` was never set.
+        """
+        packed, new = self._changed()
+        order = np.argsort(packed, kind="stable")
+        packed, new = packed[order], new[order]
+        keys = np.column_stack([(packed >> np.uint64(16 * a)) & np.uint64(0xFFFF)
+                                for a in range(3)]).astype(np.uint16).reshape(-1, 3)
+        centres = self.key_to_coord(keys) if len(keys) else np.empty((0, 3))
+        return Changes(keys, centres, new)
+
+    def reset_changes(self) -> "OccupancyOctree":
+        """Forget the recorded changes (tracking stays as it is); return self."""
+        self._reset_changes()
         return self
 
     def _check_bbox(self, bbox: ArrayLike) -> np.ndarray:

@@ -161,3 +161,59 @@ def test_bad_bbox(bbox, match):
     with pytest.raises(ValueError, match=match):
         m.insert_scan([[0.5, 0, 0]], [0, 0, 0], bbox=bbox)
     assert m.to_bytes() == before
+
+
+# ---------------------------------------------------------------------- changes
+def record(changes, before, after, occ_log):
+    """liboctomap's change-detection rule, from the cells' values before and after."""
+    for key, value in after.items():
+        if key not in before:
+            changes.setdefault(key, True)
+        elif (before[key] >= occ_log) != (value >= occ_log):
+            if key not in changes:
+                changes[key] = False
+            elif changes[key] is False:
+                del changes[key]
+
+
+@pytest.mark.parametrize("method", ["plain", "culling", "superray+culling"])
+def test_change_detection_follows_liboctomaps_rule(method):
+    from test_culling import room_sequence
+    scans = room_sequence(np.random.default_rng(6), n_scans=6, n_points=400)
+    occ_log = logodds32(0.5)
+    m = OccupancyOctree(0.1)
+    m.track_changes = True
+    plain = OccupancyOctree(0.1)
+    expected: dict = {}
+    rng = np.random.default_rng(1)
+    for i, (points, origin) in enumerate(scans):
+        before = leaf_values(plain)
+        plain.insert_scan(points, origin, method="plain")
+        m.insert_scan(points, origin, method=method)
+        if i == 3:       # cells set and updated by hand flip too
+            pts = points[:30]
+            vals = rng.normal(0, 3, 30).astype(np.float32)
+            plain.update_cells(pts, vals)
+            m.update_cells(pts, vals)
+        record(expected, before, leaf_values(plain), occ_log)
+        if i == 4:
+            got = m.changed_cells()
+            assert {tuple(k): bool(n) for k, n in zip(got.keys.tolist(), got.new)} == expected
+            m.reset_changes()
+            expected = {}
+    assert m.to_bytes() == plain.to_bytes()
+    got = m.changed_cells()
+    assert {tuple(k): bool(n) for k, n in zip(got.keys.tolist(), got.new)} == expected
+    assert expected and not all(expected.values())     # flips were recorded, not only new
+    np.testing.assert_allclose(got.centres, m.key_to_coord(got.keys))
+
+
+def test_change_detection_off_by_default_and_with_set_cells():
+    m = OccupancyOctree(0.1).insert_scan([[0.35, 0.05, 0.05]], [0.05, 0.05, 0.05])
+    assert not m.track_changes and len(m.changed_cells().keys) == 0
+    m.track_changes = True
+    m.set_cells([[0.35, 0.05, 0.05], [2.05, 0.05, 0.05]], [-2.0, 1.0])
+    got = m.changed_cells()
+    assert got.new.tolist() == [False, True]          # a flip, then a new cell
+    with pytest.raises(TypeError, match="track_changes"):
+        m.track_changes = "yes"
