@@ -15,6 +15,7 @@ from .knn import KNNMap
 from .octree import Changes, Leaves, OccupancyOctree
 
 __version__ = "0.1.0.dev0"
-__all__ = ["OccupancyOctree", "GridMap", "Leaves", "Changes", "AKIMap", "BGKMap", "KNNMap", "__version__"]
+__all__ = ["OccupancyOctree", "GridMap", "Leaves", "Changes", "AKIMap", "BGKMap", "KNNMap",
+           "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())
