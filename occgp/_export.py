@@ -76,7 +76,7 @@ def _check_map(tree: object) -> LogOddsMap:
 def _selected_leaves(tree: LogOddsMap, occupied: bool):
     """(centres, sizes, probabilities) of the occupied (or the free) leaves."""
     occupied = check_bool(occupied, "occupied")
-    table = tree.leaves() if hasattr(tree, "leaves") else tree.cells()
+    table = (getattr(tree, "leaves", None) or getattr(tree, "cells"))()
     centres, sizes, values = table
     if hasattr(tree, "_log_odds_thresholds"):
         threshold = np.float32(tree._log_odds_thresholds()[2])
