@@ -438,7 +438,8 @@ def distance_field(tree: LogOddsMap, bbox: ArrayLike, resolution: float | None =
     The grid covers the box `bbox` with cubic cells of edge `resolution`,
     aligned to its multiples: its minimum corner is
     ``floor(bbox[0] / resolution) * resolution`` and it reaches at least
-    ``bbox[1]``. Each cell takes the map's state at its centre (occupied,
+    ``bbox[1]`` (a corner within 1e-9 cell of a multiple of `resolution`
+    counts as on it). Each cell takes the map's state at its centre (occupied,
     free or unknown); obstacle cells are the occupied ones, plus the unknown
     ones when ``unknown="occupied"``. The distance, in metres, is from each
     cell's centre to the nearest obstacle cell's centre
@@ -504,8 +505,12 @@ def distance_field(tree: LogOddsMap, bbox: ArrayLike, resolution: float | None =
     unknown = check_choice(unknown, "unknown", _UNKNOWN)
     max_cells = check_int(max_cells, "max_cells", low=1)
     with np.errstate(over="ignore", invalid="ignore"):
-        first = np.floor(box[0] / res)
-        stop = np.ceil(box[1] / res)
+        # corners within 1e-9 cell of a multiple of res snap to it (0.3 / 0.1 is 2.9999...)
+        q = box / res
+        near = np.rint(q)
+        q = np.where(np.abs(q - near) <= 1e-9 * np.maximum(1.0, np.abs(near)), near, q)
+        first = np.floor(q[0])
+        stop = np.ceil(q[1])
         counts = np.maximum(stop - first, 1.0)
         total = float(np.prod(counts))
     if not (np.isfinite(total) and total <= max_cells

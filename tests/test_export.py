@@ -307,6 +307,14 @@ def test_distance_field_unknown_as_occupied_or_free():
     assert np.isinf(distance_field(m, [[0, 0, 0], [4, 1, 1]], unknown="free").distances).all()
 
 
+def test_distance_field_grid_snaps_corners_on_multiples_of_the_resolution():
+    m = OccupancyOctree(0.1)
+    field = distance_field(m, [[0.3, -0.7, 0.0], [0.7, 0.1, 0.2]])
+    assert field.distances.shape == (4, 8, 2)
+    assert_allclose(field.origin, [0.3, -0.7, 0.0], atol=1e-15)
+    assert (field.distances == 0).all()                      # all unknown: obstacles
+
+
 def test_distance_field_at_another_resolution_and_on_a_grid_map():
     m = OccupancyOctree(1.0).set_cells([[0.5, 0.5, 0.5]], [2.0])
     field = distance_field(m, [[0, 0, 0], [2, 0.5, 0.5]], 0.5, unknown="free")
