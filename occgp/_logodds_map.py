@@ -187,6 +187,49 @@ class LogOddsMap:
         occupied = state == 1
         return (occupied, state < 0) if return_unknown else occupied
 
+    # ------------------------------------------------------------------ maps out
+    def save_ply(self, path, *, occupied: bool = True, binary: bool = True,
+                 cubes: bool = False, color: bool = True):
+        """Write the occupied (or free) cells to a PLY file; return self.
+
+        See :func:`occgp._export.save_ply` for the file's properties: points
+        (cell centres with ``size`` and ``probability``, optional height
+        colours) or, with `cubes`, one cube mesh per cell.
+        """
+        from . import _export
+        _export.save_ply(self, path, occupied=occupied, binary=binary, cubes=cubes,
+                         color=color)
+        return self
+
+    def save_pcd(self, path, *, occupied: bool = True, binary: bool = True):
+        """Write the occupied (or free) cell centres to a PCD v0.7 file (``x y z
+        intensity``, intensity = probability); return self."""
+        from . import _export
+        _export.save_pcd(self, path, occupied=occupied, binary=binary)
+        return self
+
+    def to_open3d(self, *, kind: str = "voxels", occupied: bool = True,
+                  max_voxels: int | None = None):
+        """The occupied (or free) cells as an ``open3d.geometry.VoxelGrid``
+        (``kind="voxels"``, finest cells, at most `max_voxels`, default
+        :data:`occgp._export.MAX_VOXELS`) or ``PointCloud`` (``"points"``, leaf
+        centres). Needs the ``open3d`` extra (``open3d-cpu`` or ``open3d``)."""
+        from . import _export
+        return _export.to_open3d(self, kind=kind, occupied=occupied,
+                                 max_voxels=_export.MAX_VOXELS if max_voxels is None
+                                 else max_voxels)
+
+    def distance_field(self, bbox: ArrayLike, resolution: float | None = None, *,
+                       unknown: str = "occupied", max_cells: int | None = None):
+        """Euclidean distance from each cell of a grid over `bbox` to the nearest
+        obstacle (occupied cells, and unknown ones with ``unknown="occupied"``), for
+        planners; see :func:`occgp._export.distance_field`. Returns a
+        :class:`~occgp._export.DistanceField` ``(distances, origin, resolution)``."""
+        from . import _export
+        return _export.distance_field(self, bbox, resolution, unknown=unknown,
+                                      max_cells=_export.MAX_DISTANCE_CELLS
+                                      if max_cells is None else max_cells)
+
     # ------------------------------------------------------------------ helpers
     @staticmethod
     def _check_method(method: str, superray_threshold: int) -> tuple[str, int]:

@@ -52,12 +52,12 @@ def _as_float_array(value, name):
 
 def check_origin(origin: ArrayLike, name: str = "origin") -> NDArray[np.float64]:
     """Coerce a sensor origin to a finite float64 array of shape (3,)."""
-    origin = _as_float_array(origin, name)
-    if origin.shape != (3,):
-        raise ValueError(f"{name} must have shape (3,), got {origin.shape}")
-    if not np.isfinite(origin).all():
-        raise ValueError(f"{name} must be finite (no NaN or inf), got {origin.tolist()}")
-    return origin
+    out = _as_float_array(origin, name)
+    if out.shape != (3,):
+        raise ValueError(f"{name} must have shape (3,), got {out.shape}")
+    if not np.isfinite(out).all():
+        raise ValueError(f"{name} must be finite (no NaN or inf), got {out.tolist()}")
+    return out
 
 
 def _make_scan(points: ArrayLike, origin: ArrayLike, source: str = "points",
