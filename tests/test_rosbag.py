@@ -12,7 +12,7 @@ from conftest import data_path
 rosbags = pytest.importorskip("rosbags", reason="the ros extra (rosbags) is not installed")
 
 from rosbags.rosbag1 import Writer as Writer1  # noqa: E402
-from rosbags.rosbag2 import Writer as Writer2  # noqa: E402
+from rosbags.rosbag2 import StoragePlugin, Writer as Writer2  # noqa: E402
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
 
 from occgp.datasets import Scan  # noqa: E402
@@ -71,7 +71,11 @@ def tf_msg(ts, transforms):
 def write_bag(path, messages, ros=1):
     """Write [(topic, msgtype, message)] (bag time = index) as a ROS 1 or ROS 2 bag."""
     ts = TS1 if ros == 1 else TS2
-    writer = Writer1(path) if ros == 1 else Writer2(path, version=9)
+    if ros == 1:
+        writer = Writer1(path)
+    else:
+        plugin = StoragePlugin.MCAP if ros == "mcap" else StoragePlugin.SQLITE3
+        writer = Writer2(path, version=9, storage_plugin=plugin)
     cons = {}
     with writer:
         for i, (topic, msgtype, msg) in enumerate(messages):
@@ -237,10 +241,13 @@ def test_empty_cloud(tmp_path):
 # --------------------------------------------------------------------------- #
 # TF
 # --------------------------------------------------------------------------- #
-@pytest.mark.parametrize("ros", [1, 2])
-def test_two_level_chain_static_and_dynamic_interpolated(tmp_path, ros):
+@pytest.mark.parametrize("ros, storage_file", [(1, None), (2, None), (2, "*.db3"),
+                                               ("mcap", None), ("mcap", "*.mcap")])
+def test_two_level_chain_static_and_dynamic_interpolated(tmp_path, ros, storage_file):
     name = "b.bag" if ros == 1 else "b"
     bag = chain_bag(tmp_path / name, ros, stamps=(2 * S, 1 * S + S // 2, 3 * S))
+    if storage_file:  # a ROS 2 storage file read on its own
+        bag = next(bag.glob(storage_file))
     scans = read_rosbag(bag, "/points")
     assert scans.fixed_frame == "odom"
     got = list(scans)

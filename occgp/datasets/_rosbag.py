@@ -365,12 +365,11 @@ class RosbagScans:
         Points with a NaN or inf coordinate dropped by the last iteration.
     """
 
-    def __init__(self, path, topic, n_messages, cloud_cons, tf, fixed_frame, sensor_frame,
-                 tolerance_ns):
+    def __init__(self, path, topic, n_messages, tf, fixed_frame, sensor_frame, tolerance_ns):
         self.path, self.topic = path, topic
         self.fixed_frame, self.sensor_frame = fixed_frame, sensor_frame
         self.n_points = self.n_dropped = 0
-        self._n, self._cons, self._tf, self._tol = n_messages, cloud_cons, tf, tolerance_ns
+        self._n, self._tf, self._tol = n_messages, tf, tolerance_ns
 
     def __len__(self):
         return self._n
@@ -530,7 +529,7 @@ def read_rosbag(path, topic=None, *, fixed_frame=None, sensor_frame=None,
     if first is not None:
         frame = _frame(first[3].header.frame_id)
         fixed_frame, sensor_frame = _resolve_frames(path, tf, frame, fixed_frame, sensor_frame)
-    return RosbagScans(path, topic, n, cons, tf, fixed_frame, sensor_frame, tol_ns)
+    return RosbagScans(path, topic, n, tf, fixed_frame, sensor_frame, tol_ns)
 
 
 def _resolve_frames(path, tf, frame, fixed_frame, sensor_frame):
