@@ -106,15 +106,16 @@ class _Edge:
         if self.static:
             return self.rot[0].as_matrix(), self.trans[0]
         s = self.stamps
-        if t < s[0] - tolerance_ns or t > s[-1] + tolerance_ns:
+        first, last = int(s[0]), int(s[-1])  # Python ints: no int64 overflow
+        if t < first - tolerance_ns or t > last + tolerance_ns:
             raise ValueError(
                 f"{where}: stamp {_fmt_ns(t)} lies outside the TF data of '{self.parent}' -> "
-                f"'{self.child}' ({_fmt_ns(int(s[0]))} to {_fmt_ns(int(s[-1]))}, "
+                f"'{self.child}' ({_fmt_ns(first)} to {_fmt_ns(last)}, "
                 f"{s.size} transforms); TF is not extrapolated (tf_tolerance= allows a margin)"
             )
-        if t <= s[0]:
+        if t <= first:
             return self.rot[0].as_matrix(), self.trans[0]
-        if t >= s[-1]:
+        if t >= last:
             return self.rot[-1].as_matrix(), self.trans[-1]
         i = int(np.searchsorted(s, t, side="right")) - 1
         alpha = (t - int(s[i])) / (int(s[i + 1]) - int(s[i]))
@@ -482,9 +483,11 @@ def read_rosbag(path, topic=None, *, fixed_frame=None, sensor_frame=None,
         transform or the tree is not a tree. While iterating: a cloud stamp
         outside its TF data, a message whose x / y / z are not FLOAT32 or
         FLOAT64, whose fields do not fit ``point_step`` or whose data is
-        shorter than its size says, or corrupt message data.
+        shorter than its size says, or corrupt message data. Also if
+        `tf_tolerance` is negative or not finite.
     TypeError
-        If `path`, `topic`, `fixed_frame` or `sensor_frame` has a wrong type.
+        If `path`, `topic`, `fixed_frame`, `sensor_frame` or `tf_tolerance` has a
+        wrong type.
 
     Notes
     -----
