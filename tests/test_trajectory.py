@@ -149,6 +149,10 @@ def test_apply_poses_rejects_bad_poses():
     with pytest.raises(ValueError, match=r"poses\[1\]: the rotation part is not orthonormal"):
         apply_poses(scans, bad)
     bad = good.copy()
+    bad[0, 2, 2] = -1.0  # a reflection
+    with pytest.raises(ValueError, match=r"poses\[0\]: .*not orthonormal .*det -1"):
+        apply_poses(scans, bad)
+    bad = good.copy()
     bad[0, 3, 0] = 1.0
     with pytest.raises(ValueError, match=r"poses\[0\] must have last row \[0, 0, 0, 1\]"):
         apply_poses(scans, bad)

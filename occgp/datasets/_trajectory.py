@@ -66,10 +66,11 @@ def _is_float(token):
     return True
 
 
-def _rotation_error(rot):
-    """max |R R^T - I| per matrix, +inf where det(R) <= 0; rot of shape (n, 3, 3)."""
+def _bad_rotations(rot, tol):
+    """(bad mask, max |R R^T - I|, det R) of rotations of shape (n, 3, 3)."""
     err = np.abs(rot @ np.swapaxes(rot, 1, 2) - np.eye(3)).max(axis=(1, 2))
-    return np.where(np.linalg.det(rot) > 0, err, np.inf)
+    det = np.linalg.det(rot)
+    return ~((err <= tol) & (det > 0)), err, det
 
 
 def _check_tol(tol):
@@ -121,12 +122,12 @@ def read_kitti_poses(path, *, tol: float = _ROT_TOL) -> NDArray[np.float64]:
     poses = np.zeros((table.shape[0], 4, 4))
     poses[:, :3, :] = table.reshape(-1, 3, 4)
     poses[:, 3, 3] = 1.0
-    err = _rotation_error(poses[:, :3, :3])
-    bad = ~(err <= tol)
+    bad, err, det = _bad_rotations(poses[:, :3, :3], tol)
     if bad.any():
         i = int(np.argmax(bad))
         raise ValueError(f"{path}: line {lines[i]}: the rotation part is not orthonormal with "
-                         f"det +1 (max |R R^T - I| = {err[i]:.3g}, tol={tol:g})")
+                         f"det +1 (max |R R^T - I| = {err[i]:.3g}, det {det[i]:.3g}, "
+                         f"tol={tol:g})")
     return poses
 
 
@@ -221,12 +222,11 @@ def _check_poses(poses, n_scans, tol):
             i = int(np.argmax(last))
             raise ValueError(f"poses[{i}] must have last row [0, 0, 0, 1], got "
                              f"{poses[i, 3].tolist()}")
-    err = _rotation_error(poses[:, :3, :3])
-    bad = ~(err <= tol)
+    bad, err, det = _bad_rotations(poses[:, :3, :3], tol)
     if bad.any():
         i = int(np.argmax(bad))
         raise ValueError(f"poses[{i}]: the rotation part is not orthonormal with det +1 "
-                         f"(max |R R^T - I| = {err[i]:.3g}, tol={tol:g})")
+                         f"(max |R R^T - I| = {err[i]:.3g}, det {det[i]:.3g}, tol={tol:g})")
     return poses
 
 
