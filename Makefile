@@ -6,7 +6,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.occgp-installed
-EXTRAS ?= test,dask
+EXTRAS ?= test,dask,ros
 BUILD_INPUTS := setup.py pyproject.toml $(wildcard ext/*.pyx ext/*.pxd ext/*.h)
 
 .PHONY: all demo test bench docs asan soak fuzz system venv install clean distclean

@@ -47,6 +47,7 @@ from ._readers import (
     read_xyz,
     write_scan_graph,
 )
+from ._rosbag import RosbagScans, read_rosbag
 from ._scan import Scan
 from ._scene2d import LaserScan2D, Scene2D, room_2d
 from ._scenes import Scene, make_scene, structured_room, unstructured_room
@@ -60,6 +61,7 @@ from ._stereo import (
     tetromino_scene,
     voxel_filter,
 )
+from ._trajectory import apply_poses, read_kitti_poses, read_tum_trajectory
 
 __all__ = [
     "Scan",
@@ -92,4 +94,9 @@ __all__ = [
     "StereoDataset",
     "stereo_datasets",
     "voxel_filter",
+    "read_rosbag",
+    "RosbagScans",
+    "read_kitti_poses",
+    "read_tum_trajectory",
+    "apply_poses",
 ]
