@@ -48,9 +48,9 @@ def write_npz(path: Any, format_name: str, version: int, class_name: str,
               params: dict, arrays: dict[str, np.ndarray]) -> None:
     """Write the archive at `path` exactly (no ``.npz`` suffix is added)."""
     path = os.fspath(as_path(path))
-    members = {"format": np.array(format_name), "version": np.array(version, dtype=np.int64),
-               "class": np.array(class_name),
-               "params": np.array(json_text(params))}
+    members: dict[str, Any] = {
+        "format": np.array(format_name), "version": np.array(version, dtype=np.int64),
+        "class": np.array(class_name), "params": np.array(json_text(params))}
     members.update(arrays)
     with open(path, "wb") as f:
         np.savez_compressed(f, **members)
@@ -237,30 +237,103 @@ def check_finite(arrays: dict, keys, source: str, nonnegative: bool = False) -> 
             raise ValueError(f"{source}: array {key!r} holds negative values")
 
 
-def encode_rng_state(state: Any) -> Any:
-    """A numpy bit generator's ``state`` as JSON-ready values (arrays as lists)."""
-    if isinstance(state, dict):
-        return {str(k): encode_rng_state(v) for k, v in state.items()}
-    if isinstance(state, np.ndarray):
-        return {"__ndarray__": state.dtype.str, "data": state.tolist()}
-    if isinstance(state, (np.integer,)):
-        return int(state)
-    return state
+def encode_value(value: Any, classes: dict | None = None) -> Any:
+    """`value` as JSON-ready data: dicts, lists, str, int, float, bool and None as
+    they are; tuples, numeric arrays, numpy Generators and RandomStates, and
+    objects of `classes` (name -> class, rebuilt from ``get_params()``) as
+    one-key marker objects (``{"__tuple__": [...]}``, ...). TypeError on
+    anything else."""
+    classes = classes or {}
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, (int, np.integer)) and not isinstance(value, np.bool_):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, dict):
+        if not all(isinstance(k, str) for k in value):
+            raise TypeError(f"cannot save a dict with keys other than str: {value!r}")
+        return {k: encode_value(v, classes) for k, v in value.items()}
+    if isinstance(value, list):
+        return [encode_value(v, classes) for v in value]
+    if isinstance(value, tuple):
+        return {"__tuple__": [encode_value(v, classes) for v in value]}
+    if isinstance(value, np.ndarray) and value.dtype.kind in "biuf":
+        return {"__ndarray__": value.dtype.str, "shape": list(value.shape),
+                "data": value.ravel().tolist()}
+    if isinstance(value, np.random.Generator):
+        return {"__generator__": encode_value(value.bit_generator.state)}
+    if isinstance(value, np.random.RandomState):
+        return {"__random_state__": encode_value(value.get_state(legacy=False))}
+    name = type(value).__name__
+    if classes.get(name) is type(value):
+        return {"__object__": name, "params": encode_value(value.get_params(), classes)}
+    raise TypeError(f"cannot save a value of type {name} ({value!r:.80})")
 
+
+#: For the random states' arrays, which predate encode_value's "shape".
+encode_rng_state = encode_value
 
 _BIT_GENERATORS = ("PCG64", "PCG64DXSM", "MT19937", "Philox", "SFC64")
-_STATE_DTYPES = ("<u4", "<u8", "|u1", "<i4", "<i8")
+_DECODE_ERRORS = (ValueError, TypeError, KeyError, OverflowError, IndexError)
 
 
-def _decode(value: Any) -> Any:
-    if isinstance(value, dict):
-        if set(value) == {"__ndarray__", "data"}:
-            if value["__ndarray__"] not in _STATE_DTYPES or not isinstance(value["data"],
-                                                                           list):
-                raise ValueError(f"unexpected array {value['__ndarray__']!r}")
-            return np.array(value["data"], dtype=value["__ndarray__"])
-        return {k: _decode(v) for k, v in value.items()}
-    return value
+def _decode_array(value: dict) -> np.ndarray:
+    dtype = np.dtype(value["__ndarray__"]) if isinstance(value["__ndarray__"], str) else None
+    if dtype is None or dtype.kind not in "biuf" or not isinstance(value["data"], list):
+        raise ValueError(f"unexpected array {str(value['__ndarray__'])[:40]!r}")
+    arr = np.array(value["data"], dtype=dtype)
+    if "shape" in value:
+        shape = value["shape"]
+        if not (isinstance(shape, list) and all(isinstance(n, int) and n >= 0 for n in shape)):
+            raise ValueError(f"bad array shape {str(shape)[:40]}")
+        arr = arr.reshape(shape)
+    return arr
+
+
+def decode_value(value: Any, source: str, classes: dict | None = None,
+                 what: str = "'params' entry") -> Any:
+    """The inverse of :func:`encode_value`; ValueError naming `source` and `what`."""
+    classes = classes or {}
+    try:
+        return _decode_value(value, source, classes)
+    except RecursionError:
+        raise ValueError(f"{source}: corrupt {what}: nested too deeply") from None
+    except _DECODE_ERRORS as exc:
+        raise ValueError(f"{source}: corrupt {what} ({type(exc).__name__}: {exc})") from None
+
+
+def _decode_value(value, source, classes):
+    if isinstance(value, list):
+        return [_decode_value(v, source, classes) for v in value]
+    if not isinstance(value, dict):
+        return value
+    if "__ndarray__" in value:
+        return _decode_array(value)
+    if set(value) == {"__tuple__"}:
+        if not isinstance(value["__tuple__"], list):
+            raise ValueError("a tuple must be a list")
+        return tuple(_decode_value(v, source, classes) for v in value["__tuple__"])
+    if set(value) == {"__generator__"}:
+        return decode_rng(value["__generator__"], source)
+    if set(value) == {"__random_state__"}:
+        state = _decode_value(value["__random_state__"], source, classes)
+        rs = np.random.RandomState()
+        rs.set_state(state)
+        return rs
+    if set(value) == {"__object__", "params"}:
+        cls = classes.get(value["__object__"]) if isinstance(value["__object__"], str) \
+            else None
+        if cls is None:
+            raise ValueError(f"unknown class {str(value['__object__'])[:80]!r} (expected one "
+                             f"of {sorted(classes)})")
+        params = _decode_value(value["params"], source, classes)
+        if not isinstance(params, dict):
+            raise ValueError(f"the parameters of a {cls.__name__} must be an object")
+        return cls(**params)
+    return {k: _decode_value(v, source, classes) for k, v in value.items()}
 
 
 def decode_rng(state: Any, source: str) -> np.random.Generator:
@@ -271,8 +344,8 @@ def decode_rng(state: Any, source: str) -> np.random.Generator:
                          f"{_BIT_GENERATORS}, got {str(name)[:80]!r}")
     try:
         bit = getattr(np.random, name)()
-        bit.state = _decode(state)
-    except (ValueError, TypeError, KeyError, OverflowError, IndexError) as exc:
+        bit.state = _decode_value(state, source, {})
+    except _DECODE_ERRORS as exc:
         raise ValueError(f"{source}: corrupt random state of its {name} "
                          f"({type(exc).__name__}: {exc})") from None
     return np.random.Generator(bit)

@@ -317,6 +317,10 @@ class _KernelMap(_KernelCells):
     _EXTRA_SPEC: dict = {}
     _EXTRA_OPTIONAL: tuple = ()
 
+    def get_params(self) -> dict:
+        """The constructor's parameters, as a dict."""
+        raise NotImplementedError
+
     def _io_params(self) -> dict:
         return self.get_params()
 
@@ -867,7 +871,7 @@ class AKIMap(_KernelMap):
     def _io_extra(cls, params: dict, arrays: dict, source: str) -> dict:
         state = _npz_io.parse_json(str(arrays["rng"][()]), "'rng' entry", source)
         rng = _npz_io.decode_rng(state, source)
-        extra = {"_rng": rng, "last_bandwidths_": None}
+        extra: dict = {"_rng": rng, "last_bandwidths_": None}
         if params.get("random_state") == "Generator":
             params["random_state"] = None
             extra["random_state"] = rng
