@@ -374,7 +374,11 @@ class _KernelMap(_KernelCells):
         Raises
         ------
         TypeError
-            If `path` is not a str or path-like.
+            If `path` is not a str or path-like, or a parameter changed after
+            construction has the wrong type.
+        ValueError
+            If a parameter changed after construction is out of range; nothing
+            is written.
         OSError
             If the file cannot be written.
         """
@@ -384,7 +388,7 @@ class _KernelMap(_KernelCells):
         arrays = {"keys": keys[order], "alpha": alpha[order].astype(np.float32),
                   "beta": beta[order].astype(np.float32), **self._io_arrays()}
         _npz_io.write_npz(path, self._FORMAT, self._VERSIONS[-1], type(self).__name__,
-                          self._io_params(), arrays)
+                          _npz_io.encode_value(self._io_params()), arrays)
         return self
 
     @classmethod

@@ -322,3 +322,13 @@ def test_lying_headers_are_refused_before_any_allocation(saved, tmp_path):
                 np.lib.format.write_array(f, value)
     with pytest.raises(ValueError, match=r"corrupt array 'keys': 12000128 bytes from"):
         BGKMap.load(bad)
+
+
+def test_parameters_changed_after_construction(tmp_path):
+    m = BGKMap(0.1, n_jobs=np.int64(1)).update(*wall())
+    m.save(tmp_path / "a.npz")                       # numpy ints saved as ints
+    assert_same_map(m, BGKMap.load(tmp_path / "a.npz"))
+    m.prior = -1.0
+    with pytest.raises(ValueError, match=r"prior must lie in \(0.0, inf\), got -1.0"):
+        m.save(tmp_path / "b.npz")
+    assert not (tmp_path / "b.npz").exists()
