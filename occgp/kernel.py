@@ -10,6 +10,8 @@ samples; the bandwidths and the accumulation are compiled (``ext/_kernel.pyx``).
 
 from __future__ import annotations
 
+import inspect
+import os
 from numbers import Integral
 from typing import NamedTuple
 
@@ -23,6 +25,7 @@ from ._kernel_samples import (  # noqa: F401 (MAX_FREE_SAMPLES: the documented l
     _candidate_pairs, _check_free_count, _check_max_cells, _cube_sums, _merge_cube_sums,
     _packed_keys, _search_cell, _support_cells, voxel_first,
 )
+from . import _npz_io
 from .octree import OccupancyOctree
 from ._validation import as_point, as_points, check_n_jobs, check_real, n_threads
 
@@ -306,6 +309,142 @@ class _KernelMap(_KernelCells):
     def _extra_state(self) -> dict:
         return {}
 
+    # ------------------------------------------------------------------ files
+    _FORMAT = "occgp.kernel_map"
+    _VERSIONS = (1,)
+    _CELL_SPEC = {"keys": (np.uint16, ("n_cells", 3)), "alpha": (np.float32, ("n_cells",)),
+                  "beta": (np.float32, ("n_cells",))}
+    _EXTRA_SPEC: dict = {}
+    _EXTRA_OPTIONAL: tuple = ()
+
+    def get_params(self) -> dict:
+        """The constructor's parameters, as a dict."""
+        raise NotImplementedError
+
+    def _io_params(self) -> dict:
+        return self.get_params()
+
+    def _io_arrays(self) -> dict:
+        return {}
+
+    @classmethod
+    def _io_extra(cls, params: dict, arrays: dict, source: str) -> dict:
+        """Attributes to set on the loaded map (beyond its cells), from `arrays`;
+        may rewrite `params` in place."""
+        return {}
+
+    def save(self, path: str | os.PathLike) -> "_KernelMap":
+        """Write the map, its parameters and all its evidence to an ``.npz`` file.
+
+        The file is a NumPy ``.npz`` archive (``numpy.savez_compressed``) of
+        plain arrays, no pickled objects, written at `path` exactly (no
+        suffix is added); :meth:`load` reads it back into a map that
+        predicts, and goes on updating, exactly as this one. Its entries:
+
+        ``format``, ``version``, ``class``
+            0-d arrays: ``"occgp.kernel_map"``, 1, and ``"BGKMap"`` or
+            ``"AKIMap"``.
+        ``params``
+            0-d str: the constructor's parameters (:meth:`get_params`) as a
+            JSON object; for an AKIMap made with a ``numpy.random.Generator``
+            as `random_state`, that entry is ``"Generator"``.
+        ``keys``
+            uint16 (n_cells, 3): the key of every cell any kernel reached,
+            ``floor(x / resolution) + 32768`` per axis, ordered by z, y, x.
+        ``alpha``, ``beta``
+            float32 (n_cells,): each cell's occupied and free evidence, the
+            prior not included (the compiled cells keep float32).
+        ``rng`` (AKIMap)
+            0-d str: the state of the random generator of the free samples
+            (``bit_generator.state``, arrays as lists) as JSON.
+        ``bw_precision``, ``bw_extent``, ``bw_weight``, ``bw_scale``, ``bw_n_same`` (AKIMap)
+            float64 (m, 3, 3), (m, 3), (m,), (m,) and int64 (m,): the fields
+            of ``last_bandwidths_``; absent while it is None.
+
+        Parameters
+        ----------
+        path : str or path-like
+            Destination file (overwritten).
+
+        Returns
+        -------
+        self
+            The map.
+
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or path-like, or a parameter changed after
+            construction has the wrong type.
+        ValueError
+            If a parameter changed after construction is out of range; nothing
+            is written.
+        OSError
+            If the file cannot be written.
+        """
+        self._check_params()
+        keys, alpha, beta = self._cells_arrays()
+        order = np.lexsort(keys.T)
+        arrays = {"keys": keys[order], "alpha": alpha[order].astype(np.float32),
+                  "beta": beta[order].astype(np.float32), **self._io_arrays()}
+        _npz_io.write_npz(path, self._FORMAT, self._VERSIONS[-1], type(self).__name__,
+                          _npz_io.encode_value(self._io_params()), arrays)
+        return self
+
+    @classmethod
+    def load(cls, path: str | os.PathLike):
+        """Read a map written by :meth:`save` (the format is described there).
+
+        The file is read with ``numpy.load(..., allow_pickle=False)``; every
+        entry's dtype, shape and size is checked before its data is read.
+
+        Parameters
+        ----------
+        path : str or path-like
+            A file written by ``save`` of this class.
+
+        Returns
+        -------
+        map
+            A map with the saved parameters, cells and (AKIMap) random stream
+            and ``last_bandwidths_``.
+
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or path-like.
+        OSError
+            If the file does not exist, is not a regular file or cannot be read.
+        ValueError
+            If it is not an ``.npz`` archive, is truncated or corrupt, is of
+            another format, format version or class, lacks an entry or has an
+            unexpected one, or an entry has the wrong dtype or shape; if the
+            parameters are not those of the class or out of range; if the
+            evidence holds NaN, inf or negative values, or a cell key twice.
+        """
+        name = cls.__name__
+        source, _, params, arrays = _read_kernel_file(cls, path)
+        expected = [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
+        if sorted(params) != sorted(expected):
+            raise ValueError(f"{source}: the parameters of a {name} must be "
+                             f"{sorted(expected)}, got {sorted(params)[:20]}")
+        extra = cls._io_extra(params, arrays, source)
+        _npz_io.check_finite(arrays, ("alpha", "beta"), source, nonnegative=True)
+        keys = arrays["keys"]
+        packed = (keys[:, 0].astype(np.uint64) | keys[:, 1].astype(np.uint64) << 16 |
+                  keys[:, 2].astype(np.uint64) << 32)
+        if len(np.unique(packed)) != len(packed):
+            raise ValueError(f"{source}: array 'keys' holds a cell more than once")
+        try:
+            m = cls(**params)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{source}: bad parameters of a {name}: {exc}") from None
+        m._set_cells(keys, arrays["alpha"].astype(np.float64),
+                     arrays["beta"].astype(np.float64))
+        for attr, value in extra.items():
+            setattr(m, attr, value)
+        return m
+
     def __reduce__(self):
         keys, alpha, beta = self._cells_arrays()
         return _restore, (type(self), self.get_params(), keys, alpha, beta,
@@ -335,6 +474,14 @@ def _restore(cls, params, keys, alpha, beta, extra=None):
     for name, value in (extra or {}).items():
         setattr(m, name, value)
     return m
+
+
+def _read_kernel_file(cls, path):
+    path = os.fspath(_npz_io.as_path(path))
+    spec = {**_KernelMap._CELL_SPEC, **cls._EXTRA_SPEC}
+    cls_name, version, params, arrays = _npz_io.read_npz(
+        path, cls._FORMAT, cls._VERSIONS, (cls.__name__,), spec, cls._EXTRA_OPTIONAL)
+    return path, version, params, arrays
 
 
 class BGKMap(_KernelMap):
@@ -699,6 +846,50 @@ class AKIMap(_KernelMap):
     def _extra_state(self) -> dict:
         # the generator where it stands, so a restored map draws what this one would
         return {"_rng": self._rng, "last_bandwidths_": self.last_bandwidths_}
+
+    _BW_FIELDS = ("precision", "extent", "weight", "scale", "n_same")
+    _EXTRA_SPEC = {"rng": (np.str_, ()),
+                   "bw_precision": (np.float64, ("n_bw", 3, 3)),
+                   "bw_extent": (np.float64, ("n_bw", 3)),
+                   "bw_weight": (np.float64, ("n_bw",)),
+                   "bw_scale": (np.float64, ("n_bw",)),
+                   "bw_n_same": (np.int64, ("n_bw",))}
+    _EXTRA_OPTIONAL = tuple("bw_" + f for f in _BW_FIELDS)
+
+    def _io_params(self) -> dict:
+        params = self.get_params()
+        rs = params["random_state"]
+        params["random_state"] = ("Generator" if isinstance(rs, np.random.Generator)
+                                  else None if rs is None else int(rs))
+        return params
+
+    def _io_arrays(self) -> dict:
+        state = _npz_io.encode_rng_state(self._rng.bit_generator.state)
+        out = {"rng": np.array(_npz_io.json_text(state))}
+        if self.last_bandwidths_ is not None:
+            for f in self._BW_FIELDS:
+                out["bw_" + f] = np.asarray(getattr(self.last_bandwidths_, f))
+        return out
+
+    @classmethod
+    def _io_extra(cls, params: dict, arrays: dict, source: str) -> dict:
+        state = _npz_io.parse_json(str(arrays["rng"][()]), "'rng' entry", source)
+        rng = _npz_io.decode_rng(state, source)
+        extra: dict = {"_rng": rng, "last_bandwidths_": None}
+        if params.get("random_state") == "Generator":
+            params["random_state"] = None
+            extra["random_state"] = rng
+        present = [k for k in cls._EXTRA_OPTIONAL if k in arrays]
+        if present and len(present) != len(cls._EXTRA_OPTIONAL):
+            raise ValueError(f"{source}: the last bandwidths need all of "
+                             f"{list(cls._EXTRA_OPTIONAL)}, got only {present}")
+        if present:
+            _npz_io.check_finite(arrays, present, source)
+            if (arrays["bw_n_same"] < 1).any():
+                raise ValueError(f"{source}: array 'bw_n_same' holds counts under 1")
+            extra["last_bandwidths_"] = Bandwidths(*(arrays["bw_" + f]
+                                                     for f in cls._BW_FIELDS))
+        return extra
 
     @property
     def floor_(self) -> float:

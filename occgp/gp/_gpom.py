@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import copy
 import numbers
+import os
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -26,6 +27,9 @@ from ._integral import _check_kernel, as_segments
 from ._kernels import SquaredExponential, _check_bounds
 from ._limits import MAX_DENSE_BYTES, MAX_RESTARTS, check_coordinates, check_dense, threads
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
+from ._gpomik import _GP_FORMAT, _GP_VERSIONS, _check_gp_fitted, _gp_fitted, _gp_params, \
+    _read_gp
+from .. import _npz_io
 
 __all__ = ["GPOM"]
 
@@ -301,6 +305,104 @@ class GPOM(BaseEstimator):
             -0.5 * ys @ alpha - np.log(np.diag(L)).sum() - 0.5 * len(ys) * np.log(2.0 * np.pi))
         self.plsc_ = plsc
         return self
+
+    # ----------------------------------------------------------------- files
+    _TRAIN_SPEC = {"X_train": (np.float64, ("n_train", "n_dims")),
+                   "y_train": (np.float64, ("n_train",))}
+    _FITTED = ("kernel_", "noise_", "plsc_", "log_marginal_likelihood_value_", "n_dims_")
+
+    def save(self, path: str | os.PathLike) -> "GPOM":
+        """Write the model (parameters and, once fitted, its training set) to an ``.npz``.
+
+        The format of :meth:`GPOMIK.save <occgp.gp.GPOMIK.save>` (``"occgp.gp_model"``,
+        version 1, class ``"GPOM"``, ``params``), with, for a fitted model:
+
+        ``fitted``
+            0-d str, JSON: ``kernel_``, ``noise_``, ``plsc_``,
+            ``log_marginal_likelihood_value_`` (null for NaN), ``n_dims_``.
+        ``X_train``, ``y_train``
+            float64 (n_train, D) and (n_train,): ``X_train_`` and
+            ``y_train_`` (the hits, target +1, then the free points, -1);
+            the neighbour trees of :meth:`predict` are rebuilt from them.
+
+        :meth:`load` reads it back into a model that predicts exactly as this one.
+
+        Parameters
+        ----------
+        path : str or path-like
+            Destination file (overwritten).
+
+        Returns
+        -------
+        self : GPOM
+
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or path-like, or a parameter holds a value
+            that cannot be saved (see :meth:`GPOMIK.save <occgp.gp.GPOMIK.save>`).
+        OSError
+            If the file cannot be written.
+        """
+        params = _gp_params(self)
+        arrays = {}
+        if hasattr(self, "plsc_"):
+            lml = float(self.log_marginal_likelihood_value_)
+            arrays["fitted"] = _gp_fitted({
+                "kernel_": self.kernel_, "noise_": float(self.noise_),
+                "plsc_": tuple(float(v) for v in self.plsc_),
+                "log_marginal_likelihood_value_": lml if np.isfinite(lml) else None,
+                "n_dims_": int(self.n_dims_)})
+            arrays["X_train"], arrays["y_train"] = self.X_train_, self.y_train_
+        _npz_io.write_npz(path, _GP_FORMAT, _GP_VERSIONS[-1], type(self).__name__, params,
+                          arrays)
+        return self
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "GPOM":
+        """Read a model written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or path-like
+
+        Returns
+        -------
+        GPOM
+            Fitted when the saved model was.
+
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or path-like.
+        OSError
+            If the file does not exist, is not a regular file or cannot be read.
+        ValueError
+            If it is not an ``.npz`` archive, is truncated or corrupt, is of
+            another format, version or class, lacks an entry or has an
+            unexpected one, an entry has the wrong dtype or shape; if the
+            parameters or the fitted state are not valid (NaN or inf, targets
+            other than hits (+1) then free points (-1), both present).
+        """
+        source, model, arrays, fitted = _read_gp(cls, path, cls._TRAIN_SPEC)
+        if fitted is None:
+            return model
+        X, y = arrays["X_train"], arrays["y_train"]
+        n_hits = int(np.count_nonzero(y == 1))
+        if not 1 <= X.shape[1] <= 3:
+            raise ValueError(f"{source}: corrupt fitted state of a GPOM: the training points "
+                             f"must have 1 to 3 dimensions, got {X.shape[1]}")
+        fitted = _check_gp_fitted(fitted, cls._FITTED, X.shape[1], source, "GPOM")
+        if not (0 < n_hits < len(y) and (y[:n_hits] == 1).all() and (y[n_hits:] == -1).all()):
+            raise ValueError(f"{source}: corrupt fitted state of a GPOM: 'y_train' must be "
+                             f"+1 (hits) then -1 (free points), both present")
+        model.n_dims_ = X.shape[1]
+        model.X_train_, model.y_train_ = X, y
+        model._hit_tree, model._free_tree = cKDTree(X[:n_hits]), cKDTree(X[n_hits:])
+        model.kernel_, model.noise_ = fitted["kernel_"], float(fitted["noise_"])
+        model.log_marginal_likelihood_value_ = fitted["log_marginal_likelihood_value_"]
+        model.plsc_ = tuple(float(v) for v in fitted["plsc_"])
+        return model
 
     def _check_X(self, X):
         check_is_fitted(self, "plsc_")

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import inspect
 import numbers
+import os
 
 import numpy as np
 import scipy.linalg as sl
@@ -10,14 +12,15 @@ from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from .. import _integral
+from .. import _integral, _npz_io
 from .._validation import as_points, check_bool, check_real
 from ._gpr import _with_noise, cholesky, jitter_for, optimize_hyperparameters, solve_lower
 from ._integral import _check_kernel, _check_quadrature, _covariance
-from ._kernels import SquaredExponential
+from ._kernels import Matern32, SparseKernel, SquaredExponential
 from ._limits import MAX_RESTARTS, check_coordinates, check_dense, check_segments, generator, threads
 from ._observations import Observations, make_observations
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
+from ._quadrature import ClenshawCurtis, Simpson, _Rule
 
 __all__ = ["GPOMIK"]
 
@@ -88,6 +91,88 @@ def _spatial_groups(anchors, max_size):
         half = len(order) // 2
         todo += [order[half:], order[:half]]
     return done
+
+
+# ------------------------------------------------------------------ files
+#: Format of the GP models' files (see GPOMIK.save, GPOM.save).
+_GP_FORMAT = "occgp.gp_model"
+_GP_VERSIONS = (1,)
+#: The objects a GP model's parameters may hold, rebuilt from their get_params().
+_GP_CLASSES = {c.__name__: c for c in (SquaredExponential, Matern32, SparseKernel,
+                                       ClenshawCurtis, Simpson)}
+
+
+def _gp_params(model) -> dict:
+    """JSON-ready constructor parameters of `model` (TypeError if one cannot be saved)."""
+    try:
+        return _npz_io.encode_value(model.get_params(deep=False), _GP_CLASSES)
+    except TypeError as exc:
+        raise TypeError(f"cannot save this {type(model).__name__}: a parameter holds an "
+                        f"unsupported value: {exc}") from None
+
+
+def _gp_fitted(value: dict) -> np.ndarray:
+    return np.array(_npz_io.json_text(_npz_io.encode_value(value, _GP_CLASSES)))
+
+
+def _read_gp(cls, path, spec):
+    """(source, unfitted model of the saved parameters, arrays, fitted dict or None)."""
+    source = os.fspath(_npz_io.as_path(path))
+    spec = {"fitted": (np.str_, ()), **spec}
+    _, _, raw, arrays = _npz_io.read_npz(source, _GP_FORMAT, _GP_VERSIONS, (cls.__name__,),
+                                         spec, tuple(spec))
+    name = cls.__name__
+    params = _npz_io.decode_value(raw, source, _GP_CLASSES)
+    expected = [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
+    if sorted(params) != sorted(expected):
+        raise ValueError(f"{source}: the parameters of a {name} must be {sorted(expected)}, "
+                         f"got {sorted(params)[:20]}")
+    try:
+        model = cls(**params)
+        model._check_params()
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{source}: bad parameters of a {name}: {exc}") from None
+    present = [k for k in spec if k in arrays]
+    if present and len(present) != len(spec):
+        raise ValueError(f"{source}: a fitted {name} needs all of {list(spec)}, got only "
+                         f"{present}")
+    fitted = None
+    if present:
+        text = str(arrays.pop("fitted")[()])
+        fitted = _npz_io.decode_value(_npz_io.parse_json(text, "'fitted' entry", source),
+                                      source, _GP_CLASSES, "'fitted' entry")
+        if not isinstance(fitted, dict):
+            raise ValueError(f"{source}: corrupt 'fitted' entry: expected a JSON object")
+        _npz_io.check_finite(arrays, list(arrays), source)
+    return source, model, arrays, fitted
+
+
+def _check_gp_fitted(fitted: dict, keys, n_dims: int, source: str, name: str) -> dict:
+    """The fitted scalars shared by the GP models, checked; ValueError naming `source`."""
+    if sorted(fitted) != sorted(keys):
+        raise ValueError(f"{source}: the fitted state of a {name} must hold {sorted(keys)}, "
+                         f"got {sorted(fitted)[:20]}")
+    try:
+        kernel = _check_kernel(fitted["kernel_"])
+        kernel._checked()
+        kernel.inverse_length_scales(n_dims)
+        check_real(fitted["noise_"], "noise_", low=0.0)
+        plsc = fitted["plsc_"]
+        if not (isinstance(plsc, tuple) and len(plsc) == 2):
+            raise ValueError(f"plsc_ must be a pair (a, b), got {plsc!r:.80}")
+        for v in plsc:
+            check_real(v, "plsc_")
+        lml = fitted["log_marginal_likelihood_value_"]
+        if lml is not None:
+            check_real(lml, "log_marginal_likelihood_value_")
+        dims = fitted["n_dims_"]
+        if isinstance(dims, bool) or dims != n_dims:
+            raise ValueError(f"n_dims_ must be {n_dims} (the arrays' width), got {dims!r:.40}")
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{source}: corrupt fitted state of a {name}: {exc}") from None
+    fitted = dict(fitted)
+    fitted["log_marginal_likelihood_value_"] = np.nan if lml is None else float(lml)
+    return fitted
 
 
 class GPOMIK(BaseEstimator):
@@ -490,6 +575,187 @@ default="clenshaw-curtis"
         self.n_accepted_ += len(keep)
         self.n_rejected_ += n_rejected
         return self
+
+    # ----------------------------------------------------------------- files
+    _OBS_SPEC = {"cell_sizes": (np.int64, ("n_cells",)),
+                 "L_fortran": (np.bool_, ("n_cells",)),
+                 "starts": (np.float64, ("n_obs", "n_dims")),
+                 "ends": (np.float64, ("n_obs", "n_dims")),
+                 "y": (np.float64, ("n_obs",)), "labels": (np.float64, ("n_obs",)),
+                 "lengths": (np.float64, ("n_obs",)), "alpha": (np.float64, ("n_obs",)),
+                 "L": (np.float64, ("n_L",))}
+    _FITTED = ("kernel_", "quadrature_", "noise_", "jitter_", "plsc_",
+               "log_marginal_likelihood_value_", "n_dims_", "n_accepted_", "n_rejected_")
+
+    def save(self, path: str | os.PathLike) -> "GPOMIK":
+        """Write the model (parameters and, once fitted, every local model) to an ``.npz``.
+
+        A NumPy ``.npz`` archive (``numpy.savez_compressed``) of plain arrays,
+        no pickled objects, written at `path` exactly; :meth:`load` reads it
+        back into a model that predicts, and goes on updating, exactly as this
+        one. Its entries:
+
+        ``format``, ``version``, ``class``
+            0-d arrays: ``"occgp.gp_model"``, 1, ``"GPOMIK"``.
+        ``params``
+            0-d str, JSON: the constructor's parameters; a kernel or rule as
+            ``{"__object__": class name, "params": {...}}``, a tuple as
+            ``{"__tuple__": [...]}``, an array as ``{"__ndarray__": dtype,
+            "shape": [...], "data": [...]}``, a Generator as
+            ``{"__generator__": its bit generator's state}``.
+        ``fitted`` (fitted models only, as all below)
+            0-d str, JSON: ``kernel_``, ``quadrature_`` (the rule in use),
+            ``noise_``, ``jitter_``, ``plsc_``,
+            ``log_marginal_likelihood_value_`` (null for NaN), ``n_dims_``,
+            ``n_accepted_``, ``n_rejected_``.
+        ``cell_sizes``
+            int64 (n_cells,): observations in each local model, in order.
+        ``L_fortran``
+            bool (n_cells,): whether each factor was held in Fortran order
+            (as LAPACK returns it); the triangular solves of ``predict`` and
+            ``update`` round differently in the two layouts.
+        ``starts``, ``ends``, ``y``, ``labels``, ``lengths``
+            float64 (n_obs, D) and (n_obs,): the fields of every local
+            model's :class:`~occgp.gp.Observations`, cell after cell.
+        ``alpha``
+            float64 (n_obs,): each local model's ``K^-1 y``, cell after cell.
+        ``L``
+            float64 (sum n_i (n_i + 1) / 2,): the lower triangle of each local
+            model's Cholesky factor, row by row (``numpy.tril_indices``).
+
+        Parameters
+        ----------
+        path : str or path-like
+            Destination file (overwritten).
+
+        Returns
+        -------
+        self : GPOMIK
+
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or path-like, or a parameter holds a value
+            other than None, bool, int, float, str, tuple, list, numeric array,
+            numpy Generator or RandomState, or one of occgp.gp's kernels and
+            rules.
+        OSError
+            If the file cannot be written.
+        """
+        params = _gp_params(self)
+        arrays = {}
+        if hasattr(self, "cells_"):
+            cells = self.cells_
+            lml = float(self.log_marginal_likelihood_value_)
+            arrays["fitted"] = _gp_fitted({
+                "kernel_": self.kernel_, "quadrature_": self._quadrature,
+                "noise_": float(self.noise_), "jitter_": float(self.jitter_),
+                "plsc_": tuple(float(v) for v in self.plsc_),
+                "log_marginal_likelihood_value_": lml if np.isfinite(lml) else None,
+                "n_dims_": int(self.n_dims_), "n_accepted_": int(self.n_accepted_),
+                "n_rejected_": int(self.n_rejected_)})
+            arrays["cell_sizes"] = np.array([c.size for c in cells], dtype=np.int64)
+            arrays["L_fortran"] = np.array(
+                [c.L.flags.f_contiguous and not c.L.flags.c_contiguous for c in cells],
+                dtype=np.bool_)
+            for f in Observations._fields:
+                arrays[f] = np.concatenate([getattr(c.obs, f) for c in cells])
+            arrays["alpha"] = np.concatenate([c.alpha for c in cells])
+            arrays["L"] = np.concatenate([c.L[np.tril_indices(c.size)] for c in cells])
+        _npz_io.write_npz(path, _GP_FORMAT, _GP_VERSIONS[-1], type(self).__name__, params,
+                          arrays)
+        return self
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "GPOMIK":
+        """Read a model written by :meth:`save` (the format is described there).
+
+        Parameters
+        ----------
+        path : str or path-like
+
+        Returns
+        -------
+        GPOMIK
+            Fitted when the saved model was.
+
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or path-like.
+        OSError
+            If the file does not exist, is not a regular file or cannot be read.
+        ValueError
+            If it is not an ``.npz`` archive, is truncated or corrupt, is of
+            another format, version or class, lacks an entry or has an
+            unexpected one, an entry has the wrong dtype or shape; if the
+            parameters or the fitted state are not valid (NaN or inf, sizes
+            that disagree, a factor with a diagonal entry <= 0, targets that
+            do not match the labels and lengths).
+        """
+        source, model, arrays, fitted = _read_gp(cls, path, cls._OBS_SPEC)
+        if fitted is None:
+            return model
+        n_obs, n_dims = arrays["starts"].shape
+        fitted = _check_gp_fitted(fitted, cls._FITTED, n_dims, source, "GPOMIK")
+        bad = ""
+        sizes = arrays["cell_sizes"]
+        try:
+            quadrature = fitted["quadrature_"]
+            if not isinstance(quadrature, _Rule):
+                raise TypeError(f"quadrature_ must be a ClenshawCurtis or Simpson, got "
+                                f"{quadrature!r:.80}")
+            quadrature._checked()
+            check_real(fitted["jitter_"], "jitter_", low=0.0, low_open=False)
+            for key in ("n_accepted_", "n_rejected_"):
+                _check_int(fitted[key], key, 0)
+        except (TypeError, ValueError) as exc:
+            bad = str(exc)
+        labels, y, lengths = arrays["labels"], arrays["y"], arrays["lengths"]
+        hit = labels == 1
+        if bad:
+            pass
+        elif not 1 <= n_dims <= 3:
+            bad = f"the observations must have 1 to 3 dimensions, got {n_dims}"
+        elif len(sizes) == 0 or (sizes < 1).any() or int(sizes.sum()) != n_obs:
+            bad = f"'cell_sizes' must be positive and sum to {n_obs}"
+        elif fitted["n_accepted_"] != n_obs:
+            bad = f"n_accepted_ must be {n_obs} (the observations), got {fitted['n_accepted_']}"
+        elif sum(int(n) * (int(n) + 1) // 2 for n in sizes) != len(arrays["L"]):
+            bad = "'L' must hold the lower triangles of the cells' factors"
+        elif not (hit | (labels == -1)).all():
+            bad = "'labels' must be +1 (hit) or -1 (beam)"
+        elif not (np.array_equal(y[hit], np.ones(hit.sum())) and
+                  np.array_equal(arrays["starts"][hit], arrays["ends"][hit]) and
+                  not lengths[hit].any()):
+            bad = "the hits must be points with target 1 and length 0"
+        elif not (np.array_equal(y[~hit], np.where(lengths[~hit] > 0, -lengths[~hit], -1.0))
+                  and (lengths >= 0).all()):
+            bad = "the beams' targets must be minus their lengths (-1 for zero length)"
+        if bad:
+            raise ValueError(f"{source}: corrupt fitted state of a GPOMIK: {bad}")
+        cells, start, pos = [], 0, 0
+        for n, fortran in zip(sizes.tolist(), arrays["L_fortran"].tolist()):
+            L = np.zeros((n, n), order="F" if fortran else "C")
+            L[np.tril_indices(n)] = arrays["L"][pos:pos + n * (n + 1) // 2]
+            if not (np.diag(L) > 0).all():
+                raise ValueError(f"{source}: corrupt fitted state of a GPOMIK: the Cholesky "
+                                 f"factor of local model {len(cells)} has a diagonal entry "
+                                 f"<= 0")
+            obs = Observations(*(arrays[f][start:start + n].copy()
+                                 for f in Observations._fields))
+            cells.append(_Cell(obs, L, arrays["alpha"][start:start + n].copy()))
+            start, pos = start + n, pos + n * (n + 1) // 2
+        model.kernel_, model.noise_ = fitted["kernel_"], float(fitted["noise_"])
+        model.jitter_ = float(fitted["jitter_"])
+        model.plsc_ = tuple(float(v) for v in fitted["plsc_"])
+        model.log_marginal_likelihood_value_ = fitted["log_marginal_likelihood_value_"]
+        model.n_dims_ = n_dims
+        model._quadrature, model._n_threads = fitted["quadrature_"], threads(model.n_jobs)
+        model.cells_ = cells
+        model.n_accepted_ = int(fitted["n_accepted_"])
+        model.n_rejected_ = int(fitted["n_rejected_"])
+        return model
 
     # --------------------------------------------------------------- predict
     def _check_X(self, X):
