@@ -19,6 +19,7 @@ its :meth:`~occgp.BGKMap.to_octree`), or a kernel map's ``.npz``.
 from __future__ import annotations
 
 import argparse
+import errno
 import inspect
 import re
 import sys
@@ -378,6 +379,9 @@ def _check_map_args(paths, output, method, mode, resolution, max_range, knn_para
         note = " (.npz: bgk and akimap only)" if _suffix(output) == ".npz" else ""
         raise _OptionError("output", f"output must end in {', '.join(fits[:-1])} or "
                            f"{fits[-1]} for method={method!r}{note}, got {str(output)!r}")
+    if not output.parent.is_dir():
+        raise FileNotFoundError(errno.ENOENT, "output: no such folder for the map file",
+                                str(output.parent))
     if mode is not None and method != "octree":
         raise _OptionError("mode", f"mode applies to method='octree' only, got mode={mode!r} "
                            f"with method={method!r}")
@@ -569,13 +573,15 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         one pose per scan; a bag option is given and no bag is among `paths`;
         `input_map` does not fit `method`, holds another class of map, or its
         resolution differs from `resolution`; a file is malformed; or no scan
-        is found. All but the last checks come before any scan is read.
+        is found. The arguments are checked before any file is read; the pose
+        count and `input_map` before any scan is inserted. Nothing is written
+        when an error is raised.
     TypeError
         If `max_range`, `resolution` or `tf_tolerance` is not a real number,
         `knn_params` is not a mapping or holds a value of the wrong type.
     OSError
-        If a scan, pose or map file cannot be read or the output cannot be
-        written.
+        If a scan, pose or map file cannot be read, the folder of `output`
+        does not exist (checked first) or the output cannot be written.
     ImportError
         If a bag is given and the ``rosbags`` package is not installed.
     """

@@ -173,12 +173,23 @@ def test_map_command_max_range_for_kernel_maps(tmp_path, capsys):
 @pytest.mark.parametrize("args, message", [
     (["map", "missing.pcd", "-o", "m.bt"], "occgp map: error:"),
     (["map", "x.pcd", "-o", "m.bt"], "occgp map: error: x.pcd"),
+    (["map", "s.pcd", "-o", "nowhere/m.bt"],
+     "occgp map: error: [Errno 2] output: no such folder for the map file: 'nowhere'"),
+    (["map", "s.pcd", "-o", "m.bt", "--input-map", "missing.ot"],
+     "occgp map: error: [Errno 2] No such file or directory: 'missing.ot'"),
+    (["map", "s.pcd", "-o", "m.bt", "--poses", "x.pcd", "--poses-format", "kitti"],
+     "occgp map: error: x.pcd: line 1: expected 12 numbers"),
+    (["map", "s.pcd", "-o", "m.bt", "--poses", "binary.txt"],
+     "occgp map: error: binary.txt: not a text file (invalid UTF-8)"),
 ])
 def test_map_command_reports_errors(tmp_path, capsys, monkeypatch, args, message):
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "x.pcd").write_text("not a pcd")
-    assert main(args) == 1
+    (tmp_path / "x.pcd").write_text("not a pcd file of poses 1 2 3 4 5 6 7 8 9 10")
+    (tmp_path / "binary.txt").write_bytes(b"\xff\xfe\x00")
+    write_pcd(tmp_path / "s.pcd", [[1.0, 0.0, 0.0]], [0.0, 0.0, 0.0])
+    assert main(args + ["--no-progress"]) == 1
     assert message in capsys.readouterr().err
+    assert not (tmp_path / "m.bt").exists()
 
 
 def test_map_command_builds_knn_map(tmp_path, capsys):
