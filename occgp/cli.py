@@ -5,16 +5,21 @@
 AKIMap in both variants and the k-NN map), prints their scores, then maps a
 noisy version of the same scans with the octree and the k-NN map
 (:func:`noisy_mapping_methods`) and prints theirs, and writes ``map.bt`` and
-figures. ``occgp map`` builds a map from scan files with ``--method octree``
-(the default), ``bgk`` (:class:`~occgp.BGKMap`), ``akimap``
-(:class:`~occgp.AKIMap`) or ``knn`` (:class:`~occgp.KNNMap`) and writes it as
-an OctoMap ``.bt`` or ``.ot`` file (a kernel map through its
-:meth:`~occgp.BGKMap.to_octree`).
+figures. ``occgp map`` (:func:`map_scans`) builds a map from scan files and ROS
+bags (PointCloud2 posed by TF; ``--topic``, ``--fixed-frame``,
+``--sensor-frame``), optionally posed by a KITTI or TUM trajectory
+(``--poses``), with ``--method octree`` (the default), ``bgk``
+(:class:`~occgp.BGKMap`), ``akimap`` (:class:`~occgp.AKIMap`) or ``knn``
+(:class:`~occgp.KNNMap`), optionally continuing a saved map
+(``--input-map``), and writes it by the output's suffix: an OctoMap ``.bt`` or
+``.ot`` file, the occupied cells as ``.ply`` or ``.pcd`` (a kernel map through
+its :meth:`~occgp.BGKMap.to_octree`), or a kernel map's ``.npz``.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import inspect
 import re
 import sys
@@ -26,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from ._validation import check_real
+from ._validation import check_n_jobs, check_real, check_resolution
 from .grid import GridMap
 from .kernel import AKIMap, BGKMap
 from .knn import CDFS, KNN_PARAMS, KNNMap, check_knn_params
@@ -290,38 +295,228 @@ def _check_knn_options(knn_params) -> dict:
         raise ValueError(f"cdf must be one of {CDFS}, got {cdf!r}")
     return {**check_knn_params(params), "cdf": cdf}
 
+class _OptionError(ValueError):
+    """A ValueError about one argument of :func:`map_scans` (its name in `param`);
+    ``occgp map`` reports it as a usage error of the matching option (exit code 2)."""
 
-def map_scans(paths, output: str | Path, *, resolution: float = 0.1, method: str = "octree",
-              mode: str | None = None, max_range: float | None = None,
-              knn_params: Mapping[str, Any] | None = None,
+    def __init__(self, param: str, message: str) -> None:
+        super().__init__(message)
+        self.param = param
+
+
+# the option of each map_scans argument an _OptionError can name
+_OPTION_OF = {"output": "-o/--output", "method": "--method", "mode": "--mode",
+              "resolution": "--resolution", "max_range": "--max-range", "n_jobs": "--n-jobs",
+              "poses": "--poses", "poses_format": "--poses-format", "topic": "--topic",
+              "fixed_frame": "--fixed-frame", "sensor_frame": "--sensor-frame",
+              "tf_tolerance": "--tf-tolerance", "input_map": "--input-map",
+              "fields": "--fields", "paths": "scans"}
+_KERNEL_METHODS = ("bgk", "akimap")
+_POSE_FORMATS = ("kitti", "tum")
+# the output suffixes of each method, and the saved maps --input-map takes
+_OUTPUTS = {"octree": (".bt", ".ot", ".ply", ".pcd"), "knn": (".bt", ".ot", ".ply", ".pcd"),
+            "bgk": (".bt", ".ot", ".ply", ".pcd", ".npz"),
+            "akimap": (".bt", ".ot", ".ply", ".pcd", ".npz")}
+_INPUT_MAPS = {"octree": (".bt", ".ot"), "knn": (".bt", ".ot"), "bgk": (".npz",),
+               "akimap": (".npz",)}
+_BAG_SUFFIXES = (".bag", ".db3", ".mcap")
+# whether the octree's insert_scan takes n_jobs (threaded ray counting)
+_OCTREE_N_JOBS = "n_jobs" in inspect.signature(OccupancyOctree.insert_scan).parameters
+
+
+def _is_bag(path) -> bool:
+    """Whether `path` is read with read_rosbag: a ``.bag`` / ``.db3`` / ``.mcap`` file or
+    a ROS 2 bag folder (one holding ``metadata.yaml``)."""
+    path = Path(path)
+    if path.is_dir():
+        return (path / "metadata.yaml").is_file()
+    return path.suffix.lower() in _BAG_SUFFIXES
+
+
+def _suffix(path: Path) -> str:
+    return path.suffix.lower()
+
+
+def _read_poses(path, poses_format):
+    """The (n, 4, 4) poses of a KITTI or TUM file; the format guessed from the first
+    line's column count when `poses_format` is None."""
+    from .datasets import read_kitti_poses, read_tum_trajectory
+    from .datasets._fileio import read_maybe_compressed
+
+    if poses_format is None:
+        try:
+            text = read_maybe_compressed(path).decode("utf-8")
+        except UnicodeDecodeError:
+            raise ValueError(f"{path}: not a text file (invalid UTF-8)") from None
+        first = next(((i, line.split("#", 1)[0].split())
+                      for i, line in enumerate(text.splitlines(), start=1)
+                      if line.split("#", 1)[0].split()), None)
+        if first is None:
+            raise _OptionError("poses", f"poses file {str(path)!r} holds no poses")
+        n = len(first[1])
+        if n not in (12, 8):
+            raise _OptionError("poses", f"cannot tell the format of poses file {str(path)!r}: "
+                               f"line {first[0]} has {n} columns; expected 12 (kitti: a 3x4 "
+                               f"row-major pose) or 8 (tum: t x y z qx qy qz qw); pass "
+                               f"poses_format")
+        poses_format = "kitti" if n == 12 else "tum"
+    if poses_format == "kitti":
+        return read_kitti_poses(path)
+    return read_tum_trajectory(path)[1]
+
+
+def _check_map_args(paths, output, method, mode, resolution, max_range, knn_params, n_jobs,
+                    poses, poses_format, bag_options,
+                    input_map) -> tuple[Path, float | None, float | None, int | None,
+                                        Path | None]:
+    """Check map_scans' arguments before anything is read; return (output, resolution,
+    max_range, n_jobs, input_map) as used."""
+    if method not in _MAP_METHODS:
+        raise _OptionError("method", f"method must be one of {_MAP_METHODS}, got {method!r}")
+    output = Path(output)
+    fits = _OUTPUTS[method]
+    if _suffix(output) not in fits:
+        note = " (.npz: bgk and akimap only)" if _suffix(output) == ".npz" else ""
+        raise _OptionError("output", f"output must end in {', '.join(fits[:-1])} or "
+                           f"{fits[-1]} for method={method!r}{note}, got {str(output)!r}")
+    if not output.parent.is_dir():
+        raise FileNotFoundError(errno.ENOENT, "output: no such folder for the map file",
+                                str(output.parent))
+    if mode is not None and method != "octree":
+        raise _OptionError("mode", f"mode applies to method='octree' only, got mode={mode!r} "
+                           f"with method={method!r}")
+    if mode is not None and mode not in ("scan", "ray"):
+        raise _OptionError("mode", f"mode must be 'scan' or 'ray', got {mode!r}")
+    if knn_params is not None and method != "knn":
+        raise ValueError(f"knn_params applies to method='knn' only, got method={method!r}")
+    if max_range is not None and method == "knn":
+        raise _OptionError("max_range", f"max_range does not apply to method='knn': its range "
+                           f"limit is knn_params['sensor_range'] (default "
+                           f"{_KNN_DEFAULTS['sensor_range']} m), got max_range={max_range!r}")
+    try:
+        if max_range is not None:
+            max_range = check_real(max_range, "max_range", low=0.0)
+    except ValueError as exc:
+        raise _OptionError("max_range", str(exc)) from None
+    if resolution is not None:
+        try:
+            resolution = check_resolution(resolution)
+        except ValueError as exc:
+            raise _OptionError("resolution", str(exc)) from None
+    try:
+        n_jobs = check_n_jobs(n_jobs)
+    except ValueError as exc:
+        raise _OptionError("n_jobs", str(exc)) from None
+    if poses_format is not None:
+        if poses is None:
+            raise _OptionError("poses_format", f"poses_format applies with poses only, got "
+                               f"poses_format={poses_format!r} and no poses")
+        if poses_format not in _POSE_FORMATS:
+            raise _OptionError("poses_format", f"poses_format must be one of {_POSE_FORMATS} "
+                               f"or None (guess from the columns), got {poses_format!r}")
+    if isinstance(paths, (str, bytes)) or not len(paths):
+        raise _OptionError("paths", f"paths must be a non-empty sequence of scan files or "
+                           f"folders, got {paths!r}")
+    try:
+        check_real(bag_options["tf_tolerance"], "tf_tolerance", low=0.0, high=1e9,
+                   low_open=False)
+    except ValueError as exc:
+        raise _OptionError("tf_tolerance", str(exc)) from None
+    given = {k: v for k, v in bag_options.items() if v not in (None, 0.0)}
+    if given and not any(_is_bag(p) for p in paths):
+        name = next(iter(given))
+        raise _OptionError(name, f"{name} applies to ROS bag inputs only (.bag, .db3, .mcap "
+                           f"files or ROS 2 bag folders), and none is among the scans")
+    if input_map is not None:
+        input_map = Path(input_map)
+        if _suffix(input_map) not in _INPUT_MAPS[method]:
+            kinds = " or ".join(_INPUT_MAPS[method])
+            raise _OptionError("input_map", f"input_map must be a {kinds} file to continue a "
+                               f"{method} map, got {str(input_map)!r}")
+    return output, resolution, max_range, n_jobs, input_map
+
+
+def _new_map(method, resolution, max_range, knn, n_jobs, input_map):
+    """The map to insert into: loaded from `input_map` or new."""
+    if input_map is None:
+        res = 0.1 if resolution is None else resolution
+        if method == "octree":
+            return OccupancyOctree(res)
+        if method == "knn":
+            return KNNMap(res, **knn, n_jobs=n_jobs)
+        if method == "bgk":
+            return BGKMap(res, n_jobs=n_jobs) if max_range is None else \
+                BGKMap(res, max_range=max_range, n_jobs=n_jobs)
+        return AKIMap(res, random_state=0, n_jobs=n_jobs)
+    cls = {"octree": OccupancyOctree, "knn": KNNMap, "bgk": BGKMap, "akimap": AKIMap}[method]
+    try:
+        mapper = cls.load(input_map, **knn, n_jobs=n_jobs) if method == "knn" else \
+            cls.load(input_map)
+    except ValueError as exc:
+        raise ValueError(f"input_map: cannot continue it as a {method} map: {exc}") from None
+    if resolution is not None and resolution != mapper.resolution:
+        raise _OptionError("resolution", f"resolution {resolution:g} differs from that of "
+                           f"input_map {str(input_map)!r} ({mapper.resolution:g}); leave it "
+                           f"out to continue the map at its own")
+    if method in _KERNEL_METHODS:
+        mapper.n_jobs = n_jobs
+        if method == "bgk" and max_range is not None:
+            mapper.max_range = max_range
+    return mapper
+
+
+def map_scans(paths, output: str | Path, *, resolution: float | None = None,
+              method: str = "octree", mode: str | None = None,
+              max_range: float | None = None, knn_params: Mapping[str, Any] | None = None,
+              poses: str | Path | None = None, poses_format: str | None = None,
+              topic: str | None = None, fixed_frame: str | None = None,
+              sensor_frame: str | None = None, tf_tolerance: float = 0.0, fields=None,
+              input_map: str | Path | None = None, n_jobs: int | None = -1,
               progress: bool | None = None, out=None):
-    """Build a map from scan files and save it as an OctoMap file (``.bt`` or ``.ot``).
+    """Build a map from scan files and ROS bags and save it.
+
+    Every step (loading `input_map`, reading each scan file, inserting each
+    scan, converting a kernel map to an octree, saving) advances one progress
+    bar. At the end one line gives the scans, points, cells, the insertion
+    time and the wall time of the whole call; lines before it say how many
+    points were dropped (non-finite points of bags) or cut at the range
+    limit.
 
     Parameters
     ----------
     paths : sequence of str or path-like
-        Scan files or folders, read with :func:`occgp.datasets.read_scans`.
+        Scan files or folders, read with :func:`occgp.datasets.read_scans`,
+        and ROS bags (a ``.bag``, ``.db3`` or ``.mcap`` file, or a ROS 2 bag
+        folder holding ``metadata.yaml``), read with
+        :func:`occgp.datasets.read_rosbag`. Scans go in in this order.
     output : str or path-like
-        The map file; its suffix, ``.bt`` or ``.ot``, gives the format.
-    resolution : float, default=0.1
-        Cell size in metres.
+        The map file; its suffix gives the format: ``.bt`` / ``.ot``
+        (OctoMap), ``.ply`` / ``.pcd`` (the occupied cells, see
+        :meth:`~occgp.OccupancyOctree.save_ply` /
+        :meth:`~occgp.OccupancyOctree.save_pcd`) or, for ``method="bgk"`` and
+        ``"akimap"`` only, ``.npz`` (the kernel map with its evidence, see
+        :meth:`~occgp.BGKMap.save`). A kernel map goes to the other formats
+        through its ``to_octree()``: each cell holds its posterior mean as
+        log-odds (a ``.bt`` file keeps only whether it is above 0.5); cells
+        no kernel reached stay unknown.
+    resolution : float, default=None
+        Cell size in metres; None means 0.1, or the resolution of
+        `input_map` (which a value given must equal).
     method : {"octree", "bgk", "akimap", "knn"}, default="octree"
         The map: :class:`~occgp.OccupancyOctree`, :class:`~occgp.BGKMap`,
-        :class:`~occgp.AKIMap` (``random_state=0``) or :class:`~occgp.KNNMap`.
-        The kernel maps use every core and are written through their
-        ``to_octree()``: each cell holds its posterior mean as log-odds (a
-        ``.bt`` file keeps only whether it is above 0.5); cells no kernel
-        reached stay unknown. The k-NN map is an octree (its k-NN queries use
-        every core) and is written as it is.
+        :class:`~occgp.AKIMap` (``random_state=0``) or :class:`~occgp.KNNMap`
+        (an octree, written as it is).
     mode : {"scan", "ray"}, default=None
         The octree's update mode (None: ``"scan"``); only for ``method="octree"``.
     max_range : float, default=None
         Range limit in metres; None means none (and BGKMap's own 8 m for
-        ``method="bgk"``). The octree inserts longer beams up to `max_range` as
-        free space only; BGK drops them whole (its ``max_range``); AKIMap gets
-        only the end points within `max_range` of the sensor. Not for
-        ``method="knn"``, whose range limit is its ``sensor_range`` (in
-        `knn_params`), which acts as the octree's `max_range` does.
+        ``method="bgk"``; a loaded BGK map keeps its own). The octree inserts
+        longer beams up to `max_range` as free space only; BGK drops them
+        whole (its ``max_range``); AKIMap gets only the end points within
+        `max_range` of the sensor. Not for ``method="knn"``, whose range
+        limit is its ``sensor_range`` (in `knn_params`). The points beyond
+        the limit are counted and reported (raw points: BGK applies its
+        limit to the centroids of its down-sampling cubes).
     knn_params : mapping, default=None
         For ``method="knn"`` only: :class:`~occgp.KNNMap`'s ``k``, ``p_u``,
         ``p_l``, ``p_m``, ``p_m_out``, ``p_min``, ``p_max``, ``p_t``,
@@ -329,10 +524,35 @@ def map_scans(paths, output: str | Path, *, resolution: float = 0.1, method: str
         (``sensor_range`` 4 m: points farther from the sensor are not
         inserted, their rays are cut there). Checked as KNNMap checks them
         (Miao et al.'s Eq. 12) before any scan is read.
+    poses : str or path-like, default=None
+        A trajectory file: KITTI odometry poses (12 numbers a line, a 3 x 4
+        row-major sensor-to-world pose) or TUM (``t x y z qx qy qz qw``).
+        Pose ``i`` moves scan ``i`` (in input order, over all `paths`) with
+        :func:`occgp.datasets.apply_poses`; the file must hold one pose per
+        scan. TUM timestamps are not matched to scans, only the order counts.
+    poses_format : {"kitti", "tum"}, default=None
+        The format of `poses`; None guesses it from the first line's columns
+        (12: kitti, 8: tum).
+    topic, fixed_frame, sensor_frame, tf_tolerance
+        For ROS bags only, passed to :func:`occgp.datasets.read_rosbag`
+        (defaults: the only PointCloud2 topic, the root of the TF tree, the
+        cloud's frame, 0 s).
+    fields : int, str or numpy.dtype, default=None
+        Record layout of ``.bin`` scan files, passed to
+        :func:`occgp.datasets.read_scans` (None: by file name).
+    input_map : str or path-like, default=None
+        A saved map to continue: ``.bt`` / ``.ot`` for ``method="octree"``
+        and ``"knn"`` (the k-NN parameters then come from `knn_params`),
+        ``.npz`` (written by ``save``) for ``"bgk"`` and ``"akimap"``, which
+        must hold a map of that class. The scans are inserted into it.
+    n_jobs : int, default=-1
+        Threads of BGKMap, AKIMap and KNNMap (and of the octree's
+        ``insert_scan`` where it takes ``n_jobs``): -1 every core, None or 1
+        one. The map does not depend on it.
     progress : bool, default=None
         Show a progress bar (None: only on a terminal).
     out : file-like, default=None
-        Where the summary line goes (None: standard output).
+        Where the summary lines go (None: standard output).
 
     Returns
     -------
@@ -342,85 +562,162 @@ def map_scans(paths, output: str | Path, *, resolution: float = 0.1, method: str
     Raises
     ------
     ValueError
-        If `output` does not end in ``.bt`` or ``.ot``, `method` or `mode` is
-        not one of the choices (or `mode` is given with another method than
-        the octree), `max_range` is not positive or is given with
-        ``method="knn"``, `knn_params` is given with another method, names a
-        parameter KNNMap does not take or holds a value KNNMap rejects, or no
-        scan is found.
+        If `output` has a suffix other than those above or one that does not
+        fit `method`; `method` or `mode` is not one of the choices (or `mode`
+        is given with another method than the octree); `max_range` or
+        `resolution` is not positive, or `max_range` is given with
+        ``method="knn"``; `n_jobs` is 0; `knn_params` is given with another
+        method, names a parameter KNNMap does not take or holds a value
+        KNNMap rejects; `poses_format` is given without `poses` or is not a
+        choice; the format of `poses` cannot be guessed, or it does not hold
+        one pose per scan; a bag option is given and no bag is among `paths`;
+        `input_map` does not fit `method`, holds another class of map, or its
+        resolution differs from `resolution`; a file is malformed; or no scan
+        is found. The arguments are checked before any file is read; the pose
+        count and `input_map` before any scan is inserted. Nothing is written
+        when an error is raised.
     TypeError
-        If `max_range` is not a real number, `knn_params` is not a mapping or
-        holds a value of the wrong type.
+        If `max_range`, `resolution` or `tf_tolerance` is not a real number,
+        `knn_params` is not a mapping or holds a value of the wrong type.
     OSError
-        If a scan file cannot be read or the output cannot be written.
+        If a scan, pose or map file cannot be read, the folder of `output`
+        does not exist (checked first) or the output cannot be written.
+    ImportError
+        If a bag is given and the ``rosbags`` package is not installed.
     """
     from tqdm.auto import tqdm
 
-    from .datasets import read_scans
+    from .datasets import apply_poses, read_rosbag, read_scans
 
+    t_start = time.perf_counter()
     out = sys.stdout if out is None else out
-    output = Path(output)
-    if output.suffix not in (".bt", ".ot"):
-        raise ValueError(f"output must end in .bt or .ot, got {str(output)!r}")
-    if method not in _MAP_METHODS:
-        raise ValueError(f"method must be one of {_MAP_METHODS}, got {method!r}")
-    if mode is not None and method != "octree":
-        raise ValueError(f"mode applies to method='octree' only, got mode={mode!r} with "
-                         f"method={method!r}")
-    if knn_params is not None and method != "knn":
-        raise ValueError(f"knn_params applies to method='knn' only, got method={method!r}")
-    if max_range is not None and method == "knn":
-        raise ValueError(f"max_range does not apply to method='knn': its range limit is "
-                         f"knn_params['sensor_range'] (default {_KNN_DEFAULTS['sensor_range']} "
-                         f"m), got max_range={max_range!r}")
-    if max_range is not None:
-        max_range = check_real(max_range, "max_range", low=0.0)
-    mapper: Any
-    if method == "octree":
-        mapper = OccupancyOctree(resolution)
-        mode = "scan" if mode is None else mode
-
-        def insert(points, origin):
-            mapper.insert_scan(points, origin, max_range=max_range, mode=mode)
-    elif method == "knn":
-        mapper = KNNMap(resolution, **_check_knn_options({} if knn_params is None
-                                                         else knn_params), n_jobs=-1)
-
-        def insert(points, origin):
-            mapper.insert_scan(points, origin)
-    else:
-        if method == "bgk":
-            mapper = BGKMap(resolution, n_jobs=-1) if max_range is None else \
-                BGKMap(resolution, max_range=max_range, n_jobs=-1)
-        else:
-            mapper = AKIMap(resolution, random_state=0, n_jobs=-1)
-
-        def insert(points, origin):
-            if method == "akimap" and max_range is not None:
-                points = np.asarray(points, dtype=np.float64)
-                near = np.linalg.norm(points - np.asarray(origin, dtype=np.float64),
-                                      axis=1) <= max_range
-                points = points[near]
-            mapper.update(points, origin)
-    scans = [scan for path in paths for scan in read_scans(path)]
-    if not scans:
-        raise ValueError("no scans found in " + ", ".join(map(str, paths)))
-    t0 = time.perf_counter()
-    for scan in tqdm(scans, desc="inserting scans", unit="scan",
-                     disable=None if progress is None else not progress):
-        insert(scan.points, scan.origin)
-    seconds = time.perf_counter() - t0
-    n = sum(len(s.points) for s in scans)
+    bag_options = {"topic": topic, "fixed_frame": fixed_frame, "sensor_frame": sensor_frame,
+                   "tf_tolerance": tf_tolerance}
+    output_path, resolution, max_range, n_jobs, input_path = _check_map_args(
+        paths, output, method, mode, resolution, max_range, knn_params, n_jobs, poses,
+        poses_format, bag_options, input_map)
+    knn = _check_knn_options({} if knn_params is None else knn_params) \
+        if method == "knn" else {}
+    pose_array = None if poses is None else _read_poses(poses, poses_format)
+    convert = method in _KERNEL_METHODS and _suffix(output_path) != ".npz"
+    bar = tqdm(total=(input_path is not None) + len(paths) + convert + 1, unit="step",
+               disable=None if progress is None else not progress)
+    try:
+        if input_path is not None:
+            bar.set_description(f"loading {input_path.name}")
+        mapper: Any = _new_map(method, resolution, max_range, knn, n_jobs, input_path)
+        if input_path is not None:
+            bar.update()
+        sources = []
+        for path in paths:
+            bar.set_description(f"reading {Path(path).name}")
+            if _is_bag(path):
+                source = read_rosbag(path, topic, fixed_frame=fixed_frame,
+                                     sensor_frame=sensor_frame, tf_tolerance=tf_tolerance)
+            else:
+                source = read_scans(path, fields=fields)
+            sources.append(source)
+            bar.total += len(source)
+            bar.update()
+        n_scans = sum(len(s) for s in sources)
+        if not n_scans:
+            raise ValueError("no scans found in " + ", ".join(map(str, paths)))
+        if pose_array is not None and len(pose_array) != n_scans:
+            raise _OptionError("poses", f"poses file {str(poses)!r} holds {len(pose_array)} "
+                               f"poses for {n_scans} scans; expected one pose per scan, in "
+                               f"input order")
+        insert, limit = _inserter(mapper, method, mode, max_range, n_jobs)
+        n_points = n_beyond = n_done = 0
+        dropped = []
+        t0 = time.perf_counter()
+        bar.set_description("inserting scans")
+        for path, source in zip(paths, sources):
+            for scan in source:
+                if pose_array is not None:
+                    scan = apply_poses([scan], pose_array[n_done:n_done + 1])[0]
+                points = scan.points
+                n_points += len(points)
+                if limit is not None and len(points):
+                    far = np.linalg.norm(np.asarray(points, dtype=np.float64)
+                                         - np.asarray(scan.origin, dtype=np.float64),
+                                         axis=1) > limit
+                    n_beyond += int(np.count_nonzero(far))
+                    if method == "akimap":
+                        points = points[~far]
+                insert(points, scan.origin)
+                n_done += 1
+                bar.update()
+            if getattr(source, "n_dropped", 0):
+                dropped.append((path, source.n_dropped, source.n_points))
+        seconds = time.perf_counter() - t0
+        tree = mapper
+        if convert:
+            bar.set_description("converting to an octree")
+            tree = mapper.to_octree()
+            bar.update()
+        bar.set_description(f"writing {output_path.name}")
+        _save(mapper, tree, output_path)
+        bar.update()
+    finally:
+        bar.close()
+    wall = time.perf_counter() - t_start
+    for path, n, total in dropped:
+        print(f"dropped {n:,} of {total:,} points of {path} with a NaN or inf coordinate",
+              file=out)
+    if limit is not None and n_beyond:
+        print(_beyond_message(method, n_beyond, n_points, limit), file=out)
     if method in ("octree", "knn"):
-        mapper.save(output)
         built = f"{mapper.num_leaves:,} leaves"
-    else:
-        tree = mapper.to_octree()
-        tree.save(output)
+    elif convert:
         built = f"{mapper.num_cells:,} cells ({tree.num_leaves:,} octree leaves)"
-    print(f"{len(scans)} scans, {n:,} points → {built} in {seconds:.2f} s; wrote {output}",
-          file=out)
+    else:
+        built = f"{mapper.num_cells:,} cells"
+    start = f"{input_path} + " if input_path is not None else ""
+    print(f"{start}{n_scans} scans, {n_points:,} points → {built}; inserted in "
+          f"{seconds:.2f} s, wall time {wall:.2f} s; wrote {output_path}", file=out)
     return mapper
+
+
+def _inserter(mapper, method, mode, max_range, n_jobs):
+    """(insert(points, origin), the range limit whose points are counted, or None)."""
+    if method == "octree":
+        kwargs = {"max_range": max_range, "mode": "scan" if mode is None else mode}
+        if _OCTREE_N_JOBS:
+            kwargs["n_jobs"] = n_jobs
+
+        def insert(points, origin):
+            mapper.insert_scan(points, origin, **kwargs)
+        return insert, max_range
+    if method == "knn":
+        return mapper.insert_scan, mapper.sensor_range
+    if method == "bgk":
+        return mapper.update, mapper.max_range
+    return mapper.update, max_range
+
+
+def _beyond_message(method, n, total, limit) -> str:
+    where = f"{n:,} of {total:,} points lie beyond"
+    if method == "octree":
+        return f"{where} max_range {limit:g} m: their rays were cut there (free space only)"
+    if method == "knn":
+        return (f"{where} sensor_range {limit:g} m: not inserted, their rays were cut "
+                f"there")
+    if method == "bgk":
+        return (f"{where} max_range {limit:g} m: BGK dropped their beams (it drops the beams "
+                f"to its down-sampled end points beyond max_range)")
+    return f"{where} max_range {limit:g} m: dropped (AKIMap got only the nearer ones)"
+
+
+def _save(mapper, tree, output: Path) -> None:
+    suffix = _suffix(output)
+    if suffix == ".npz":
+        mapper.save(output)
+    elif suffix == ".ply":
+        tree.save_ply(output)
+    elif suffix == ".pcd":
+        tree.save_pcd(output)
+    else:
+        tree.save(output, format=suffix[1:])
 
 
 def _option(name: str) -> str:
@@ -438,6 +735,28 @@ def _knn_error(parser: argparse.ArgumentParser, exc: Exception) -> None:
     parser.error(f"argument {options}: {message}")
 
 
+_FIELD_NAMES = ("kitti", "nuscenes")
+
+
+def _fields(text: str):
+    """--fields: an int (float32 values per record), "kitti" / "nuscenes", or a record
+    layout ``name:dtype,...`` (e.g. ``x:<f8,y:<f8,z:<f8,t:<u4``)."""
+    text = text.strip()
+    if text.isdigit():
+        return int(text)
+    if text in _FIELD_NAMES:
+        return text
+    try:
+        items = [item.split(":") for item in text.split(",")]
+        if not all(len(item) == 2 and item[0] for item in items):
+            raise ValueError
+        return np.dtype([(name.strip(), np.dtype(kind.strip())) for name, kind in items])
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(
+            f"expected an int (float32 values per record), kitti, nuscenes or name:dtype,... "
+            f"(e.g. x:<f4,y:<f4,z:<f4,t:<u4), got {text[:60]!r}") from None
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="occgp", description="Occupancy mapping from range "
                                      "sensors: OctoMap octrees, kernel, k-NN and GP maps.")
@@ -448,29 +767,73 @@ def _parser() -> argparse.ArgumentParser:
                        "(and noisy scans of it with the octree and the k-NN map), print "
                        "scores, write map.bt and figures")
     p.add_argument("-o", "--output", default="demo_out", help="output folder (default: %(default)s)")
-    p.add_argument("--resolution", type=float, default=0.1, help="cell size in metres")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--resolution", type=float, default=0.1,
+                   help="cell size in metres (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the scene, scans and noise (default: %(default)s)")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bars (default: shown on a terminal)")
 
-    p = sub.add_parser("map", help="build a map from scan files (.pcd, .bin, .graph, "
-                       "x y z text, or a folder of .pcd) and write it as an OctoMap file")
+    p = sub.add_parser("map", help="build a map from scan files (.pcd, .bin, .pcd.bin, "
+                       ".graph, x y z text, a folder of them) and ROS bags, and write it as "
+                       "an OctoMap file, PLY / PCD cells or a kernel map's .npz",
+                       description="Build a map from scan files and ROS bags (PointCloud2 "
+                       "posed by TF) and write it.")
     p.set_defaults(map_parser=p)
-    p.add_argument("scans", nargs="+", help="scan files or folders")
-    p.add_argument("-o", "--output", required=True, help="the map file (.bt or .ot)")
-    p.add_argument("--resolution", type=float, default=0.1, help="cell size in metres")
+    p.add_argument("scans", nargs="+", help="scan files or folders (.pcd, .bin, .pcd.bin, "
+                   ".graph, .xyz/.txt, ...) and ROS bags (.bag, .db3, .mcap, a ROS 2 bag "
+                   "folder), inserted in this order")
+    p.add_argument("-o", "--output", required=True,
+                   help="the map file, format by suffix: .bt/.ot (OctoMap), .ply/.pcd (the "
+                   "occupied cells), .npz (bgk/akimap only: the kernel map with its "
+                   "evidence, for --input-map); required, no default")
+    p.add_argument("--resolution", type=float, default=None,
+                   help="cell size in metres (default: 0.1, or the --input-map's)")
     p.add_argument("--method", choices=_MAP_METHODS, default="octree",
                    help="octree: OctoMap log-odds; bgk: BGK kernel inference; akimap: "
                    "adaptive kernel inference; knn: the k-NN inverse sensor model on the "
-                   "octree; a kernel map is written as an octree of its posterior means "
-                   "(default: %(default)s)")
+                   "octree; a kernel map is written to .bt/.ot/.ply/.pcd as an octree of its "
+                   "posterior means (default: %(default)s)")
     p.add_argument("--mode", choices=["scan", "ray"], default=None,
                    help="the octree's update mode (default: scan; --method octree only)")
     p.add_argument("--max-range", type=float, default=None,
                    help="range limit in metres: octree: longer beams are free space up to "
-                   "it; bgk: longer beams are dropped (default: 8); akimap: end points "
-                   "farther from the sensor are dropped (default: no limit); not with knn, "
-                   "whose range limit is --sensor-range")
-    p.add_argument("--no-progress", action="store_true")
+                   "it (default: no limit); bgk: longer beams are dropped (default: 8, or the "
+                   "--input-map's); akimap: end points farther from the sensor are dropped "
+                   "(default: no limit); not with knn, whose range limit is --sensor-range")
+    p.add_argument("--n-jobs", type=int, default=-1,
+                   help="threads of bgk, akimap and knn" + (" and the octree" if _OCTREE_N_JOBS
+                                                            else "") +
+                   "; -1: every core; the map does not depend on it (default: %(default)s)")
+    p.add_argument("--input-map", default=None, metavar="PATH",
+                   help="continue a saved map: .bt/.ot for octree and knn, .npz (written by "
+                   "-o X.npz) for bgk and akimap; the scans are inserted into it "
+                   "(default: a new map)")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bar (default: shown on a terminal)")
+    g = p.add_argument_group("poses and record layouts")
+    g.add_argument("--poses", default=None, metavar="FILE",
+                   help="sensor-to-world poses, one per scan in input order: KITTI poses.txt "
+                   "(3x4 row-major) or TUM (t x y z qx qy qz qw; timestamps not matched) "
+                   "(default: none, the scans are in the world frame)")
+    g.add_argument("--poses-format", choices=_POSE_FORMATS, default=None,
+                   help="format of --poses (default: guessed from the columns: 12 kitti, "
+                   "8 tum)")
+    g.add_argument("--fields", type=_fields, default=None,
+                   help="record layout of .bin scans: an int (float32 values per record, x y "
+                   "z first), kitti, nuscenes, or name:dtype,... such as x:<f4,y:<f4,z:<f4,"
+                   "t:<u4 (default: by file name: nuscenes for .pcd.bin, else kitti)")
+    g = p.add_argument_group("ROS bags (PointCloud2 messages posed by /tf and /tf_static)")
+    g.add_argument("--topic", default=None,
+                   help="the PointCloud2 topic (default: the bag's only one)")
+    g.add_argument("--fixed-frame", default=None,
+                   help="the world frame of the map (default: the root of the TF tree)")
+    g.add_argument("--sensor-frame", default=None,
+                   help="the frame whose origin is the sensor position (default: the "
+                   "cloud's header.frame_id)")
+    g.add_argument("--tf-tolerance", type=float, default=0.0,
+                   help="seconds a cloud stamp may lie outside a TF edge's stamps "
+                   "(default: %(default)s)")
     g = p.add_argument_group("k-NN inverse sensor model (--method knn only; defaults: "
                              "KNNMap's)")
     d = _KNN_DEFAULTS
@@ -536,8 +899,14 @@ def main(argv=None) -> int:
         else:
             map_scans(args.scans, args.output, resolution=args.resolution,
                       method=args.method, mode=args.mode, max_range=args.max_range,
-                      knn_params=knn_params, progress=progress)
-    except (ValueError, TypeError, OSError) as exc:
+                      knn_params=knn_params, poses=args.poses, poses_format=args.poses_format,
+                      topic=args.topic, fixed_frame=args.fixed_frame,
+                      sensor_frame=args.sensor_frame, tf_tolerance=args.tf_tolerance,
+                      fields=args.fields, input_map=args.input_map, n_jobs=args.n_jobs,
+                      progress=progress)
+    except _OptionError as exc:
+        args.map_parser.error(f"argument {_OPTION_OF.get(exc.param, exc.param)}: {exc}")
+    except (ValueError, TypeError, OSError, ImportError) as exc:
         print(f"occgp {args.command}: error: {exc}", file=sys.stderr)
         return 1
     return 0
