@@ -131,7 +131,7 @@ cdef class _OcTree:
         point lies in the box (its float comparison) and within `max_range` (< 0: none)."""
         cdef Py_ssize_t i, n = points.shape[0]
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
-        cdef point3d p
+        cdef point3d p, end
         keep = np.zeros(n, dtype=np.bool_)
         cdef uint8_t[::1] k = keep.view(np.uint8)
         with nogil:
@@ -140,7 +140,7 @@ cdef class _OcTree:
                 k[i] = (p.x() >= bbox[0, 0] and p.y() >= bbox[0, 1] and p.z() >= bbox[0, 2]
                         and p.x() <= bbox[1, 0] and p.y() <= bbox[1, 1]
                         and p.z() <= bbox[1, 2]
-                        and (max_range < 0 or (p - o).norm() <= max_range))
+                        and not effective_end(o, p, max_range, &end))
         return keep
 
     def _insert_batch(self, const float[:, ::1] points, const float[::1] origin,
@@ -223,7 +223,8 @@ cdef class _OcTree:
         culling region: fully free cells holding no near point, whose l_in or
         l_out update (both <= 0) changes nothing.
 
-        Returns (near, keys, kinds, point_cell, stats): near (n,) bool; keys
+        Returns (near, keys, kinds, point_cell, stats): near (n_near, 3) float32,
+        the near points in scan order; keys
         (m,) uint64 packed keys (x in the low 16 bits); kinds (m,) uint8;
         point_cell (n_near,) int64, the row of `keys` holding each near point;
         stats as :meth:`_insert_batch` returns them (the two traversals added).
@@ -235,7 +236,7 @@ cdef class _OcTree:
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
         cdef point3d end
         near = np.zeros(n, dtype=np.bool_)
-        cdef uint8_t[::1] near_v = near.view(np.uint8)
+        cdef uint8_t[::1] near_v = near.view(np.uint8)   # which rows are near
         with nogil:
             for i in range(n):
                 near_v[i] = not effective_end(
@@ -309,7 +310,7 @@ cdef class _OcTree:
                 pc_v[i] = deref(it).second if it != row.end() else -1
         stats = _sum_stats(scan_result(sa, found_a.size(), done),
                            scan_result(sb, found_b.size(), done))
-        return near, keys[:m], kinds[:m], point_cell, stats
+        return near_pts, keys[:m], kinds[:m], point_cell, stats
 
     def _apply_cells(self, const uint64_t[::1] keys, const float[::1] updates):
         """Add ``updates[i]`` to the cell of packed key ``keys[i]`` (keys distinct), as

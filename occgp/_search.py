@@ -22,7 +22,8 @@ from joblib import Parallel, delayed
 from numpy.typing import ArrayLike, NDArray
 
 from ._validation import check_choice, check_int, check_n_jobs, check_real, n_threads
-from .knn import KNNMap, ScanReplay, check_knn_params, check_octomap_params, _log_odds
+from .knn import KNNMap, ScanReplay, _log_odds, check_knn_params, check_octomap_params
+from .metrics import _tpr_fdr_area, _tpr_fdr_auc
 
 __all__ = ["grid_search", "GridSearchResult", "cell_labels", "KNN_GRID", "OCTOMAP_GRID",
            "KNN_WEIGHT_GRID", "THRESHOLDS"]
@@ -200,14 +201,6 @@ def _curve(values, labels, thresholds):
     return kept, tpr, fdr
 
 
-def _auc(tpr, fdr):
-    """Trapezoid area along (0, 0), the operating points by decreasing threshold, (1, 1)
-    (the convention of :func:`occgp.metrics.tpr_fdr_auc`)."""
-    x = np.r_[0.0, fdr, 1.0]
-    y = np.r_[0.0, tpr, 1.0]
-    return float(np.trapezoid(y, x))
-
-
 def _score_chunk(replay, labels, method, combos, thresholds, batch_size):
     rows = []
     for start in range(0, len(combos), batch_size):
@@ -221,7 +214,6 @@ def _score_chunk(replay, labels, method, combos, thresholds, batch_size):
         for b, params in enumerate(batch):
             lo, hi = bounds[b]
             if thresholds is None:
-                from .metrics import _tpr_fdr_auc
                 prob = 1.0 - 1.0 / (1.0 + np.exp(values[b].astype(np.float64)))
                 rows.append({**params, "auc": _tpr_fdr_auc(labels, prob), "thresholds": (),
                              "tpr": (), "fdr": ()})
@@ -229,7 +221,7 @@ def _score_chunk(replay, labels, method, combos, thresholds, batch_size):
             ts = [(t, np.float32(_log_odds(t))) for t in sorted(thresholds, reverse=True)
                   if lo - 1e-12 <= t <= hi + 1e-12]
             kept, tpr, fdr = _curve(values[b], labels, ts)
-            rows.append({**params, "auc": _auc(tpr, fdr), "thresholds": tuple(kept),
+            rows.append({**params, "auc": _tpr_fdr_area(fdr, tpr), "thresholds": tuple(kept),
                          "tpr": tuple(tpr), "fdr": tuple(fdr)})
     return rows
 
@@ -357,21 +349,18 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
         raise ValueError(f"truth holds no occupied cell among the {replay.n_cells} cells "
                          "the scans reach: the TPR is undefined")
     workers = n_threads(n_jobs)
-    chunks = [kept[i::workers * 2] for i in range(workers * 2)] if workers > 1 else [kept]
-    chunks = [c for c in chunks if c]
-    if len(chunks) == 1:
-        parts = [_score_chunk(replay, labels, method, chunks[0], thresholds, batch_size)]
+    n_chunks = min(2 * workers, len(kept)) if workers > 1 else 1
+    chunks = [kept[i::n_chunks] for i in range(n_chunks)]
+    if n_chunks == 1:
+        parts = [_score_chunk(replay, labels, method, kept, thresholds, batch_size)]
     else:
         parts = Parallel(n_jobs=n_jobs)(
             delayed(_score_chunk)(replay, labels, method, c, thresholds, batch_size)
             for c in chunks)
-    # back to grid order
-    order = {id(c): None for c in kept}
-    by_combo = {}
-    for chunk, rows in zip(chunks, parts):
-        for c, row in zip(chunk, rows):
-            by_combo[id(c)] = row
-    results = [by_combo[k] for k in order]
+    # chunk i holds the combinations i, i + n_chunks, ...: back to grid order
+    results: list[dict[str, Any]] = [{}] * len(kept)
+    for i, rows in enumerate(parts):
+        results[i::n_chunks] = rows
     aucs = np.array([r["auc"] for r in results])
     best = int(np.argmax(aucs))
     best_params = {k: v for k, v in results[best].items()

@@ -29,7 +29,7 @@ from ._octree import _welford
 from ._validation import (
     check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
 )
-from .octree import OccupancyOctree
+from .octree import OccupancyOctree, unpack_keys
 
 __all__ = ["KNNMap", "ScanReplay", "check_knn_params", "check_octomap_params",
            "mean_knn_distances", "point_log_odds"]
@@ -361,8 +361,8 @@ default="auto"
             raise AssertionError("unreachable")
         near, keys, kinds, point_cell, stats = out
         t0 = time.perf_counter()
-        near_pts = pts[near].astype(np.float64)
-        s = mean_knn_distances(near_pts, [self.k], n_threads(self._params["n_jobs"]))[:, 0]
+        s = mean_knn_distances(near.astype(np.float64), [self.k],
+                               n_threads(self._params["n_jobs"]))[:, 0]
         scores = _welford(s, *self._scores)
         updates = _cell_updates(kinds, point_cell, point_log_odds(
             s, *scores, self.p_u, self.p_l, self.cdf), _log_odds(self.p_m),
@@ -380,9 +380,6 @@ default="auto"
     def __reduce__(self):
         return (_rebuild_knn, (type(self), self.get_params(), self.to_bytes("ot"),
                                self._scores))
-
-    def _sensor_params(self) -> dict:
-        return {k: v for k, v in self._params.items() if k != "resolution"}
 
 
 def _cell_updates(kinds: NDArray[np.uint8], point_cell: NDArray[np.int64],
@@ -477,7 +474,7 @@ class ScanReplay:
                     raise ValueError(f"scans[{i}]: {exc}") from None
                 raise AssertionError("unreachable")
             near, keys, kinds, point_cell, _ = out
-            s = mean_knn_distances(pts[near].astype(np.float64), self.ks, workers)
+            s = mean_knn_distances(near.astype(np.float64), self.ks, workers)
             per_k = []
             for j in range(len(self.ks)):
                 stats[j] = _welford(np.ascontiguousarray(s[:, j]), *stats[j])
@@ -490,9 +487,7 @@ class ScanReplay:
         self.keys = np.unique(all_keys)
         self._scans = [(np.searchsorted(self.keys, keys).astype(np.int64), kinds, point_cell,
                         s, per_k) for keys, kinds, point_cell, s, per_k in local]
-        k3 = np.column_stack([(self.keys >> np.uint64(16 * a)) & np.uint64(0xFFFF)
-                              for a in range(3)]).astype(np.float64)
-        self.centres = (k3 - 32768 + 0.5) * self.resolution
+        self.centres = probe.key_to_coord(unpack_keys(self.keys))
 
     @property
     def n_cells(self) -> int:

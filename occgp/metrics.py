@@ -369,11 +369,15 @@ def _require_positive(labels):
         )
 
 
+def _tpr_fdr_area(fdr, tpr):
+    """Trapezoid area of a TPR-FDR path from (0, 0) through the operating points
+    (by decreasing threshold), closed with a flat segment to (1, 1)."""
+    return float(np.trapezoid(np.r_[0.0, tpr, 1.0], np.r_[0.0, fdr, 1.0]))
+
+
 def _tpr_fdr_auc(labels, probs):
     fdr, tpr, _ = _tpr_fdr_points(labels, probs)
-    fdr = np.r_[fdr, 1.0]
-    tpr = np.r_[tpr, 1.0]
-    return float(np.trapezoid(tpr, fdr))
+    return _tpr_fdr_area(fdr[1:], tpr[1:])
 
 
 def tpr_fdr_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:

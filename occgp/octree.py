@@ -327,8 +327,7 @@ default="auto"
         packed, new = self._changed()
         order = np.argsort(packed, kind="stable")
         packed, new = packed[order], new[order]
-        keys = np.column_stack([(packed >> np.uint64(16 * a)) & np.uint64(0xFFFF)
-                                for a in range(3)]).astype(np.uint16).reshape(-1, 3)
+        keys = unpack_keys(packed)
         centres = self.key_to_coord(keys) if len(keys) else np.empty((0, 3))
         return Changes(keys, centres, new)
 
@@ -897,6 +896,12 @@ def _pack(keys: np.ndarray) -> np.ndarray:
     """Packed keys (x in the low 16 bits), as the compiled core hashes them."""
     k = keys.astype(np.uint64)
     return k[:, 0] | (k[:, 1] << np.uint64(16)) | (k[:, 2] << np.uint64(32))
+
+
+def unpack_keys(packed: np.ndarray) -> NDArray[np.uint16]:
+    """The (n, 3) uint16 keys of packed keys (the inverse of :func:`_pack`)."""
+    return np.column_stack([(packed >> np.uint64(16 * a)) & np.uint64(0xFFFF)
+                            for a in range(3)]).astype(np.uint16).reshape(-1, 3)
 
 
 def _discretized(points: np.ndarray, resolution: float) -> np.ndarray:

@@ -8,6 +8,7 @@ from numpy.testing import assert_array_equal
 from sklearn.exceptions import NotFittedError
 
 from occgp.gp import GPOM, GPOMIK, Matern32, Simpson, SquaredExponential
+from test_kernel_io import rewrite
 
 X = np.random.default_rng(0).uniform([-1, -2], [4, 2], (300, 2))
 
@@ -83,18 +84,6 @@ def test_gpom_loaded_predicts_exactly_as_the_original(kw, tmp_path):
 
 
 # ---------------------------------------------------------------- bad files
-def rewrite(src, dst, **changes):
-    with np.load(src, allow_pickle=False) as z:
-        arrays = {k: z[k] for k in z.files}
-    for k, v in changes.items():
-        if v is None:
-            arrays.pop(k)
-        else:
-            arrays[k] = v
-    np.savez_compressed(dst, **arrays)
-    return dst
-
-
 def json_with(path, key, **changes):
     with np.load(path) as z:
         value = json.loads(str(z[key]))
