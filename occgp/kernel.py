@@ -165,6 +165,9 @@ class _KernelMap(_KernelCells):
     def _keep(self, extra) -> None:
         """Keep what an accepted update's kernels leave (AKIMap: its bandwidths)."""
 
+    def _accepted(self) -> None:
+        """Called once an update is accepted (also one that added no sample)."""
+
     def _validated_scan(self, points: ArrayLike, origin: ArrayLike):
         pts = as_points(points, "points")
         org = as_point(origin, "origin")
@@ -233,6 +236,7 @@ class _KernelMap(_KernelCells):
         """
         samples, labels, org, state = self._checked_training_data(points, origin)
         if not len(samples):
+            self._accepted()
             return self
         try:
             precision, extent, weights, sf2, extra = self._kernels(samples, labels, org)
@@ -243,6 +247,7 @@ class _KernelMap(_KernelCells):
         self._keep(extra)
         self._accumulate(np.ascontiguousarray(samples), labels, precision, extent,
                          weights, sf2, n_threads(self.n_jobs))
+        self._accepted()
         return self
 
     # evaluation harness protocol: maps take scans through insert_scan
@@ -538,6 +543,12 @@ class BGKMap(_KernelMap):
     ----------
     num_cells : int
         Number of cells any kernel reached.
+    last_beams_ : tuple of (int, int)
+        ``(kept, dropped)`` of the last accepted :meth:`update`: its beams
+        (end points reduced to one centroid per cube of `ds_resolution`)
+        within `max_range`, and those beyond it, dropped whole. ``(0, 0)``
+        before any update; not saved by :meth:`save` or pickled (a loaded map
+        starts at ``(0, 0)``).
 
     See Also
     --------
@@ -580,8 +591,13 @@ class BGKMap(_KernelMap):
         self.max_range = max_range
         self.max_cells_per_update = max_cells_per_update
         self._check_params()
+        self.last_beams_ = (0, 0)
+        self._beams = (0, 0)
 
     _SUPPORT_HINT = "a smaller ell"
+
+    def _accepted(self) -> None:
+        self.last_beams_ = self._beams
 
     def _check_params(self) -> None:
         super()._check_params()
@@ -621,12 +637,15 @@ class BGKMap(_KernelMap):
 
     def _training_data(self, pts, org):
         ds = self.resolution if self.ds_resolution is None else self.ds_resolution
+        self._beams = (0, 0)
         if len(pts) == 0:
             return np.empty((0, 3)), np.empty(0)
         _, sums, counts = _cube_sums(pts, ds, "ds_resolution")
         hits = sums / counts[:, None]
+        n_beams = len(hits)
         if self.max_range is not None:
             hits = hits[np.linalg.norm(hits - org, axis=1) <= self.max_range]
+        self._beams = (len(hits), n_beams - len(hits))
         if len(hits) == 0:
             return np.empty((0, 3)), np.empty(0)
         # free samples every free_resolution metres along each beam (d < length), one
