@@ -252,25 +252,102 @@ class _KernelMap(_KernelCells):
 
     # evaluation harness protocol: maps take scans through insert_scan
     def insert_scan(self, points: ArrayLike, origin: ArrayLike):
-        """Alias of :meth:`update`, for :mod:`occgp.evaluation`."""
+        """Alias of :meth:`update`, for :mod:`occgp.evaluation`.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            End points of the beams in the world frame, in metres.
+        origin : array-like of shape (3,)
+            Sensor position, in metres.
+
+        Returns
+        -------
+        self
+            The updated map.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`update`; the map is then unchanged.
+        """
         return self.update(points, origin)
 
     # ------------------------------------------------------------------ queries
     def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
         """Posterior mean of occupancy, alpha / (alpha + beta), at each point's cell.
 
-        Returns NaN where no sample's kernel ever reached the cell (unknown).
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres.
+
+        Returns
+        -------
+        p : ndarray of shape (n_points,)
+            The posterior mean (`prior` added to alpha and beta); NaN where no
+            sample's kernel ever reached the cell (unknown), or the point lies
+            outside the key range.
+
+        Raises
+        ------
+        TypeError
+            If `points` does not hold real numbers.
+        ValueError
+            If `points` is not of shape (n_points, 3) or holds NaN or inf.
         """
         pts = as_points(points, "points")
         return self._query(pts, check_real(self.prior, "prior", low=0.0), 0)
 
     def variance(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Posterior variance of occupancy, ab / ((a + b)^2 (a + b + 1)); NaN where unknown."""
+        """Posterior variance of occupancy, ab / ((a + b)^2 (a + b + 1)), at each point's cell.
+
+        ``a`` and ``b`` are the cell's alpha and beta with `prior` added (the
+        variance of the Beta posterior).
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres.
+
+        Returns
+        -------
+        var : ndarray of shape (n_points,)
+            The posterior variance; NaN where unknown (as :meth:`occupancy`).
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`occupancy`.
+        """
         pts = as_points(points, "points")
         return self._query(pts, check_real(self.prior, "prior", low=0.0), 1)
 
     def is_occupied(self, points: ArrayLike, threshold: float = 0.5) -> NDArray[np.bool_]:
-        """Whether each point's cell has occupancy above `threshold` (unknown: False)."""
+        """Whether each point's cell has occupancy above `threshold`.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres.
+        threshold : float, default=0.5
+            Probability in [0, 1]; a cell is occupied when its posterior mean
+            (:meth:`occupancy`) is strictly above it.
+
+        Returns
+        -------
+        occupied : ndarray of bool, shape (n_points,)
+            False where unknown.
+
+        Raises
+        ------
+        TypeError
+            If `points` does not hold real numbers or `threshold` is not a real
+            number.
+        ValueError
+            If `points` is malformed (as :meth:`occupancy`) or `threshold` is
+            outside [0, 1].
+        """
         threshold = check_real(threshold, "threshold", low=0.0, high=1.0)
         p = self.occupancy(points)
         return np.where(np.isnan(p), False, p > threshold)
@@ -297,10 +374,29 @@ class _KernelMap(_KernelCells):
 
     def to_octree(self, *, clamping_min: float = 0.001,
                   clamping_max: float = 0.999) -> OccupancyOctree:
-        """An :class:`~occgp.OccupancyOctree` of the same resolution holding each cell's
-        posterior mean as log-odds (float32, within the clamping bounds given), pruned,
-        so that ``.bt`` / ``.ot`` export and OctoMap's viewers work. Cells no kernel
-        reached stay unknown."""
+        """The map as an :class:`~occgp.OccupancyOctree` of the same resolution.
+
+        Each cell's posterior mean becomes its log-odds (float32, clamped to
+        the bounds given), and the tree is pruned, so that ``.bt`` / ``.ot``
+        export and OctoMap's viewers work. Cells no kernel reached stay
+        unknown.
+
+        Parameters
+        ----------
+        clamping_min, clamping_max : float, default=0.001 and 0.999
+            The octree's clamping bounds, probabilities in (0, 0.5) and (0.5, 1),
+            as :class:`~occgp.OccupancyOctree`'s.
+
+        Returns
+        -------
+        tree : OccupancyOctree
+            With the default sensor model otherwise.
+
+        Raises
+        ------
+        TypeError, ValueError
+            If the clamping bounds are rejected by :class:`~occgp.OccupancyOctree`.
+        """
         tree = OccupancyOctree(self.resolution, clamping_min=clamping_min,
                                clamping_max=clamping_max)
         keys, alpha, beta = self._cells_arrays()
@@ -627,6 +723,20 @@ class BGKMap(_KernelMap):
                       origin: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The samples and labels (1 occupied, 0 free) that :meth:`update` uses.
 
+        Nothing in the map changes.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            End points of the beams in the world frame, in metres.
+        origin : array-like of shape (3,)
+            Sensor position, in metres.
+
+        Returns
+        -------
+        samples : ndarray of shape (n_samples, 3)
+        labels : ndarray of shape (n_samples,)
+
         Raises
         ------
         TypeError, ValueError
@@ -926,6 +1036,18 @@ class AKIMap(_KernelMap):
                       origin: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The samples and labels (1 occupied, 0 free) an update would use, drawn from
         the map's random generator (so this advances it).
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            End points of the beams in the world frame, in metres.
+        origin : array-like of shape (3,)
+            Sensor position, in metres.
+
+        Returns
+        -------
+        samples : ndarray of shape (n_samples, 3)
+        labels : ndarray of shape (n_samples,)
 
         Raises
         ------
