@@ -708,8 +708,8 @@ def _beyond_message(method, n, total, limit, beams) -> str:
     if method == "bgk":
         kept, dropped = (int(b) for b in beams)
         return (f"{where} max_range {limit:g} m: BGK dropped {dropped:,} of its "
-                f"{kept + dropped:,} beams (one per cube of ds_resolution holding end points, "
-                f"to their centroid), those whose centroid lies beyond max_range")
+                f"{kept + dropped:,} beams (to the end points' centroids per cube of "
+                f"ds_resolution) beyond it")
     return f"{where} max_range {limit:g} m: dropped (AKIMap got only the nearer ones)"
 
 
