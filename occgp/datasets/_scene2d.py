@@ -200,7 +200,24 @@ class Scene2D:
         return self._interior[0].copy(), self._interior[1].copy()
 
     def occupancy(self, points: ArrayLike) -> NDArray[np.bool_]:
-        """Exact membership of 2D `points` (shape (n_points, 2)) in the solids.
+        """Exact membership of 2D `points` in the union of the solids.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 2)
+            Query points in the world frame, in metres.
+
+        Returns
+        -------
+        occupied : ndarray of shape (n_points,), dtype bool
+            True inside or on the boundary of a solid.
+
+        Raises
+        ------
+        TypeError
+            If `points` does not hold real numbers.
+        ValueError
+            If `points` is not of shape (n_points, 2) or holds NaN or inf.
 
         Examples
         --------
@@ -228,9 +245,25 @@ class Scene2D:
         return out
 
     def signed_distance(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Signed distance to the solids (negative inside), shape (n_points,).
+        """Signed Euclidean distance to the solids (negative inside).
 
-        Exact outside the solids; inside overlapping solids, a lower bound.
+        Exact outside the solids; inside overlapping solids, the magnitude is
+        the depth inside the deepest single solid (a lower bound).
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 2)
+            Query points in the world frame, in metres.
+
+        Returns
+        -------
+        distance : ndarray of shape (n_points,)
+            In metres; inf everywhere for a scene without solids.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`occupancy`.
 
         Examples
         --------
@@ -249,15 +282,28 @@ class Scene2D:
         Parameters
         ----------
         origins : array-like of shape (2,) or (n_rays, 2)
+            Ray origins; one origin is shared by all rays.
         directions : array-like of shape (n_rays, 2)
             Normalised internally; must be non-zero.
         max_range : float, default=inf
+            Positive; rays that hit nothing closer are misses.
 
         Returns
         -------
         distances : ndarray of shape (n_rays,)
-            Distance to the first hit, `max_range` for misses.
+            Distance to the first hit, `max_range` for misses. A ray starting
+            inside a solid hits at 0.
         hit : ndarray of shape (n_rays,), dtype bool
+
+        Raises
+        ------
+        TypeError
+            If `origins` or `directions` does not hold real numbers, or
+            `max_range` is not a real number.
+        ValueError
+            If `directions` is not of shape (n_rays, 2), `origins` neither of
+            shape (2,) nor that of `directions`, either holds NaN or inf, a
+            direction is zero, or `max_range` is not positive.
 
         Examples
         --------
@@ -279,12 +325,21 @@ class Scene2D:
         Parameters
         ----------
         n_poses : int, default=26
+            Number of poses, at least 1; the first is the path's start and
+            the last (for more than one) its end.
 
         Returns
         -------
         origins : ndarray of shape (n_poses, 2)
         headings : ndarray of shape (n_poses,)
             Direction of travel, radians from +x.
+
+        Raises
+        ------
+        TypeError
+            If `n_poses` is not an int.
+        ValueError
+            If `n_poses` is below 1.
 
         Examples
         --------
@@ -334,6 +389,17 @@ class Scene2D:
         Returns
         -------
         scans : list of LaserScan2D
+            One scan per pose.
+
+        Raises
+        ------
+        TypeError
+            If `n_poses`, `n_beams` or `seed` is not an int, or `max_range`
+            not a real number.
+        ValueError
+            If `n_poses` or `n_beams` is below 1, `fov` outside [0, 2 pi],
+            `max_range` not positive and finite, `noise` negative or NaN, or
+            `seed` negative.
 
         Examples
         --------
@@ -387,6 +453,13 @@ def room_2d(seed: int = 0) -> Scene2D:
     Returns
     -------
     scene : Scene2D
+
+    Raises
+    ------
+    TypeError
+        If `seed` is not an int.
+    ValueError
+        If `seed` is negative.
 
     Examples
     --------

@@ -155,6 +155,8 @@ class Scene:
 
         Raises
         ------
+        TypeError
+            If `points` does not hold real numbers.
         ValueError
             If `points` is not of shape (n_points, 3) or not finite.
 
@@ -179,10 +181,17 @@ class Scene:
         Parameters
         ----------
         points : array-like of shape (n_points, 3)
+            Query points in the world frame, in metres.
 
         Returns
         -------
         distance : ndarray of shape (n_points,)
+            In metres.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`occupancy`.
 
         Examples
         --------
@@ -211,6 +220,16 @@ class Scene:
             Distance to the first hit along the unit direction, `max_range`
             for misses. A ray starting inside a solid hits at 0.
         hit : ndarray of shape (n_rays,), dtype bool
+
+        Raises
+        ------
+        TypeError
+            If `origins` or `directions` does not hold real numbers, or
+            `max_range` is not a real number.
+        ValueError
+            If `directions` is not of shape (n_rays, 3), `origins` neither of
+            shape (3,) nor that of `directions`, either holds NaN or inf, a
+            direction is zero, or `max_range` is not positive.
 
         Examples
         --------
@@ -245,7 +264,17 @@ class Scene:
         -------
         origins : ndarray of shape (n_poses, 3)
         headings : ndarray of shape (n_poses, scans_per_pose)
-            Radians about +z, measured from +x.
+            Radians about +z, measured from +x, in [-pi, pi).
+
+        Raises
+        ------
+        TypeError
+            If `n_poses`, `scans_per_pose` or `seed` is not an int.
+        ValueError
+            If `n_poses` or `scans_per_pose` is below 1, or `seed` negative.
+        RuntimeError
+            If the extra poses cannot all be placed (1000 rounds of 256
+            candidates; reached for some hundred thousand poses).
 
         Examples
         --------
@@ -504,6 +533,13 @@ def structured_room(seed: int = 0) -> Scene:
     -------
     scene : Scene
 
+    Raises
+    ------
+    TypeError
+        If `seed` is not an int.
+    ValueError
+        If `seed` is negative.
+
     Examples
     --------
     >>> scene = structured_room()
@@ -533,6 +569,13 @@ def unstructured_room(seed: int = 0) -> Scene:
     -------
     scene : Scene
 
+    Raises
+    ------
+    TypeError
+        If `seed` is not an int.
+    ValueError
+        If `seed` is negative.
+
     Examples
     --------
     >>> scene = unstructured_room()
@@ -544,6 +587,24 @@ def unstructured_room(seed: int = 0) -> Scene:
 
 def make_scene(name: str, seed: int = 0) -> Scene:
     """Build a synthetic 3D room by name: ``"structured"`` or ``"unstructured"``.
+
+    Parameters
+    ----------
+    name : {"structured", "unstructured"}
+        :func:`structured_room` or :func:`unstructured_room`.
+    seed : int, default=0
+        Non-negative; 0 gives the fixed default layout (see those functions).
+
+    Returns
+    -------
+    scene : Scene
+
+    Raises
+    ------
+    TypeError
+        If `name` is not a str, or `seed` is not an int.
+    ValueError
+        If `name` is not one of the two, or `seed` is negative.
 
     Examples
     --------

@@ -106,6 +106,13 @@ class LidarSensor:
             azimuth ``i`` (counter-clockwise), so per-beam values reshape to a
             ``(n_vertical, n_horizontal)`` range image.
 
+        Raises
+        ------
+        TypeError
+            If `heading` is not a real number.
+        ValueError
+            If `heading` is NaN or inf.
+
         Examples
         --------
         >>> d = LidarSensor(horizontal_fov=np.pi, n_horizontal=2, vertical_fov=(-0.1, 0.1),

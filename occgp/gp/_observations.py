@@ -33,7 +33,19 @@ class Observations(NamedTuple):
         return 0.5 * (self.starts + self.ends)
 
     def take(self, index) -> "Observations":
-        """The observations at `index` (an integer array or a boolean mask)."""
+        """The observations at `index`.
+
+        Parameters
+        ----------
+        index : int array, boolean mask of shape (n,) or slice
+            Any NumPy index of the first axis (not checked here: NumPy's
+            IndexError on a bad one).
+
+        Returns
+        -------
+        observations : Observations
+            The selected rows of every field.
+        """
         return Observations(*(a[index] for a in self))
 
 
