@@ -15,12 +15,14 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_points, check_int
+from .._validation import as_points, check_int, check_real
 from ._scenes import _as_rays, _check_max_range
 
 __all__ = ["LaserScan2D", "Scene2D", "room_2d"]
 
 _INF = np.inf
+MAX_BEAMS = 2**26  # most beams (n_poses * n_beams) one Scene2D.scan casts
+MAX_POSES = 10**7  # most poses Scene2D.poses makes
 
 
 class LaserScan2D(NamedTuple):
@@ -325,8 +327,8 @@ class Scene2D:
         Parameters
         ----------
         n_poses : int, default=26
-            Number of poses, at least 1; the first is the path's start and
-            the last (for more than one) its end.
+            Number of poses, in [1, ``MAX_POSES``] (10^7); the first is the
+            path's start and the last (for more than one) its end.
 
         Returns
         -------
@@ -339,7 +341,7 @@ class Scene2D:
         TypeError
             If `n_poses` is not an int.
         ValueError
-            If `n_poses` is below 1.
+            If `n_poses` is below 1 or above ``MAX_POSES``.
 
         Examples
         --------
@@ -347,7 +349,7 @@ class Scene2D:
         >>> origins.shape, headings.shape
         ((26, 2), (26,))
         """
-        n_poses = check_int(n_poses, "n_poses", low=1)
+        n_poses = check_int(n_poses, "n_poses", low=1, high=MAX_POSES)
         seg = np.diff(self.path, axis=0)
         length = np.linalg.norm(seg, axis=1)
         cum = np.concatenate([[0.0], np.cumsum(length)])
@@ -394,12 +396,13 @@ class Scene2D:
         Raises
         ------
         TypeError
-            If `n_poses`, `n_beams` or `seed` is not an int, or `max_range`
-            not a real number.
+            If `n_poses`, `n_beams` or `seed` is not an int, or `fov`,
+            `max_range` or `noise` not a real number.
         ValueError
-            If `n_poses` or `n_beams` is below 1, `fov` outside [0, 2 pi],
-            `max_range` not positive and finite, `noise` negative or NaN, or
-            `seed` negative.
+            If `n_poses` or `n_beams` is below 1, ``n_poses * n_beams`` above
+            ``MAX_BEAMS`` (2^26), `fov` outside [0, 2 pi], `max_range` not
+            positive and finite, `noise` negative or not finite, or `seed`
+            negative.
 
         Examples
         --------
@@ -408,15 +411,16 @@ class Scene2D:
         (26, (17,))
         """
         n_beams = check_int(n_beams, "n_beams", low=1)
-        fov = float(fov)
-        if not 0 <= fov <= 2 * np.pi:
-            raise ValueError(f"fov must be in [0, 2 pi], got {fov}")
+        n_poses = check_int(n_poses, "n_poses", low=1)
+        if n_poses * n_beams > MAX_BEAMS:
+            raise ValueError(f"n_poses * n_beams must be at most {MAX_BEAMS} beams, got "
+                             f"{n_poses} x {n_beams}")
+        fov = check_real(fov, "fov", low=0.0, high=2 * np.pi, low_open=False,
+                         high_open=False)
         max_range = _check_max_range(max_range)
         if not np.isfinite(max_range):
             raise ValueError("max_range must be finite for a laser scan")
-        noise = float(noise)
-        if not noise >= 0:
-            raise ValueError(f"noise must be non-negative, got {noise}")
+        noise = check_real(noise, "noise", low=0.0, low_open=False)
         rng = np.random.default_rng(check_int(seed, "seed", low=0))
         origins, headings = self.poses(n_poses)
         angles = np.linspace(-fov / 2, fov / 2, n_beams) if n_beams > 1 else np.zeros(1)

@@ -41,6 +41,7 @@ DEFAULT_HEADING = -np.pi / 2
 HORIZONTAL_FOV = np.radians(117.0)
 ELEVATION_RANGE = (0.0, np.radians(42.0))
 _CLEARANCE = 0.3  # minimum distance from a sensor position to any object
+MAX_POSES = 10_000  # most sensor poses Scene.poses places
 
 
 def _as_rays(origins, directions, dim=3):
@@ -255,6 +256,7 @@ class Scene:
         Parameters
         ----------
         n_poses : int, default=4
+            At most ``MAX_POSES`` (10,000).
         scans_per_pose : int, default=3
             Scans at one pose turn by ``2 pi / scans_per_pose``, starting from
             :attr:`base_heading` (random for the extra poses).
@@ -271,10 +273,9 @@ class Scene:
         TypeError
             If `n_poses`, `scans_per_pose` or `seed` is not an int.
         ValueError
-            If `n_poses` or `scans_per_pose` is below 1, or `seed` negative.
-        RuntimeError
-            If the extra poses cannot all be placed (1000 rounds of 256
-            candidates; reached for some hundred thousand poses).
+            If `n_poses` or `scans_per_pose` is below 1, `n_poses` above
+            ``MAX_POSES``, or `seed` negative; or if the extra poses cannot all
+            be placed clear of the objects (1000 rounds of 256 candidates).
 
         Examples
         --------
@@ -282,7 +283,7 @@ class Scene:
         >>> origins.shape, np.degrees(headings[0]).round().tolist()
         ((4, 3), [-90.0, 30.0, 150.0])
         """
-        n_poses = check_int(n_poses, "n_poses", low=1)
+        n_poses = check_int(n_poses, "n_poses", low=1, high=MAX_POSES)
         scans_per_pose = check_int(scans_per_pose, "scans_per_pose", low=1)
         seed = check_int(seed, "seed", low=0)
         n_fixed = min(n_poses, len(self.sensor_positions))
@@ -306,8 +307,10 @@ class Scene:
                 found = np.vstack([found, cand[clear]])
                 if len(found) >= n_extra:
                     break
-            else:  # pragma: no cover - the rooms have plenty of free space
-                raise RuntimeError("could not place the extra sensor poses")
+            else:  # pragma: no cover - the rooms have room for MAX_POSES poses
+                raise ValueError(f"n_poses: could not place {n_extra} extra sensor poses "
+                                 f"{_CLEARANCE} m clear of the objects, found "
+                                 f"{len(found)}; use fewer poses")
             origins.append(found[:n_extra])
             bases.append(rng.uniform(-np.pi, np.pi, n_extra))
         steps = 2 * np.pi * np.arange(scans_per_pose) / scans_per_pose

@@ -17,7 +17,7 @@ import numbers
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_numeric, check_bool
+from .._validation import as_numeric, check_bool, check_int
 from ._limits import MAX_DENSE_BYTES
 
 __all__ = ["SquaredExponential", "Matern32", "SparseKernel"]
@@ -209,7 +209,7 @@ class _Stationary:
         Parameters
         ----------
         n_dims : int
-            Number of input dimensions, >= 0 (not checked further).
+            Number of input dimensions, 0 to 65536.
 
         Returns
         -------
@@ -218,11 +218,14 @@ class _Stationary:
         Raises
         ------
         ValueError
-            If the length scale has neither 1 nor `n_dims` entries, or the
-            variance, length scale or bounds are invalid.
+            If `n_dims` is not in [0, 65536], the length scale has neither 1 nor
+            `n_dims` entries, or the variance, length scale or bounds are
+            invalid.
         TypeError
-            If the variance or length scale is not real.
+            If `n_dims` is not an int, or the variance or length scale is not
+            real.
         """
+        n_dims = check_int(n_dims, "n_dims", low=0, high=65536)
         _, ls = self._checked()
         if ls.size == 1:
             ls = np.full(n_dims, ls[0])

@@ -38,15 +38,24 @@ class Observations(NamedTuple):
         Parameters
         ----------
         index : int array, boolean mask of shape (n,) or slice
-            Any NumPy index of the first axis (not checked here: NumPy's
-            IndexError on a bad one).
+            Any NumPy index of the first axis.
 
         Returns
         -------
         observations : Observations
             The selected rows of every field.
+
+        Raises
+        ------
+        ValueError
+            If `index` is not a valid NumPy index of the observations (out of
+            bounds, a mask of the wrong length, another type).
         """
-        return Observations(*(a[index] for a in self))
+        try:
+            return Observations(*(a[index] for a in self))
+        except IndexError as exc:
+            raise ValueError(f"index: {exc} (there are {len(self.y)} observations)") \
+                from None
 
 
 def _dimension(hits, starts):
