@@ -58,7 +58,13 @@ class DistanceField(NamedTuple):
     resolution: float
 
     def centers(self) -> NDArray[np.float64]:
-        """Centres of every cell, shape (nx, ny, nz, 3)."""
+        """Centres of every cell of the grid.
+
+        Returns
+        -------
+        centers : ndarray of shape (nx, ny, nz, 3)
+            In metres, indexed as `distances`.
+        """
         axes = [self.origin[a] + (np.arange(n) + 0.5) * self.resolution
                 for a, n in enumerate(self.distances.shape)]
         return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)

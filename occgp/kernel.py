@@ -353,7 +353,14 @@ class _KernelMap(_KernelCells):
         return np.where(np.isnan(p), False, p > threshold)
 
     def cells(self) -> KernelCells:
-        """Every cell any kernel reached, ordered by key (z, then y, then x)."""
+        """Every cell any kernel reached, ordered by key (z, then y, then x).
+
+        Returns
+        -------
+        cells : KernelCells
+            Named tuple ``(centers, alpha, beta)``: the cells' centres, shape
+            (n_cells, 3), and their evidence with `prior` added, shape (n_cells,).
+        """
         keys, alpha, beta = self._cells_arrays()
         order = np.lexsort(keys.T)
         keys, alpha, beta = keys[order], alpha[order], beta[order]
@@ -419,7 +426,14 @@ class _KernelMap(_KernelCells):
     _EXTRA_OPTIONAL: tuple = ()
 
     def get_params(self) -> dict:
-        """The constructor's parameters, as a dict."""
+        """The constructor's parameters.
+
+        Returns
+        -------
+        params : dict
+            Parameter name to value, as passed to the constructor (``cls(**params)``
+            builds an empty map of the same kind).
+        """
         raise NotImplementedError
 
     def _io_params(self) -> dict:
@@ -709,7 +723,14 @@ class BGKMap(_KernelMap):
                           check_real(self.max_range, "max_range", low=0.0))
 
     def get_params(self) -> dict:
-        """The constructor's parameters, as a dict."""
+        """The constructor's parameters.
+
+        Returns
+        -------
+        params : dict
+            Parameter name to value, as passed to the constructor (``cls(**params)``
+            builds an empty map of the same kind).
+        """
         return dict(resolution=self.resolution, ell=self.ell, sf2=self.sf2,
                     free_resolution=self.free_resolution, ds_resolution=self.ds_resolution,
                     prior=self.prior, max_range=self.max_range, n_jobs=self.n_jobs,
@@ -960,7 +981,14 @@ class AKIMap(_KernelMap):
         self.last_bandwidths_ = extra
 
     def get_params(self) -> dict:
-        """The constructor's parameters, as a dict."""
+        """The constructor's parameters.
+
+        Returns
+        -------
+        params : dict
+            Parameter name to value, as passed to the constructor (``cls(**params)``
+            builds an empty map of the same kind).
+        """
         return dict(resolution=self.resolution,
                     free_sample_distance=self.free_sample_distance,
                     max_search_range=self.max_search_range, sensor_range=self.sensor_range,
