@@ -840,8 +840,10 @@ default="auto"
     def _from_data(cls, data: bytes, source: str, params: dict) -> "OccupancyOctree":
         header = fmt.parse_header(data, source)
         if header.tree_type != "OcTree":
+            hint = (" (read ColorOcTree files with occgp.ColorOctree.load)"
+                    if header.tree_type == "ColorOcTree" else "")
             raise ValueError(f"{source} holds a {header.tree_type!r} tree; only 'OcTree' "
-                             "(occupancy) files can be read")
+                             f"(occupancy) files can be read{hint}")
         try:
             check_resolution(header.resolution)
         except ValueError as exc:

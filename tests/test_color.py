@@ -371,7 +371,8 @@ def test_load_rejects_other_files(tmp_path):
         ColorOctree.load(tmp_path / "missing.ot")
     # and OccupancyOctree refuses a colour file with a clear message
     ColorOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], [[1, 2, 3]]).save(tmp_path / "c.ot")
-    with pytest.raises(ValueError, match="holds a 'ColorOcTree' tree; only 'OcTree'"):
+    with pytest.raises(ValueError, match="holds a 'ColorOcTree' tree; only 'OcTree' "
+                       ".*occgp.ColorOctree.load"):
         OccupancyOctree.load(tmp_path / "c.ot")
 
 
