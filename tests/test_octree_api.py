@@ -575,3 +575,19 @@ def test_knnmap_keeps_its_rules():
         m.prob_hit
     assert m.get_params() == before
     assert m.set_params() is m
+
+
+def test_inner_nodes_after_expand_prune_and_max_likelihood(room):
+    check_inner_nodes(room.expand())
+    check_inner_nodes(room.prune())
+    check_inner_nodes(room.to_max_likelihood())
+
+
+def test_empty_calls_return_empty_arrays():
+    m = OccupancyOctree(RES).insert_scan([[0.35, 0.05, 0.05]], [0.05, 0.05, 0.05])
+    none = np.empty((0, 3))
+    points, found = m.ray_intersections([0, 0, 0], none, none)
+    assert points.shape == (0, 3) and found.shape == (0,)
+    assert m.delete_cells(none) == 0 and m.log_odds(none, depth=3).shape == (0,)
+    assert m.is_at_threshold(none).shape == (0,)
+    assert m.coord_to_key(none, depth=4).shape == (0, 3)
