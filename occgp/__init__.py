@@ -15,10 +15,10 @@ from .color import ColorLeaves, ColorOctree
 from .grid import GridMap
 from .kernel import AKIMap, BGKMap
 from .knn import KNNMap
-from .octree import Changes, Leaves, OccupancyOctree
+from .octree import Changes, Leaves, Nodes, OccupancyOctree
 
 __version__ = "0.1.0.dev0"
-__all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "ColorLeaves", "Changes",
+__all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "Nodes", "ColorLeaves", "Changes",
            "AKIMap", "BGKMap", "KNNMap", "DistanceField", "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())
