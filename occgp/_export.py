@@ -191,69 +191,7 @@ def _ascii_rows(fh, table: np.ndarray, fmts: list[str]) -> None:
 # --------------------------------------------------------------------------- #
 def save_ply(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = True,
              cubes: bool = False, color: bool = True) -> None:
-    """Write the occupied (or the free) cells of a map to a PLY file.
-
-    With ``cubes=False`` the file is a point cloud: one vertex per leaf, at
-    its centre. With ``cubes=True`` it is a triangle mesh: each leaf is a cube
-    of 8 vertices and 12 triangles (counter-clockwise seen from outside), so
-    that mesh viewers (MeshLab, CloudCompare, Open3D) show the voxels. Every
-    vertex carries the properties
-
-    * ``x y z`` (float): the centre (points) or a corner (cubes), in metres;
-    * ``size`` (float): the leaf's edge (pruned leaves are larger than the
-      resolution);
-    * ``probability`` (float): the leaf's occupancy probability;
-    * ``red green blue`` (uchar, with `color`): the leaf's own colour for
-      a colour map (:class:`occgp.color.ColorOctree`; ``255 255 255`` where a
-      leaf has none), otherwise a viridis colour of the leaf's height, spread
-      from the lowest to the highest cell.
-
-    A ``comment`` line records the map's resolution. Faces are
-    ``property list uchar int vertex_indices``.
-
-    Parameters
-    ----------
-    tree : OccupancyOctree, ColorOctree or GridMap
-    path : str or os.PathLike
-        Destination (overwritten).
-    occupied : bool, default=True
-        True: the leaves at or above the occupancy threshold; False: the
-        known leaves below it.
-    binary : bool, default=True
-        ``binary_little_endian`` (True) or ``ascii`` (False) encoding.
-    cubes : bool, default=False
-        Write each leaf as a cube mesh instead of a point.
-    color : bool, default=True
-        Add the colours (the cells' own for a colour map, else by height).
-
-    Raises
-    ------
-    TypeError
-        If `tree` is not a map, `path` is not a str or os.PathLike, or a flag
-        is not a bool.
-    ValueError
-        If ``cubes=True`` and the leaves are more than 268,435,455 (their
-        vertex indices would overflow int32).
-    OSError
-        If the file cannot be written (missing folder, no permission); the
-        message names the path.
-
-    Notes
-    -----
-    Coordinates are stored in single precision, as liboctomap stores them:
-    across the key range (``2**15`` cells each side) that resolves a cell to
-    about 1/256 of its edge.
-
-    Examples
-    --------
-    >>> import os, tempfile
-    >>> from occgp import OccupancyOctree
-    >>> m = OccupancyOctree(0.1).insert_scan([[1.0, 0.0, 0.0]], [0.0, 0.0, 0.0])
-    >>> path = os.path.join(tempfile.mkdtemp(), "map.ply")
-    >>> save_ply(m, path, binary=False)
-    >>> print(open(path).read().splitlines()[-1])
-    1.04999995 0.0500000007 0.0500000007 0.100000001 0.699999988 33 145 140
-    """
+    """Write `tree`'s occupied (or free) cells to a PLY file: :meth:`occgp.OccupancyOctree.save_ply`."""
     _check_map(tree)
     binary = check_bool(binary, "binary")
     cubes = check_bool(cubes, "cubes")
@@ -317,52 +255,7 @@ def save_ply(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
 # PCD
 # --------------------------------------------------------------------------- #
 def save_pcd(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = True) -> None:
-    """Write the centres of the occupied (or the free) leaves to a PCD v0.7 file.
-
-    Fields ``x y z intensity`` (float32), ``intensity`` being the leaf's
-    occupancy probability (PCL's ``PointXYZI``); the viewpoint is the origin.
-    A colour map (:class:`occgp.color.ColorOctree`) adds the field ``rgb``:
-    the leaf's colour packed as ``r << 16 | g << 8 | b`` in a uint32
-    (``TYPE U``; PCL's ``PointXYZRGB`` holds the same bits), ``0xFFFFFF`` for
-    leaves without colour.
-    Pruned leaves give one point at their centre (see
-    :meth:`~occgp.OccupancyOctree.expand` for finest cells).
-
-    Parameters
-    ----------
-    tree : OccupancyOctree, ColorOctree or GridMap
-    path : str or os.PathLike
-        Destination (overwritten).
-    occupied : bool, default=True
-        True: the leaves at or above the occupancy threshold; False: the
-        known leaves below it.
-    binary : bool, default=True
-        ``DATA binary`` (True) or ``DATA ascii`` (False).
-
-    Raises
-    ------
-    TypeError
-        If `tree` is not a map, `path` is not a str or os.PathLike, or a flag
-        is not a bool.
-    OSError
-        If the file cannot be written; the message names the path.
-
-    See Also
-    --------
-    occgp.datasets.read_pcd : Reads the file back.
-
-    Examples
-    --------
-    >>> import os, tempfile
-    >>> from occgp import OccupancyOctree
-    >>> from occgp.datasets import read_pcd
-    >>> m = OccupancyOctree(0.1).insert_scan([[1.0, 0.0, 0.0]], [0.0, 0.0, 0.0])
-    >>> path = os.path.join(tempfile.mkdtemp(), "map.pcd")
-    >>> save_pcd(m, path)
-    >>> scan, fields = read_pcd(path, return_fields=True)
-    >>> scan.points.round(2).tolist(), fields["intensity"].round(2).tolist()
-    ([[1.05, 0.05, 0.05]], [0.7])
-    """
+    """Write `tree`'s occupied (or free) leaf centres to a PCD file: :meth:`occgp.OccupancyOctree.save_pcd`."""
     # imported at run time: occgp.datasets is not part of the maps' import graph
     write_pcd = importlib.import_module("occgp.datasets._pcd").write_pcd
     _check_map(tree)
@@ -404,40 +297,7 @@ def _import_open3d():
 
 def to_open3d(tree: LogOddsMap, *, kind: str = "voxels", occupied: bool = True,
               max_voxels: int = MAX_VOXELS):
-    """The occupied (or the free) cells of a map as an Open3D geometry.
-
-    Parameters
-    ----------
-    tree : OccupancyOctree or GridMap
-    kind : {"voxels", "points"}, default="voxels"
-        ``"voxels"``: an ``open3d.geometry.VoxelGrid`` of voxel size
-        ``resolution``, aligned to the map's cells; pruned leaves are expanded
-        to their finest cells. ``"points"``: an ``open3d.geometry.PointCloud``
-        of the leaf centres (one point per leaf, pruned or not).
-    occupied : bool, default=True
-        True: the leaves at or above the occupancy threshold; False: the
-        known leaves below it.
-    max_voxels : int, default=4194304
-        The most voxels ``kind="voxels"`` builds (about 56 bytes each); past
-        it a ValueError is raised before any allocation (free space, which
-        prunes into large leaves, reaches it first).
-
-    Returns
-    -------
-    geometry : open3d.geometry.VoxelGrid or open3d.geometry.PointCloud
-        Coloured by height (viridis, from the lowest to the highest cell), or
-        with the cells' own colours for a colour map
-        (:class:`occgp.color.ColorOctree`).
-
-    Raises
-    ------
-    ImportError
-        If Open3D is not installed (the extra ``occgp[open3d]``).
-    TypeError
-        If `tree` is not a map, `occupied` not a bool or `max_voxels` not an int.
-    ValueError
-        If `kind` is unknown, or the voxels would be more than `max_voxels`.
-    """
+    """`tree`'s occupied (or free) cells as an Open3D geometry: :meth:`occgp.OccupancyOctree.to_open3d`."""
     _check_map(tree)
     kind = check_choice(kind, "kind", _KINDS)
     max_voxels = check_int(max_voxels, "max_voxels", low=0)
@@ -473,62 +333,7 @@ def to_open3d(tree: LogOddsMap, *, kind: str = "voxels", occupied: bool = True,
 def distance_field(tree: LogOddsMap, bbox: ArrayLike, resolution: float | None = None, *,
                    unknown: str = "occupied",
                    max_cells: int = MAX_DISTANCE_CELLS) -> DistanceField:
-    """Euclidean distance from each cell of a regular grid to the nearest obstacle.
-
-    The grid covers the box `bbox` with cubic cells of edge `resolution`,
-    aligned to its multiples: its minimum corner is
-    ``floor(bbox[0] / resolution) * resolution`` and it reaches at least
-    ``bbox[1]`` (a corner within 1e-9 cell of a multiple of `resolution`
-    counts as on it). Each cell takes the map's state at its centre (occupied,
-    free or unknown); obstacle cells are the occupied ones, plus the unknown
-    ones when ``unknown="occupied"``. The distance, in metres, is from each
-    cell's centre to the nearest obstacle cell's centre
-    (``scipy.ndimage.distance_transform_edt`` with the cell edge as sampling),
-    so obstacle cells hold 0 and a cell next to one holds `resolution`.
-    Obstacles outside the box are not seen.
-
-    Parameters
-    ----------
-    tree : OccupancyOctree or GridMap
-    bbox : array-like of shape (2, 3)
-        ``[min_corner, max_corner]`` in metres, finite, min < max on every axis.
-    resolution : float, default=None
-        Cell edge in metres; default: the map's resolution (then the grid's
-        cells are the map's finest cells).
-    unknown : {"occupied", "free"}, default="occupied"
-        How cells the map knows nothing about count: as obstacles (the safe
-        choice for planning) or as free space. Points outside the map's key
-        range are unknown.
-    max_cells : int, default=8388608
-        The most cells the grid may have (about 30 bytes each at peak); past
-        it a ValueError is raised before any allocation.
-
-    Returns
-    -------
-    field : DistanceField
-        Named tuple ``(distances, origin, resolution)``: `distances` of shape
-        (nx, ny, nz) indexed along x, y, z (inf everywhere when the grid holds
-        no obstacle), `origin` the grid's minimum corner, `resolution` its
-        cell edge.
-
-    Raises
-    ------
-    TypeError
-        If `tree` is not a map, `bbox` does not hold numbers, `resolution` is
-        not a real number or `max_cells` not an int.
-    ValueError
-        If `bbox` is not of shape (2, 3), not finite or not min < max;
-        `resolution` not positive and finite; `unknown` not one of the
-        choices; or the grid would have more than `max_cells` cells.
-
-    Examples
-    --------
-    >>> from occgp import OccupancyOctree
-    >>> m = OccupancyOctree(1.0).set_cells([[0.5, 0.5, 0.5]], [2.0])
-    >>> field = distance_field(m, [[0, 0, 0], [3, 1, 1]], unknown="free")
-    >>> field.distances[:, 0, 0].tolist(), field.origin.tolist()
-    ([0.0, 1.0, 2.0], [0.0, 0.0, 0.0])
-    """
+    """The distance field of `tree` over a box: :meth:`occgp.OccupancyOctree.distance_field`."""
     from scipy import ndimage  # type: ignore[import-untyped]
 
     _check_map(tree)

@@ -360,31 +360,6 @@ class ColorOctree(LogOddsMap, _ColorOcTree):
         return self
 
     # ------------------------------------------------------------------ maps out
-    def save_ply(self, path, *, occupied: bool = True, binary: bool = True,
-                 cubes: bool = False, color: bool = True) -> "ColorOctree":
-        """Write the occupied (or free) cells to a PLY file, with their colours; return self.
-
-        As :func:`occgp._export.save_ply` (``x y z size probability`` per
-        vertex, or a cube mesh per cell with `cubes`), the ``red green blue``
-        (uchar) properties holding each cell's own colour (``255 255 255`` for
-        cells without colour) instead of height colours.
-        """
-        from . import _export
-        _export.save_ply(self, path, occupied=occupied, binary=binary, cubes=cubes,
-                         color=color)
-        return self
-
-    def save_pcd(self, path, *, occupied: bool = True, binary: bool = True) -> "ColorOctree":
-        """Write the occupied (or free) cell centres to a PCD v0.7 file; return self.
-
-        Fields ``x y z intensity rgb``: intensity is the occupancy probability
-        (float32), rgb the cell's colour packed as ``r << 16 | g << 8 | b``
-        (uint32, ``TYPE U``; PCL's ``PointXYZRGB`` holds the same bits).
-        """
-        from . import _export
-        _export.save_pcd(self, path, occupied=occupied, binary=binary)
-        return self
-
     # ------------------------------------------------------------------ I/O
     def to_bytes(self) -> bytes:
         """Serialise the map as a ColorOcTree ``.ot`` file (every log-odds and colour).
