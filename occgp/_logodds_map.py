@@ -91,7 +91,14 @@ class LogOddsMap:
 
     # ------------------------------------------------------------------ parameters
     def get_params(self) -> dict:
-        """Return the constructor's parameters as a dict."""
+        """The constructor's parameters.
+
+        Returns
+        -------
+        params : dict
+            Parameter name to value (``type(m)(**m.get_params())`` builds an
+            empty map with the same parameters).
+        """
         return dict(self._params)
 
     @property

@@ -248,7 +248,23 @@ class ColorOctree(LogOddsMap, _ColorOcTree):
 
         As :meth:`update_colors`, but each colour replaces the cell's (the last
         point in a cell wins). Setting ``(255, 255, 255)`` removes a cell's
-        colour. Returns self; raises as :meth:`update_colors`.
+        colour.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Finite, in the key range.
+        colors : array-like of shape (n_points, 3)
+            Integers in [0, 255] or floats in [0, 1], as for :meth:`insert_scan`.
+
+        Returns
+        -------
+        self : ColorOctree
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`update_colors`; the map is then unchanged.
         """
         pts, rgb = self._checked_cells(points, colors)
         self._fuse_colors(pts, rgb, True)
@@ -351,11 +367,22 @@ class ColorOctree(LogOddsMap, _ColorOcTree):
         return self._bounds()
 
     def memory_usage(self) -> int:
-        """Bytes used by the tree's nodes (liboctomap's estimate)."""
+        """Bytes used by the tree's nodes.
+
+        Returns
+        -------
+        nbytes : int
+            liboctomap's ``memoryUsage`` estimate.
+        """
         return self._memory_usage()
 
     def clear(self) -> "ColorOctree":
-        """Remove every cell; return self."""
+        """Remove every cell (the parameters stay).
+
+        Returns
+        -------
+        self : ColorOctree
+        """
         self._clear()
         return self
 
@@ -390,6 +417,10 @@ class ColorOctree(LogOddsMap, _ColorOcTree):
         **params
             Sensor-model parameters (``prob_hit``, ``clamping_min``, ...); the
             file stores only the resolution.
+
+        Returns
+        -------
+        tree : ColorOctree
 
         Raises
         ------
@@ -444,6 +475,10 @@ class ColorOctree(LogOddsMap, _ColorOcTree):
         path : str or path-like
         **params
             Sensor-model parameters, as for :meth:`from_bytes`.
+
+        Returns
+        -------
+        tree : ColorOctree
 
         Raises
         ------

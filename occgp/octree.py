@@ -352,7 +352,13 @@ default="auto"
         return Changes(keys, centres, new)
 
     def reset_changes(self) -> "OccupancyOctree":
-        """Forget the recorded changes (tracking stays as it is); return self."""
+        """Forget the recorded changes (tracking stays as it is).
+
+        Returns
+        -------
+        self
+            The map.
+        """
         self._reset_changes()
         return self
 
@@ -612,9 +618,16 @@ default="auto"
         return centres[keep], sizes[keep]
 
     def to_max_likelihood(self) -> "OccupancyOctree":
-        """Set every cell to its clamping bound by its state (liboctomap's
-        ``toMaxLikelihood``): occupied cells to ``clamping_max``, free ones to
-        ``clamping_min``; then prune. Returns self."""
+        """Set every cell to its clamping bound by its state (liboctomap's ``toMaxLikelihood``).
+
+        Occupied cells go to ``clamping_max``, free ones to ``clamping_min``;
+        then the tree is pruned.
+
+        Returns
+        -------
+        self
+            The map.
+        """
         self._to_max_likelihood()
         return self
 
@@ -1199,21 +1212,45 @@ default="auto"
         return self._bounds()
 
     def memory_usage(self) -> int:
-        """Bytes used by the tree's nodes (liboctomap's estimate)."""
+        """Bytes used by the tree's nodes.
+
+        Returns
+        -------
+        nbytes : int
+            liboctomap's ``memoryUsage`` estimate.
+        """
         return self._memory_usage()
 
     def prune(self) -> "OccupancyOctree":
-        """Merge every set of eight identical leaves into their parent; return self."""
+        """Merge every set of eight identical leaves into their parent (liboctomap's ``prune``).
+
+        Returns
+        -------
+        self
+            The map.
+        """
         self._prune()
         return self
 
     def expand(self) -> "OccupancyOctree":
-        """Split every pruned leaf down to the finest resolution; return self."""
+        """Split every pruned leaf down to the finest resolution (liboctomap's ``expand``).
+
+        Returns
+        -------
+        self
+            The map.
+        """
         self._expand()
         return self
 
     def clear(self) -> "OccupancyOctree":
-        """Remove every cell; return self."""
+        """Remove every cell (the parameters stay).
+
+        Returns
+        -------
+        self
+            The map.
+        """
         self._clear()
         return self
 
@@ -1258,6 +1295,11 @@ default="auto"
             files store only the resolution. The clamping bounds give the
             values of ``.bt`` leaves.
 
+        Returns
+        -------
+        tree : OccupancyOctree
+            A map of the class this is called on.
+
         Raises
         ------
         ValueError
@@ -1300,6 +1342,11 @@ default="auto"
         path : str or path-like
         **params
             Sensor-model parameters, as for :meth:`from_bytes`.
+
+        Returns
+        -------
+        tree : OccupancyOctree
+            A map of the class this is called on.
 
         Raises
         ------
