@@ -616,9 +616,9 @@ cdef inline int scan_updates(
     stays within one ray per thread of it plus the end cells; the exact count decides).
 
     The rays are walked on up to `n_threads` OpenMP threads (fewer for small scans;
-    one with `diagnose`), each into its own counts: a slice of `counts` when
-    `n_threads` slices of the scan's key box fit the dense limit, else its own
-    table. The counts are merged (integer sums) before the cells are collected,
+    one with `diagnose`), each into its own counts: a slice of `counts` over the
+    scan's key box (no more threads than slices fit the dense limit), or, where the
+    box alone exceeds the limit, a table of its own. The counts are merged (integer sums) before the cells are collected,
     so the cells, their updates and the statistics are the same for every
     `n_threads`; only the order of `cells` may differ.
     """
@@ -708,8 +708,12 @@ cdef inline int scan_updates(
     if diagnose or n_threads < 1:
         n_threads = 1
     n_threads = min(n_threads, <int>_MAX_THREADS, <int>max(n_trav // _MIN_THREAD_RAYS, 1))
-    # each thread's counts get their own slice of `counts`, within the dense limit
-    dense = box_cells <= _MAX_DENSE_CELLS // <uint64_t>n_threads
+    # each thread's counts get their own slice of `counts`, within the dense limit:
+    # no more threads than slices fit (counting in tables instead is several times
+    # slower); a box larger than the limit is counted in tables by every thread
+    dense = box_cells <= _MAX_DENSE_CELLS
+    if dense:
+        n_threads = <int>min(<uint64_t>n_threads, _MAX_DENSE_CELLS // box_cells)
     if dense and (counts_dirty[0] or counts.size() < box_cells * n_threads):
         counts.assign(max(box_cells * n_threads, counts.size()), 0)
     counts_dirty[0] = True

@@ -145,7 +145,7 @@ default="auto"
             the grid and :attr:`last_insert_`'s counts are the same for every
             `n_jobs`. As for :meth:`OccupancyOctree.insert_scan`, the threads'
             dense counts share a limit of 2^24 cells of the scan's key box
-            (hash tables beyond it).
+            (fewer threads where their boxes exceed it).
 
         Returns
         -------

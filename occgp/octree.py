@@ -215,9 +215,10 @@ default="auto"
             that one too where it falls back to occgp's traversal: change
             tracking on, or rays too long for liboctomap's key buffer);
             liboctomap's own ``insertPointCloud`` runs on one thread. Each
-            thread's dense counts take 4 bytes per cell of the scan's key box;
-            where the threads' boxes together exceed 2^24 cells, the threads
-            count in hash tables instead (the map is the same).
+            thread's dense counts take 4 bytes per cell of the scan's key box,
+            within 2^24 cells for all threads together: a scan whose box holds
+            more than 2^24 / n cells runs on fewer threads, and one whose box
+            holds more than 2^24 cells counts in hash tables (on every thread).
 
         Returns
         -------

@@ -140,8 +140,9 @@ def test_more_threads_than_cores_give_the_same_map(cls, kw):
 
 
 def test_bbox_max_range_and_key_tables_give_the_same_map():
-    """bbox= and max_range on occgp's traversal; and a key box of 10.6M cells: dense
-    counts for one thread, hash tables for two and more (2 x 10.6M > 2^24 cells)."""
+    """bbox= and max_range on occgp's traversal; a key box of 10.6M cells (dense counts
+    for one thread only: 2 x 10.6M > 2^24 cells, so the core keeps one thread), and one
+    of 17.8M cells (> 2^24: every thread counts in its own hash table)."""
     _, scans, res = SCENES[1]
     box = [[-1.0, -1.2, -0.8], [1.1, 0.9, 1.0]]
     for method in ("plain", "culling", "superray"):
@@ -152,18 +153,19 @@ def test_bbox_max_range_and_key_tables_give_the_same_map():
             assert_same_octree(m, ref)
             assert counts == ref_counts
     rng = np.random.default_rng(3)
-    corners = np.array([[0.0, 0.0, 0.0], [2.19, 2.19, 2.19]])
-    points = rng.uniform(0.0, 2.19, (300, 3))
-    points[:2] = corners                       # key box 220 x 220 x 220 at 1 cm
-    for cls in (OccupancyOctree, GridMap):
-        maps = []
-        for n_threads in (1, 2, 3):
-            m = cls(0.01)
-            out = _core_insert(m, points, [1.1, 1.1, 1.1], n_threads, ray_mode=True)
-            maps.append((m, out[:4]))
-        for m, out in maps[1:]:
-            (assert_same_octree if cls is OccupancyOctree else assert_same_grid)(m, maps[0][0])
-            assert out == maps[0][1]
+    for edge in (2.19, 2.6):                   # key boxes 220^3 and 261^3 at 1 cm
+        points = rng.uniform(0.0, edge, (300, 3))
+        points[:2] = [[0.0, 0.0, 0.0], [edge, edge, edge]]
+        for cls in (OccupancyOctree, GridMap):
+            maps = []
+            for n_threads in (1, 2, 3):
+                m = cls(0.01)
+                out = _core_insert(m, points, [1.1, 1.1, 1.1], n_threads, ray_mode=True)
+                maps.append((m, out[:4]))
+            for m, out in maps[1:]:
+                (assert_same_octree if cls is OccupancyOctree else assert_same_grid)(
+                    m, maps[0][0])
+                assert out == maps[0][1]
 
 
 def test_change_tracking_is_the_same_for_every_n_jobs():
