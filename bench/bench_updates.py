@@ -31,7 +31,7 @@ liboctomap ``insertPointCloud`` method (octree, ``mode="scan"``, ``"plain"``) ru
 on one thread whatever ``n_jobs`` says: its ratio stays near 1.
 
 Run: ``python bench/bench_updates.py [--scans 4] [--resolutions 0.2 ...] [--threads 2]``
-(the default run takes about a minute and a half on two busy cores; the
+(the default run takes 40-90 s on two shared cores; the
 dissertation's tables: ``--scans 20 --resolutions 0.1 0.2 0.4 0.8 1.0``).
 """
 
