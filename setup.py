@@ -16,7 +16,7 @@ from Cython.Build import cythonize
 from setuptools import Extension, setup
 
 HERE = Path(__file__).resolve().parent
-OPENMP_MODULES = {"_kernel", "_integral"}
+OPENMP_MODULES = {"_kernel", "_integral", "_octree", "_grid"}
 
 
 def pkgconfig(package):

@@ -111,14 +111,17 @@ cdef class _Grid:
     # ------------------------------------------------------------------ updates
     def _insert(self, const float[:, ::1] points, const float[::1] origin, double max_range,
                 bint ray_mode, bint culling=False, const uint32_t[::1] weights=None,
-                int superray_threshold=0, bint diagnose=False, uint64_t max_cells=0):
+                int superray_threshold=0, bint diagnose=False, uint64_t max_cells=0,
+                int n_threads=1):
         """Insert a scan: one update per cell (see ``scan_updates`` in ``ext/_scan.pxd``).
 
         The cells, their counts and updates are the octree's; each update is
         applied to the hash map as liboctomap's ``updateNode`` applies it. With
         `culling` the scan's culling region is grown over this grid's cells;
         with `weights` (ray mode), ray i counts ``weights[i]`` times; with
-        `superray_threshold` > 0 the rays are grouped into super rays first.
+        `superray_threshold` > 0 the rays are grouped into super rays first. The rays
+        are walked on up to `n_threads` threads (one with `diagnose`); the grid and the
+        statistics are the same for every `n_threads`.
 
         Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
         seconds, unnecessary_traversals) as ``OccupancyOctree``'s ``_insert_batch``.
@@ -139,7 +142,8 @@ cdef class _Grid:
             with nogil:
                 scan_updates(tree, points, o, max_range, ray_mode, culling, w,
                              superray_threshold, _fully_free, &view, self._counts,
-                             &self._counts_dirty, found, &stats, diagnose, max_cells)
+                             &self._counts_dirty, found, &stats, diagnose, max_cells,
+                             n_threads)
                 if self._cells.empty():
                     self._cells.reserve(found.size())
                 for j in range(<Py_ssize_t>found.size()):

@@ -7,9 +7,11 @@
 //   during one scan (replaces liboctomap's std::tr1 unordered sets).
 //   KeyMap<BlockSlot> indexes the kernel maps' blocks of cells (_beta_blocks.h).
 // CellBox: a bitset over a box of keys (the culling region of one scan).
+// StopFlag: a flag that the threads of one scan's traversal set and poll.
 #ifndef OCCGP_KEYTABLE_H
 #define OCCGP_KEYTABLE_H
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -166,6 +168,16 @@ class CellBox {
   int lo_[3] = {0, 0, 0};
   uint64_t dim_[3] = {0, 0, 0};
   std::vector<uint64_t> bits_;
+};
+
+// Set by any thread of a traversal, polled by all (relaxed: it only stops work early).
+class StopFlag {
+ public:
+  bool get() const { return flag_.load(std::memory_order_relaxed); }
+  void set() { flag_.store(true, std::memory_order_relaxed); }
+
+ private:
+  std::atomic<bool> flag_{false};
 };
 
 }  // namespace occgp

@@ -160,7 +160,7 @@ cdef class _OcTree:
                       double max_range, bint ray_mode, bint culling,
                       const uint32_t[::1] weights=None, int superray_threshold=0,
                       bint diagnose=False, uint64_t max_cells=0,
-                      const uint16_t[:, ::1] key_box=None):
+                      const uint16_t[:, ::1] key_box=None, int n_threads=1):
         """Insert a scan through occgp's own key table, optionally culled.
 
         Every ray is traversed by liboctomap's ``computeRayKeys``; the cells are
@@ -183,6 +183,8 @@ cdef class _OcTree:
         Returns None, changing nothing, when a ray's end (after truncation)
         lies outside the key range or a ray cannot be walked, and "too many cells",
         changing nothing, when the scan reaches more than `max_cells` cells (> 0).
+        The rays are walked on up to `n_threads` threads (one with `diagnose`), without
+        the GIL; the tree and the statistics are the same for every `n_threads`.
         """
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t j
@@ -206,7 +208,8 @@ cdef class _OcTree:
             with nogil:
                 scan_updates(tree, points, o, max_range, ray_mode, culling, w,
                              superray_threshold, _fully_free, tree, self._counts,
-                             &self._counts_dirty, found, &stats, diagnose, max_cells)
+                             &self._counts_dirty, found, &stats, diagnose, max_cells,
+                             n_threads)
                 if not stats.bad_ends and not stats.too_many:
                     cells.resize(found.size())
                     for j in range(<Py_ssize_t>found.size()):
@@ -224,7 +227,7 @@ cdef class _OcTree:
 
     def _knn_cells(self, const float[:, ::1] points, const float[::1] origin,
                    double sensor_range, bint culling, int superray_threshold=0,
-                   uint64_t max_cells=0):
+                   uint64_t max_cells=0, int n_threads=1):
         """A scan's cells for the k-NN inverse sensor model, one class per cell.
 
         The rays to the points within `sensor_range` (the *near* points: not
@@ -242,7 +245,9 @@ cdef class _OcTree:
         point_cell (n_near,) int64, the row of `keys` holding each near point;
         stats as :meth:`_insert_batch` returns them (the two traversals added).
         Returns None when a ray end lies outside the key range or a ray cannot
-        be walked, and "too many cells" past `max_cells` (> 0).
+        be walked, and "too many cells" past `max_cells` (> 0). The rays are walked
+        on up to `n_threads` threads; the cells, their classes and the statistics are
+        the same for every `n_threads` (the order of the cells may differ).
         """
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t i, j, n = points.shape[0], n_near = 0, n_far = 0
@@ -285,11 +290,13 @@ cdef class _OcTree:
                 if n_near:
                     scan_updates(tree, a_v, o, -1.0, False, culling, NULL,
                                  superray_threshold, _fully_free, tree, self._counts,
-                                 &self._counts_dirty, found_a, &sa, False, max_cells)
+                                 &self._counts_dirty, found_a, &sa, False, max_cells,
+                                 n_threads)
                 if n_far and not sa.bad_ends and not sa.too_many:
                     scan_updates(tree, b_v, o, sensor_range, False, culling, NULL,
                                  superray_threshold, _fully_free, tree, self._counts,
-                                 &self._counts_dirty, found_b, &sb, False, max_cells)
+                                 &self._counts_dirty, found_b, &sb, False, max_cells,
+                                 n_threads)
                 clock_gettime(CLOCK_MONOTONIC, &done)
         if sa.bad_ends or sb.bad_ends:
             return None

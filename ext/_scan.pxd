@@ -4,13 +4,16 @@
 Inline ``nogil`` code only (no module of its own): :func:`scan_updates` turns a
 scan into one update per cell, and each map applies them its own way
 (``ext/_octree.pyx`` in one pass over the tree, ``ext/_grid.pyx`` in its hash
-map). Keys, ray ends and the sensor model come from a liboctomap ``OcTree`` of
+map). The rays of a scan may be walked on several OpenMP threads, each into its
+own counts, merged (integer sums) before the cells are collected: the modules
+that cimport this are built with OpenMP (``OPENMP_MODULES`` in ``setup.py``). Keys, ray ends and the sensor model come from a liboctomap ``OcTree`` of
 the map's resolution, so every map finds the cells liboctomap finds.
 """
 
 from libc.math cimport fabs, floor, ldexp, sqrt
 from libc.stdint cimport uint8_t, uint32_t, uint64_t
 from libcpp.vector cimport vector
+from cython.parallel cimport prange, threadid
 from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 from _keys cimport (
@@ -21,12 +24,22 @@ from _keys cimport (
 from liboctomap cimport OcTree, OcTreeKey, key_type, point3d
 
 
+cdef extern from "_keytable.h" namespace "occgp" nogil:
+    cdef cppclass StopFlag:   # set by one thread of a traversal, polled by all
+        StopFlag()
+        bint get() const
+        void set()
+
+
 cdef extern from *:
     int _clz64 "__builtin_clzll"(unsigned long long x) nogil
 
 cdef enum:
     _MAX_REGION_CELLS = 1 << 28   # larger scan key boxes are not culled (2 x 32 MB of bits)
-    _MAX_DENSE_CELLS = 1 << 24    # up to this, a scan's free counts live in an array (64 MB)
+    _MAX_DENSE_CELLS = 1 << 24    # up to this, a scan's free counts live in arrays (64 MB)
+    _MIN_THREAD_RAYS = 64         # fewer rays per thread than this: fewer threads
+    _MAX_THREADS = 256
+    _CHUNKS_PER_THREAD = 16       # the rays are handed out in chunks, first come first served
 
 #: Whether the map's cell at a key is known and at the lower clamping bound.
 ctypedef bint (*FreeTest)(void* map, const OcTreeKey& key) noexcept nogil
@@ -70,9 +83,10 @@ cdef inline OcTreeKey _box_key(uint64_t idx, const int* lo, const uint64_t* dims
 
 
 cdef inline int _count_free(int kx, int ky, int kz, uint32_t w, bint dense, const int* lo,
-                            const uint64_t* dims, vector[uint32_t]& free_counts,
-                            vector[uint64_t]& touched, KeyTable& table) except -1 nogil:
-    """Count `w` rays through the cell (kx, ky, kz): in the scan's dense box, or the table."""
+                            const uint64_t* dims, uint32_t* free_counts,
+                            vector[uint64_t]* touched, KeyTable* table) except -1 nogil:
+    """Count `w` rays through the cell (kx, ky, kz): in the scan's dense box (`free_counts`,
+    new cells appended to `touched`), or the table."""
     cdef uint64_t x = <uint64_t>(kx - lo[0]), y = <uint64_t>(ky - lo[1]), z = <uint64_t>(kz - lo[2])
     cdef uint64_t idx
     cdef OcTreeKey key
@@ -464,6 +478,100 @@ cdef inline long _build_region(FreeTest fully_free, void* map, const OcTreeKey& 
     return count
 
 
+cdef struct _Rays:
+    # what the threads of one scan's traversal share, read only
+    double res
+    const point3d* origin
+    const OcTreeKey* key_origin
+    const point3d* ends            # per ray: its end after truncation
+    const OcTreeKey* end_keys
+    const uint8_t* end_ok
+    const uint32_t* ray_ids        # super rays: the rays to walk and their weights; NULL
+    const uint32_t* ray_weights
+    const uint32_t* weights        # per ray, or NULL
+    const CellBox* region          # the culling region over the scan's key box
+    bint cull                      # the region holds cells
+    bint dense                     # counts in box arrays (else in tables)
+    const int* lo                  # the scan's key box
+    const uint64_t* dims
+    uint64_t max_cells             # 0: no limit
+
+
+cdef inline int _walk_rays(const _Rays* s, Py_ssize_t r0, Py_ssize_t r1, uint32_t* counts,
+                           vector[uint64_t]* touched, KeyTable* table, size_t table_base,
+                           KeyTable* visits, long* traversed, StopFlag* stop) except -1 nogil:
+    """Walk rays ``r0 <= r < r1`` of a scan (of its super rays when it has them) into one
+    thread's counts: cells of the scan's key box in `counts` (dense; new ones appended
+    to `touched`), other cells in `table`'s ``n_free``. Adds the cell visits to
+    `traversed`; with `visits` (diagnose), counts every visit there too.
+
+    With ``s.max_cells``, stops (setting `stop`) once ``touched`` and the entries of
+    `table` past its first `table_base` ones -- distinct cells of the scan, as no
+    two of them are one -- outnumber it; stops when another thread set `stop`.
+    """
+    cdef Py_ssize_t r, i
+    cdef uint32_t w = 1
+    cdef RayWalker walker
+    cdef vector[uint64_t] back
+    cdef bint more
+    cdef size_t j
+    cdef uint64_t idx
+    cdef OcTreeKey key
+    cdef long n_visits = 0
+    cdef const CellBox* region = s.region
+    for r in range(r0, r1):
+        if stop.get():
+            break
+        if s.ray_ids != NULL:
+            i = s.ray_ids[r]
+            w = s.ray_weights[r]
+        else:
+            i = r
+            if s.weights != NULL:
+                w = s.weights[i]
+        if not s.end_ok[i]:
+            continue        # computeRayKeys's out-of-range check
+        more = walker.start(s.res, s.origin[0], s.key_origin[0], s.ends[i], s.end_keys[i])
+        if more and s.cull:
+            back.clear()
+            if walker.walk_back(region[0], back):
+                # the region's box is the scan's key box, the one `counts` covers
+                for j in range(back.size()):
+                    idx = back[j]
+                    if s.dense:
+                        if counts[idx] == 0:
+                            touched.push_back(idx)
+                        counts[idx] += w
+                    else:
+                        table.get(_pack(_box_key(idx, s.lo, s.dims))).n_free += w
+                    if visits != NULL:
+                        visits.get(_pack(_box_key(idx, s.lo, s.dims))).n_free += 1
+                n_visits += back.size()
+                more = False
+            else:
+                # the region is closed under stepping toward the origin, so a
+                # ray's cells in it form a prefix of its traversal
+                while more and region.inside(walker.key(0), walker.key(1),
+                                             walker.key(2)) and region.test(
+                        walker.key(0), walker.key(1), walker.key(2)):
+                    more = walker.next()
+        while more:
+            _count_free(walker.key(0), walker.key(1), walker.key(2), w, s.dense, s.lo,
+                        s.dims, counts, touched, table)
+            if visits != NULL:
+                key[0] = <key_type>walker.key(0)
+                key[1] = <key_type>walker.key(1)
+                key[2] = <key_type>walker.key(2)
+                visits.get(_pack(key)).n_free += 1
+            n_visits += 1
+            more = walker.next()
+        if s.max_cells and touched.size() + (table.size() - table_base) > s.max_cells:
+            stop.set()
+            break
+    traversed[0] += n_visits
+    return 0
+
+
 cdef inline void empty_stats(ScanStats* stats) noexcept nogil:
     """The statistics of a scan before (or without) its traversal, every clock now."""
     cdef int k
@@ -482,7 +590,7 @@ cdef inline int scan_updates(
         bint ray_mode, bint culling, const uint32_t* weights, int superray_threshold,
         FreeTest fully_free, void* map, vector[uint32_t]& counts, bint* counts_dirty,
         vector[ScanCell]& cells, ScanStats* stats, bint diagnose=False,
-        uint64_t max_cells=0) except -1 nogil:
+        uint64_t max_cells=0, int n_threads=1) except -1 nogil:
     """Collect one update per cell for a scan (appended to `cells`, keys distinct).
 
     Every ray is traversed as liboctomap's ``computeRayKeys`` traverses it
@@ -504,12 +612,20 @@ cdef inline int scan_updates(
     whose update changes nothing: fully free cells that no ray ends in (the
     dissertation's "unnecessary traversals", Table 2.3). With `max_cells` > 0, a scan
     whose rays reach more than that many distinct cells sets ``stats.too_many`` and
-    collects nothing (checked after each ray, so memory stays within one ray of it).
+    collects nothing (a lower bound on them is checked after each ray, so memory
+    stays within one ray per thread of it plus the end cells; the exact count decides).
+
+    The rays are walked on up to `n_threads` OpenMP threads (fewer for small scans;
+    one with `diagnose`), each into its own counts: a slice of `counts` over the
+    scan's key box (no more threads than slices fit the dense limit), or, where the
+    box alone exceeds the limit, a table of its own. The counts are merged (integer sums) before the cells are collected,
+    so the cells, their updates and the statistics are the same for every
+    `n_threads`; only the order of `cells` may differ.
     """
     cdef Py_ssize_t i, n = points.shape[0]
     cdef bint weighted = weights != NULL
     cdef vector[uint32_t] ray_ids, ray_weights     # the rays to traverse, super rays
-    cdef Py_ssize_t r, n_trav = n
+    cdef Py_ssize_t n_trav = n
     cdef vector[point3d] ends
     cdef vector[uint8_t] truncated
     cdef KeyTable table
@@ -519,7 +635,6 @@ cdef inline int scan_updates(
     cdef int lo[3]
     cdef int hi[3]
     cdef int axis, max_level = 0, level
-    cdef uint32_t w = 1
     cdef size_t slot, j
     cdef float l_hit = keys.getProbHitLog(), l_miss = keys.getProbMissLog()
     cdef vector[uint64_t] touched         # box indices with a nonzero count
@@ -529,12 +644,19 @@ cdef inline int scan_updates(
     cdef uint32_t n_free
     cdef vector[OcTreeKey] end_keys
     cdef vector[uint8_t] end_ok
-    cdef RayWalker walker
-    cdef vector[uint64_t] back
     cdef KeyTable visits                  # with diagnose: walked visits per cell
-    cdef bint more
     cdef double res = keys.getResolution(), rf = 1.0 / res
     cdef ScanCell cell
+    cdef _Rays rays
+    cdef StopFlag stop
+    cdef size_t hits
+    cdef uint64_t distinct
+    cdef uint32_t* part
+    cdef Py_ssize_t c, n_chunks
+    cdef int t
+    cdef vector[vector[uint64_t]] part_touched    # threads 1, 2, ...: their new box cells
+    cdef vector[KeyTable] part_tables             # and their other cells
+    cdef vector[long] part_visits
     empty_stats(stats)
     keys.coordToKeyChecked(o, ko)
     for axis in range(3):
@@ -582,59 +704,84 @@ cdef inline int scan_updates(
     for axis in range(3):
         dims[axis] = <uint64_t>(hi[axis] - lo[axis] + 1)
         box_cells *= dims[axis]
+    # threads: one with `diagnose`, and at least _MIN_THREAD_RAYS rays each
+    if diagnose or n_threads < 1:
+        n_threads = 1
+    n_threads = min(n_threads, <int>_MAX_THREADS, <int>max(n_trav // _MIN_THREAD_RAYS, 1))
+    # each thread's counts get their own slice of `counts`, within the dense limit:
+    # no more threads than slices fit (counting in tables instead is several times
+    # slower); a box larger than the limit is counted in tables by every thread
     dense = box_cells <= _MAX_DENSE_CELLS
-    if dense and (counts_dirty[0] or counts.size() < box_cells):
-        counts.assign(max(box_cells, counts.size()), 0)
+    if dense:
+        n_threads = <int>min(<uint64_t>n_threads, _MAX_DENSE_CELLS // box_cells)
+    if dense and (counts_dirty[0] or counts.size() < box_cells * n_threads):
+        counts.assign(max(box_cells * n_threads, counts.size()), 0)
     counts_dirty[0] = True
-    for r in range(n_trav):
-        if max_cells and touched.size() + table.size() > max_cells:
-            stats.too_many = True
-            break
-        if superray_threshold > 0:
-            i = ray_ids[r]
-            w = ray_weights[r]
-        else:
-            i = r
-            if weighted:
-                w = weights[i]
-        if not end_ok[i]:
-            continue        # computeRayKeys's out-of-range check
-        more = walker.start(res, o, ko, ends[i], end_keys[i])
-        if more and stats.region_cells > 0:
-            back.clear()
-            if walker.walk_back(region, back):
-                # the region's box is the scan's key box, the one `counts` covers
-                for j in range(back.size()):
-                    idx = back[j]
-                    if dense:
-                        if counts[idx] == 0:
-                            touched.push_back(idx)
-                        counts[idx] += w
-                    else:
-                        table.get(_pack(_box_key(idx, lo, dims))).n_free += w
-                    if diagnose:
-                        visits.get(_pack(_box_key(idx, lo, dims))).n_free += 1
-                stats.traversed_cells += back.size()
-                continue
-            # the region is closed under stepping toward the origin, so a
-            # ray's cells in it form a prefix of its traversal
-            while more and region.inside(walker.key(0), walker.key(1),
-                                         walker.key(2)) and region.test(
-                    walker.key(0), walker.key(1), walker.key(2)):
-                more = walker.next()
-        while more:
-            _count_free(walker.key(0), walker.key(1), walker.key(2), w, dense, lo,
-                        dims, counts, touched, table)
-            if diagnose:
-                key[0] = <key_type>walker.key(0)
-                key[1] = <key_type>walker.key(1)
-                key[2] = <key_type>walker.key(2)
-                visits.get(_pack(key)).n_free += 1
-            stats.traversed_cells += 1
-            more = walker.next()
+    rays.res = res
+    rays.origin = &o
+    rays.key_origin = &ko
+    rays.ends = ends.data()
+    rays.end_keys = end_keys.data()
+    rays.end_ok = end_ok.data()
+    rays.ray_ids = ray_ids.data() if superray_threshold > 0 else NULL
+    rays.ray_weights = ray_weights.data() if superray_threshold > 0 else NULL
+    rays.weights = weights if weighted else NULL
+    rays.region = &region
+    rays.cull = stats.region_cells > 0
+    rays.dense = dense
+    rays.lo = lo
+    rays.dims = dims
+    rays.max_cells = max_cells
+    # thread 0 counts into the scan's own table (its first `hits` entries: the end
+    # cells), the others into tables of their own
+    hits = table.size()
+    if n_threads == 1:
+        _walk_rays(&rays, 0, n_trav, counts.data() if dense else NULL, &touched, &table,
+                   hits, &visits if diagnose else NULL, &stats.traversed_cells, &stop)
+    else:
+        part_touched.resize(n_threads)
+        part_tables.resize(n_threads - 1)
+        part_visits.assign(n_threads, 0)
+        n_chunks = min(n_trav, <Py_ssize_t>n_threads * _CHUNKS_PER_THREAD)
+        for c in prange(n_chunks, num_threads=n_threads, schedule="dynamic"):
+            t = threadid()
+            _walk_rays(&rays, c * n_trav // n_chunks, (c + 1) * n_trav // n_chunks,
+                       (counts.data() + <uint64_t>t * box_cells) if dense else NULL,
+                       &touched if t == 0 else &part_touched[t],
+                       &table if t == 0 else &part_tables[t - 1], hits if t == 0 else 0,
+                       NULL, &part_visits[t], &stop)
+        # merge into thread 0's counts (integer sums: the order does not matter),
+        # leaving the other slices zero
+        stats.traversed_cells += part_visits[0]
+        for t in range(1, n_threads):
+            if dense:
+                part = counts.data() + <uint64_t>t * box_cells
+                for j in range(part_touched[t].size()):
+                    idx = part_touched[t][j]
+                    if counts[idx] == 0:
+                        touched.push_back(idx)
+                    counts[idx] += part[idx]
+                    part[idx] = 0
+            if not stop.get():
+                for slot in range(part_tables[t - 1].capacity()):
+                    if part_tables[t - 1].slot(slot).key != KEY_EMPTY:
+                        table.get(part_tables[t - 1].slot(slot).key).n_free += \
+                            part_tables[t - 1].slot(slot).n_free
+            stats.traversed_cells += part_visits[t]
     clock_gettime(CLOCK_MONOTONIC, &stats.clock[4])
-    if max_cells and touched.size() + table.size() > max_cells:
+    if stop.get():
         stats.too_many = True
+    elif max_cells:
+        # the distinct cells: those counted in the box, and the table's others
+        distinct = touched.size() + table.size()
+        if dense:
+            for slot in range(table.capacity()):
+                if table.slot(slot).key == KEY_EMPTY:
+                    continue
+                key = _unpack(table.slot(slot).key)
+                if _in_box(key, lo, dims) and counts[_box_index(key, lo, dims)]:
+                    distinct -= 1
+        stats.too_many = distinct > max_cells
     if stats.too_many:
         for j in range(touched.size()):
             counts[touched[j]] = 0

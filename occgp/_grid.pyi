@@ -14,7 +14,7 @@ class _Grid:
     def _insert(self, points: NDArray[np.float32], origin: NDArray[np.float32],
                 max_range: float, ray_mode: bool, culling: bool = False,
                 weights: NDArray[np.uint32] | None = None, superray_threshold: int = 0,
-                diagnose: bool = False, max_cells: int = 0,
+                diagnose: bool = False, max_cells: int = 0, n_threads: int = 1,
                 ) -> tuple[int, int, int, int, tuple[float, float, float, float], int] | str | None: ...
     def _query(self, points: NDArray[np.float32], what: int) -> NDArray[np.float64]: ...
     def _cells_sorted(self, occupied_only: bool,

@@ -25,11 +25,11 @@ class _OcTree:
                       weights: NDArray[np.uint32] | None = None,
                       superray_threshold: int = 0,
                       diagnose: bool = False, max_cells: int = 0,
-                      key_box: NDArray[np.uint16] | None = None,
+                      key_box: NDArray[np.uint16] | None = None, n_threads: int = 1,
                       ) -> tuple[int, int, int, int, tuple[float, float, float, float], int] | str | None: ...
     def _knn_cells(self, points: NDArray[np.float32], origin: NDArray[np.float32],
                    sensor_range: float, culling: bool, superray_threshold: int = 0,
-                   max_cells: int = 0,
+                   max_cells: int = 0, n_threads: int = 1,
                    ) -> tuple[NDArray[np.float32], NDArray[np.uint64], NDArray[np.uint8],
                               NDArray[np.int64], tuple] | str | None: ...
     def _apply_cells(self, keys: NDArray[np.uint64], updates: NDArray[np.float32]) -> int: ...

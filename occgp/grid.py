@@ -7,7 +7,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._grid import _Grid
 from ._logodds_map import Leaves, LogOddsMap
-from ._validation import check_bool
+from ._validation import check_bool, check_n_jobs, n_threads
 
 __all__ = ["GridMap"]
 
@@ -100,6 +100,7 @@ class GridMap(LogOddsMap, _Grid):
         mode: str = "scan",
         method: str = "auto",
         superray_threshold: int = 20,
+        n_jobs: int | None = None,
     ) -> "GridMap":
         """Integrate one range scan into the map.
 
@@ -137,6 +138,14 @@ default="auto"
         superray_threshold : int, default=20
             With the super-ray methods, the fewest end points a cell must hold
             for its rays to be grouped; at least 1.
+        n_jobs : int or None, default=None
+            Threads that walk the scan's rays, every method (None: 1, -1: every
+            core; at most the cores, and about one per 64 rays). The threads'
+            counts are merged (integer sums) before the cells are updated, so
+            the grid and :attr:`last_insert_`'s counts are the same for every
+            `n_jobs`. As for :meth:`OccupancyOctree.insert_scan`, the threads'
+            dense counts share a limit of 2^24 cells of the scan's key box
+            (fewer threads where their boxes exceed it).
 
         Returns
         -------
@@ -153,9 +162,9 @@ default="auto"
             truncation at `max_range`), a ray is shorter than 1.1e-19 m yet
             crosses a cell border (too short for the single-precision
             traversal), the scan reaches more than :attr:`MAX_SCAN_CELLS`
-            distinct cells, or
-            `max_range`, `mode`, `method` or `superray_threshold` is invalid.
-            The map is then unchanged.
+            distinct cells (the same scans for every `n_jobs`), or
+            `max_range`, `mode`, `method`, `superray_threshold` or `n_jobs` is
+            invalid (`n_jobs` 0 or not an int). The map is then unchanged.
 
         Examples
         --------
@@ -165,6 +174,7 @@ default="auto"
         >>> m.num_cells        # the cells the ray crosses, and its end cell
         10
         """
+        threads = n_threads(check_n_jobs(n_jobs))
         method, threshold = self._check_method(method, superray_threshold)
         scan = self._validated_scan(points, origin, max_range, mode, check_ends=False)
         if scan is not None:
@@ -172,7 +182,7 @@ default="auto"
             threshold = self._adaptive_threshold(method, threshold)
             self._record_insert(self._insert(
                 pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold,
-                False, self._max_scan_cells()), pts, org, rng, method, threshold)
+                False, self._max_scan_cells(), threads), pts, org, rng, method, threshold)
         return self
 
     # ------------------------------------------------------------------ queries

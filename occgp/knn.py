@@ -201,8 +201,9 @@ class KNNMap(OccupancyOctree):
         F: the normal CDF of the paper, or the normal truncated at s = 0 (the
         scores are distances), as the authors' code does.
     n_jobs : int or None, default=None
-        Threads for the k-NN queries (``cKDTree.query(workers=)``); None: 1, -1:
-        every core.
+        Threads for the k-NN queries (``cKDTree.query(workers=)``) and for
+        walking a scan's rays (as ``OccupancyOctree.insert_scan(n_jobs=)``:
+        the map is the same for every `n_jobs`); None: 1, -1: every core.
 
     Attributes
     ----------
@@ -355,7 +356,7 @@ default="auto"
         pts, org, rng, _ = scan
         threshold = self._adaptive_threshold(method, threshold)
         out = self._knn_cells(pts, org, rng, method.endswith("culling"), threshold,
-                              self._max_scan_cells())
+                              self._max_scan_cells(), n_threads(self._params["n_jobs"]))
         if out is None or isinstance(out, str):
             self._record_insert(out, pts, org, rng, method, threshold)   # raises
             raise AssertionError("unreachable")
@@ -427,7 +428,8 @@ class ScanReplay:
         The values of k to score points for.
     cdf : {"normal", "truncated"}, default="normal"
     n_jobs : int or None, default=None
-        Threads for the k-NN queries.
+        Threads for the k-NN queries and the rays' traversal (the replay is the
+        same for every `n_jobs`).
 
     Attributes
     ----------
@@ -466,7 +468,8 @@ class ScanReplay:
             if got is None:
                 continue
             pts, org, rng, _ = got
-            out = probe._knn_cells(pts, org, rng, False, 20, probe._max_scan_cells())
+            out = probe._knn_cells(pts, org, rng, False, 20, probe._max_scan_cells(),
+                                   workers)
             if out is None or isinstance(out, str):
                 try:
                     probe._record_insert(out, pts, org, rng, "superray", 20)

@@ -152,6 +152,7 @@ class OccupancyOctree(LogOddsMap, _OcTree):
         superray_threshold: int = 20,
         discretize: bool = False,
         bbox: ArrayLike | None = None,
+        n_jobs: int | None = None,
     ) -> "OccupancyOctree":
         """Integrate one range scan into the map.
 
@@ -224,6 +225,20 @@ default="auto"
             inside the box free (rays ending outside the box, or cut at
             `max_range`, change nothing). Every method gives liboctomap's map.
             Both corners must lie in the key range.
+        n_jobs : int or None, default=None
+            Threads that walk the scan's rays (None: 1, -1: every core; at
+            most the cores, and about one per 64 rays). Each thread counts its
+            share of the rays on its own; the counts are merged (integer sums)
+            before the one tree update, so the map and :attr:`last_insert_`'s
+            counts are the same for every `n_jobs`. It applies to occgp's
+            traversal (every `method` but ``"plain"`` with ``mode="scan"``, and
+            that one too where it falls back to occgp's traversal: change
+            tracking on, or rays too long for liboctomap's key buffer);
+            liboctomap's own ``insertPointCloud`` runs on one thread. Each
+            thread's dense counts take 4 bytes per cell of the scan's key box,
+            within 2^24 cells for all threads together: a scan whose box holds
+            more than 2^24 / n cells runs on fewer threads, and one whose box
+            holds more than 2^24 cells counts in hash tables (on every thread).
 
         Returns
         -------
@@ -240,9 +255,9 @@ default="auto"
             truncation at `max_range`), a ray is shorter than 1.1e-19 m yet
             crosses a cell border (too short for the single-precision
             traversal), the scan reaches more than :attr:`MAX_SCAN_CELLS`
-            distinct cells, or
-            `max_range`, `mode` or `discretize` is invalid. The map is then
-            unchanged.
+            distinct cells (the same scans for every `n_jobs`), or
+            `max_range`, `mode`, `discretize` or `n_jobs` is invalid (0, or not
+            an int). The map is then unchanged.
 
         References
         ----------
@@ -256,6 +271,8 @@ default="auto"
         >>> m.is_occupied([[1.0, 0, 0]]).tolist()
         [True]
         """
+        from ._validation import check_n_jobs, n_threads
+        threads = n_threads(check_n_jobs(n_jobs))
         discretize = check_bool(discretize, "discretize")
         mode = check_choice(mode, "mode", MODES)
         method, threshold = self._check_method(
@@ -301,7 +318,8 @@ default="auto"
         threshold = self._adaptive_threshold(method, threshold)
         self._record_insert(self._insert_batch(
             pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold,
-            False, self._max_scan_cells(), key_box), pts, org, rng, method, threshold)
+            False, self._max_scan_cells(), key_box, threads), pts, org, rng, method,
+            threshold)
         return self
 
     # ------------------------------------------------------------------ changes
