@@ -15,8 +15,8 @@ from ._octree import (
     KEYRAY_CELLS, TREE_DEPTH, TREE_MAX_VAL, _check_binary_data, _check_full_data, _OcTree,
 )
 from ._validation import (
-    as_numeric, as_path, as_points, check_bool, check_choice, check_int, check_real,
-    check_resolution,
+    as_numeric, as_path, as_points, check_bool, check_choice, check_int, check_n_jobs,
+    check_real, check_resolution, n_threads,
 )
 
 __all__ = ["OccupancyOctree", "Leaves", "Changes", "Nodes"]
@@ -271,7 +271,6 @@ default="auto"
         >>> m.is_occupied([[1.0, 0, 0]]).tolist()
         [True]
         """
-        from ._validation import check_n_jobs, n_threads
         threads = n_threads(check_n_jobs(n_jobs))
         discretize = check_bool(discretize, "discretize")
         mode = check_choice(mode, "mode", MODES)
