@@ -153,6 +153,19 @@ cdef class _ColorOcTree:
             tree.setOccupancyThres(occupancy_threshold)
             self._inner_dirty = False
 
+    def _set_sensor_model(self, double prob_hit, double prob_miss, double clamping_min,
+                          double clamping_max, double occupancy_threshold):
+        """liboctomap's setters of the sensor model (validated by the caller); the stored
+        values are left as they are."""
+        cdef ColorOcTree* tree
+        with self._lock:
+            tree = self._tree.get()
+            tree.setProbHit(prob_hit)
+            tree.setProbMiss(prob_miss)
+            tree.setClampingThresMin(clamping_min)
+            tree.setClampingThresMax(clamping_max)
+            tree.setOccupancyThres(occupancy_threshold)
+
     # ------------------------------------------------------------------ key range
     def _in_range(self, const float[:, ::1] points):
         """Boolean mask: which rows of `points` have a valid key on every axis."""

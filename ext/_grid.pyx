@@ -97,6 +97,16 @@ cdef class _Grid:
             set_sensor_model(tree, prob_hit, prob_miss, clamping_min, clamping_max,
                              occupancy_threshold)
 
+    def _set_sensor_model(self, double prob_hit, double prob_miss, double clamping_min,
+                          double clamping_max, double occupancy_threshold):
+        """liboctomap's setters on the key calculator, whose sensor model every update
+        and query reads (validated by the caller); the stored values are left as they
+        are."""
+        cdef OcTree* tree = self._get()
+        with self._lock:
+            set_sensor_model(tree, prob_hit, prob_miss, clamping_min, clamping_max,
+                             occupancy_threshold)
+
     # ------------------------------------------------------------------ key range
     def _in_range(self, const float[:, ::1] points):
         """Boolean mask: which rows of `points` have a valid key on every axis."""

@@ -8,6 +8,8 @@ FUSE_MEAN: int
 
 @disjoint_base
 class _ColorOcTree:
+    def _set_sensor_model(self, prob_hit: float, prob_miss: float, clamping_min: float,
+                          clamping_max: float, occupancy_threshold: float) -> None: ...
     def _setup(self, resolution: float, prob_hit: float, prob_miss: float,
                clamping_min: float, clamping_max: float,
                occupancy_threshold: float) -> None: ...

@@ -5,6 +5,8 @@ from typing_extensions import disjoint_base
 
 @disjoint_base
 class _Grid:
+    def _set_sensor_model(self, prob_hit: float, prob_miss: float, clamping_min: float,
+                          clamping_max: float, occupancy_threshold: float) -> None: ...
     def _setup(self, resolution: float, prob_hit: float, prob_miss: float,
                clamping_min: float, clamping_max: float,
                occupancy_threshold: float) -> None: ...

@@ -49,11 +49,6 @@ class Nodes(NamedTuple):
     #: listing's ``max_depth``.
     is_leaf: NDArray[np.bool_]
 
-#: The settable sensor-model parameters (:meth:`OccupancyOctree.set_params`).
-_SENSOR_PARAMS = ("prob_hit", "prob_miss", "clamping_min", "clamping_max",
-                  "occupancy_threshold")
-
-
 class OccupancyOctree(LogOddsMap, _OcTree):
     """Probabilistic 3D occupancy map on an octree (OctoMap).
 
@@ -1126,65 +1121,6 @@ default="auto"
             if not ok.all():
                 self._raise_out_of_range(name, ok, "")
         return np.ascontiguousarray(rows)
-
-    def set_params(self, **params) -> "OccupancyOctree":
-        """Change the sensor model (liboctomap's ``setProbHit``, ``setClampingThresMin``, ...).
-
-        Sets any of ``prob_hit``, ``prob_miss``, ``clamping_min``,
-        ``clamping_max`` and ``occupancy_threshold``, checked as the
-        constructor checks them (scikit-learn's ``set_params``;
-        :meth:`get_params` reads them back). As with liboctomap's setters, the
-        stored log-odds do not change: the new values apply to later updates
-        (and clamps) and to the queries that compare with a threshold
-        (:meth:`is_occupied`, :meth:`is_at_threshold`, :meth:`extract_points`,
-        ...). The resolution is fixed: ``resolution`` is accepted only with
-        the map's own value (so that ``set_params(**other.get_params())``
-        works between maps of one resolution). Pickles keep the new values;
-        ``.bt`` / ``.ot`` files store only the resolution, so pass the values
-        to :meth:`load` again.
-
-        Parameters
-        ----------
-        **params
-            The parameters to change, by name.
-
-        Returns
-        -------
-        self : OccupancyOctree
-
-        Raises
-        ------
-        TypeError
-            If a value is not a real number.
-        ValueError
-            If a name is not a settable parameter of this map (subclasses such
-            as :class:`occgp.KNNMap`, whose sensor model has other parameters,
-            have none), `resolution` differs from the map's, or a value lies
-            outside the constructor's range. The map is then unchanged.
-
-        Examples
-        --------
-        >>> m = OccupancyOctree(0.1).set_params(prob_hit=0.9, clamping_max=0.99)
-        >>> m.prob_hit, m.get_params()["clamping_max"]
-        (0.9, 0.99)
-        """
-        settable = [k for k in _SENSOR_PARAMS if k in self._params]
-        for name, value in params.items():
-            if name == "resolution" and "resolution" in self._params:
-                if value != self.resolution:
-                    raise ValueError(f"resolution is fixed at construction ({self.resolution!r}), "
-                                     f"got {value!r}; build a new map instead")
-            elif name not in settable:
-                raise ValueError(f"{name!r} is not a parameter set_params can change on "
-                                 f"{type(self).__name__} (settable: "
-                                 f"{', '.join(settable) or 'none'})")
-        if not settable:
-            return self
-        new = check_params({**self._params, **{k: v for k, v in params.items()
-                                               if k != "resolution"}})
-        self._set_sensor_model(*(new[k] for k in _SENSOR_PARAMS))
-        self._params = new
-        return self
 
     @property
     def tree_depth(self) -> int:

@@ -566,6 +566,32 @@ def test_set_params_rejects_and_changes_nothing(params, exc, match):
     assert (m.get_params(), m._log_odds_thresholds()) == before
 
 
+def test_grid_and_colour_maps_set_params_as_if_built_with_them():
+    from occgp import ColorOctree, GridMap
+    rng = np.random.default_rng(3)
+    scans = [rng.uniform(-1, 1, (100, 3)) for _ in range(3)]
+    a, b = GridMap(RES).set_params(**NEW), GridMap(RES, **NEW)
+    for s in scans:
+        a.insert_scan(s, [0, 0, 0], mode="ray")
+        b.insert_scan(s, [0, 0, 0], mode="ray")
+    got, want = a.cells(), b.cells()
+    assert a.get_params() == b.get_params() and len(got.centers) > 0
+    np.testing.assert_array_equal(got.centers, want.centers)
+    np.testing.assert_array_equal(got.log_odds, want.log_odds)
+    np.testing.assert_array_equal(a.is_occupied(got.centers), b.is_occupied(got.centers))
+    colours = rng.integers(0, 255, (100, 3))
+    c, d = ColorOctree(RES).set_params(**NEW), ColorOctree(RES, **NEW)
+    for s in scans:
+        c.insert_scan(s, [0, 0, 0], colours)
+        d.insert_scan(s, [0, 0, 0], colours)
+    assert c.to_bytes() == d.to_bytes() and c.get_params() == d.get_params()
+    for m in (a, c):
+        before = m.get_params()
+        with pytest.raises(ValueError, match="prob_miss"):
+            m.set_params(prob_hit=0.8, prob_miss=0.7)
+        assert m.get_params() == before
+
+
 def test_knnmap_keeps_its_rules():
     m = KNNMap(RES)
     before = m.get_params()
