@@ -51,6 +51,19 @@ cdef extern from "_octree_batch.h" namespace "occgp" nogil:
                          vector[CellUpdate]& scratch) except +
 
 
+cdef extern from "_octree_edit.h" namespace "occgp" nogil:
+    cdef cppclass NodeList:
+        vector[double] centers
+        vector[double] sizes
+        vector[uint8_t] depths
+        vector[float] values
+        vector[uint8_t] is_leaf
+    bint delete_node(OcTree& tree, const OcTreeKey& key, unsigned depth) except +
+    void collect_nodes(const OcTree& tree, unsigned max_depth, bint leaves_only,
+                       bint occupied_only, const OcTreeKey& kmin, const OcTreeKey& kmax,
+                       NodeList& out) except +
+
+
 @cython.auto_pickle(False)
 cdef class _OcTree:
     """A liboctomap ``OcTree`` owned by Python. Use :class:`occgp.OccupancyOctree`."""
@@ -470,6 +483,126 @@ cdef class _OcTree:
                     else:
                         states[i] = 1 if tree.isNodeOccupied(node) else 0
         return out
+
+    def _query_depth(self, const float[:, ::1] points, int what, unsigned depth):
+        """Per point, of the node liboctomap's ``search(key, depth)`` returns (the node at
+        `depth` holding the point, or the coarser leaf holding it): 0 → occupancy,
+        1 → log-odds (NaN where unknown), 2 → int8 state (-1 unknown, 0 free,
+        1 occupied), 3 → int8 ``isNodeAtThreshold`` (-1 unknown)."""
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef OcTreeKey key
+        cdef OcTreeNode* node
+        out = np.full(n, np.nan) if what < 2 else np.full(n, -1, dtype=np.int8)
+        cdef double[::1] values
+        cdef signed char[::1] states
+        if what >= 2:
+            states = out
+        else:
+            values = out
+        with self._lock:
+            with nogil:
+                for i in range(n):
+                    if not tree.coordToKeyChecked(
+                            point3d(points[i, 0], points[i, 1], points[i, 2]), key):
+                        continue
+                    node = tree.search(key, depth)
+                    if node == NULL:
+                        continue
+                    if what == 0:
+                        values[i] = node.getOccupancy()
+                    elif what == 1:
+                        values[i] = node.getLogOdds()
+                    elif what == 2:
+                        states[i] = 1 if tree.isNodeOccupied(node) else 0
+                    else:
+                        states[i] = 1 if tree.isNodeAtThreshold(node) else 0
+        return out
+
+    def _delete(self, const uint16_t[:, ::1] keys, unsigned depth):
+        """Delete the depth-`depth` (1..16) node holding each key, in order (see
+        ``ext/_octree_edit.h``); returns how many nodes were deleted."""
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t i
+        cdef size_t deleted = 0
+        with self._lock:
+            with nogil:
+                for i in range(keys.shape[0]):
+                    deleted += delete_node(tree[0], OcTreeKey(keys[i, 0], keys[i, 1], keys[i, 2]),
+                                           depth)
+        return deleted
+
+    def _nodes(self, unsigned max_depth, bint leaves_only, bint occupied_only,
+               const uint16_t[:, ::1] key_box=None):
+        """Centres (n, 3), sizes (n,), depths (n,) uint8, log-odds (n,) float32 and
+        is-leaf flags (n,) of the nodes down to `max_depth` (1..16) in liboctomap's
+        iterator order (leaves only: as begin_leafs(max_depth)), limited to the nodes
+        meeting `key_box` (rows: lowest and highest key) when given."""
+        cdef OcTree* tree = self._get()
+        cdef NodeList nodes
+        cdef OcTreeKey kmin = OcTreeKey(0, 0, 0)
+        cdef OcTreeKey kmax = OcTreeKey(65535, 65535, 65535)
+        cdef int axis
+        if key_box is not None:
+            for axis in range(3):
+                kmin[axis] = key_box[0, axis]
+                kmax[axis] = key_box[1, axis]
+        with self._lock:
+            with nogil:
+                collect_nodes(tree[0], max_depth, leaves_only, occupied_only, kmin, kmax, nodes)
+        cdef Py_ssize_t n = nodes.sizes.size()
+        out_c = np.empty((n, 3))
+        out_s = np.empty(n)
+        out_d = np.empty(n, dtype=np.uint8)
+        out_v = np.empty(n, dtype=np.float32)
+        out_l = np.empty(n, dtype=np.bool_)
+        cdef double[:, ::1] oc = out_c
+        cdef double[::1] os_ = out_s
+        cdef uint8_t[::1] od = out_d
+        cdef float[::1] ov = out_v
+        cdef uint8_t[::1] ol = out_l.view(np.uint8)
+        if n:
+            memcpy(&oc[0, 0], nodes.centers.data(), 3 * n * sizeof(double))
+            memcpy(&os_[0], nodes.sizes.data(), n * sizeof(double))
+            memcpy(&od[0], nodes.depths.data(), n * sizeof(uint8_t))
+            memcpy(&ov[0], nodes.values.data(), n * sizeof(float))
+            memcpy(&ol[0], nodes.is_leaf.data(), n * sizeof(uint8_t))
+        return out_c, out_s, out_d, out_v, out_l
+
+    def _ray_intersections(self, const float[:, ::1] origins, const float[:, ::1] directions,
+                           const float[:, ::1] centres, double delta):
+        """liboctomap's ``getRayIntersection(origin, direction.normalized(), centre,
+        intersection, delta)`` per row: (points (n, 3) doubles, NaN where not found;
+        found (n,) bool)."""
+        cdef OcTree* tree = self._get()
+        cdef Py_ssize_t i, n = origins.shape[0]
+        points = np.full((n, 3), np.nan)
+        found = np.zeros(n, dtype=np.bool_)
+        cdef double[:, ::1] pv = points
+        cdef uint8_t[::1] fv = found.view(np.uint8)
+        cdef point3d hit
+        with self._lock:
+            with nogil:
+                for i in range(n):
+                    fv[i] = tree.getRayIntersection(
+                        point3d(origins[i, 0], origins[i, 1], origins[i, 2]),
+                        point3d(directions[i, 0], directions[i, 1],
+                                directions[i, 2]).normalized(),
+                        point3d(centres[i, 0], centres[i, 1], centres[i, 2]), hit, delta)
+                    if fv[i]:
+                        pv[i, 0] = hit.x()
+                        pv[i, 1] = hit.y()
+                        pv[i, 2] = hit.z()
+        return points, found
+
+    def _set_sensor_model(self, double prob_hit, double prob_miss, double clamping_min,
+                          double clamping_max, double occupancy_threshold):
+        """liboctomap's setters of the sensor model (validated by the caller); the stored
+        values are left as they are."""
+        cdef OcTree* tree = self._get()
+        with self._lock:
+            set_sensor_model(tree, prob_hit, prob_miss, clamping_min, clamping_max,
+                             occupancy_threshold)
 
     def _cast_rays(self, const float[:, ::1] origins, const float[:, ::1] directions,
                    bint ignore_unknown, const double[::1] max_range):

@@ -125,6 +125,9 @@ cdef extern from "octomap/octomap.h" namespace "octomap" nogil:
         double keyToCoord(key_type key, unsigned depth)
         bool castRay(const point3d& origin, const point3d& direction, point3d& end,
                      bool ignoreUnknownCells, double maxRange) except +
+        bool getRayIntersection(const point3d& origin, const point3d& direction,
+                                const point3d& center, point3d& intersection, double delta)
+        bool isNodeAtThreshold(const OcTreeNode* node)
         leaf_iterator begin_leafs(unsigned char maxDepth) except +
         leaf_iterator end_leafs()
         leaf_bbx_iterator begin_leafs_bbx(const OcTreeKey& min, const OcTreeKey& max,

@@ -1,6 +1,7 @@
 """occgp: occupancy mapping from range sensors.
 
-The OctoMap octree under a numpy API (:class:`OccupancyOctree`), kernel
+The OctoMap octree under a numpy API (:class:`OccupancyOctree`, and
+:class:`ColorOctree` with a colour per cell), kernel
 inference on cells (:class:`BGKMap`, :class:`AKIMap`), the k-NN inverse
 sensor model (:class:`KNNMap`), synthetic
 scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
@@ -10,13 +11,14 @@ scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
 import logging
 
 from ._export import DistanceField
+from .color import ColorLeaves, ColorOctree
 from .grid import GridMap
 from .kernel import AKIMap, BGKMap
 from .knn import KNNMap
 from .octree import Changes, Leaves, OccupancyOctree
 
 __version__ = "0.1.0.dev0"
-__all__ = ["OccupancyOctree", "GridMap", "Leaves", "Changes", "AKIMap", "BGKMap", "KNNMap",
-           "DistanceField", "__version__"]
+__all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "ColorLeaves", "Changes",
+           "AKIMap", "BGKMap", "KNNMap", "DistanceField", "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())

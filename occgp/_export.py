@@ -18,7 +18,7 @@ from ._logodds_map import LogOddsMap
 from ._validation import as_numeric, as_path, check_bool, check_choice, check_int, check_real
 
 __all__ = ["save_ply", "save_pcd", "to_open3d", "distance_field", "DistanceField",
-           "MAX_VOXELS", "MAX_DISTANCE_CELLS"]
+           "MAX_VOXELS", "MAX_DISTANCE_CELLS", "pack_rgb", "unpack_rgb"]
 
 #: Default cap on the finest voxels :func:`to_open3d` builds (about 56 bytes each
 #: while the voxel grid is built: centres, colours and Open3D's own copy).
@@ -58,7 +58,13 @@ class DistanceField(NamedTuple):
     resolution: float
 
     def centers(self) -> NDArray[np.float64]:
-        """Centres of every cell, shape (nx, ny, nz, 3)."""
+        """Centres of every cell of the grid.
+
+        Returns
+        -------
+        centers : ndarray of shape (nx, ny, nz, 3)
+            In metres, indexed as `distances`.
+        """
         axes = [self.origin[a] + (np.arange(n) + 0.5) * self.resolution
                 for a, n in enumerate(self.distances.shape)]
         return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
@@ -74,11 +80,13 @@ def _check_map(tree: object) -> LogOddsMap:
     return tree
 
 
-def _selected_leaves(tree: LogOddsMap, occupied: bool):
-    """(centres, sizes, probabilities) of the occupied (or the free) leaves."""
+def _selected_leaves(tree: LogOddsMap, occupied: bool, with_colors: bool = False):
+    """(centres, sizes, probabilities) of the occupied (or the free) leaves, and with
+    `with_colors` their colours (uint8 (n, 3); None for a map without colours)."""
     occupied = check_bool(occupied, "occupied")
     table = (getattr(tree, "leaves", None) or getattr(tree, "cells"))()
-    centres, sizes, values = table
+    centres, sizes, values = table[:3]
+    colors = getattr(table, "colors", None)
     if hasattr(tree, "_log_odds_thresholds"):
         threshold = np.float32(tree._log_odds_thresholds()[2])
     else:  # liboctomap's logodds(): float of log(p / (1 - p))
@@ -88,7 +96,10 @@ def _selected_leaves(tree: LogOddsMap, occupied: bool):
     centres, sizes, values = centres[keep], sizes[keep], values[keep]
     # liboctomap's probability(): 1 - 1 / (1 + exp(l))
     prob = 1.0 - 1.0 / (1.0 + np.exp(values.astype(np.float64)))
-    return np.ascontiguousarray(centres), np.ascontiguousarray(sizes), prob
+    out = np.ascontiguousarray(centres), np.ascontiguousarray(sizes), prob
+    if with_colors:
+        return (*out, None if colors is None else np.ascontiguousarray(colors[keep]))
+    return out
 
 
 def _height_colors(z: np.ndarray) -> NDArray[np.uint8]:
@@ -162,7 +173,7 @@ def _finest_cells(tree: LogOddsMap, occupied: bool = True,
     """
     _check_map(tree)
     max_cells = check_int(max_cells, "max_cells", low=0)
-    centres, sizes, _ = _selected_leaves(tree, occupied)
+    centres, sizes, _ = _selected_leaves(tree, occupied)[:3]
     what = "occupied" if occupied else "free"
     return _expand_leaves(centres, sizes, tree.resolution, max_cells, what, "max_cells")[0]
 
@@ -192,15 +203,17 @@ def save_ply(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
     * ``size`` (float): the leaf's edge (pruned leaves are larger than the
       resolution);
     * ``probability`` (float): the leaf's occupancy probability;
-    * ``red green blue`` (uchar, with `color`): a viridis colour of the
-      leaf's height, spread from the lowest to the highest cell.
+    * ``red green blue`` (uchar, with `color`): the leaf's own colour for
+      a colour map (:class:`occgp.color.ColorOctree`; ``255 255 255`` where a
+      leaf has none), otherwise a viridis colour of the leaf's height, spread
+      from the lowest to the highest cell.
 
     A ``comment`` line records the map's resolution. Faces are
     ``property list uchar int vertex_indices``.
 
     Parameters
     ----------
-    tree : OccupancyOctree or GridMap
+    tree : OccupancyOctree, ColorOctree or GridMap
     path : str or os.PathLike
         Destination (overwritten).
     occupied : bool, default=True
@@ -211,7 +224,7 @@ def save_ply(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
     cubes : bool, default=False
         Write each leaf as a cube mesh instead of a point.
     color : bool, default=True
-        Add the height colours.
+        Add the colours (the cells' own for a colour map, else by height).
 
     Raises
     ------
@@ -245,7 +258,7 @@ def save_ply(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
     binary = check_bool(binary, "binary")
     cubes = check_bool(cubes, "cubes")
     color = check_bool(color, "color")
-    centres, sizes, prob = _selected_leaves(tree, occupied)
+    centres, sizes, prob, own_colors = _selected_leaves(tree, occupied, with_colors=True)
     path = as_path(path)
     n = len(centres)
     if cubes and n > _MAX_CUBES:
@@ -256,7 +269,8 @@ def save_ply(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
         columns += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
     per_leaf = np.column_stack([centres, sizes, prob]) if n else np.empty((0, 5))
     if color:
-        per_leaf = np.column_stack([per_leaf, _height_colors(centres[:, 2])])
+        per_leaf = np.column_stack([per_leaf, _height_colors(centres[:, 2])
+                                    if own_colors is None else own_colors])
     if cubes:
         vertices = np.repeat(per_leaf, 8, axis=0)
         corners = (centres[:, None, :]
@@ -307,12 +321,16 @@ def save_pcd(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
 
     Fields ``x y z intensity`` (float32), ``intensity`` being the leaf's
     occupancy probability (PCL's ``PointXYZI``); the viewpoint is the origin.
+    A colour map (:class:`occgp.color.ColorOctree`) adds the field ``rgb``:
+    the leaf's colour packed as ``r << 16 | g << 8 | b`` in a uint32
+    (``TYPE U``; PCL's ``PointXYZRGB`` holds the same bits), ``0xFFFFFF`` for
+    leaves without colour.
     Pruned leaves give one point at their centre (see
     :meth:`~occgp.OccupancyOctree.expand` for finest cells).
 
     Parameters
     ----------
-    tree : OccupancyOctree or GridMap
+    tree : OccupancyOctree, ColorOctree or GridMap
     path : str or os.PathLike
         Destination (overwritten).
     occupied : bool, default=True
@@ -349,10 +367,26 @@ def save_pcd(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
     write_pcd = importlib.import_module("occgp.datasets._pcd").write_pcd
     _check_map(tree)
     binary = check_bool(binary, "binary")
-    centres, _, prob = _selected_leaves(tree, occupied)
+    centres, _, prob, colors = _selected_leaves(tree, occupied, with_colors=True)
     path = as_path(path)
-    write_pcd(path, centres, data="binary" if binary else "ascii",
-              fields={"intensity": prob.astype(np.float32)})
+    fields = {"intensity": prob.astype(np.float32)}
+    if colors is not None:
+        fields["rgb"] = pack_rgb(colors)
+    write_pcd(path, centres, data="binary" if binary else "ascii", fields=fields)
+
+
+def pack_rgb(colors: np.ndarray) -> NDArray[np.uint32]:
+    """uint8 colours (n, 3) packed as PCL packs them: ``r << 16 | g << 8 | b`` (uint32)."""
+    c = np.asarray(colors, dtype=np.uint32).reshape(-1, 3)
+    return (c[:, 0] << np.uint32(16)) | (c[:, 1] << np.uint32(8)) | c[:, 2]
+
+
+def unpack_rgb(rgb: ArrayLike) -> NDArray[np.uint8]:
+    """The uint8 colours (n, 3) of PCL-packed ``rgb`` values (uint32, or float32 bits)."""
+    v = np.asarray(rgb)
+    v = (v.view(np.uint32) if v.dtype == np.float32 else v.astype(np.uint32)).ravel()
+    return np.column_stack([(v >> np.uint32(s)) & np.uint32(0xFF)
+                            for s in (16, 8, 0)]).astype(np.uint8).reshape(-1, 3)
 
 
 # --------------------------------------------------------------------------- #
@@ -391,7 +425,9 @@ def to_open3d(tree: LogOddsMap, *, kind: str = "voxels", occupied: bool = True,
     Returns
     -------
     geometry : open3d.geometry.VoxelGrid or open3d.geometry.PointCloud
-        Coloured by height (viridis, from the lowest to the highest cell).
+        Coloured by height (viridis, from the lowest to the highest cell), or
+        with the cells' own colours for a colour map
+        (:class:`occgp.color.ColorOctree`).
 
     Raises
     ------
@@ -405,17 +441,20 @@ def to_open3d(tree: LogOddsMap, *, kind: str = "voxels", occupied: bool = True,
     _check_map(tree)
     kind = check_choice(kind, "kind", _KINDS)
     max_voxels = check_int(max_voxels, "max_voxels", low=0)
-    centres, sizes, _ = _selected_leaves(tree, occupied)
+    centres, sizes, _, own_colors = _selected_leaves(tree, occupied, with_colors=True)
     res = tree.resolution
     what = "occupied" if occupied else "free"
     if kind == "voxels":  # the cap first: a ValueError is the same with or without Open3D
         _check_cap(sizes, res, max_voxels, what, "max_voxels")
     o3d = _import_open3d()
     if kind == "voxels":
-        centres, _ = _expand_leaves(centres, sizes, res, max_voxels, what, "max_voxels")
+        centres, owner = _expand_leaves(centres, sizes, res, max_voxels, what, "max_voxels")
+        if own_colors is not None:
+            own_colors = own_colors[owner]
     cloud = o3d.geometry.PointCloud()
     cloud.points = o3d.utility.Vector3dVector(centres)
-    cloud.colors = o3d.utility.Vector3dVector(_height_colors(centres[:, 2]) / 255.0)
+    rgb = _height_colors(centres[:, 2]) if own_colors is None else own_colors
+    cloud.colors = o3d.utility.Vector3dVector(rgb / 255.0)
     if kind == "points":
         return cloud
     if len(centres) == 0:

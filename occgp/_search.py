@@ -85,8 +85,14 @@ class GridSearchResult(NamedTuple):
     seconds: float
 
     def operating_points(self) -> list[dict[str, Any]]:
-        """One row per (combination, threshold): the parameters, ``p_t``, ``tpr``,
-        ``fdr`` — e.g. the samples of :func:`occgp.evaluation.nca_feature_weights`."""
+        """One row per (combination, threshold) of the search.
+
+        Returns
+        -------
+        rows : list of dict
+            The combination's parameters, ``p_t``, ``tpr`` and ``fdr``: e.g. the
+            samples of :func:`occgp.evaluation.nca_feature_weights`.
+        """
         rows = []
         for row in self.results:
             params = {k: v for k, v in row.items() if k not in ("auc", "thresholds", "tpr",

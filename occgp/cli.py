@@ -808,6 +808,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
                                f"input order")
         insert, limit = _inserter(mapper, method, mode, max_range, n_jobs)
         n_points = n_beyond = n_done = 0
+        beams = np.zeros(2, dtype=np.int64)     # BGK's (kept, dropped) beams
         dropped = []
         t0 = time.perf_counter()
         bar.set_description("inserting scans")
@@ -825,6 +826,8 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
                     if method == "akimap":
                         points = points[~far]
                 insert(points, scan.origin)
+                if method == "bgk":
+                    beams += mapper.last_beams_
                 n_done += 1
                 bar.update()
             if getattr(source, "n_dropped", 0):
@@ -845,7 +848,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         print(f"dropped {n:,} of {total:,} points of {path} with a NaN or inf coordinate",
               file=out)
     if limit is not None and n_beyond:
-        print(_beyond_message(method, n_beyond, n_points, limit), file=out)
+        print(_beyond_message(method, n_beyond, n_points, limit, beams), file=out)
     if method in ("octree", "knn"):
         built = f"{mapper.num_leaves:,} leaves"
     elif convert:
@@ -875,7 +878,7 @@ def _inserter(mapper, method, mode, max_range, n_jobs):
     return mapper.update, max_range
 
 
-def _beyond_message(method, n, total, limit) -> str:
+def _beyond_message(method, n, total, limit, beams) -> str:
     where = f"{n:,} of {total:,} points lie beyond"
     if method == "octree":
         return f"{where} max_range {limit:g} m: their rays were cut there (free space only)"
@@ -883,8 +886,10 @@ def _beyond_message(method, n, total, limit) -> str:
         return (f"{where} sensor_range {limit:g} m: not inserted, their rays were cut "
                 f"there")
     if method == "bgk":
-        return (f"{where} max_range {limit:g} m: BGK dropped their beams (it drops the beams "
-                f"to its down-sampled end points beyond max_range)")
+        kept, dropped = (int(b) for b in beams)
+        return (f"{where} max_range {limit:g} m: BGK dropped {dropped:,} of its "
+                f"{kept + dropped:,} beams (to the end points' centroids per cube of "
+                f"ds_resolution) beyond it")
     return f"{where} max_range {limit:g} m: dropped (AKIMap got only the nearer ones)"
 
 

@@ -165,6 +165,9 @@ class _KernelMap(_KernelCells):
     def _keep(self, extra) -> None:
         """Keep what an accepted update's kernels leave (AKIMap: its bandwidths)."""
 
+    def _accepted(self) -> None:
+        """Called once an update is accepted (also one that added no sample)."""
+
     def _validated_scan(self, points: ArrayLike, origin: ArrayLike):
         pts = as_points(points, "points")
         org = as_point(origin, "origin")
@@ -233,6 +236,7 @@ class _KernelMap(_KernelCells):
         """
         samples, labels, org, state = self._checked_training_data(points, origin)
         if not len(samples):
+            self._accepted()
             return self
         try:
             precision, extent, weights, sf2, extra = self._kernels(samples, labels, org)
@@ -243,35 +247,120 @@ class _KernelMap(_KernelCells):
         self._keep(extra)
         self._accumulate(np.ascontiguousarray(samples), labels, precision, extent,
                          weights, sf2, n_threads(self.n_jobs))
+        self._accepted()
         return self
 
     # evaluation harness protocol: maps take scans through insert_scan
     def insert_scan(self, points: ArrayLike, origin: ArrayLike):
-        """Alias of :meth:`update`, for :mod:`occgp.evaluation`."""
+        """Alias of :meth:`update`, for :mod:`occgp.evaluation`.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            End points of the beams in the world frame, in metres.
+        origin : array-like of shape (3,)
+            Sensor position, in metres.
+
+        Returns
+        -------
+        self
+            The updated map.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`update`; the map is then unchanged.
+        """
         return self.update(points, origin)
 
     # ------------------------------------------------------------------ queries
     def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
         """Posterior mean of occupancy, alpha / (alpha + beta), at each point's cell.
 
-        Returns NaN where no sample's kernel ever reached the cell (unknown).
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres.
+
+        Returns
+        -------
+        p : ndarray of shape (n_points,)
+            The posterior mean (`prior` added to alpha and beta); NaN where no
+            sample's kernel ever reached the cell (unknown), or the point lies
+            outside the key range.
+
+        Raises
+        ------
+        TypeError
+            If `points` does not hold real numbers.
+        ValueError
+            If `points` is not of shape (n_points, 3) or holds NaN or inf.
         """
         pts = as_points(points, "points")
         return self._query(pts, check_real(self.prior, "prior", low=0.0), 0)
 
     def variance(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Posterior variance of occupancy, ab / ((a + b)^2 (a + b + 1)); NaN where unknown."""
+        """Posterior variance of occupancy, ab / ((a + b)^2 (a + b + 1)), at each point's cell.
+
+        ``a`` and ``b`` are the cell's alpha and beta with `prior` added (the
+        variance of the Beta posterior).
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres.
+
+        Returns
+        -------
+        var : ndarray of shape (n_points,)
+            The posterior variance; NaN where unknown (as :meth:`occupancy`).
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`occupancy`.
+        """
         pts = as_points(points, "points")
         return self._query(pts, check_real(self.prior, "prior", low=0.0), 1)
 
     def is_occupied(self, points: ArrayLike, threshold: float = 0.5) -> NDArray[np.bool_]:
-        """Whether each point's cell has occupancy above `threshold` (unknown: False)."""
+        """Whether each point's cell has occupancy above `threshold`.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres.
+        threshold : float, default=0.5
+            Probability in [0, 1]; a cell is occupied when its posterior mean
+            (:meth:`occupancy`) is strictly above it.
+
+        Returns
+        -------
+        occupied : ndarray of bool, shape (n_points,)
+            False where unknown.
+
+        Raises
+        ------
+        TypeError
+            If `points` does not hold real numbers or `threshold` is not a real
+            number.
+        ValueError
+            If `points` is malformed (as :meth:`occupancy`) or `threshold` is
+            outside [0, 1].
+        """
         threshold = check_real(threshold, "threshold", low=0.0, high=1.0)
         p = self.occupancy(points)
         return np.where(np.isnan(p), False, p > threshold)
 
     def cells(self) -> KernelCells:
-        """Every cell any kernel reached, ordered by key (z, then y, then x)."""
+        """Every cell any kernel reached, ordered by key (z, then y, then x).
+
+        Returns
+        -------
+        cells : KernelCells
+            Named tuple ``(centers, alpha, beta)``: the cells' centres, shape
+            (n_cells, 3), and their evidence with `prior` added, shape (n_cells,).
+        """
         keys, alpha, beta = self._cells_arrays()
         order = np.lexsort(keys.T)
         keys, alpha, beta = keys[order], alpha[order], beta[order]
@@ -292,10 +381,29 @@ class _KernelMap(_KernelCells):
 
     def to_octree(self, *, clamping_min: float = 0.001,
                   clamping_max: float = 0.999) -> OccupancyOctree:
-        """An :class:`~occgp.OccupancyOctree` of the same resolution holding each cell's
-        posterior mean as log-odds (float32, within the clamping bounds given), pruned,
-        so that ``.bt`` / ``.ot`` export and OctoMap's viewers work. Cells no kernel
-        reached stay unknown."""
+        """The map as an :class:`~occgp.OccupancyOctree` of the same resolution.
+
+        Each cell's posterior mean becomes its log-odds (float32, clamped to
+        the bounds given), and the tree is pruned, so that ``.bt`` / ``.ot``
+        export and OctoMap's viewers work. Cells no kernel reached stay
+        unknown.
+
+        Parameters
+        ----------
+        clamping_min, clamping_max : float, default=0.001 and 0.999
+            The octree's clamping bounds, probabilities in (0, 0.5) and (0.5, 1),
+            as :class:`~occgp.OccupancyOctree`'s.
+
+        Returns
+        -------
+        tree : OccupancyOctree
+            With the default sensor model otherwise.
+
+        Raises
+        ------
+        TypeError, ValueError
+            If the clamping bounds are rejected by :class:`~occgp.OccupancyOctree`.
+        """
         tree = OccupancyOctree(self.resolution, clamping_min=clamping_min,
                                clamping_max=clamping_max)
         keys, alpha, beta = self._cells_arrays()
@@ -318,7 +426,14 @@ class _KernelMap(_KernelCells):
     _EXTRA_OPTIONAL: tuple = ()
 
     def get_params(self) -> dict:
-        """The constructor's parameters, as a dict."""
+        """The constructor's parameters.
+
+        Returns
+        -------
+        params : dict
+            Parameter name to value, as passed to the constructor (``cls(**params)``
+            builds an empty map of the same kind).
+        """
         raise NotImplementedError
 
     def _io_params(self) -> dict:
@@ -538,6 +653,12 @@ class BGKMap(_KernelMap):
     ----------
     num_cells : int
         Number of cells any kernel reached.
+    last_beams_ : tuple of (int, int)
+        ``(kept, dropped)`` of the last accepted :meth:`update`: its beams
+        (end points reduced to one centroid per cube of `ds_resolution`)
+        within `max_range`, and those beyond it, dropped whole. ``(0, 0)``
+        before any update; not saved by :meth:`save` or pickled (a loaded map
+        starts at ``(0, 0)``).
 
     See Also
     --------
@@ -580,8 +701,13 @@ class BGKMap(_KernelMap):
         self.max_range = max_range
         self.max_cells_per_update = max_cells_per_update
         self._check_params()
+        self.last_beams_ = (0, 0)
+        self._beams = (0, 0)
 
     _SUPPORT_HINT = "a smaller ell"
+
+    def _accepted(self) -> None:
+        self.last_beams_ = self._beams
 
     def _check_params(self) -> None:
         super()._check_params()
@@ -597,7 +723,14 @@ class BGKMap(_KernelMap):
                           check_real(self.max_range, "max_range", low=0.0))
 
     def get_params(self) -> dict:
-        """The constructor's parameters, as a dict."""
+        """The constructor's parameters.
+
+        Returns
+        -------
+        params : dict
+            Parameter name to value, as passed to the constructor (``cls(**params)``
+            builds an empty map of the same kind).
+        """
         return dict(resolution=self.resolution, ell=self.ell, sf2=self.sf2,
                     free_resolution=self.free_resolution, ds_resolution=self.ds_resolution,
                     prior=self.prior, max_range=self.max_range, n_jobs=self.n_jobs,
@@ -611,6 +744,20 @@ class BGKMap(_KernelMap):
                       origin: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The samples and labels (1 occupied, 0 free) that :meth:`update` uses.
 
+        Nothing in the map changes.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            End points of the beams in the world frame, in metres.
+        origin : array-like of shape (3,)
+            Sensor position, in metres.
+
+        Returns
+        -------
+        samples : ndarray of shape (n_samples, 3)
+        labels : ndarray of shape (n_samples,)
+
         Raises
         ------
         TypeError, ValueError
@@ -621,12 +768,15 @@ class BGKMap(_KernelMap):
 
     def _training_data(self, pts, org):
         ds = self.resolution if self.ds_resolution is None else self.ds_resolution
+        self._beams = (0, 0)
         if len(pts) == 0:
             return np.empty((0, 3)), np.empty(0)
         _, sums, counts = _cube_sums(pts, ds, "ds_resolution")
         hits = sums / counts[:, None]
+        n_beams = len(hits)
         if self.max_range is not None:
             hits = hits[np.linalg.norm(hits - org, axis=1) <= self.max_range]
+        self._beams = (len(hits), n_beams - len(hits))
         if len(hits) == 0:
             return np.empty((0, 3)), np.empty(0)
         # free samples every free_resolution metres along each beam (d < length), one
@@ -831,7 +981,14 @@ class AKIMap(_KernelMap):
         self.last_bandwidths_ = extra
 
     def get_params(self) -> dict:
-        """The constructor's parameters, as a dict."""
+        """The constructor's parameters.
+
+        Returns
+        -------
+        params : dict
+            Parameter name to value, as passed to the constructor (``cls(**params)``
+            builds an empty map of the same kind).
+        """
         return dict(resolution=self.resolution,
                     free_sample_distance=self.free_sample_distance,
                     max_search_range=self.max_search_range, sensor_range=self.sensor_range,
@@ -907,6 +1064,18 @@ class AKIMap(_KernelMap):
                       origin: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The samples and labels (1 occupied, 0 free) an update would use, drawn from
         the map's random generator (so this advances it).
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            End points of the beams in the world frame, in metres.
+        origin : array-like of shape (3,)
+            Sensor position, in metres.
+
+        Returns
+        -------
+        samples : ndarray of shape (n_samples, 3)
+        labels : ndarray of shape (n_samples,)
 
         Raises
         ------

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _octomap_format as fmt
-from ._logodds_map import MODES, Leaves, LogOddsMap
+from ._logodds_map import MODES, Leaves, LogOddsMap, check_params
 from ._octree import (
     KEYRAY_CELLS, TREE_DEPTH, TREE_MAX_VAL, _check_binary_data, _check_full_data, _OcTree,
 )
@@ -19,7 +19,7 @@ from ._validation import (
     check_resolution,
 )
 
-__all__ = ["OccupancyOctree", "Leaves", "Changes"]
+__all__ = ["OccupancyOctree", "Leaves", "Changes", "Nodes"]
 
 
 class Changes(NamedTuple):
@@ -32,6 +32,26 @@ class Changes(NamedTuple):
     #: True where the cell was new (unknown before), False where its state flipped.
     new: NDArray[np.bool_]
 
+
+class Nodes(NamedTuple):
+    """The nodes of an octree, inner ones included (see :meth:`OccupancyOctree.nodes`)."""
+
+    #: Node centres, metres, shape (n_nodes, 3).
+    centers: NDArray[np.float64]
+    #: Edge lengths, shape (n_nodes,): ``resolution * 2**(16 - depths)``.
+    sizes: NDArray[np.float64]
+    #: Tree depth of each node, uint8: 0 is the root, 16 the finest cells.
+    depths: NDArray[np.uint8]
+    #: Log-odds, float32 as liboctomap stores them; an inner node holds the largest
+    #: log-odds of its children.
+    log_odds: NDArray[np.float32]
+    #: True where the node is listed as a leaf: it has no children, or lies at the
+    #: listing's ``max_depth``.
+    is_leaf: NDArray[np.bool_]
+
+#: The settable sensor-model parameters (:meth:`OccupancyOctree.set_params`).
+_SENSOR_PARAMS = ("prob_hit", "prob_miss", "clamping_min", "clamping_max",
+                  "occupancy_threshold")
 
 
 class OccupancyOctree(LogOddsMap, _OcTree):
@@ -475,15 +495,24 @@ default="auto"
                              f"{values[bad]!r} at row {bad}")
         return out
 
-    def coord_to_key(self, points: ArrayLike) -> NDArray[np.uint16]:
-        """The 16-bit keys of the finest cells holding `points` (liboctomap's ``coordToKey``).
+    def coord_to_key(self, points: ArrayLike, depth: int = TREE_DEPTH) -> NDArray[np.uint16]:
+        """The 16-bit keys of the cells holding `points` (liboctomap's ``coordToKey``).
 
         ``floor(coordinate / resolution) + 32768`` per axis, from the
-        single-precision coordinate as liboctomap computes it.
+        single-precision coordinate as liboctomap computes it. With `depth`
+        below 16, the key of the depth-`depth` node holding the point, as
+        liboctomap's ``coordToKey(coord, depth)`` and ``adjustKeyAtDepth``
+        give it: the key at the node's centre, ``(key >> s << s) + (1 << (s -
+        1))`` per axis with ``s = 16 - depth``; ``key_to_coord(keys, depth)``
+        gives the node's centre.
 
         Parameters
         ----------
         points : array-like of shape (n_points, 3)
+        depth : int, default=16
+            Tree depth of the cells, in [1, 16] (16: the finest cells). Depth
+            0, the root, has no key of its own (liboctomap's formula wraps
+            around there).
 
         Returns
         -------
@@ -491,19 +520,28 @@ default="auto"
 
         Raises
         ------
+        TypeError
+            If `points` does not hold numbers or `depth` is not an int.
         ValueError
-            If `points` is malformed, not finite, or outside the key range.
+            If `points` is malformed, not finite, or outside the key range, or
+            `depth` lies outside [1, 16].
 
         Examples
         --------
         >>> OccupancyOctree(0.1).coord_to_key([[0.05, -0.05, 1.0]]).tolist()
         [[32768, 32767, 32778]]
+        >>> OccupancyOctree(0.1).coord_to_key([[0.05, -0.05, 1.0]], depth=14).tolist()
+        [[32770, 32766, 32778]]
         """
+        depth = check_int(depth, "depth", low=1, high=TREE_DEPTH)
         pts = self._as_float32_points(points, "points")
         ok = self._in_range(pts)
         if not ok.all():
             self._raise_out_of_range("points", ok, "")
         keys = np.floor(pts.astype(np.float64) * (1.0 / self.resolution)) + TREE_MAX_VAL
+        shift = TREE_DEPTH - depth
+        if shift:
+            keys = np.floor(keys / (1 << shift)) * (1 << shift) + (1 << (shift - 1))
         return np.ascontiguousarray(keys, dtype=np.uint16)
 
     def key_to_coord(self, keys: ArrayLike, depth: int = TREE_DEPTH) -> NDArray[np.float64]:
@@ -581,6 +619,113 @@ default="auto"
         return self
 
     # ------------------------------------------------------------------ queries
+    def occupancy(self, points: ArrayLike, *, depth: int = 0) -> NDArray[np.float64]:
+        """Probability of occupancy at each point, NaN where the map knows nothing.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres. Points outside the key range are unknown.
+        depth : int, default=0
+            Tree depth of the answering node, in [0, 16]; 0 means 16 (the leaf
+            holding the point). ``d`` answers with the depth-``d`` node holding
+            the point, as liboctomap's ``search(key, depth)``: an inner node's
+            value is the largest log-odds of its children, so a coarse query
+            is conservative (occupied if anything below is); a pruned leaf
+            coarser than ``d`` answers for itself.
+
+        Returns
+        -------
+        p : ndarray of shape (n_points,)
+            Occupancy probability of the node holding each point, or NaN.
+
+        Raises
+        ------
+        TypeError
+            If `points` does not hold numbers or `depth` is not an int.
+        ValueError
+            If `points` is not of shape (n_points, 3) or holds NaN or inf, or
+            `depth` lies outside [0, 16].
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).insert_scan([[0.55, 0.05, 0.05]], [0.05, 0.05, 0.05])
+        >>> m.occupancy([[0.45, 0.05, 0.05]]).round(2).tolist()      # a free leaf
+        [0.4]
+        >>> m.occupancy([[0.45, 0.05, 0.05]], depth=13).round(2).tolist()  # its 0.8 m node
+        [0.7]
+        """
+        return self._depth_query(points, depth, 0)
+
+    def log_odds(self, points: ArrayLike, *, depth: int = 0) -> NDArray[np.float64]:
+        """Log-odds of occupancy at each point, NaN where the map knows nothing.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres. Points outside the key range are unknown.
+        depth : int, default=0
+            Tree depth of the answering node, as for :meth:`occupancy`.
+
+        Returns
+        -------
+        l : ndarray of shape (n_points,)
+            The node's stored log-odds (float32 values), or NaN.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`occupancy`.
+        """
+        return self._depth_query(points, depth, 1)
+
+    def is_occupied(self, points: ArrayLike, *, return_unknown: bool = False,
+                    depth: int = 0):
+        """Whether each point lies in an occupied cell.
+
+        A cell is occupied when its probability is at least
+        ``occupancy_threshold``. Unknown cells are reported as not occupied;
+        ask for `return_unknown` to tell them apart from free ones.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+        return_unknown : bool, default=False
+            Also return the mask of points in unknown cells.
+        depth : int, default=0
+            Tree depth of the answering node, as for :meth:`occupancy`: an
+            inner node is occupied when one of its children is.
+
+        Returns
+        -------
+        occupied : ndarray of bool, shape (n_points,)
+        unknown : ndarray of bool, shape (n_points,)
+            Only when `return_unknown` is True.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`occupancy`, and TypeError if `return_unknown` is not a
+            bool.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0])
+        >>> occ, unk = m.is_occupied([[1.0, 0, 0], [0.5, 0, 0], [9, 9, 9]], return_unknown=True)
+        >>> occ.tolist(), unk.tolist()
+        ([True, False, False], [False, False, True])
+        """
+        return_unknown = check_bool(return_unknown, "return_unknown")
+        state = self._depth_query(points, depth, 2)
+        occupied = state == 1
+        return (occupied, state < 0) if return_unknown else occupied
+
+    def _depth_query(self, points: ArrayLike, depth: int, what: int):
+        """The core's query `what` (see ``_query_depth``) at a checked depth."""
+        d = self._check_depth(depth)
+        pts = self._as_float32_points(points, "points")
+        return self._query(pts, what) if d == TREE_DEPTH else self._query_depth(pts, what, d)
+
     def cast_rays(
         self,
         origins: ArrayLike,
@@ -667,8 +812,12 @@ default="auto"
         far = np.linalg.norm(origins[:, None, :] - corners[None], axis=2).max(axis=1)
         return far + 2 * self.resolution
 
-    def leaves(self, *, occupied_only: bool = False, bbox: ArrayLike | None = None) -> Leaves:
-        """Return every leaf of the tree as arrays.
+    def leaves(self, *, occupied_only: bool = False, bbox: ArrayLike | None = None,
+               max_depth: int = 0) -> Leaves:
+        """Return every leaf of the tree as arrays (liboctomap's ``begin_leafs``).
+
+        The leaves come in liboctomap's iterator order (depth first, children
+        in liboctomap's child order).
 
         Parameters
         ----------
@@ -676,12 +825,28 @@ default="auto"
             Keep only the occupied leaves.
         bbox : array-like of shape (2, 3), default=None
             ``[min_corner, max_corner]``: keep only the leaves overlapping this
-            axis-aligned box.
+            axis-aligned box (``begin_leafs_bbx``). A box larger than the key
+            range means all of it.
+        max_depth : int, default=0
+            Deepest level listed, in [0, 16]; 0 means 16 (the leaves
+            themselves). As ``begin_leafs(max_depth)``: inner nodes at
+            `max_depth` are listed as leaves, with their own size and value
+            (the largest log-odds below them), and `occupied_only` tests
+            that value.
 
         Returns
         -------
         leaves : Leaves
             Named tuple ``(centers, sizes, log_odds)``.
+
+        Raises
+        ------
+        TypeError
+            If `occupied_only` is not a bool, `max_depth` not an int, or `bbox`
+            does not hold numbers.
+        ValueError
+            If `max_depth` lies outside [0, 16], or `bbox` is not of shape
+            (2, 3), holds NaN or has min > max on an axis.
 
         Examples
         --------
@@ -689,8 +854,16 @@ default="auto"
         >>> centers, sizes, log_odds = m.leaves(occupied_only=True)
         >>> centers.round(2).tolist(), sizes.round(2).tolist()
         ([[0.55, 0.05, 0.05]], [0.1])
+        >>> leaves = m.leaves(max_depth=13)     # one 0.8 m cube holds the scan's cells
+        >>> leaves.sizes.round(2).tolist(), leaves.log_odds.round(3).tolist()
+        ([0.8], [0.847])
         """
         occupied_only = check_bool(occupied_only, "occupied_only")
+        depth = self._check_depth(max_depth, "max_depth")
+        if depth < TREE_DEPTH:
+            key_box = None if bbox is None else self._leaves_key_box(bbox)
+            centers, sizes, _, values, _ = self._nodes(depth, True, occupied_only, key_box)
+            return Leaves(centers, sizes, values)
         if bbox is not None:
             box = as_numeric(bbox, "bbox")
             if box.shape != (2, 3):
@@ -702,6 +875,310 @@ default="auto"
             box = np.clip(box, *(np.array(self.key_range) * [1, 1 - 1e-12]))
             return Leaves(*self._leaves(occupied_only, box))
         return Leaves(*self._leaves(occupied_only))
+
+    def nodes(self, *, max_depth: int = 0, bbox: ArrayLike | None = None) -> "Nodes":
+        """Return every node of the tree, inner nodes included (liboctomap's ``begin_tree``).
+
+        The nodes come in the order of liboctomap's tree iterator: depth first,
+        each node before its children, children in liboctomap's child order
+        (``x`` in bit 0, ``y`` in bit 1, ``z`` in bit 2 of the child index).
+        The root (depth 0, centre at the origin, edge ``resolution * 2**16``)
+        comes first when the map is not empty. An inner node's log-odds is the
+        largest of its children's (liboctomap's ``updateInnerOccupancy``,
+        which occgp keeps current after every update and deletion).
+
+        Parameters
+        ----------
+        max_depth : int, default=0
+            Deepest level listed, in [0, 16]; 0 means 16 (every node). Nodes
+            at `max_depth` are listed as leaves (``is_leaf`` True) and their
+            children are not listed, as ``begin_tree(max_depth)`` does.
+        bbox : array-like of shape (2, 3), default=None
+            ``[min_corner, max_corner]``: list only the nodes whose cube
+            overlaps this box (and so, with each node, its ancestors). A box
+            larger than the key range means all of it.
+
+        Returns
+        -------
+        nodes : Nodes
+            Named tuple ``(centers, sizes, depths, log_odds, is_leaf)``.
+
+        Raises
+        ------
+        TypeError
+            If `max_depth` is not an int or `bbox` does not hold numbers.
+        ValueError
+            If `max_depth` lies outside [0, 16], or `bbox` is not of shape
+            (2, 3), holds NaN or has min > max on an axis.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).insert_scan([[0.15, 0.05, 0.05]], [0.05, 0.05, 0.05])
+        >>> nodes = m.nodes()
+        >>> len(nodes.depths), int(nodes.depths[0]), int(nodes.is_leaf.sum())   # root first
+        (18, 0, 2)
+        """
+        depth = self._check_depth(max_depth, "max_depth")
+        key_box = None if bbox is None else self._leaves_key_box(bbox)
+        return Nodes(*self._nodes(depth, False, False, key_box))
+
+    def delete_cells(self, points: ArrayLike, depth: int = 0) -> int:
+        """Make the nodes holding `points` unknown again (liboctomap's ``deleteNode``).
+
+        Row ``i`` deletes the node at `depth` that holds ``points[i]``, with its
+        whole subtree. A pruned leaf coarser than `depth` on the way is first
+        expanded, as liboctomap's ``deleteNodeRecurs`` does: its eight children
+        take its value, and the deletion continues in the child holding the
+        point, so the rest of the pruned cube stays known. An inner node left
+        without children is deleted too, and every remaining ancestor takes
+        the largest log-odds of its children again, so queries at any depth
+        stay consistent; afterwards queries at the points give NaN (unknown).
+        The tree is not pruned again: the siblings of a deleted cell stay as
+        they are.
+
+        occgp implements this itself: liboctomap 1.9's ``deleteNode`` aborts
+        on inner nodes. Deletions are not recorded by :attr:`track_changes`
+        (liboctomap's change detection does not record them either); a
+        deleted cell that is observed again is recorded as new.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Points in the nodes to delete, metres; inside the key range.
+        depth : int, default=0
+            Tree depth of the deleted nodes, in [0, 16]: 16 (or 0, liboctomap's
+            convention for "the tree's depth") deletes the finest cells, ``d``
+            the node of edge ``resolution * 2**(16 - d)``.
+
+        Returns
+        -------
+        n_deleted : int
+            How many nodes were deleted (points in unknown space, or in a node
+            an earlier row already deleted, delete nothing).
+
+        Raises
+        ------
+        TypeError
+            If `points` does not hold numbers or `depth` is not an int.
+        ValueError
+            If `points` is not of shape (n_points, 3), holds NaN or inf or lies
+            outside the key range, or `depth` lies outside [0, 16]. The map is
+            then unchanged.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).insert_scan([[0.55, 0.05, 0.05]], [0.05, 0.05, 0.05])
+        >>> m.delete_cells([[0.55, 0.05, 0.05], [0.56, 0.05, 0.05]])
+        1
+        >>> m.log_odds([[0.55, 0.05, 0.05], [0.45, 0.05, 0.05]]).round(3).tolist()
+        [nan, -0.405]
+        """
+        depth = self._check_depth(depth)
+        keys = self.coord_to_key(points)
+        if len(keys) == 0:
+            return 0
+        return int(self._delete(keys, depth))
+
+    def is_at_threshold(self, points: ArrayLike, *, depth: int = 0) -> NDArray[np.bool_]:
+        """Whether each point's cell is at a clamping bound (liboctomap's ``isNodeAtThreshold``).
+
+        True where the stored log-odds is at or beyond ``logit(clamping_max)``
+        or ``logit(clamping_min)`` (as float32, liboctomap's comparison): such
+        a cell does not change under further updates in the same direction.
+        Unknown cells (and points outside the key range) give False.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres.
+        depth : int, default=0
+            Answer for the node at this depth, as :meth:`log_odds` does.
+
+        Returns
+        -------
+        at_threshold : ndarray of bool, shape (n_points,)
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`log_odds`.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).insert_scan([[0.55, 0.05, 0.05]], [0.05, 0.05, 0.05])
+        >>> pts = [[0.55, 0.05, 0.05], [5.0, 5.0, 5.0]]
+        >>> m.is_at_threshold(pts).tolist(), m.to_max_likelihood().is_at_threshold(pts).tolist()
+        ([False, False], [True, False])
+        """
+        depth = self._check_depth(depth)
+        return self._query_depth(self._as_float32_points(points, "points"), 3, depth) == 1
+
+    def ray_intersections(
+        self,
+        origins: ArrayLike,
+        directions: ArrayLike,
+        centres: ArrayLike,
+        *,
+        delta: float = 0.0,
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """Where each ray enters a cell (liboctomap's ``getRayIntersection``).
+
+        For row ``i``, the line through ``origins[i]`` along ``directions[i]``
+        is intersected with the six faces of the cube of edge ``resolution``
+        centred at ``centres[i]`` (liboctomap's computation, in its mixed
+        single and double precision, faces widened by 1e-6); of the faces it
+        meets, the one nearest along the direction is kept (the smallest
+        signed distance: behind the origin when the origin lies inside the
+        cube), and the point ``origin + unit_direction * (distance + delta)``
+        is returned. Typical use: the `ends` of :meth:`cast_rays` as
+        `centres`, to get the surface point where each ray hit.
+
+        Parameters
+        ----------
+        origins : array-like of shape (n_rays, 3) or (3,)
+            Ray origins (one shared origin, or one per ray), in the key range.
+        directions : array-like of shape (n_rays, 3)
+            Ray directions; normalised (in single precision, as ``castRay``
+            normalises them), must not be zero.
+        centres : array-like of shape (n_rays, 3) or (3,)
+            Centres of the cells, in the key range (used as given, not snapped
+            to the cell grid).
+        delta : float, default=0.0
+            Metres to move the point along the ray (liboctomap's ``delta``):
+            a small positive value puts it inside the cell; ``|delta|`` at
+            most the key range's diagonal.
+
+        Returns
+        -------
+        points : ndarray of shape (n_rays, 3)
+            The entry points; NaN where the line misses the cube.
+        found : ndarray of bool, shape (n_rays,)
+            Whether the line meets the cube.
+
+        Raises
+        ------
+        TypeError
+            If an array does not hold real numbers or `delta` is not a real number.
+        ValueError
+            If a shape is wrong (or the rows of `origins` or `centres` do not
+            match `directions`), an array holds NaN or inf, `origins` or
+            `centres` lie outside the key range, a direction is zero, or
+            `delta` is out of range.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1)
+        >>> pts, found = m.ray_intersections([0.05, 0.05, 0.05], [[1.0, 0, 0]],
+        ...                                  [[1.05, 0.05, 0.05]])
+        >>> found.tolist(), pts.round(3).tolist()
+        ([True], [[1.0, 0.05, 0.05]])
+        """
+        dirs = _as_float32_directions(directions)
+        n = len(dirs)
+        orgs = self._rows_in_range(origins, "origins", n)
+        cens = self._rows_in_range(centres, "centres", n)
+        reach = 2 * np.sqrt(3) * (self.key_range[1] - self.key_range[0])
+        delta = check_real(delta, "delta", low=-reach, high=reach, low_open=False,
+                           high_open=False)
+        return self._ray_intersections(orgs, dirs, cens, delta)
+
+    def _rows_in_range(self, x: ArrayLike, name: str, n: int) -> np.ndarray:
+        """`x` as float32 rows, one per ray ((3,) is shared), all in the key range."""
+        arr = as_numeric(x, name)
+        if arr.ndim == 1:
+            rows = np.repeat(self._as_float32_origin(arr, name)[None], n, axis=0)
+        else:
+            rows = self._as_float32_points(arr, name)
+            if len(rows) != n:
+                raise ValueError(f"{name} must have shape (3,) or ({n}, 3) to match "
+                                 f"directions, got {rows.shape}")
+            ok = self._in_range(rows)
+            if not ok.all():
+                self._raise_out_of_range(name, ok, "")
+        return np.ascontiguousarray(rows)
+
+    def set_params(self, **params) -> "OccupancyOctree":
+        """Change the sensor model (liboctomap's ``setProbHit``, ``setClampingThresMin``, ...).
+
+        Sets any of ``prob_hit``, ``prob_miss``, ``clamping_min``,
+        ``clamping_max`` and ``occupancy_threshold``, checked as the
+        constructor checks them (scikit-learn's ``set_params``;
+        :meth:`get_params` reads them back). As with liboctomap's setters, the
+        stored log-odds do not change: the new values apply to later updates
+        (and clamps) and to the queries that compare with a threshold
+        (:meth:`is_occupied`, :meth:`is_at_threshold`, :meth:`extract_points`,
+        ...). The resolution is fixed: ``resolution`` is accepted only with
+        the map's own value (so that ``set_params(**other.get_params())``
+        works between maps of one resolution). Pickles keep the new values;
+        ``.bt`` / ``.ot`` files store only the resolution, so pass the values
+        to :meth:`load` again.
+
+        Parameters
+        ----------
+        **params
+            The parameters to change, by name.
+
+        Returns
+        -------
+        self : OccupancyOctree
+
+        Raises
+        ------
+        TypeError
+            If a value is not a real number.
+        ValueError
+            If a name is not a settable parameter of this map (subclasses such
+            as :class:`occgp.KNNMap`, whose sensor model has other parameters,
+            have none), `resolution` differs from the map's, or a value lies
+            outside the constructor's range. The map is then unchanged.
+
+        Examples
+        --------
+        >>> m = OccupancyOctree(0.1).set_params(prob_hit=0.9, clamping_max=0.99)
+        >>> m.prob_hit, m.get_params()["clamping_max"]
+        (0.9, 0.99)
+        """
+        settable = [k for k in _SENSOR_PARAMS if k in self._params]
+        for name, value in params.items():
+            if name == "resolution" and "resolution" in self._params:
+                if value != self.resolution:
+                    raise ValueError(f"resolution is fixed at construction ({self.resolution!r}), "
+                                     f"got {value!r}; build a new map instead")
+            elif name not in settable:
+                raise ValueError(f"{name!r} is not a parameter set_params can change on "
+                                 f"{type(self).__name__} (settable: "
+                                 f"{', '.join(settable) or 'none'})")
+        if not settable:
+            return self
+        new = check_params({**self._params, **{k: v for k, v in params.items()
+                                               if k != "resolution"}})
+        self._set_sensor_model(*(new[k] for k in _SENSOR_PARAMS))
+        self._params = new
+        return self
+
+    @property
+    def tree_depth(self) -> int:
+        """Depth of the tree (liboctomap's ``getTreeDepth``): always 16, the finest cells'."""
+        return TREE_DEPTH
+
+    def _check_depth(self, depth: int, name: str = "depth") -> int:
+        """A node depth in [0, 16] as liboctomap's search takes it: 0 becomes 16."""
+        d = check_int(depth, name, low=0, high=TREE_DEPTH)
+        return d if d else TREE_DEPTH
+
+    def _leaves_key_box(self, bbox: ArrayLike) -> np.ndarray:
+        """The lowest and highest key of `bbox` (rows), clipped to the key range."""
+        box = as_numeric(bbox, "bbox")
+        if box.shape != (2, 3):
+            raise ValueError(f"bbox must have shape (2, 3) (min and max corner), "
+                             f"got {box.shape}")
+        box = np.ascontiguousarray(box, dtype=np.float64)
+        if np.isnan(box).any() or (box[0] > box[1]).any():
+            raise ValueError(f"bbox must have min <= max on every axis, got {box.tolist()}")
+        box = np.clip(box, *(np.array(self.key_range) * [1, 1 - 1e-12]))
+        # as the compiled _leaves computes them
+        keys = np.floor((1.0 / self.resolution) * box) + TREE_MAX_VAL
+        return np.ascontiguousarray(np.clip(keys, 0, 2 * TREE_MAX_VAL - 1), dtype=np.uint16)
 
     # ------------------------------------------------------------------ structure
     @property
@@ -840,8 +1317,10 @@ default="auto"
     def _from_data(cls, data: bytes, source: str, params: dict) -> "OccupancyOctree":
         header = fmt.parse_header(data, source)
         if header.tree_type != "OcTree":
+            hint = (" (read ColorOcTree files with occgp.ColorOctree.load)"
+                    if header.tree_type == "ColorOcTree" else "")
             raise ValueError(f"{source} holds a {header.tree_type!r} tree; only 'OcTree' "
-                             "(occupancy) files can be read")
+                             f"(occupancy) files can be read{hint}")
         try:
             check_resolution(header.resolution)
         except ValueError as exc:

@@ -98,6 +98,7 @@ def test_rows_naming_an_equivalent_cite_it(rows):
     "expand", "writeBinary", "readBinary", "write(", "read(", "useBBXLimit",
     "setBBXMin", "enableChangeDetection", "resetChangeDetection", "extractPointCloud",
     "dynamicEDT_generate", "ColorOcTree", "averageNodeColor", "deleteNode",
+    "adjustKeyAtDepth", "getTreeDepth", "setProbHit", "setOccupancyThres",
 ])
 def test_binding_method_has_a_row(rows, method):
     assert any(method in r[0] for r in rows[1:]), method
@@ -112,12 +113,24 @@ def test_recipes_in_the_notes():
     occ, unk = m.is_occupied(pts, return_unknown=True)
     assert np.where(unk, -1, occ.astype(int)).tolist() == [1, 0, -1]
 
-    # isNodeAtThreshold: False after one scan, True after toMaxLikelihood
+    # isNodeAtThreshold: False after one scan, True after toMaxLikelihood; the method
+    # is the float32 comparison with the clamping bounds, False where unknown
     def at_threshold(tree):
-        l = tree.log_odds(pts[:2])
+        l = tree.log_odds(pts)
         return ((l >= _logit(tree.clamping_max)) | (l <= _logit(tree.clamping_min))).tolist()
-    assert at_threshold(m) == [False, False]
-    assert at_threshold(m.to_max_likelihood()) == [True, True]
+    assert at_threshold(m) == m.is_at_threshold(pts).tolist() == [False, False, False]
+    ml = OccupancyOctree.from_bytes(m.to_bytes()).to_max_likelihood()
+    assert at_threshold(ml) == ml.is_at_threshold(pts).tolist() == [True, True, False]
+
+    # search(point, depth): the node's value is the largest of its children's
+    assert m.log_odds(pts[:1], depth=1)[0] == m.leaves().log_odds.max()
+    assert np.isnan(m.log_odds(pts[2:], depth=14))[0]
+
+    # begin_leafs(maxDepth), begin_tree: sizes and the root
+    assert m.leaves(max_depth=12).sizes.tolist() == [1.6]
+    nodes = m.nodes()
+    assert nodes.depths[0] == 0 and len(nodes.depths) == m.num_nodes
+    assert m.tree_depth == 16
 
     # getMetricMin/Max/Size and volume
     lo, hi = m.bounds
@@ -129,6 +142,14 @@ def test_recipes_in_the_notes():
     leaves = m.leaves()
     depth = 16 - np.log2(leaves.sizes / m.resolution)
     assert depth.min() >= 0 and depth.max() == 16
+
+    # deleteNode
+    assert m.delete_cells(pts) == 2 and np.isnan(m.log_odds(pts)).all()
+
+    # setProbHit ...: pickles keep them
+    import pickle
+    m.set_params(prob_hit=0.8)
+    assert pickle.loads(pickle.dumps(m)).prob_hit == 0.8
 
 
 @pytest.mark.parametrize("d", [1, 5, 15])
@@ -143,6 +164,9 @@ def test_adjust_key_at_depth_recipe(d):
     sibling = np.minimum(k | 1, 65535)
     same = ((sibling >> (16 - d)) << (16 - d)) + (1 << (15 - d))
     assert np.array_equal(same, adjusted)
+    # coord_to_key(pts, depth=d) gives the adjusted key of the finest one
+    pts = m.key_to_coord(keys)
+    assert np.array_equal(m.coord_to_key(pts, depth=d), adjusted)
 
 
 def test_key_to_coord_of_the_depth_recipe_is_the_node_centre():
@@ -157,3 +181,19 @@ def test_module_names_resolve():
     assert _resolve("occgp.Leaves") is occgp.Leaves
     with pytest.raises(AttributeError):
         _resolve("occgp.OccupancyOctree.search")
+
+
+@pytest.mark.parametrize("binding, ours", [
+    ("tree.search(point, depth)", "occgp.OccupancyOctree.log_odds"),
+    ("tree.isNodeAtThreshold", "occgp.OccupancyOctree.is_at_threshold"),
+    ("getRayIntersection", "occgp.OccupancyOctree.ray_intersections"),
+    ("adjustKeyAtDepth", "occgp.OccupancyOctree.coord_to_key"),
+    ("begin_leafs(maxDepth)", "occgp.OccupancyOctree.leaves"),
+    ("begin_tree", "occgp.OccupancyOctree.nodes"),
+    ("getTreeDepth", "occgp.OccupancyOctree.tree_depth"),
+    ("setProbHit", "occgp.OccupancyOctree.set_params"),
+    ("deleteNode", "occgp.OccupancyOctree.delete_cells"),
+])
+def test_rows_now_covered_cite_their_method(rows, binding, ours):
+    row = next(r for r in rows[1:] if binding in r[0])
+    assert ours in ROLE.findall(row[1])

@@ -483,10 +483,21 @@ def test_map_command_reports_beams_beyond_max_range(tmp_path, capsys):
     ends = np.concatenate([s.points.astype(np.float64) - s.origin for s in scans])
     far = int(np.count_nonzero(np.linalg.norm(ends, axis=1) > 3.0))
     assert 0 < far < len(ends)
+    # BGK's beams: one per 0.1 m cube holding end points, to their centroid
+    kept = dropped = 0
+    for s in scans:
+        pts = s.points.astype(np.float64)
+        _, inverse, counts = np.unique(np.floor(pts / 0.1), axis=0, return_inverse=True,
+                                       return_counts=True)
+        sums = np.zeros((len(counts), 3))
+        np.add.at(sums, inverse.ravel(), pts)
+        beyond = np.linalg.norm(sums / counts[:, None] - s.origin, axis=1) > 3.0
+        kept, dropped = kept + int((~beyond).sum()), dropped + int(beyond.sum())
+    assert 0 < dropped < kept
     assert main(["map", *map(str, paths), "-o", str(tmp_path / "m.bt"), "--method", "bgk",
                  "--max-range", "3", "--n-jobs", "2", "--no-progress"]) == 0
-    assert f"{far:,} of 1,000 points lie beyond max_range 3 m: BGK dropped their beams" in \
-        capsys.readouterr().out
+    assert (f"{far:,} of 1,000 points lie beyond max_range 3 m: BGK dropped {dropped:,} of "
+            f"its {kept + dropped:,} beams") in capsys.readouterr().out
     assert main(["map", *map(str, paths), "-o", str(tmp_path / "m.bt"), "--max-range", "3",
                  "--no-progress"]) == 0
     assert f"{far:,} of 1,000 points lie beyond max_range 3 m: their rays were cut" in \

@@ -411,14 +411,28 @@ def test_room_2d_seed_moves_obstacles():
     "kwargs, match",
     [
         ({"n_beams": 0}, "n_beams must be a positive int"),
-        ({"fov": -1.0}, "fov must be in"),
+        ({"fov": -1.0}, r"fov must lie in \[0.0, 6.28"),
         ({"max_range": np.inf}, "max_range must be finite"),
-        ({"noise": -1.0}, "noise must be non-negative"),
+        ({"noise": -1.0}, r"noise must lie in \[0.0, inf\), got -1"),
+        ({"noise": np.inf}, r"noise must lie in \[0.0, inf\), got inf"),
+        ({"n_poses": 10**6, "n_beams": 10**3}, "n_poses \\* n_beams must be at most 67108864"),
     ],
 )
 def test_room_2d_scan_rejects_bad_arguments(room, kwargs, match):
     with pytest.raises(ValueError, match=match):
         room.scan(**kwargs)
+
+
+def test_scenes_and_sensors_reject_huge_or_mistyped_sizes(room):
+    from occgp.datasets import LidarSensor, structured_room
+    with pytest.raises(TypeError, match="fov must be a real number, got str"):
+        room.scan(fov="wide")
+    with pytest.raises(ValueError, match=r"n_poses must lie in \[1, 10000000\]"):
+        room.poses(10**9)
+    with pytest.raises(ValueError, match=r"n_poses must lie in \[1, 10000\], got 10001"):
+        structured_room().poses(10_001)
+    with pytest.raises(ValueError, match="n_vertical \\* n_horizontal must be at most 16777216"):
+        LidarSensor(n_horizontal=10**5, n_vertical=10**5)
 
 
 def test_room_2d_rejects_bad_points(room):

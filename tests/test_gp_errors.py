@@ -361,3 +361,20 @@ def test_n_jobs_beyond_the_cores_counts_as_every_core():
     from occgp._validation import n_threads
     assert threads(2**70) == threads(-1) == n_threads(-1)
     assert threads(None) == 1 and threads(1) == 1
+
+
+def test_inverse_length_scales_and_take_reject_bad_arguments():
+    from occgp.gp import Observations, SquaredExponential
+    k = SquaredExponential(length_scale=[1.0, 2.0])
+    np.testing.assert_array_equal(k.inverse_length_scales(2), [1.0, 0.5])
+    with pytest.raises(TypeError, match="n_dims must be a non-negative int, got str"):
+        k.inverse_length_scales("2")
+    with pytest.raises(ValueError, match=r"n_dims must lie in \[0, 65536\], got -1"):
+        k.inverse_length_scales(-1)
+    obs = Observations(*(np.zeros((3, 2)), np.zeros((3, 2)), np.ones(3), np.ones(3),
+                         np.zeros(3)))
+    assert len(obs.take([0, 2]).y) == 2
+    with pytest.raises(ValueError, match=r"index: index 5 is out of bounds .*3 observations"):
+        obs.take(5)
+    with pytest.raises(ValueError, match="index: boolean index did not match"):
+        obs.take(np.ones(4, dtype=bool))

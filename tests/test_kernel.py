@@ -58,6 +58,25 @@ def test_bgk_training_data_follows_la3dm():
     assert_allclose(frees[:, 1:], 0.0)
 
 
+def test_bgk_last_beams_counts_the_kept_and_dropped_beams_of_an_accepted_update():
+    m = BGKMap(0.1, max_range=3.0)
+    assert m.last_beams_ == (0, 0)
+    points = np.array([[1.22, 0.0, 0.0], [1.24, 0.0, 0.0], [0.0, 5.0, 0.0], [0.0, 0.0, 4.0]])
+    m.training_data(points, [0.0, 0.0, 0.0])                # a dry run counts nothing
+    assert m.last_beams_ == (0, 0)
+    m.update(points, [0.0, 0.0, 0.0])
+    assert m.last_beams_ == (1, 2)                          # two cubes merged, two far
+    m.update(points[2:], [0.0, 0.0, 0.0])                   # every beam dropped: no sample
+    assert m.last_beams_ == (0, 2) and m.num_cells > 0
+    with pytest.raises(ValueError, match="points"):
+        m.update([[np.nan, 0.0, 0.0]], [0.0, 0.0, 0.0])
+    assert m.last_beams_ == (0, 2)                          # a rejected update changes nothing
+    m.update(np.empty((0, 3)), [0.0, 0.0, 0.0])
+    assert m.last_beams_ == (0, 0)
+    assert BGKMap(0.1, max_range=None).update(points, np.zeros(3)).last_beams_ == (3, 0)
+    assert pickle.loads(pickle.dumps(m)).last_beams_ == (0, 0)
+
+
 def test_bgk_extra_free_sample_only_on_beams_longer_than_free_resolution():
     """la3dm's beam_sample: no free sample on a beam of at most free_resolution; on a
     beam of exactly 2 free_resolution the extra sample falls on the step one (both

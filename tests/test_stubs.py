@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize("module", ["occgp._octree", "occgp._grid", "occgp._kernel", "occgp._integral",
-                                    "occgp._linetrack"])
+                                    "occgp._linetrack", "occgp._color"])
 def test_compiled_module_stubs_match_runtime(module):
     pytest.importorskip("mypy.stubtest")
     env = dict(os.environ, MYPYPATH=str(ROOT))

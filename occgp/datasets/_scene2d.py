@@ -15,12 +15,14 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_points, check_int
+from .._validation import as_points, check_int, check_real
 from ._scenes import _as_rays, _check_max_range
 
 __all__ = ["LaserScan2D", "Scene2D", "room_2d"]
 
 _INF = np.inf
+MAX_BEAMS = 2**26  # most beams (n_poses * n_beams) one Scene2D.scan casts
+MAX_POSES = 10**7  # most poses Scene2D.poses makes
 
 
 class LaserScan2D(NamedTuple):
@@ -200,7 +202,24 @@ class Scene2D:
         return self._interior[0].copy(), self._interior[1].copy()
 
     def occupancy(self, points: ArrayLike) -> NDArray[np.bool_]:
-        """Exact membership of 2D `points` (shape (n_points, 2)) in the solids.
+        """Exact membership of 2D `points` in the union of the solids.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 2)
+            Query points in the world frame, in metres.
+
+        Returns
+        -------
+        occupied : ndarray of shape (n_points,), dtype bool
+            True inside or on the boundary of a solid.
+
+        Raises
+        ------
+        TypeError
+            If `points` does not hold real numbers.
+        ValueError
+            If `points` is not of shape (n_points, 2) or holds NaN or inf.
 
         Examples
         --------
@@ -228,9 +247,25 @@ class Scene2D:
         return out
 
     def signed_distance(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Signed distance to the solids (negative inside), shape (n_points,).
+        """Signed Euclidean distance to the solids (negative inside).
 
-        Exact outside the solids; inside overlapping solids, a lower bound.
+        Exact outside the solids; inside overlapping solids, the magnitude is
+        the depth inside the deepest single solid (a lower bound).
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 2)
+            Query points in the world frame, in metres.
+
+        Returns
+        -------
+        distance : ndarray of shape (n_points,)
+            In metres; inf everywhere for a scene without solids.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`occupancy`.
 
         Examples
         --------
@@ -249,15 +284,28 @@ class Scene2D:
         Parameters
         ----------
         origins : array-like of shape (2,) or (n_rays, 2)
+            Ray origins; one origin is shared by all rays.
         directions : array-like of shape (n_rays, 2)
             Normalised internally; must be non-zero.
         max_range : float, default=inf
+            Positive; rays that hit nothing closer are misses.
 
         Returns
         -------
         distances : ndarray of shape (n_rays,)
-            Distance to the first hit, `max_range` for misses.
+            Distance to the first hit, `max_range` for misses. A ray starting
+            inside a solid hits at 0.
         hit : ndarray of shape (n_rays,), dtype bool
+
+        Raises
+        ------
+        TypeError
+            If `origins` or `directions` does not hold real numbers, or
+            `max_range` is not a real number.
+        ValueError
+            If `directions` is not of shape (n_rays, 2), `origins` neither of
+            shape (2,) nor that of `directions`, either holds NaN or inf, a
+            direction is zero, or `max_range` is not positive.
 
         Examples
         --------
@@ -279,6 +327,8 @@ class Scene2D:
         Parameters
         ----------
         n_poses : int, default=26
+            Number of poses, in [1, ``MAX_POSES``] (10^7); the first is the
+            path's start and the last (for more than one) its end.
 
         Returns
         -------
@@ -286,13 +336,20 @@ class Scene2D:
         headings : ndarray of shape (n_poses,)
             Direction of travel, radians from +x.
 
+        Raises
+        ------
+        TypeError
+            If `n_poses` is not an int.
+        ValueError
+            If `n_poses` is below 1 or above ``MAX_POSES``.
+
         Examples
         --------
         >>> origins, headings = room_2d().poses()
         >>> origins.shape, headings.shape
         ((26, 2), (26,))
         """
-        n_poses = check_int(n_poses, "n_poses", low=1)
+        n_poses = check_int(n_poses, "n_poses", low=1, high=MAX_POSES)
         seg = np.diff(self.path, axis=0)
         length = np.linalg.norm(seg, axis=1)
         cum = np.concatenate([[0.0], np.cumsum(length)])
@@ -334,6 +391,18 @@ class Scene2D:
         Returns
         -------
         scans : list of LaserScan2D
+            One scan per pose.
+
+        Raises
+        ------
+        TypeError
+            If `n_poses`, `n_beams` or `seed` is not an int, or `fov`,
+            `max_range` or `noise` not a real number.
+        ValueError
+            If `n_poses` or `n_beams` is below 1, ``n_poses * n_beams`` above
+            ``MAX_BEAMS`` (2^26), `fov` outside [0, 2 pi], `max_range` not
+            positive and finite, `noise` negative or not finite, or `seed`
+            negative.
 
         Examples
         --------
@@ -342,15 +411,16 @@ class Scene2D:
         (26, (17,))
         """
         n_beams = check_int(n_beams, "n_beams", low=1)
-        fov = float(fov)
-        if not 0 <= fov <= 2 * np.pi:
-            raise ValueError(f"fov must be in [0, 2 pi], got {fov}")
+        n_poses = check_int(n_poses, "n_poses", low=1)
+        if n_poses * n_beams > MAX_BEAMS:
+            raise ValueError(f"n_poses * n_beams must be at most {MAX_BEAMS} beams, got "
+                             f"{n_poses} x {n_beams}")
+        fov = check_real(fov, "fov", low=0.0, high=2 * np.pi, low_open=False,
+                         high_open=False)
         max_range = _check_max_range(max_range)
         if not np.isfinite(max_range):
             raise ValueError("max_range must be finite for a laser scan")
-        noise = float(noise)
-        if not noise >= 0:
-            raise ValueError(f"noise must be non-negative, got {noise}")
+        noise = check_real(noise, "noise", low=0.0, low_open=False)
         rng = np.random.default_rng(check_int(seed, "seed", low=0))
         origins, headings = self.poses(n_poses)
         angles = np.linspace(-fov / 2, fov / 2, n_beams) if n_beams > 1 else np.zeros(1)
@@ -387,6 +457,13 @@ def room_2d(seed: int = 0) -> Scene2D:
     Returns
     -------
     scene : Scene2D
+
+    Raises
+    ------
+    TypeError
+        If `seed` is not an int.
+    ValueError
+        If `seed` is negative.
 
     Examples
     --------

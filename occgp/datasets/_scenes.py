@@ -41,6 +41,7 @@ DEFAULT_HEADING = -np.pi / 2
 HORIZONTAL_FOV = np.radians(117.0)
 ELEVATION_RANGE = (0.0, np.radians(42.0))
 _CLEARANCE = 0.3  # minimum distance from a sensor position to any object
+MAX_POSES = 10_000  # most sensor poses Scene.poses places
 
 
 def _as_rays(origins, directions, dim=3):
@@ -155,6 +156,8 @@ class Scene:
 
         Raises
         ------
+        TypeError
+            If `points` does not hold real numbers.
         ValueError
             If `points` is not of shape (n_points, 3) or not finite.
 
@@ -179,10 +182,17 @@ class Scene:
         Parameters
         ----------
         points : array-like of shape (n_points, 3)
+            Query points in the world frame, in metres.
 
         Returns
         -------
         distance : ndarray of shape (n_points,)
+            In metres.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`occupancy`.
 
         Examples
         --------
@@ -212,6 +222,16 @@ class Scene:
             for misses. A ray starting inside a solid hits at 0.
         hit : ndarray of shape (n_rays,), dtype bool
 
+        Raises
+        ------
+        TypeError
+            If `origins` or `directions` does not hold real numbers, or
+            `max_range` is not a real number.
+        ValueError
+            If `directions` is not of shape (n_rays, 3), `origins` neither of
+            shape (3,) nor that of `directions`, either holds NaN or inf, a
+            direction is zero, or `max_range` is not positive.
+
         Examples
         --------
         >>> d, hit = structured_room().ray_cast([0.0, 0.0, 1.0], [[0.0, 0.0, -1.0]])
@@ -236,6 +256,7 @@ class Scene:
         Parameters
         ----------
         n_poses : int, default=4
+            At most ``MAX_POSES`` (10,000).
         scans_per_pose : int, default=3
             Scans at one pose turn by ``2 pi / scans_per_pose``, starting from
             :attr:`base_heading` (random for the extra poses).
@@ -245,7 +266,16 @@ class Scene:
         -------
         origins : ndarray of shape (n_poses, 3)
         headings : ndarray of shape (n_poses, scans_per_pose)
-            Radians about +z, measured from +x.
+            Radians about +z, measured from +x, in [-pi, pi).
+
+        Raises
+        ------
+        TypeError
+            If `n_poses`, `scans_per_pose` or `seed` is not an int.
+        ValueError
+            If `n_poses` or `scans_per_pose` is below 1, `n_poses` above
+            ``MAX_POSES``, or `seed` negative; or if the extra poses cannot all
+            be placed clear of the objects (1000 rounds of 256 candidates).
 
         Examples
         --------
@@ -253,7 +283,7 @@ class Scene:
         >>> origins.shape, np.degrees(headings[0]).round().tolist()
         ((4, 3), [-90.0, 30.0, 150.0])
         """
-        n_poses = check_int(n_poses, "n_poses", low=1)
+        n_poses = check_int(n_poses, "n_poses", low=1, high=MAX_POSES)
         scans_per_pose = check_int(scans_per_pose, "scans_per_pose", low=1)
         seed = check_int(seed, "seed", low=0)
         n_fixed = min(n_poses, len(self.sensor_positions))
@@ -277,8 +307,10 @@ class Scene:
                 found = np.vstack([found, cand[clear]])
                 if len(found) >= n_extra:
                     break
-            else:  # pragma: no cover - the rooms have plenty of free space
-                raise RuntimeError("could not place the extra sensor poses")
+            else:  # pragma: no cover - the rooms have room for MAX_POSES poses
+                raise ValueError(f"n_poses: could not place {n_extra} extra sensor poses "
+                                 f"{_CLEARANCE} m clear of the objects, found "
+                                 f"{len(found)}; use fewer poses")
             origins.append(found[:n_extra])
             bases.append(rng.uniform(-np.pi, np.pi, n_extra))
         steps = 2 * np.pi * np.arange(scans_per_pose) / scans_per_pose
@@ -504,6 +536,13 @@ def structured_room(seed: int = 0) -> Scene:
     -------
     scene : Scene
 
+    Raises
+    ------
+    TypeError
+        If `seed` is not an int.
+    ValueError
+        If `seed` is negative.
+
     Examples
     --------
     >>> scene = structured_room()
@@ -533,6 +572,13 @@ def unstructured_room(seed: int = 0) -> Scene:
     -------
     scene : Scene
 
+    Raises
+    ------
+    TypeError
+        If `seed` is not an int.
+    ValueError
+        If `seed` is negative.
+
     Examples
     --------
     >>> scene = unstructured_room()
@@ -544,6 +590,24 @@ def unstructured_room(seed: int = 0) -> Scene:
 
 def make_scene(name: str, seed: int = 0) -> Scene:
     """Build a synthetic 3D room by name: ``"structured"`` or ``"unstructured"``.
+
+    Parameters
+    ----------
+    name : {"structured", "unstructured"}
+        :func:`structured_room` or :func:`unstructured_room`.
+    seed : int, default=0
+        Non-negative; 0 gives the fixed default layout (see those functions).
+
+    Returns
+    -------
+    scene : Scene
+
+    Raises
+    ------
+    TypeError
+        If `name` is not a str, or `seed` is not an int.
+    ValueError
+        If `name` is not one of the two, or `seed` is negative.
 
     Examples
     --------

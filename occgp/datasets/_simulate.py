@@ -25,6 +25,7 @@ __all__ = ["LidarSensor", "simulate_scans", "free_path"]
 _NEIGHBOURS = 64  # occupied cells checked for a pose's clearance
 _CANDIDATES = 24  # headings tried per path step (the last one turns back)
 _MAX_STARTS = 50  # start poses tried before free_path gives up
+MAX_RAYS = 2**24  # most beams of a LidarSensor (n_vertical * n_horizontal)
 
 
 @dataclass(frozen=True)
@@ -44,7 +45,8 @@ class LidarSensor:
         Lowest and highest beam elevation, radians, with
         ``-pi/2 <= low < high <= pi/2``.
     n_vertical : int, default=150
-        Number of elevations (0.5 degree steps by default).
+        Number of elevations (0.5 degree steps by default). At most
+        ``MAX_RAYS`` (2^24) beams in all, ``n_vertical * n_horizontal``.
     max_range : float, default=20.0
         Longest range that gives a return, metres.
     range_noise : float, default=0.0
@@ -75,6 +77,9 @@ class LidarSensor:
                                          high=2 * np.pi, high_open=False))
         fix("n_horizontal", check_int(self.n_horizontal, "n_horizontal", low=1))
         fix("n_vertical", check_int(self.n_vertical, "n_vertical", low=1))
+        if self.n_vertical * self.n_horizontal > MAX_RAYS:
+            raise ValueError(f"n_vertical * n_horizontal must be at most {MAX_RAYS} beams, got "
+                             f"{self.n_vertical} x {self.n_horizontal}")
         fov = np.asarray(self.vertical_fov)
         if fov.dtype.kind not in "iuf":
             raise TypeError(f"vertical_fov must hold real numbers, got dtype {fov.dtype}")
@@ -105,6 +110,13 @@ class LidarSensor:
             Row ``j * n_horizontal + i`` is elevation ``j`` (lowest first) and
             azimuth ``i`` (counter-clockwise), so per-beam values reshape to a
             ``(n_vertical, n_horizontal)`` range image.
+
+        Raises
+        ------
+        TypeError
+            If `heading` is not a real number.
+        ValueError
+            If `heading` is NaN or inf.
 
         Examples
         --------

@@ -584,19 +584,67 @@ class StereoDataset(NamedTuple):
                 f"_noise{self.depth_noise:g}")
 
     def scene(self) -> TetrominoScene:
-        """The data set's :func:`tetromino_scene`."""
+        """Build the data set's :func:`tetromino_scene`.
+
+        Returns
+        -------
+        scene : TetrominoScene
+            ``tetromino_scene(layout, texture=texture, environment=environment,
+            seed=scene_seed)``.
+
+        Raises
+        ------
+        ValueError, TypeError
+            As :func:`tetromino_scene`, for fields set to invalid values.
+        """
         return tetromino_scene(self.layout, texture=self.texture, environment=self.environment,
                                seed=self.scene_seed)
 
     def camera(self, **kwargs) -> StereoCamera:
-        """``StereoCamera(depth_noise=self.depth_noise, **kwargs)``."""
+        """The data set's camera: ``StereoCamera(depth_noise=self.depth_noise, **kwargs)``.
+
+        Parameters
+        ----------
+        **kwargs
+            Other :class:`StereoCamera` arguments (`width`, `height`, `fov`,
+            `max_depth`, `speckle`, `missing`); not `depth_noise`.
+
+        Returns
+        -------
+        camera : StereoCamera
+
+        Raises
+        ------
+        ValueError, TypeError
+            As :class:`StereoCamera`, and TypeError for an unknown keyword or
+            `depth_noise`.
+        """
         return StereoCamera(depth_noise=self.depth_noise, **kwargs)
 
     def scans(self, camera: StereoCamera | None = None, **kwargs) -> list[Scan]:
-        """``simulate_stereo(self.scene(), camera, seed=self.seed, **kwargs)``.
+        """Simulate the data set's scans with :func:`simulate_stereo`.
 
-        `camera` defaults to :meth:`camera` (the default camera at this data
-        set's noise level); `kwargs` go to :func:`simulate_stereo`.
+        ``simulate_stereo(self.scene(), camera, seed=self.seed, **kwargs)``.
+
+        Parameters
+        ----------
+        camera : StereoCamera, default=None
+            None: :meth:`camera` (the default camera at this data set's noise
+            level). A given camera is used as it is, whatever its
+            `depth_noise`.
+        **kwargs
+            Other :func:`simulate_stereo` arguments (`n_frames`, `orbits`,
+            `radius`, `height`, `voxel`, `progress`); not `seed`.
+
+        Returns
+        -------
+        scans : list of Scan
+            As :func:`simulate_stereo`.
+
+        Raises
+        ------
+        ValueError, TypeError
+            As :meth:`scene` and :func:`simulate_stereo`.
         """
         return simulate_stereo(self.scene(), self.camera() if camera is None else camera,
                                seed=self.seed, **kwargs)

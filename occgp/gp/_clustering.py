@@ -211,9 +211,27 @@ class _Clustering(BaseEstimator):
         return self
 
     def fit_predict(self, hits: ArrayLike, origins: ArrayLike) -> NDArray[np.int64]:
-        """Cluster `hits` from scratch and return their labels (int64, 0..k-1).
+        """Cluster `hits` from scratch and return their labels.
 
-        The same as ``fit(hits, origins).labels_`` (a copy); raises as :meth:`fit`.
+        The same as ``fit(hits, origins).labels_`` (a copy).
+
+        Parameters
+        ----------
+        hits : array-like of shape (n_hits, D)
+            Laser returns, in scan order.
+        origins : array-like of shape (n_hits, D)
+            The sensor position of each hit; a run of consecutive equal rows
+            is one scan.
+
+        Returns
+        -------
+        labels : ndarray of shape (n_hits,), dtype int64
+            Cluster labels ``0..k-1``, ``k`` = :attr:`n_clusters_`.
+
+        Raises
+        ------
+        ValueError, TypeError
+            As :meth:`fit`.
         """
         return self.fit(hits, origins).labels_.copy()
 

@@ -457,6 +457,8 @@ class GPOM(BaseEstimator):
             If called before :meth:`fit`.
         ValueError
             If `X` is not of shape (n_queries, n_dims) or holds NaN or inf.
+        TypeError
+            If `X` does not hold real numbers, or `return_var` is not a bool.
 
         Examples
         --------
@@ -495,6 +497,11 @@ class GPOM(BaseEstimator):
         -------
         proba : ndarray of shape (n_queries,)
             ``Phi((a mean + b) / sqrt(1 + a**2 var))`` with ``(a, b) = plsc_``.
+
+        Raises
+        ------
+        NotFittedError, ValueError, TypeError
+            As :meth:`predict`.
 
         Examples
         --------

@@ -461,10 +461,30 @@ default="clenshaw-curtis"
         (one Cholesky factor of the batch's predictive covariance gives every
         sequential prediction at once); an older cell whose box holds the
         observation gives its own divergence, and the smallest one counts.
+        The model is not changed.
+
+        Parameters
+        ----------
+        hits : array-like of shape (n_hits, D), default=None
+            Laser returns, in the fitted model's dimension D.
+        segment_starts, segment_ends : array-like of shape (n_beams, D), default=None
+            Beams, given together. `hits` or the beams may be None, not both.
 
         Returns
         -------
         kl : ndarray of shape (n_hits + n_beams,)
+            One divergence per observation, hits first.
+
+        Raises
+        ------
+        NotFittedError
+            If called before :meth:`fit`.
+        ValueError, TypeError
+            As :meth:`update`, also when the batch's covariance with the
+            largest cell would take more than 4 GiB.
+        numpy.linalg.LinAlgError
+            (a ValueError) If the batch's predictive covariance cannot be
+            factorised.
         """
         new = self._new_observations(hits, segment_starts, segment_ends, kl=True)
         return self._kl(new)[0]
@@ -839,13 +859,24 @@ default="clenshaw-curtis"
         Parameters
         ----------
         X : array-like of shape (n_queries, D)
+            Query points in the fitted model's dimension D. Must be finite.
         return_var : bool, default=False
+            Also return the latent variance.
 
         Returns
         -------
         mean : ndarray of shape (n_queries,)
         var : ndarray of shape (n_queries,)
             Only with `return_var`.
+
+        Raises
+        ------
+        NotFittedError
+            If called before :meth:`fit`.
+        ValueError
+            If `X` is not of shape (n_queries, D) or holds NaN or inf.
+        TypeError
+            If `X` does not hold real numbers, or `return_var` is not a bool.
         """
         X = self._check_X(X)
         return_var = check_bool(return_var, "return_var")
@@ -866,7 +897,24 @@ default="clenshaw-curtis"
         return (mean, best) if return_var else mean
 
     def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
-        """Probability of occupancy at points `X` (PLSC), shape (n_queries,)."""
+        """Probability of occupancy at points `X` (PLSC on the latent prediction).
+
+        Parameters
+        ----------
+        X : array-like of shape (n_queries, D)
+            Query points in the fitted model's dimension D. Must be finite.
+
+        Returns
+        -------
+        proba : ndarray of shape (n_queries,)
+            ``Phi((a mean + b) / sqrt(1 + a**2 var))`` with ``(a, b) = plsc_``
+            and the mean and variance of :meth:`predict`.
+
+        Raises
+        ------
+        NotFittedError, ValueError, TypeError
+            As :meth:`predict`.
+        """
         mean, var = self.predict(X, return_var=True)
         a, b = self.plsc_
         return plsc_proba(mean, var, a, b)

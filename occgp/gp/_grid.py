@@ -451,6 +451,15 @@ class OccupancyGrid(BaseEstimator):
         log_odds : ndarray of shape (n_points,)
             Log-odds of the cell of each point, NaN for a cell never observed.
 
+        Raises
+        ------
+        NotFittedError
+            If called before :meth:`fit`.
+        ValueError
+            If `X` is not of shape (n_points, n_dims) or holds NaN or inf.
+        TypeError
+            If `X` does not hold real numbers.
+
         Examples
         --------
         >>> grid = OccupancyGrid(resolution=1.0).fit([[0.5, 0.5]], None, None)
@@ -476,6 +485,11 @@ class OccupancyGrid(BaseEstimator):
             Occupancy probability of the cell of each point; 0.5 (the prior)
             for a cell never observed.
 
+        Raises
+        ------
+        NotFittedError, ValueError, TypeError
+            As :meth:`log_odds`.
+
         Examples
         --------
         >>> grid = OccupancyGrid(resolution=1.0).fit([[0.5, 0.5]], None, None)
@@ -495,6 +509,13 @@ class OccupancyGrid(BaseEstimator):
         Returns
         -------
         known : ndarray of shape (n_points,), dtype bool
+            False for a cell never observed, or a point beyond the grid's
+            key range.
+
+        Raises
+        ------
+        NotFittedError, ValueError, TypeError
+            As :meth:`log_odds`.
 
         Examples
         --------
@@ -513,6 +534,11 @@ class OccupancyGrid(BaseEstimator):
             Cell centres ``(keys_ + 0.5) * resolution``, in metres.
         proba : ndarray of shape (n_cells,)
             Occupancy probability of each cell.
+
+        Raises
+        ------
+        NotFittedError
+            If called before :meth:`fit`.
 
         Examples
         --------

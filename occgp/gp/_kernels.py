@@ -17,7 +17,7 @@ import numbers
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_numeric, check_bool
+from .._validation import as_numeric, check_bool, check_int
 from ._limits import MAX_DENSE_BYTES
 
 __all__ = ["SquaredExponential", "Matern32", "SparseKernel"]
@@ -117,7 +117,26 @@ class _Stationary:
         return ["log_variance"] + [f"log_length_scale_{d}" for d in range(self.n_theta - 1)]
 
     def with_theta(self, theta: ArrayLike):
-        """A copy of the kernel with hyper-parameters ``exp(theta)``."""
+        """A copy of the kernel with hyper-parameters ``exp(theta)``.
+
+        Parameters
+        ----------
+        theta : array-like of shape (n_theta,)
+            ``log([variance, *length_scale])``, finite.
+
+        Returns
+        -------
+        kernel : same type as self
+            A new kernel with the same bounds; its length scale is a float
+            unless this kernel is ARD (:attr:`anisotropic`).
+
+        Raises
+        ------
+        TypeError
+            If `theta` does not hold real numbers.
+        ValueError
+            If `theta` is not of shape (n_theta,) or holds NaN or inf.
+        """
         theta = as_numeric(theta, "theta").astype(np.float64)
         if theta.shape != (self.n_theta,) or not np.isfinite(theta).all():
             raise ValueError(f"theta must be a finite array of shape ({self.n_theta},), got {theta!r}")
@@ -127,13 +146,43 @@ class _Stationary:
                           length_scale_bounds=self.length_scale_bounds)
 
     def get_params(self, deep: bool = True) -> dict:
-        """The constructor arguments (scikit-learn's estimator protocol)."""
+        """The constructor arguments (scikit-learn's estimator protocol).
+
+        Parameters
+        ----------
+        deep : bool, default=True
+            Ignored (a kernel holds no sub-estimators); kept for scikit-learn.
+
+        Returns
+        -------
+        params : dict
+            ``variance``, ``length_scale``, ``variance_bounds`` and
+            ``length_scale_bounds``, as set (not validated).
+        """
         return {"variance": self.variance, "length_scale": self.length_scale,
                 "variance_bounds": self.variance_bounds,
                 "length_scale_bounds": self.length_scale_bounds}
 
     def set_params(self, **params):
-        """Set constructor arguments; returns self."""
+        """Set constructor arguments (scikit-learn's estimator protocol).
+
+        Values are checked when the kernel is next used, not here.
+
+        Parameters
+        ----------
+        **params
+            New values of the names :meth:`get_params` returns.
+
+        Returns
+        -------
+        self
+            The kernel, to allow chaining.
+
+        Raises
+        ------
+        ValueError
+            If a name is not one of :meth:`get_params`'s.
+        """
         valid = self.get_params()
         for key, value in params.items():
             if key not in valid:
@@ -155,7 +204,28 @@ class _Stationary:
 
     # ----------------------------------------------------------------- values
     def inverse_length_scales(self, n_dims: int) -> NDArray[np.float64]:
-        """``1 / length_scale`` broadcast to `n_dims` entries, shape (n_dims,)."""
+        """``1 / length_scale`` broadcast to `n_dims` entries.
+
+        Parameters
+        ----------
+        n_dims : int
+            Number of input dimensions, 0 to 65536.
+
+        Returns
+        -------
+        inv : ndarray of shape (n_dims,)
+
+        Raises
+        ------
+        ValueError
+            If `n_dims` is not in [0, 65536], the length scale has neither 1 nor
+            `n_dims` entries, or the variance, length scale or bounds are
+            invalid.
+        TypeError
+            If `n_dims` is not an int, or the variance or length scale is not
+            real.
+        """
+        n_dims = check_int(n_dims, "n_dims", low=0, high=65536)
         _, ls = self._checked()
         if ls.size == 1:
             ls = np.full(n_dims, ls[0])
@@ -165,11 +235,44 @@ class _Stationary:
         return 1.0 / ls
 
     def profile(self, s: ArrayLike) -> NDArray[np.float64]:
-        """The kernel as a function of the squared scaled distance, divided by the variance."""
+        """The kernel as a function of the squared scaled distance, divided by the variance.
+
+        Parameters
+        ----------
+        s : array-like of any shape
+            Squared scaled distances ``sum_d ((x_d - x'_d) / l_d) ** 2``, >= 0
+            (not checked: negative values give NaN for the Matérn and sparse
+            kernels).
+
+        Returns
+        -------
+        f : ndarray of the shape of `s`
+            ``f(s)``; 1 at ``s = 0``.
+
+        Raises
+        ------
+        TypeError
+            If `s` does not hold real numbers.
+        """
         return self._profile(as_numeric(s, "s").astype(np.float64))
 
     def gradient_factor(self, s: ArrayLike) -> NDArray[np.float64]:
-        """``-2 f'(s)``: ``dk/dlog(l_d) = variance * gradient_factor(s) * (dx_d / l_d) ** 2``."""
+        """``-2 f'(s)``: ``dk/dlog(l_d) = variance * gradient_factor(s) * (dx_d / l_d) ** 2``.
+
+        Parameters
+        ----------
+        s : array-like of any shape
+            Squared scaled distances, >= 0 (not checked, as :meth:`profile`).
+
+        Returns
+        -------
+        g : ndarray of the shape of `s`
+
+        Raises
+        ------
+        TypeError
+            If `s` does not hold real numbers.
+        """
         return self._gradient_factor(as_numeric(s, "s").astype(np.float64))
 
     def __call__(self, X: ArrayLike, Y: ArrayLike | None = None, eval_gradient: bool = False):
@@ -227,7 +330,25 @@ class _Stationary:
         return K, np.concatenate([K[:, :, None], per_dim], axis=2)
 
     def diag(self, X: ArrayLike) -> NDArray[np.float64]:
-        """``k(x, x)`` for each row of `X` (the variance), shape (n_samples,)."""
+        """``k(x, x)`` for each row of `X`: the variance.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_features)
+            Finite inputs; a 1-D array is one sample.
+
+        Returns
+        -------
+        d : ndarray of shape (n_samples,)
+
+        Raises
+        ------
+        TypeError
+            If `X` does not hold real numbers, or the variance is not real.
+        ValueError
+            If `X` has more than two dimensions or holds NaN or inf, or the
+            variance, length scale or bounds are invalid.
+        """
         variance, _ = self._checked()
         return np.full(_as_samples(X, "X").shape[0], variance)
 

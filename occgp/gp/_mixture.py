@@ -510,13 +510,24 @@ class GPMixture(BaseEstimator):
         Parameters
         ----------
         X : array-like of shape (n_queries, D)
+            Query points in the fitted model's dimension D. Must be finite.
         return_var : bool, default=False
+            Also return the merged latent variance.
 
         Returns
         -------
         mean : ndarray of shape (n_queries,)
         var : ndarray of shape (n_queries,)
             Only with `return_var`.
+
+        Raises
+        ------
+        NotFittedError
+            If called before :meth:`fit`.
+        ValueError
+            If `X` is not of shape (n_queries, D) or holds NaN or inf.
+        TypeError
+            If `X` does not hold real numbers, or `return_var` is not a bool.
         """
         check_is_fitted(self, "experts_")
         X = as_points(X, "X", self.n_dims_)
@@ -526,7 +537,24 @@ class GPMixture(BaseEstimator):
         return (mean, var) if return_var else mean
 
     def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
-        """Probability of occupancy at `X` (PLSC of the merged prediction), shape (n_queries,)."""
+        """Probability of occupancy at `X` (PLSC of the merged prediction).
+
+        Parameters
+        ----------
+        X : array-like of shape (n_queries, D)
+            Query points in the fitted model's dimension D. Must be finite.
+
+        Returns
+        -------
+        proba : ndarray of shape (n_queries,)
+            ``Phi((a mean + b) / sqrt(1 + a**2 var))`` with ``(a, b) = plsc_``
+            and the merged mean and variance of :meth:`predict`.
+
+        Raises
+        ------
+        NotFittedError, ValueError, TypeError
+            As :meth:`predict`.
+        """
         mean, var = self.predict(X, return_var=True)
         a, b = self.plsc_
         return plsc_proba(mean, var, a, b)

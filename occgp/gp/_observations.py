@@ -33,8 +33,29 @@ class Observations(NamedTuple):
         return 0.5 * (self.starts + self.ends)
 
     def take(self, index) -> "Observations":
-        """The observations at `index` (an integer array or a boolean mask)."""
-        return Observations(*(a[index] for a in self))
+        """The observations at `index`.
+
+        Parameters
+        ----------
+        index : int array, boolean mask of shape (n,) or slice
+            Any NumPy index of the first axis.
+
+        Returns
+        -------
+        observations : Observations
+            The selected rows of every field.
+
+        Raises
+        ------
+        ValueError
+            If `index` is not a valid NumPy index of the observations (out of
+            bounds, a mask of the wrong length, another type).
+        """
+        try:
+            return Observations(*(a[index] for a in self))
+        except IndexError as exc:
+            raise ValueError(f"index: {exc} (there are {len(self.y)} observations)") \
+                from None
 
 
 def _dimension(hits, starts):

@@ -157,7 +157,19 @@ def fit_plsc(mu: ArrayLike, var: ArrayLike, labels: ArrayLike, *,
 def plsc_proba(mu: ArrayLike, var: ArrayLike, a: float, b: float) -> NDArray[np.float64]:
     """``Phi((a mu + b) / sqrt(1 + a**2 var))``, the probability of class +1.
 
-    `mu` and `var` (non-negative) broadcast together; all inputs are finite.
+    Parameters
+    ----------
+    mu : array-like
+        Latent means, finite.
+    var : array-like
+        Latent variances, finite and >= 0; broadcasts with `mu`.
+    a, b : float
+        The PLSC slope and offset (:func:`fit_plsc`), finite.
+
+    Returns
+    -------
+    proba : ndarray of the broadcast shape of `mu` and `var`
+        Probabilities in [0, 1].
 
     Raises
     ------

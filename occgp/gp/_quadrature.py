@@ -46,6 +46,13 @@ def clenshaw_curtis(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     weights : ndarray of shape (n,)
         Positive, summing to 1.
 
+    Raises
+    ------
+    TypeError
+        If `n` is not an int.
+    ValueError
+        If `n` is outside [2, 16385].
+
     Examples
     --------
     >>> x, w = clenshaw_curtis(5)
@@ -75,7 +82,24 @@ def clenshaw_curtis(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
 def simpson(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Nodes and weights of the composite Simpson rule with `n` (odd) nodes on [0, 1].
 
-    `n` runs from 3 to 2**20 + 1.
+    Parameters
+    ----------
+    n : int
+        Number of nodes, odd, from 3 to 2**20 + 1.
+
+    Returns
+    -------
+    nodes : ndarray of shape (n,)
+        Equally spaced, from 0 to 1.
+    weights : ndarray of shape (n,)
+        ``(1, 4, 2, 4, ..., 2, 4, 1) / (3 (n - 1))``, summing to 1.
+
+    Raises
+    ------
+    TypeError
+        If `n` is not an int.
+    ValueError
+        If `n` is even or outside [3, 2**20 + 1].
 
     Examples
     --------
@@ -136,20 +160,106 @@ class _Rule:
         return out
 
     def nodes(self, order: int):
-        """Nodes and weights of one order on [0, 1]."""
+        """Nodes and weights of one order on [0, 1].
+
+        Parameters
+        ----------
+        order : int
+            Number of nodes: 2 to 16385 for :class:`ClenshawCurtis`, odd from
+            3 to 2**20 + 1 for :class:`Simpson` (any such order, not only the
+            tabulated :attr:`orders`).
+
+        Returns
+        -------
+        nodes, weights : ndarray of shape (order,)
+            As :func:`clenshaw_curtis` / :func:`simpson`.
+
+        Raises
+        ------
+        TypeError
+            If `order` is not an int.
+        ValueError
+            If `order` is out of the rule's range (or even, for Simpson).
+        """
         return type(self)._family(order)
 
     def table(self, kernel):
-        """Concatenated nodes, weights, offsets and reaches for `kernel`'s profile."""
+        """Concatenated nodes, weights, offsets and reaches for `kernel`'s profile.
+
+        The table depends on the kernel's class only (its profile ``f``), not
+        on its variance or length scales; it is computed once per rule class,
+        kernel class, `tol` and `max_order` and cached.
+
+        Parameters
+        ----------
+        kernel : SquaredExponential, Matern32 or SparseKernel
+
+        Returns
+        -------
+        nodes, weights : ndarray of shape (n_nodes,)
+            The nodes and weights of each of :attr:`orders` in turn, on [0, 1].
+        offsets : ndarray of intp of shape (n_orders + 1,)
+            Order ``k`` occupies ``nodes[offsets[k]:offsets[k + 1]]``.
+        reach : ndarray of shape (n_orders,)
+            As :meth:`reach`.
+
+        Raises
+        ------
+        TypeError
+            If `kernel` is not one of occgp.gp's kernels, or `max_order` is
+            not an int.
+        ValueError
+            If `tol` is not in [1e-15, 1), `max_order` is outside [3, 16385],
+            or no order up to `max_order` reaches `tol`.
+        """
         tol, max_order = self._checked()
         return _table(type(self).__name__, type(_check_kernel_class(kernel)), tol, max_order)
 
     def reach(self, kernel) -> NDArray[np.float64]:
-        """Longest piece (length-scale units) each order integrates to `tol`."""
+        """Longest piece (length-scale units) each order integrates to `tol`.
+
+        Parameters
+        ----------
+        kernel : SquaredExponential, Matern32 or SparseKernel
+
+        Returns
+        -------
+        reach : ndarray of shape (n_orders,)
+            Non-decreasing over :attr:`orders`; -1 for the lowest orders that
+            reach none of the calibrated lengths (0.02 to 64).
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`table`.
+        """
         return self.table(kernel)[3].copy()
 
     def order_for(self, kernel, length: float) -> tuple[int, int]:
-        """``(order, n_panels)`` used for a piece of `length` length-scale units (finite, >= 0)."""
+        """The order and number of panels used for a piece of `length` length-scale units.
+
+        Parameters
+        ----------
+        kernel : SquaredExponential, Matern32 or SparseKernel
+        length : float
+            Length of the piece in length-scale units, finite and >= 0.
+
+        Returns
+        -------
+        order : int
+            The lowest of :attr:`orders` whose reach covers `length`, else the
+            highest.
+        n_panels : int
+            1, or the number of equal panels of the highest order when
+            `length` is beyond its reach.
+
+        Raises
+        ------
+        TypeError
+            If `length` is not a real number, or as :meth:`table`.
+        ValueError
+            If `length` is negative or not finite, or as :meth:`table`.
+        """
         from .._validation import check_real
         length = check_real(length, "length", low=0.0, low_open=False)
         reach = self.table(kernel)[3]
@@ -159,6 +269,18 @@ class _Rule:
         return orders[k], panels
 
     def get_params(self, deep: bool = True) -> dict:
+        """The constructor arguments (scikit-learn's estimator protocol).
+
+        Parameters
+        ----------
+        deep : bool, default=True
+            Ignored (a rule holds no sub-estimators); kept for scikit-learn.
+
+        Returns
+        -------
+        params : dict
+            ``tol`` and ``max_order``, as set (not validated).
+        """
         return {"tol": self.tol, "max_order": self.max_order}
 
     def __repr__(self):

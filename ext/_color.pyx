@@ -1,0 +1,471 @@
+# cython: language_level=3
+# distutils: language = c++
+"""Compiled core of :class:`occgp.ColorOctree`: liboctomap's ``ColorOcTree`` behind typed loops.
+
+Nothing here validates user input: :mod:`occgp.color` coerces and checks every
+array (shape, dtype, range, key range) before it reaches these methods. Every
+loop and every liboctomap call that does real work runs without the GIL; a
+per-tree lock serialises the operations on one tree.
+
+Inner nodes' colours are derived state: liboctomap's ``ColorOcTree::
+updateInnerOccupancy`` sets each to the average of its children's. occgp calls
+it before the tree is written (when an update changed the tree since), which
+gives the file liboctomap's own call sequence gives; leaves, and so every
+query, never depend on it.
+"""
+
+from cython.operator cimport dereference as deref, preincrement as inc
+from libc.math cimport isfinite
+from libc.stdint cimport uint8_t, uint64_t
+from libc.string cimport memcpy
+from libcpp cimport bool
+from libcpp.algorithm cimport sort
+from libcpp.memory cimport unique_ptr
+from libcpp.string cimport string
+from libcpp.unordered_map cimport unordered_map
+from libcpp.vector cimport vector
+
+from _keys cimport (
+    KEY_DEPTH as _DEPTH, effective_end, in_range_mask, pack_key as _pack, ray_codes,
+    unpack_key as _unpack,
+)
+from liboctomap cimport (
+    OcTreeKey, Pointcloud, istream, istringstream, key_type, ostream, ostringstream, point3d,
+)
+
+import threading
+
+import numpy as np
+
+
+cdef extern from "octomap/ColorOcTree.h" namespace "octomap" nogil:
+    cdef cppclass Color "octomap::ColorOcTreeNode::Color":
+        uint8_t r
+        uint8_t g
+        uint8_t b
+
+    cdef cppclass ColorOcTreeNode:
+        double getOccupancy()
+        float getLogOdds()
+        Color getColor()
+        bool isColorSet()
+        void setColor(uint8_t r, uint8_t g, uint8_t b)
+
+    cdef cppclass ColorOcTree:
+        cppclass leaf_iterator:
+            leaf_iterator() except +
+            ColorOcTreeNode& operator*()
+            leaf_iterator& operator++()
+            bool operator==(const leaf_iterator&)
+            bool operator!=(const leaf_iterator&)
+            double getSize()
+            unsigned getDepth()
+            const OcTreeKey& getKey()
+
+        ColorOcTree(double resolution) except +
+
+        # sensor model
+        void setProbHit(double prob)
+        void setProbMiss(double prob)
+        void setClampingThresMin(double prob)
+        void setClampingThresMax(double prob)
+        void setOccupancyThres(double prob)
+        float getProbHitLog()
+        float getProbMissLog()
+        float getClampingThresMinLog()
+        float getClampingThresMaxLog()
+        float getOccupancyThresLog()
+
+        # updates
+        void insertPointCloud(const Pointcloud& scan, const point3d& sensor_origin,
+                              double maxrange, bool lazy_eval, bool discretize) except +
+        ColorOcTreeNode* averageNodeColor(const OcTreeKey& key, uint8_t r, uint8_t g,
+                                          uint8_t b)
+        ColorOcTreeNode* setNodeColor(const OcTreeKey& key, uint8_t r, uint8_t g, uint8_t b)
+        void updateInnerOccupancy()
+
+        # queries
+        ColorOcTreeNode* search(const OcTreeKey& key, unsigned int depth)
+        bool isNodeOccupied(const ColorOcTreeNode* node)
+        bool coordToKeyChecked(const point3d& coord, OcTreeKey& key)
+        OcTreeKey coordToKey(const point3d& coord)
+        double keyToCoord(key_type key, unsigned depth)
+        leaf_iterator begin_leafs(unsigned char maxDepth) except +
+        leaf_iterator end_leafs()
+
+        # structure
+        double getResolution()
+        void setResolution(double r)
+        size_t size()
+        size_t getNumLeafNodes()
+        size_t memoryUsage()
+        void getMetricMin(double& x, double& y, double& z)
+        void getMetricMax(double& x, double& y, double& z)
+        void clear()
+
+        # serialisation (.ot data block: per node float log-odds, r, g, b, child mask)
+        ostream& writeData(ostream& s) except +
+        istream& readData(istream& s) except +
+
+
+cdef enum:
+    _FUSE_AVERAGE = 0
+    _FUSE_MEAN = 1
+
+#: Colour fusion rules of :meth:`_ColorOcTree._insert_colored`.
+FUSE_AVERAGE = _FUSE_AVERAGE
+FUSE_MEAN = _FUSE_MEAN
+
+
+cdef struct ColorSum:
+    uint64_t r, g, b, n
+
+
+cdef class _ColorOcTree:
+    """A liboctomap ``ColorOcTree`` owned by Python. Use :class:`occgp.ColorOctree`."""
+
+    cdef unique_ptr[ColorOcTree] _tree
+    cdef object _lock
+    # an update changed the tree since the inner nodes' colours were last computed
+    cdef bint _inner_dirty
+
+    def __cinit__(self, *args, **kwargs):
+        self._lock = threading.Lock()
+
+    cdef ColorOcTree* _get(self) except NULL:
+        cdef ColorOcTree* tree = self._tree.get()
+        if tree == NULL:
+            raise ValueError(f"{type(self).__name__} was not initialised "
+                             "(create it with ColorOctree(resolution))")
+        return tree
+
+    def _setup(self, double resolution, double prob_hit, double prob_miss,
+               double clamping_min, double clamping_max, double occupancy_threshold):
+        """Create the C++ tree (parameters were validated by the caller)."""
+        cdef ColorOcTree* tree
+        with self._lock:
+            self._tree.reset(new ColorOcTree(resolution))
+            tree = self._tree.get()
+            tree.setProbHit(prob_hit)
+            tree.setProbMiss(prob_miss)
+            tree.setClampingThresMin(clamping_min)
+            tree.setClampingThresMax(clamping_max)
+            tree.setOccupancyThres(occupancy_threshold)
+            self._inner_dirty = False
+
+    # ------------------------------------------------------------------ key range
+    def _in_range(self, const float[:, ::1] points):
+        """Boolean mask: which rows of `points` have a valid key on every axis."""
+        return in_range_mask(1.0 / self._get().getResolution(), points)
+
+    def _check_rays(self, const float[:, ::1] points, const float[::1] origin,
+                    double max_range):
+        """(codes, cells) of the rays after truncation at `max_range` (< 0: none): see
+        ``mark_rays`` in ``ext/_keys.pxd``."""
+        return ray_codes(1.0 / self._get().getResolution(), points, origin, max_range)
+
+    # ------------------------------------------------------------------ updates
+    def _insert_colored(self, const float[:, ::1] points, const float[::1] origin,
+                        double max_range, const uint8_t[:, ::1] colors, int fusion):
+        """liboctomap's ``insertPointCloud`` (every ray valid: checked by the caller),
+        then the colour of each point whose ray is not truncated at `max_range` fused
+        into its end cell. FUSE_AVERAGE: ``averageNodeColor`` point by point, in
+        order. FUSE_MEAN: per end cell, the rounded mean of its points' colours, fused
+        by one ``averageNodeColor`` per cell, in key order (x fastest). Returns the
+        number of points whose colour was fused."""
+        cdef ColorOcTree* tree = self._get()
+        cdef Pointcloud cloud
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef point3d o = point3d(origin[0], origin[1], origin[2])
+        cdef point3d p, end
+        cdef OcTreeKey key
+        cdef unordered_map[uint64_t, ColorSum] sums
+        cdef unordered_map[uint64_t, ColorSum].iterator it
+        cdef vector[uint64_t] order
+        cdef ColorSum* s
+        cdef size_t j
+        cdef Py_ssize_t fused = 0
+        with self._lock:
+            with nogil:
+                cloud.reserve(n)
+                for i in range(n):
+                    cloud.push_back(points[i, 0], points[i, 1], points[i, 2])
+                self._inner_dirty = True
+                tree.insertPointCloud(cloud, o, max_range, False, False)
+                for i in range(n):
+                    p = point3d(points[i, 0], points[i, 1], points[i, 2])
+                    if effective_end(o, p, max_range, &end):
+                        continue
+                    if not tree.coordToKeyChecked(p, key):
+                        continue
+                    fused += 1
+                    if fusion == _FUSE_AVERAGE:
+                        tree.averageNodeColor(key, colors[i, 0], colors[i, 1], colors[i, 2])
+                    else:
+                        s = &sums[_pack(key)]
+                        s.r += colors[i, 0]
+                        s.g += colors[i, 1]
+                        s.b += colors[i, 2]
+                        s.n += 1
+                if fusion == _FUSE_MEAN:
+                    order.reserve(sums.size())
+                    it = sums.begin()
+                    while it != sums.end():
+                        order.push_back(deref(it).first)
+                        inc(it)
+                    # key order, z slowest: packed keys hold x in the low bits
+                    sort(order.begin(), order.end())
+                    for j in range(order.size()):
+                        s = &sums[order[j]]
+                        tree.averageNodeColor(
+                            _unpack(order[j]), <uint8_t>((2 * s.r + s.n) // (2 * s.n)),
+                            <uint8_t>((2 * s.g + s.n) // (2 * s.n)),
+                            <uint8_t>((2 * s.b + s.n) // (2 * s.n)))
+        return fused
+
+    def _fuse_colors(self, const float[:, ::1] points, const uint8_t[:, ::1] colors,
+                     bint replace):
+        """For each point in a known cell (in order): ``averageNodeColor`` of its colour,
+        or ``setNodeColor`` with `replace`. Points in unknown cells are skipped. Returns
+        a bool mask of the points whose cell was known."""
+        cdef ColorOcTree* tree = self._get()
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef OcTreeKey key
+        cdef ColorOcTreeNode* node
+        known = np.zeros(n, dtype=np.bool_)
+        cdef uint8_t[::1] k = known.view(np.uint8)
+        with self._lock:
+            with nogil:
+                self._inner_dirty = True
+                for i in range(n):
+                    if not tree.coordToKeyChecked(
+                            point3d(points[i, 0], points[i, 1], points[i, 2]), key):
+                        continue
+                    if replace:
+                        node = tree.setNodeColor(key, colors[i, 0], colors[i, 1], colors[i, 2])
+                    else:
+                        node = tree.averageNodeColor(key, colors[i, 0], colors[i, 1],
+                                                     colors[i, 2])
+                    k[i] = node != NULL
+        return known
+
+    def _log_odds_thresholds(self):
+        """(clamping min, clamping max, occupancy threshold, hit, miss) as the tree
+        holds them: float32 log-odds."""
+        cdef ColorOcTree* tree = self._get()
+        return (tree.getClampingThresMinLog(), tree.getClampingThresMaxLog(),
+                tree.getOccupancyThresLog(), tree.getProbHitLog(), tree.getProbMissLog())
+
+    # ------------------------------------------------------------------ queries
+    def _query(self, const float[:, ::1] points, int what):
+        """Per point: 0 → occupancy probability, 1 → log-odds (NaN where unknown),
+        2 → int8 state (-1 unknown, 0 free, 1 occupied)."""
+        cdef ColorOcTree* tree = self._get()
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef OcTreeKey key
+        cdef ColorOcTreeNode* node
+        out = np.full(n, np.nan) if what != 2 else np.full(n, -1, dtype=np.int8)
+        cdef double[::1] values
+        cdef signed char[::1] states
+        if what == 2:
+            states = out
+        else:
+            values = out
+        with self._lock:
+            with nogil:
+                for i in range(n):
+                    if not tree.coordToKeyChecked(
+                            point3d(points[i, 0], points[i, 1], points[i, 2]), key):
+                        continue
+                    node = tree.search(key, 0)
+                    if node == NULL:
+                        continue
+                    if what == 0:
+                        values[i] = node.getOccupancy()
+                    elif what == 1:
+                        values[i] = node.getLogOdds()
+                    else:
+                        states[i] = 1 if tree.isNodeOccupied(node) else 0
+        return out
+
+    def _colors(self, const float[:, ::1] points):
+        """(colours uint8 (n, 3), set bool (n,)) of the cells holding `points`: the
+        cell's colour, or liboctomap's unset white (255, 255, 255) where the cell is
+        unknown or its colour is unset (then False)."""
+        cdef ColorOcTree* tree = self._get()
+        cdef Py_ssize_t i, n = points.shape[0]
+        cdef OcTreeKey key
+        cdef ColorOcTreeNode* node
+        cdef Color c
+        rgb = np.full((n, 3), 255, dtype=np.uint8)
+        has = np.zeros(n, dtype=np.bool_)
+        cdef uint8_t[:, ::1] out = rgb
+        cdef uint8_t[::1] h = has.view(np.uint8)
+        with self._lock:
+            with nogil:
+                for i in range(n):
+                    if not tree.coordToKeyChecked(
+                            point3d(points[i, 0], points[i, 1], points[i, 2]), key):
+                        continue
+                    node = tree.search(key, 0)
+                    if node == NULL:
+                        continue
+                    c = node.getColor()
+                    out[i, 0] = c.r
+                    out[i, 1] = c.g
+                    out[i, 2] = c.b
+                    h[i] = node.isColorSet()
+        return rgb, has
+
+    def _leaves(self, bint occupied_only):
+        """Centres (n, 3), sizes (n,), log-odds (n,) and colours (n, 3) uint8 of the
+        leaves, in liboctomap's leaf order."""
+        cdef ColorOcTree* tree = self._get()
+        cdef vector[double] centers, sizes
+        cdef vector[float] values
+        cdef vector[uint8_t] rgb
+        cdef ColorOcTree.leaf_iterator it, end
+        cdef Color c
+        cdef unsigned depth
+        with self._lock:
+            with nogil:
+                if tree.size() > 0:
+                    it = tree.begin_leafs(0)
+                    end = tree.end_leafs()
+                    while it != end:
+                        if not occupied_only or tree.isNodeOccupied(&deref(it)):
+                            depth = it.getDepth()
+                            centers.push_back(tree.keyToCoord(it.getKey()[0], depth))
+                            centers.push_back(tree.keyToCoord(it.getKey()[1], depth))
+                            centers.push_back(tree.keyToCoord(it.getKey()[2], depth))
+                            sizes.push_back(it.getSize())
+                            values.push_back(deref(it).getLogOdds())
+                            c = deref(it).getColor()
+                            rgb.push_back(c.r)
+                            rgb.push_back(c.g)
+                            rgb.push_back(c.b)
+                        inc(it)
+        cdef Py_ssize_t n = sizes.size()
+        out_c = np.empty((n, 3))
+        out_s = np.empty(n)
+        out_v = np.empty(n, dtype=np.float32)
+        out_rgb = np.empty((n, 3), dtype=np.uint8)
+        cdef double[:, ::1] oc = out_c
+        cdef double[::1] os_ = out_s
+        cdef float[::1] ov = out_v
+        cdef uint8_t[:, ::1] orgb = out_rgb
+        if n:
+            memcpy(&oc[0, 0], centers.data(), 3 * n * sizeof(double))
+            memcpy(&os_[0], sizes.data(), n * sizeof(double))
+            memcpy(&ov[0], values.data(), n * sizeof(float))
+            memcpy(&orgb[0, 0], rgb.data(), 3 * n * sizeof(uint8_t))
+        return out_c, out_s, out_v, out_rgb
+
+    # ------------------------------------------------------------------ structure
+    def _num_leaves(self):
+        cdef ColorOcTree* tree = self._get()
+        cdef size_t n = 0
+        with self._lock:
+            with nogil:
+                if tree.size() > 0:
+                    n = tree.getNumLeafNodes()
+        return n
+
+    def _num_nodes(self):
+        return self._get().size()
+
+    def _memory_usage(self):
+        return self._get().memoryUsage()
+
+    def _bounds(self):
+        cdef ColorOcTree* tree = self._get()
+        cdef double x0 = 0, y0 = 0, z0 = 0, x1 = 0, y1 = 0, z1 = 0
+        with self._lock:
+            tree.getMetricMin(x0, y0, z0)
+            tree.getMetricMax(x1, y1, z1)
+        return np.array([x0, y0, z0]), np.array([x1, y1, z1])
+
+    def _clear(self):
+        cdef ColorOcTree* tree = self._get()
+        with self._lock:
+            tree.clear()
+            self._inner_dirty = False
+
+    # ------------------------------------------------------------------ serialisation
+    def _write_data(self):
+        """The tree's .ot data block (no header), after liboctomap's
+        ``updateInnerOccupancy`` when an update changed the tree since the last one."""
+        cdef ColorOcTree* tree = self._get()
+        cdef ostringstream stream
+        cdef string data
+        with self._lock:
+            with nogil:
+                # ColorOcTree::updateInnerOccupancy dereferences the root unchecked
+                if self._inner_dirty and tree.size() > 0:
+                    tree.updateInnerOccupancy()
+                self._inner_dirty = False
+                tree.writeData(stream)
+                data = stream.str()
+        return <bytes>data
+
+    def _read_data(self, bytes payload, double resolution):
+        """Replace the tree by the .ot data block `payload` (validated by the caller)."""
+        cdef ColorOcTree* tree = self._get()
+        cdef string data = payload
+        cdef unique_ptr[istringstream] stream
+        with self._lock:
+            with nogil:
+                tree.clear()
+                tree.setResolution(resolution)
+                stream.reset(new istringstream(data))
+                tree.readData(deref(stream))
+            failed = deref(stream).fail()
+            self._inner_dirty = False
+        if failed:
+            with self._lock:
+                tree.clear()
+            raise ValueError("liboctomap could not read the tree data")
+
+
+def _check_color_data(const uint8_t[::1] data, Py_ssize_t offset):
+    """Walk a ColorOcTree .ot data block (per node: float log-odds, r, g, b, child mask)
+    without building anything.
+
+    Returns (number of nodes, end offset), or raises ValueError when the block is
+    truncated, holds a non-finite log-odds or describes a node deeper than the 16
+    levels of an octree. liboctomap trusts its input; this walk makes sure it gets
+    only valid input.
+    """
+    cdef Py_ssize_t pos = offset, n = data.shape[0], nodes = 0
+    cdef vector[uint8_t] stack
+    cdef uint8_t depth, mask
+    cdef float value
+    cdef int i, err = 0
+    stack.push_back(0)
+    with nogil:
+        while not stack.empty():
+            depth = stack.back()
+            stack.pop_back()
+            if pos + 8 > n:
+                err = 1
+                break
+            memcpy(&value, &data[pos], sizeof(float))
+            mask = data[pos + 7]
+            pos += 8
+            nodes += 1
+            if not isfinite(value):
+                err = 3
+                break
+            if mask != 0 and depth + 1 > _DEPTH:
+                err = 2
+                break
+            for i in range(7, -1, -1):
+                if (mask >> i) & 1:
+                    stack.push_back(depth + 1)
+    if err == 1:
+        raise ValueError(f"truncated data: the tree needs more than the {n - offset} bytes given")
+    if err == 2:
+        raise ValueError("corrupt data: a node lies deeper than the 16 levels of an octree")
+    if err == 3:
+        raise ValueError("corrupt data: a node holds a non-finite log-odds value")
+    return nodes, pos

@@ -1,0 +1,555 @@
+"""The colour occupancy octree: liboctomap's ``ColorOcTree`` under a numpy API."""
+
+from __future__ import annotations
+
+import os
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import _octomap_format as fmt
+from ._color import FUSE_AVERAGE, FUSE_MEAN, _check_color_data, _ColorOcTree
+from ._logodds_map import LogOddsMap
+from ._octree import KEYRAY_CELLS
+from ._validation import as_path, check_bool, check_choice, check_resolution
+
+__all__ = ["ColorOctree", "ColorLeaves", "FUSIONS"]
+
+#: The colour fusion rules of :meth:`ColorOctree.insert_scan`.
+FUSIONS = ("average", "mean")
+#: The tree type a ColorOcTree file names in its header (liboctomap's getTreeType()).
+TREE_TYPE = "ColorOcTree"
+#: liboctomap's "no colour": a node's colour is unset while it is pure white.
+UNSET = (255, 255, 255)
+
+
+class ColorLeaves(NamedTuple):
+    """The leaves (cells) of a :class:`ColorOctree`, as arrays (one row per leaf)."""
+
+    #: Cell centres, shape (n_leaves, 3), in metres.
+    centers: NDArray[np.float64]
+    #: Cell edge lengths, shape (n_leaves,): the resolution times a power of two.
+    sizes: NDArray[np.float64]
+    #: Log-odds of occupancy, shape (n_leaves,), float32 as liboctomap stores them.
+    log_odds: NDArray[np.float32]
+    #: Colours, uint8, shape (n_leaves, 3) (red, green, blue); (255, 255, 255) where
+    #: the cell has no colour (liboctomap's unset colour).
+    colors: NDArray[np.uint8]
+
+
+class ColorOctree(LogOddsMap, _ColorOcTree):
+    """Probabilistic 3D occupancy map whose cells also hold a colour (OctoMap's ColorOcTree).
+
+    Occupancy works as in :class:`occgp.OccupancyOctree` (scan mode): each
+    :meth:`insert_scan` is liboctomap's ``insertPointCloud``, so the occupancy
+    leaves are identical, leaf for leaf, to an :class:`~occgp.OccupancyOctree`
+    fed the same scans. In addition each scan's end points carry colours,
+    fused into their end cells by averaging (see `fusion` in
+    :meth:`insert_scan`). The tree is liboctomap's own ``ColorOcTree``: maps
+    are written as ``.ot`` files that octovis shows in colour and every
+    OctoMap tool reads as a ``ColorOcTree``.
+
+    A colour is 8 bits per channel (red, green, blue). As in liboctomap, a
+    cell whose colour is pure white ``(255, 255, 255)`` counts as having no
+    colour (``ColorOcTreeNode::isColorSet``): white is also the colour of
+    cells nothing coloured. When eight sibling cells share their log-odds they
+    are pruned into their parent whatever their colours, which then holds the
+    children's average colour (liboctomap's ``ColorOcTree::pruneNode``).
+
+    Parameters
+    ----------
+    resolution : float
+        Edge length of the smallest cells, in metres; in ``[1e-15, 1e14]``.
+    prob_hit : float, default=0.7
+        Probability that a cell is occupied given a ray ends in it; in (0.5, 1).
+    prob_miss : float, default=0.4
+        Probability that a cell is occupied given a ray crosses it; in (0, 0.5).
+    clamping_min : float, default=0.1192
+        Lower clamping bound (probability); in (0, 0.5).
+    clamping_max : float, default=0.971
+        Upper clamping bound (probability); in (0.5, 1).
+    occupancy_threshold : float, default=0.5
+        Cells at or above this probability count as occupied; in (0, 1).
+
+    Attributes
+    ----------
+    resolution : float
+        Edge length of the smallest cells.
+    num_leaves : int
+        Number of leaves (known cells after pruning).
+    num_nodes : int
+        Number of nodes, inner ones included.
+    bounds : tuple of ndarray of shape (3,)
+        Minimum and maximum corner of the known space (NaN when empty).
+
+    See Also
+    --------
+    occgp.OccupancyOctree : The same map without colours, and its other updates.
+
+    Examples
+    --------
+    >>> from occgp.color import ColorOctree
+    >>> m = ColorOctree(0.1).insert_scan([[1.02, 0.05, 0.05]], [0.05, 0.05, 0.05],
+    ...                                  colors=[[200, 40, 10]])
+    >>> m = m.insert_scan([[1.02, 0.05, 0.05]], [0.05, 0.05, 0.05], colors=[[100, 0, 30]])
+    >>> rgb, has_color = m.colors([[1.02, 0.05, 0.05], [0.5, 0.05, 0.05]])
+    >>> rgb.tolist(), has_color.tolist()     # (200 + 100) // 2, ...; a free cell: none
+    ([[150, 20, 20], [255, 255, 255]], [True, False])
+    >>> m.is_occupied([[1.02, 0.05, 0.05]]).tolist()
+    [True]
+    """
+
+    _kind = "octree"
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(resolution={self.resolution!r}, "
+                f"num_leaves={self.num_leaves})")
+
+    # ------------------------------------------------------------------ updates
+    def insert_scan(
+        self,
+        points: ArrayLike,
+        origin: ArrayLike,
+        colors: ArrayLike,
+        *,
+        max_range: float | None = None,
+        fusion: str = "average",
+    ) -> "ColorOctree":
+        """Integrate one coloured range scan into the map.
+
+        The occupancy update is liboctomap's ``insertPointCloud`` (as
+        :meth:`occgp.OccupancyOctree.insert_scan` with ``mode="scan"``): the
+        cells the rays cross are marked free, the cells they end in occupied,
+        each cell updated once. Then the colour of every point whose ray is not
+        truncated at `max_range` is fused into its end cell.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Ray end points in the world frame, in metres. Must be finite and in
+            the key range (after truncation at `max_range`). An empty scan
+            changes nothing.
+        origin : array-like of shape (3,)
+            Sensor position in the world frame, in metres.
+        colors : array-like of shape (n_points, 3)
+            The points' colours (red, green, blue): integers in [0, 255] (any
+            integer dtype, e.g. uint8), or floats in [0, 1] (as Open3D holds
+            them; scaled by 255 and rounded to the nearest integer). Pure white
+            is liboctomap's "no colour" (see the class notes).
+        max_range : float, default=None
+            Rays longer than this are truncated: the cells up to `max_range`
+            are marked free, the end cell is neither marked occupied nor
+            coloured. None means no limit.
+        fusion : {"average", "mean"}, default="average"
+            How colours are fused. ``"average"`` is liboctomap's
+            ``averageNodeColor`` applied point by point, in the order of
+            `points`: a cell without colour takes the point's colour, a
+            coloured cell becomes ``(previous + colour) // 2`` per channel (a
+            running pairwise average that weighs the latest points most; the
+            map is the one liboctomap's ``insertPointCloud`` followed by
+            ``averageNodeColor`` per point gives). ``"mean"`` first takes, per
+            end cell, the mean of the colours of this scan's points ending in
+            it (rounded half up), then fuses it into the cell with one
+            ``averageNodeColor`` (cells in key order): within a scan every
+            point weighs the same; across scans, each scan's mean is averaged
+            pairwise with the cell's colour (a file stores no point counts).
+
+        Returns
+        -------
+        self : ColorOctree
+            The updated map, to allow chaining.
+
+        Raises
+        ------
+        TypeError
+            If `points`, `origin` or `colors` does not hold real numbers
+            (booleans are refused for `colors`).
+        ValueError
+            If `points` is not of shape (n_points, 3), `origin` not of shape
+            (3,), either holds NaN or inf or lies outside the key range (after
+            truncation at `max_range`); a ray is too short for the
+            single-precision traversal, crosses more than 99,990 cells
+            (liboctomap's ray buffer) or the scan reaches more than
+            :attr:`MAX_SCAN_CELLS` cells; `colors` is not of shape
+            (n_points, 3), holds integers outside [0, 255] or floats outside
+            [0, 1] (or NaN); `max_range` or `fusion` is invalid. The map is then
+            unchanged.
+
+        Examples
+        --------
+        >>> m = ColorOctree(0.1)
+        >>> pts = [[1.01, 0.05, 0.05], [1.02, 0.05, 0.05], [1.03, 0.05, 0.05]]
+        >>> rgb = [[0, 0, 0], [90, 90, 90], [30, 30, 30]]
+        >>> m.insert_scan(pts, [0.05, 0.05, 0.05], rgb).colors(pts[:1])[0].tolist()
+        [[37, 37, 37]]
+        >>> m2 = ColorOctree(0.1).insert_scan(pts, [0.05, 0.05, 0.05], rgb, fusion="mean")
+        >>> m2.colors(pts[:1])[0].tolist()
+        [[40, 40, 40]]
+        """
+        fusion = check_choice(fusion, "fusion", FUSIONS)
+        scan = self._validated_scan(points, origin, max_range, "scan")
+        if scan is None:
+            _as_colors(colors, 0)
+            return self
+        pts, org, rng, cells = scan
+        rgb = _as_colors(colors, len(pts))
+        if cells.max() > KEYRAY_CELLS:
+            bad = np.flatnonzero(cells > KEYRAY_CELLS)
+            raise ValueError(
+                f"{len(bad)} of {len(pts)} rays cross more than {KEYRAY_CELLS} cells (first: "
+                f"row {int(bad[0])}), more than liboctomap's ray buffer holds; use a coarser "
+                "resolution or max_range; the map is unchanged")
+        if int(cells.sum()) + len(cells) > self._max_scan_cells():
+            raise ValueError(
+                f"the scan's {len(pts)} rays may reach more than MAX_SCAN_CELLS="
+                f"{self.MAX_SCAN_CELLS} cells at resolution {self.resolution:g} m; use a "
+                "coarser resolution, max_range or fewer points, or raise MAX_SCAN_CELLS; "
+                "the map is unchanged")
+        self._insert_colored(pts, org, rng, rgb,
+                             FUSE_AVERAGE if fusion == "average" else FUSE_MEAN)
+        return self
+
+    def update_colors(self, points: ArrayLike, colors: ArrayLike) -> "ColorOctree":
+        """Fuse colours into the cells holding `points` (liboctomap's ``averageNodeColor``).
+
+        Point by point, in order: a cell without colour takes the colour, a
+        coloured one becomes ``(previous + colour) // 2`` per channel.
+        Occupancy is unchanged. Points in cells the map does not know are
+        skipped (liboctomap finds no node there); a point in a pruned leaf
+        colours the whole leaf.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Finite, in the key range.
+        colors : array-like of shape (n_points, 3)
+            Integers in [0, 255] or floats in [0, 1], as for :meth:`insert_scan`.
+
+        Returns
+        -------
+        self : ColorOctree
+
+        Raises
+        ------
+        TypeError
+            If `points` or `colors` does not hold real numbers.
+        ValueError
+            If `points` is not of shape (n_points, 3), holds NaN or inf or
+            lies outside the key range, or `colors` is invalid (see
+            :meth:`insert_scan`). The map is then unchanged.
+        """
+        pts, rgb = self._checked_cells(points, colors)
+        self._fuse_colors(pts, rgb, False)
+        return self
+
+    def set_colors(self, points: ArrayLike, colors: ArrayLike) -> "ColorOctree":
+        """Set the colour of the cells holding `points` (liboctomap's ``setNodeColor``).
+
+        As :meth:`update_colors`, but each colour replaces the cell's (the last
+        point in a cell wins). Setting ``(255, 255, 255)`` removes a cell's
+        colour. Returns self; raises as :meth:`update_colors`.
+        """
+        pts, rgb = self._checked_cells(points, colors)
+        self._fuse_colors(pts, rgb, True)
+        return self
+
+    def _checked_cells(self, points: ArrayLike,
+                       colors: ArrayLike) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:
+        pts = self._as_float32_points(points, "points")
+        ok = self._in_range(pts)
+        if not ok.all():
+            self._raise_out_of_range("points", ok, "")
+        return pts, _as_colors(colors, len(pts))
+
+    # ------------------------------------------------------------------ queries
+    def colors(self, points: ArrayLike) -> tuple[NDArray[np.uint8], NDArray[np.bool_]]:
+        """Colour of the cell holding each point.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Query points, in metres. Points outside the key range are unknown.
+
+        Returns
+        -------
+        colors : ndarray of uint8, shape (n_points, 3)
+            Red, green, blue; ``(255, 255, 255)`` where `has_color` is False.
+        has_color : ndarray of bool, shape (n_points,)
+            False where the cell is unknown or holds no colour (liboctomap's
+            unset white).
+
+        Raises
+        ------
+        TypeError, ValueError
+            If `points` is not a finite real array of shape (n_points, 3).
+        """
+        return self._colors(self._as_float32_points(points, "points"))
+
+    def leaves(self, *, occupied_only: bool = False) -> ColorLeaves:
+        """Return every leaf of the tree as arrays.
+
+        Parameters
+        ----------
+        occupied_only : bool, default=False
+            Keep only the occupied leaves.
+
+        Returns
+        -------
+        leaves : ColorLeaves
+            Named tuple ``(centers, sizes, log_odds, colors)``, in liboctomap's
+            leaf order (that of :meth:`occgp.OccupancyOctree.leaves`).
+
+        Examples
+        --------
+        >>> m = ColorOctree(0.1).insert_scan([[0.55, 0.05, 0.05]], [0.05, 0.05, 0.05],
+        ...                                  colors=[[1.0, 0.5, 0.0]])
+        >>> leaves = m.leaves(occupied_only=True)
+        >>> leaves.centers.round(2).tolist(), leaves.colors.tolist()
+        ([[0.55, 0.05, 0.05]], [[255, 128, 0]])
+        """
+        occupied_only = check_bool(occupied_only, "occupied_only")
+        return ColorLeaves(*self._leaves(occupied_only))
+
+    def extract_points(self, occupied: bool = True):
+        """Centres, edges and colours of the occupied (or the free) leaves.
+
+        Parameters
+        ----------
+        occupied : bool, default=True
+            True: the leaves at or above the occupancy threshold; False: the
+            known leaves below it.
+
+        Returns
+        -------
+        centres : ndarray of shape (n, 3)
+        sizes : ndarray of shape (n,)
+        colors : ndarray of uint8, shape (n, 3)
+            ``(255, 255, 255)`` for leaves without colour.
+        """
+        occupied = check_bool(occupied, "occupied")
+        centres, sizes, values, rgb = self._leaves(False)
+        keep = (values >= np.float32(self._log_odds_thresholds()[2])) == occupied
+        return centres[keep], sizes[keep], rgb[keep]
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def num_leaves(self) -> int:
+        """Number of leaves (known cells, after pruning)."""
+        return self._num_leaves()
+
+    @property
+    def num_nodes(self) -> int:
+        """Number of nodes in the tree, inner nodes included."""
+        return self._num_nodes()
+
+    @property
+    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(min corner, max corner) of the known space, in metres; NaN when empty."""
+        if self.num_nodes == 0:
+            return np.full(3, np.nan), np.full(3, np.nan)
+        return self._bounds()
+
+    def memory_usage(self) -> int:
+        """Bytes used by the tree's nodes (liboctomap's estimate)."""
+        return self._memory_usage()
+
+    def clear(self) -> "ColorOctree":
+        """Remove every cell; return self."""
+        self._clear()
+        return self
+
+    # ------------------------------------------------------------------ maps out
+    def save_ply(self, path, *, occupied: bool = True, binary: bool = True,
+                 cubes: bool = False, color: bool = True) -> "ColorOctree":
+        """Write the occupied (or free) cells to a PLY file, with their colours; return self.
+
+        As :func:`occgp._export.save_ply` (``x y z size probability`` per
+        vertex, or a cube mesh per cell with `cubes`), the ``red green blue``
+        (uchar) properties holding each cell's own colour (``255 255 255`` for
+        cells without colour) instead of height colours.
+        """
+        from . import _export
+        _export.save_ply(self, path, occupied=occupied, binary=binary, cubes=cubes,
+                         color=color)
+        return self
+
+    def save_pcd(self, path, *, occupied: bool = True, binary: bool = True) -> "ColorOctree":
+        """Write the occupied (or free) cell centres to a PCD v0.7 file; return self.
+
+        Fields ``x y z intensity rgb``: intensity is the occupancy probability
+        (float32), rgb the cell's colour packed as ``r << 16 | g << 8 | b``
+        (uint32, ``TYPE U``; PCL's ``PointXYZRGB`` holds the same bits).
+        """
+        from . import _export
+        _export.save_pcd(self, path, occupied=occupied, binary=binary)
+        return self
+
+    # ------------------------------------------------------------------ I/O
+    def to_bytes(self) -> bytes:
+        """Serialise the map as a ColorOcTree ``.ot`` file (every log-odds and colour).
+
+        Returns
+        -------
+        data : bytes
+            The contents of a file with ``id ColorOcTree``, which liboctomap's
+            ``AbstractOcTree::read`` and octovis read as a ColorOcTree.
+            Inner nodes hold their children's average colour (liboctomap's
+            ``ColorOcTree::updateInnerOccupancy``, run first when the map
+            changed since).
+        """
+        body = self._write_data()
+        header = (f"{fmt.FULL_HEADER}\n# (feel free to add / change comments, but leave the "
+                  f"first line as it is!)\n#\nid {TREE_TYPE}\nsize {self.num_nodes}\n"
+                  f"res {self.resolution!r}\ndata\n").encode("ascii")
+        return header + body
+
+    @classmethod
+    def from_bytes(cls, data: bytes, **params) -> "ColorOctree":
+        """Build a map from the contents of a ColorOcTree ``.ot`` file.
+
+        Parameters
+        ----------
+        data : bytes
+            File contents.
+        **params
+            Sensor-model parameters (``prob_hit``, ``clamping_min``, ...); the
+            file stores only the resolution.
+
+        Raises
+        ------
+        TypeError
+            If `data` is not bytes.
+        ValueError
+            If the data is not an OctoMap file, is a ``.bt`` file (which holds
+            no colours), holds another tree type than ``ColorOcTree`` (e.g. an
+            ``OcTree``: read it with :meth:`occgp.OccupancyOctree.from_bytes`),
+            or is truncated or corrupt.
+        """
+        if not isinstance(data, (bytes, bytearray, memoryview)):
+            raise TypeError(f"data must be bytes, got {type(data).__name__}")
+        return cls._from_data(bytes(data), "data", params)
+
+    def save(self, path: str | os.PathLike) -> "ColorOctree":
+        """Write the map to a ColorOcTree ``.ot`` file (see :meth:`to_bytes`).
+
+        Parameters
+        ----------
+        path : str or path-like
+            Destination, ending in ``.ot`` (a ``.bt`` file cannot hold colours).
+
+        Returns
+        -------
+        self : ColorOctree
+
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or os.PathLike.
+        ValueError
+            If `path` does not end in ``.ot``.
+        OSError
+            If the file cannot be written.
+        """
+        path = os.fspath(as_path(path))
+        if os.path.splitext(path)[1].lower() != ".ot":
+            raise ValueError(f"path must end in .ot (a ColorOcTree file; .bt files hold no "
+                             f"colours), got {path!r}")
+        data = self.to_bytes()
+        with open(path, "wb") as f:
+            f.write(data)
+        return self
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, **params) -> "ColorOctree":
+        """Read a map from a ColorOcTree ``.ot`` file.
+
+        Parameters
+        ----------
+        path : str or path-like
+        **params
+            Sensor-model parameters, as for :meth:`from_bytes`.
+
+        Raises
+        ------
+        OSError
+            If the file cannot be read.
+        ValueError
+            As :meth:`from_bytes`, naming the file.
+        """
+        path = os.fspath(as_path(path))
+        with open(path, "rb") as f:
+            data = f.read()
+        return cls._from_data(data, path, params)
+
+    @classmethod
+    def _from_data(cls, data: bytes, source: str, params: dict) -> "ColorOctree":
+        header = fmt.parse_header(data, source)
+        if header.binary:
+            raise ValueError(f"{source} is a binary (.bt) OctoMap file, which holds no "
+                             f"colours; ColorOctree reads {TREE_TYPE!r} .ot files")
+        if header.tree_type != TREE_TYPE:
+            raise ValueError(f"{source} holds a {header.tree_type!r} tree; ColorOctree reads "
+                             f"only {TREE_TYPE!r} files (OccupancyOctree.load reads 'OcTree' "
+                             "files)")
+        try:
+            check_resolution(header.resolution)
+        except ValueError as exc:
+            raise ValueError(f"{source}: the header's {exc}") from None
+        tree = cls(header.resolution, **params)
+        if header.size == 0:
+            return tree
+        buf = np.frombuffer(data, dtype=np.uint8)
+        try:
+            nodes, end = _check_color_data(buf, header.data_offset)
+        except ValueError as exc:
+            raise ValueError(f"{source}: {exc}") from None
+        if nodes != header.size:
+            raise ValueError(f"{source}: corrupt data: the header announces {header.size} "
+                             f"nodes, the data holds {nodes}")
+        tree._read_data(data[header.data_offset:end], header.resolution)
+        return tree
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), self.get_params(), self.to_bytes()))
+
+    def _sensor_params(self) -> dict:
+        return {k: v for k, v in self._params.items() if k != "resolution"}
+
+
+def _rebuild(cls, params: dict, data: bytes) -> ColorOctree:
+    """Unpickle: the header stores the resolution with full precision (repr)."""
+    return cls.from_bytes(data, **{k: v for k, v in params.items() if k != "resolution"})
+
+
+def _as_colors(colors: ArrayLike, n: int, name: str = "colors") -> NDArray[np.uint8]:
+    """`colors` as a C-contiguous uint8 array of shape (n, 3), or raise naming `name`.
+
+    Integers must lie in [0, 255]; floats in [0, 1] are scaled by 255 and rounded
+    to the nearest integer (halves to even).
+    """
+    try:
+        arr = np.asarray(colors)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{name} must be a numeric array, could not convert it: {exc}") from None
+    if arr.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must hold integers in [0, 255] or floats in [0, 1], got "
+                        f"dtype {arr.dtype}")
+    if arr.shape != (n, 3):
+        raise ValueError(f"{name} must have shape ({n}, 3) (one red, green, blue row per "
+                         f"point), got {arr.shape}")
+    if arr.dtype.kind == "f":
+        bad = ~((arr >= 0) & (arr <= 1)).all(axis=1)   # NaN fails both
+        if bad.any():
+            row = int(np.flatnonzero(bad)[0])
+            raise ValueError(
+                f"{name} of a float dtype must lie in [0, 1] (pass integers for 0-255 "
+                f"values): {int(bad.sum())} rows lie outside or hold NaN (first: row {row}, "
+                f"{arr[row].tolist()})")
+        return np.ascontiguousarray(np.rint(arr.astype(np.float64) * 255.0), dtype=np.uint8)
+    bad = ~((arr >= 0) & (arr <= 255)).all(axis=1)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{name} of an integer dtype must lie in [0, 255]: {int(bad.sum())} "
+                         f"rows lie outside (first: row {row}, {arr[row].tolist()})")
+    return np.ascontiguousarray(arr, dtype=np.uint8)
