@@ -25,6 +25,8 @@ autosummary_generate = True
 # and lists them in Methods / Attributes tables
 autodoc_default_options = {"members": True}
 numpydoc_show_class_members = False
+# signatures without type hints: the numpydoc Parameters sections give the types
+autodoc_typehints = "none"
 numpydoc_class_members_toctree = False
 
 # Offline by default: intersphinx inventories are fetched only when asked for.
