@@ -29,6 +29,13 @@ class _Lifted:
         return self._scene.occupancy(points[:, :2])
 
 
+def _check_scene(scene, needs):
+    missing = [name for name in needs if not hasattr(scene, name)]
+    if missing:
+        raise TypeError(f"scene must have {', '.join(needs)} (a Scene or Scene2D of "
+                        f"occgp.datasets); {type(scene).__name__} lacks {', '.join(missing)}")
+
+
 def _views(scans, dim):
     """Per scan: its origin, the unit directions of its rays and its returns."""
     views = []
@@ -168,7 +175,8 @@ def cells_in_view(scene: Any, centres: ArrayLike, resolution: float, scans: Iter
         shape (n_cells, n_dims) or not finite, or `scans` is empty or holds
         a scan of another dimension or without rays.
     TypeError
-        If a scan is neither a (points, origin) pair nor a LaserScan2D.
+        If a scan is neither a (points, origin) pair nor a LaserScan2D, or
+        `scene` has no ``ray_cast``.
 
     Examples
     --------
@@ -181,6 +189,7 @@ def cells_in_view(scene: Any, centres: ArrayLike, resolution: float, scans: Iter
     """
     resolution = check_real(resolution, "resolution", low=0.0)
     max_range = check_real(max_range, "max_range", low=0.0)
+    _check_scene(scene, ("ray_cast",))
     scans = list(scans)
     if not scans:
         raise ValueError("scans must hold at least one scan, got none")
@@ -261,7 +270,9 @@ def exact_test_set(scene: Any, resolution: float, scans: Iterable[Any], *, max_r
         malformed or too large (see :func:`~occgp.evaluation.grid_test_set`),
         or no cell in view is occupied or none is free.
     TypeError
-        If a scan is neither a (points, origin) pair nor a LaserScan2D.
+        If a scan is neither a (points, origin) pair nor a LaserScan2D,
+        `balance` is not a bool, or `scene` lacks ``occupancy``,
+        ``ray_cast`` or ``bounds``.
 
     Examples
     --------
@@ -275,11 +286,18 @@ def exact_test_set(scene: Any, resolution: float, scans: Iterable[Any], *, max_r
 
     resolution = check_real(resolution, "resolution", low=0.0)
     max_range = check_real(max_range, "max_range", low=0.0)
+    if not isinstance(balance, (bool, np.bool_)):
+        raise TypeError(f"balance must be a bool, got {type(balance).__name__}")
     rng = check_seed(seed)
-    lo, hi = scene.bounds if bbox is None else bbox
-    dim = len(np.asarray(lo))
+    _check_scene(scene, ("occupancy", "ray_cast") + (("bounds",) if bbox is None else ()))
+    name = "scene.bounds" if bbox is None else "bbox"
+    box = scene.bounds if bbox is None else bbox
+    if len(box) != 2:
+        raise ValueError(f"{name} must be a (min, max) pair, got length {len(box)}")
+    lo, hi = box
+    dim = np.asarray(lo).size
     if dim not in (2, 3):
-        raise ValueError(f"the scene's bounds must be 2D or 3D, got {dim} coordinates")
+        raise ValueError(f"{name} must be 2D or 3D corners, got {dim} coordinates")
     views = _views(list(scans), dim)
     if dim == 2:
         box = (np.r_[np.asarray(lo, float), 0.0], np.r_[np.asarray(hi, float), 0.0])

@@ -4,6 +4,7 @@ import io
 
 import pytest
 
+import occgp._demo as demo_module
 import occgp.cli as cli
 from occgp import OccupancyOctree
 from occgp.gp import GPOM, GPOMIK, GPMixture, OccupancyGrid
@@ -21,11 +22,11 @@ def quick_demo(tmp_path_factory):
     run once for the tests of this module."""
     outdir = tmp_path_factory.mktemp("demo")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(cli, "mapping_methods", _subset(
+        mp.setattr(demo_module, "mapping_methods", _subset(
             cli.mapping_methods, {"octree (scan)", "grid (scan)", "AKIMap"}))
-        mp.setattr(cli, "noisy_mapping_methods", _subset(
+        mp.setattr(demo_module, "noisy_mapping_methods", _subset(
             cli.noisy_mapping_methods, {"octree (scan), noisy"}))
-        mp.setattr(cli, "gp_mapping_methods", _subset(
+        mp.setattr(demo_module, "gp_mapping_methods", _subset(
             cli.gp_mapping_methods, {"GPOM", "log-odds grid"}))
         out = io.StringIO()
         rows = cli.demo(outdir, resolution=0.25, progress=False, out=out)

@@ -84,6 +84,14 @@ def test_exact_test_set_in_3d_keeps_cells_of_the_scans_hits():
     ({"scans": [Scan(np.ones((4, 3)), np.zeros(3))]}, ValueError,
      r"scans\[0\]\.origin must have shape \(2,\)"),
     ({"scans": [(np.zeros((3, 2)), np.zeros(2))]}, ValueError, r"scans\[0\] holds no ray"),
+    ({"balance": 1}, TypeError, "balance must be a bool, got int"),
+    ({"resolution": 1e-6}, ValueError, "the grid would hold .* points"),
+    ({"seed": -1}, ValueError, "seed must be a non-negative int"),
+    ({"samples": 0}, ValueError, "samples"),
+    ({"bbox": ([0.0, 0.0], [-1.0, 1.0])}, ValueError, "bbox must have min <= max"),
+    ({"bbox": ([0.0, 0.0], [1.0, 1.0], [2.0, 2.0])}, ValueError,
+     r"bbox must be a \(min, max\) pair, got length 3"),
+    ({"bbox": ([0.0], [1.0])}, ValueError, "bbox must be 2D or 3D corners, got 1"),
 ])
 def test_exact_test_set_rejects_bad_input(room, kwargs, exc, match):
     args = {"resolution": 0.2, "scans": room.scan(n_poses=2), "max_range": 8.0, **kwargs}
@@ -95,6 +103,20 @@ def test_exact_test_set_needs_both_classes(room):
     scan = _one_beam_scan([0.0, -0.5], 0.0, max_range=1.0)   # 1 m of free corridor
     with pytest.raises(ValueError, match="0 occupied .* a test set needs both"):
         exact_test_set(room, 0.2, [scan], max_range=1.0)
+
+
+def test_exact_test_set_rejects_a_scene_without_ray_casting():
+    class Flat:
+        bounds = (np.zeros(2), np.ones(2))
+
+        def occupancy(self, points):
+            return np.zeros(len(points), dtype=bool)
+
+    with pytest.raises(TypeError, match="scene must have occupancy, ray_cast, bounds .* "
+                                        "Flat lacks ray_cast"):
+        exact_test_set(Flat(), 0.2, room_2d().scan(n_poses=1), max_range=8.0)
+    with pytest.raises(TypeError, match="Flat lacks ray_cast"):
+        cells_in_view(Flat(), [[0.5, 0.5]], 0.2, room_2d().scan(n_poses=1), max_range=8.0)
 
 
 def test_cells_in_view_rejects_bad_centres(room):
