@@ -17,6 +17,10 @@ from ._search import cell_labels
 from ._validation import as_point, as_points, check_real, check_seed
 
 
+# cells whose corner points are tested at once in _visible (27 points of 3 floats each)
+_BAND_CHUNK = 100_000
+
+
 class _Lifted:
     """A 2D scene seen as a 3D one that ignores z (for the 3D lattice and cell rule)."""
 
@@ -127,11 +131,13 @@ def _visible(scene, centres, views, max_range, resolution):
         # sector is in it when a point of the cell (a 3**dim grid, just inside) is
         band = np.flatnonzero(~inside & _in_sector(unit, sector, np.arcsin(
             np.minimum(margin / dist, 1.0))))
-        if band.size:
-            pts = rays[band, None, :] + resolution * _offsets(dim)[None]
-            pts = pts.reshape(-1, dim)
-            ok = _in_sector(pts / np.linalg.norm(pts, axis=1)[:, None], sector)
-            inside[band] = ok.reshape(len(band), -1).any(axis=1)
+        offsets = resolution * _offsets(dim)
+        for start in range(0, band.size, _BAND_CHUNK):     # bounded memory
+            rows = band[start:start + _BAND_CHUNK]
+            pts = (rays[rows, None, :] + offsets[None]).reshape(-1, dim)
+            norm = np.linalg.norm(pts, axis=1)
+            ok = _in_sector(pts / np.maximum(norm, 1e-300)[:, None], sector)
+            inside[rows] = ok.reshape(len(rows), -1).any(axis=1)
         todo, unit, dist = todo[inside], unit[inside], dist[inside]
         if not len(todo):
             continue
