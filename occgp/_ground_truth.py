@@ -104,7 +104,9 @@ def _offsets(dim):
 
 def _cell_keys(points, resolution):
     """Integer cell index rows of points, as one void scalar per row (for np.isin)."""
-    keys = np.ascontiguousarray(np.floor(points / resolution).astype(np.int64))
+    # clipped into int64 (a cell that far holds no return of a finite scan anyway)
+    index = np.clip(np.floor(points / resolution), -2.0 ** 62, 2.0 ** 62)
+    keys = np.ascontiguousarray(index.astype(np.int64))
     return keys.view(np.dtype((np.void, keys.dtype.itemsize * keys.shape[1]))).ravel()
 
 

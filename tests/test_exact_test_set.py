@@ -119,6 +119,13 @@ def test_exact_test_set_rejects_a_scene_without_ray_casting():
         cells_in_view(Flat(), [[0.5, 0.5]], 0.2, room_2d().scan(n_poses=1), max_range=8.0)
 
 
+def test_cells_in_view_of_far_cells_is_false(room):
+    scans = room.scan(n_poses=1)
+    with np.errstate(all="raise"):
+        got = cells_in_view(room, [[1e30, 1e30], [-1e30, 0.0]], 0.1, scans, max_range=8.0)
+    assert got.tolist() == [False, False]
+
+
 def test_cells_in_view_rejects_bad_centres(room):
     with pytest.raises(ValueError, match=r"centres must have shape \(n_points, 3\)"):
         cells_in_view(room, np.zeros((4, 5)), 0.1, room.scan(n_poses=1), max_range=8.0)
