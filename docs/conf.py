@@ -20,8 +20,13 @@ extensions = [
 ]
 
 autosummary_generate = True
-autodoc_default_options = {"members": True, "inherited-members": False}
+# every class page (docs/_templates/autosummary/class.rst) documents its public
+# members, inherited ones included (but not those of tuple, for the named tuples),
+# and lists them in Methods / Attributes tables
+autodoc_default_options = {"members": True}
 numpydoc_show_class_members = False
+# signatures without type hints: the numpydoc Parameters sections give the types
+autodoc_typehints = "none"
 numpydoc_class_members_toctree = False
 
 # Offline by default: intersphinx inventories are fetched only when asked for.
@@ -42,17 +47,29 @@ sphinx_gallery_conf = {
     "remove_config_comments": True,
 }
 
-templates_path = []
+templates_path = ["_templates"]
 exclude_patterns = ["_build", "gen_modules/backreferences/*.examples"]
 html_theme = "pydata_sphinx_theme"
 html_title = f"occgp {release}"
+# a table of contents in the left sidebar of every page (docs/_templates/sidebar-toc.html):
+# the pages and their sections; the right sidebar lists the page's own sections
+html_sidebars = {"**": ["sidebar-toc.html"]}
+html_theme_options = {"show_toc_level": 2, "secondary_sidebar_items": ["page-toc"]}
 
 
 def _skip_metadata_requests(app, what, name, obj, skip, options):
-    """Skip scikit-learn's generated ``set_*_request`` methods (metadata routing)."""
-    if name.startswith("set_") and name.endswith("_request"):
+    """Skip scikit-learn's metadata-routing methods (``set_*_request``,
+    ``get_metadata_routing``): scikit-learn's machinery, not occgp's API."""
+    if is_metadata_routing(name):
         return True
     return None
+
+
+def is_metadata_routing(name):
+    """Whether `name` is one of scikit-learn's metadata-routing methods (also used by
+    tests/test_api_docs.py)."""
+    return (name.startswith("set_") and name.endswith("_request")) or \
+        name == "get_metadata_routing"
 
 
 def setup(app):

@@ -1,13 +1,15 @@
 """The ``occgp`` command line: ``occgp demo`` (the main job) and ``occgp map``.
 
-``occgp demo`` maps the synthetic structured room with every mapping method
-(:func:`mapping_methods`: the octree and the grid in scan and ray mode, BGK,
-AKIMap in both variants and the k-NN map), prints their scores, then maps a
-noisy version of the same scans with the octree and the k-NN map
-(:func:`noisy_mapping_methods`) and prints theirs, and writes ``map.bt`` and
-figures. ``occgp map`` (:func:`map_scans`) builds a map from scan files and ROS
-bags (PointCloud2 posed by TF; ``--topic``, ``--fixed-frame``,
-``--sensor-frame``), optionally posed by a KITTI or TUM trajectory
+``occgp demo`` (:func:`demo`, in ``occgp/_demo.py``) maps the synthetic
+structured room with every mapping method (:func:`mapping_methods`: the octree
+and the grid in scan and ray mode, BGK, AKIMap in both variants and the k-NN
+map), a noisy version of the same scans with the octree and the k-NN map
+(:func:`noisy_mapping_methods`), and the 2D room with the GP maps
+(:func:`gp_mapping_methods`), scores every map against the scene's exact ground
+truth (:func:`occgp.evaluation.exact_test_set`), prints a table for each and
+writes ``map.bt`` and figures. ``occgp map`` (:func:`map_scans`) builds a map
+from scan files and ROS bags (PointCloud2 posed by TF; ``--topic``,
+``--fixed-frame``, ``--sensor-frame``), optionally posed by a KITTI or TUM trajectory
 (``--poses``), with ``--method octree`` (the default), ``bgk``
 (:class:`~occgp.BGKMap`), ``akimap`` (:class:`~occgp.AKIMap`) or ``knn``
 (:class:`~occgp.KNNMap`), optionally continuing a saved map
@@ -32,12 +34,15 @@ import numpy as np
 
 from . import __version__
 from ._validation import check_n_jobs, check_real, check_resolution
-from .grid import GridMap
 from .kernel import AKIMap, BGKMap
 from .knn import CDFS, KNN_PARAMS, KNNMap, check_knn_params
 from .octree import OccupancyOctree
+from ._demo import (  # noqa: F401  (re-exported: occgp.cli is the demo's public home)
+    _noisy_scans, demo, gp_mapping_methods, mapping_methods, noisy_mapping_methods,
+)
 
-__all__ = ["main", "demo", "map_scans", "mapping_methods", "noisy_mapping_methods"]
+__all__ = ["main", "demo", "map_scans", "mapping_methods", "noisy_mapping_methods",
+           "gp_mapping_methods"]
 
 # the maps `occgp map` can build (--method); each is written as an octree
 _MAP_METHODS = ("octree", "bgk", "akimap", "knn")
@@ -46,240 +51,6 @@ _MAP_METHODS = ("octree", "bgk", "akimap", "knn")
 _KNN_OPTIONS = KNN_PARAMS + ("cdf",)
 _KNN_DEFAULTS = {name: prm.default for name, prm in
                  inspect.signature(KNNMap.__init__).parameters.items() if name in _KNN_OPTIONS}
-# the demo's scanner range (Scene.scan's max_range): every return lies within it, so
-# the k-NN map's sensor_range of that length cuts no clean ray
-_DEMO_RANGE = 8.0
-
-
-class _RayModeOctree(OccupancyOctree):
-    """An octree whose scans go in with per-ray counting (``mode="ray"``)."""
-
-    def insert_scan(self, points, origin, **kwargs):
-        return super().insert_scan(points, origin, mode="ray", **kwargs)
-
-
-class _RayModeGrid(GridMap):
-    """A grid whose scans go in with per-ray counting (``mode="ray"``)."""
-
-    def insert_scan(self, points, origin, **kwargs):
-        return super().insert_scan(points, origin, mode="ray", **kwargs)
-
-
-class _RangedOctree(OccupancyOctree):
-    """An octree whose scans go in with a range limit (``max_range=``), in scan mode."""
-
-    def __init__(self, resolution, max_range):
-        super().__init__(resolution)
-        self._max_range = max_range
-
-    def insert_scan(self, points, origin, **kwargs):
-        return super().insert_scan(points, origin, max_range=self._max_range, **kwargs)
-
-
-def mapping_methods(resolution: float) -> dict:
-    """Every mapping method of ``occgp demo``, as name → factory of an empty map.
-
-    The octree and the grid in scan and ray mode, :class:`~occgp.BGKMap`
-    ("BGK"), :class:`~occgp.AKIMap` in its two variants ("AKIMap",
-    "AKIMap (published)") and :class:`~occgp.KNNMap` ("k-NN", its default
-    parameters, with ``sensor_range`` 8 m, the demo scanner's range: it cuts
-    no ray, as the octree's unlimited range); the kernel maps use every core
-    and AKIMap draws its free samples with ``random_state=0``.
-
-    Parameters
-    ----------
-    resolution : float
-        Cell size of every map, in metres.
-
-    Returns
-    -------
-    methods : dict of str to callable
-        Each factory returns a new, empty map with ``insert_scan(points, origin)``
-        and ``occupancy(points)``.
-    """
-    return {
-        "octree (scan)": lambda: OccupancyOctree(resolution),
-        "octree (ray)": lambda: _RayModeOctree(resolution),
-        "grid (scan)": lambda: GridMap(resolution),
-        "grid (ray)": lambda: _RayModeGrid(resolution),
-        "BGK": lambda: BGKMap(resolution, n_jobs=-1),
-        "AKIMap": lambda: AKIMap(resolution, random_state=0, n_jobs=-1),
-        "AKIMap (published)": lambda: AKIMap(resolution, variant="published", random_state=0,
-                                             n_jobs=-1),
-        "k-NN": lambda: KNNMap(resolution, sensor_range=_DEMO_RANGE),
-    }
-
-
-def noisy_mapping_methods(resolution: float) -> dict:
-    """The methods of ``occgp demo``'s noisy-scan table, as name → factory of an empty map.
-
-    "octree (scan), noisy": :class:`~occgp.OccupancyOctree` in scan mode with
-    ``max_range`` 8 m, and "k-NN, noisy": :class:`~occgp.KNNMap` (its default
-    parameters) with ``sensor_range`` 8 m: both cut the rays that depth noise
-    takes past the demo scanner's range at the same length, so the two read
-    the same scans alike.
-
-    Parameters
-    ----------
-    resolution : float
-        Cell size of every map, in metres.
-
-    Returns
-    -------
-    methods : dict of str to callable
-        Each factory returns a new, empty map.
-    """
-    return {
-        "octree (scan), noisy": lambda: _RangedOctree(resolution, _DEMO_RANGE),
-        "k-NN, noisy": lambda: KNNMap(resolution, sensor_range=_DEMO_RANGE),
-    }
-
-
-def _noisy_scans(scans, *, depth_noise: float, speckle: float, seed: int) -> list:
-    """The scans with stereo-like noise (the error model of
-    :class:`occgp.datasets.StereoCamera`, on the range ``d``): each point is, with
-    probability `speckle`, moved to ``U(0, 1)`` times its range on its ray (an
-    outlier between the sensor and the surface), else along its ray by
-    ``depth_noise * d**2 * N(0, 1)`` (kept at 0.001 of its range at least, in
-    front of the sensor). One generator, ``default_rng([seed, 1])``,
-    draws over the scans in order."""
-    rng = np.random.default_rng([seed, 1])
-    out = []
-    for scan in scans:
-        points = np.asarray(scan.points, dtype=np.float64)
-        origin = np.asarray(scan.origin, dtype=np.float64)
-        rays = points - origin
-        dist = np.linalg.norm(rays, axis=1)
-        n = len(points)
-        outlier = rng.random(n) < speckle
-        fraction = rng.random(n)
-        noise = rng.standard_normal(n)
-        scale = np.where(outlier, fraction, np.maximum(1.0 + depth_noise * dist * noise, 1e-3))
-        out.append(scan._replace(points=origin + scale[:, None] * rays))
-    return out
-
-
-def demo(outdir: str | Path = "demo_out", *, resolution: float = 0.1, seed: int = 0,
-         progress: bool | None = None, out=None) -> list:
-    """Map the synthetic structured room with every method and score the maps.
-
-    The room (10 x 7 x 2 m) is scanned like the la3dm data set (4 poses x 3
-    scans x 3500 points, ranges up to 8 m). Each scan is split by the held-out
-    protocol: 80% of its points build the maps, the held-out 20% give occupied
-    test points and, on their rays, free test points. The methods are those of
-    :func:`mapping_methods`. Then the same training scans get the noise of
-    :class:`occgp.datasets.StereoCamera` at its defaults (depth noise
-    ``depth_noise * d**2`` along each ray, a fraction `speckle` of outliers
-    between the sensor and the surface; seeded by `seed`) and are mapped by
-    the methods of :func:`noisy_mapping_methods` (the octree and the k-NN
-    map, both cut at 8 m), scored on the same test set. Prints a table for
-    each (AUC, MSE, accuracies, update time) and writes ``map.bt`` (the
-    scan-mode octree of the clean scans), ``slice.png`` (a horizontal slice of
-    each map beside the ground truth) and ``roc.png`` to `outdir`.
-
-    Returns
-    -------
-    rows : list of MapResult
-        The rows of :func:`mapping_methods`, then those of
-        :func:`noisy_mapping_methods` (names ending in ", noisy").
-    """
-    from .datasets import StereoCamera, structured_room
-    from .evaluation import compare_methods, format_table, held_out_split
-
-    out = sys.stdout if out is None else out
-    outdir = Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
-    scene = structured_room(seed=seed)
-    scans = scene.scan(max_range=_DEMO_RANGE, seed=seed)
-    train, test = held_out_split(scans, fraction=0.2, seed=seed)
-    n_points = sum(len(s.points) for s in train)
-    print(f"occgp {__version__} demo: structured room 10 x 7 x 2 m, {len(scans)} scans, "
-          f"{n_points:,} points mapped, {len(test.points):,} held-out test points, "
-          f"resolution {resolution} m", file=out)
-    rows = compare_methods(mapping_methods(resolution), train, test, progress=progress)
-    print(format_table(rows), file=out)
-
-    camera = StereoCamera()
-    noisy = _noisy_scans(train, depth_noise=camera.depth_noise, speckle=camera.speckle,
-                         seed=seed)
-    print(f"\nnoisy scans: the same scans with stereo-camera noise (depth noise "
-          f"{camera.depth_noise:g} m x (range / 1 m)^2,\n{camera.speckle:.0%} speckle outliers "
-          f"between sensor and surface), rays cut at {_DEMO_RANGE:g} m, the same test points",
-          file=out)
-    noisy_rows = compare_methods(noisy_mapping_methods(resolution), noisy, test,
-                                 progress=progress)
-    print(format_table(noisy_rows), file=out)
-    rows += noisy_rows
-
-    next(r for r in rows if r.method == "octree (scan)").map.save(outdir / "map.bt")
-    _plot_slice(rows, scene, train, outdir / "slice.png")
-    _plot_roc(rows, test, outdir / "roc.png")
-    print(f"wrote {outdir / 'map.bt'}, {outdir / 'slice.png'}, {outdir / 'roc.png'}", file=out)
-    return rows
-
-
-def _plot_slice(rows, scene, scans, path: Path, z: float | None = None) -> None:
-    from matplotlib.figure import Figure
-
-    lo, hi = (np.asarray(b, dtype=float) for b in scene.bounds)
-    if z is None:   # the mean sensor height: the best observed plane
-        z = float(np.mean([s.origin[2] for s in scans]))
-    res = rows[0].map.resolution
-    xs = np.arange(lo[0] + res / 2, hi[0], res)
-    ys = np.arange(lo[1] + res / 2, hi[1], res)
-    gx, gy = np.meshgrid(xs, ys)
-    q = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, z)])
-    truth = scene.occupancy(q).reshape(gx.shape)
-    panels = [("ground truth", truth.astype(float))]
-    panels += [(r.method, r.map.occupancy(q).reshape(gx.shape)) for r in rows]
-    # up to 4 panels in a row, in as few rows as that allows
-    nrows = -(-len(panels) // 4)
-    ncols = -(-len(panels) // nrows)
-    fig = Figure(figsize=(4.2 * ncols, 3.6 * nrows), layout="constrained")
-    axes = fig.subplots(nrows, ncols, squeeze=False)
-    cmap = _cmap()
-    for ax in axes.flat[len(panels):]:
-        ax.set_axis_off()
-    for ax, (title, img) in zip(axes.flat, panels):
-        im = ax.imshow(img, origin="lower", extent=(lo[0], hi[0], lo[1], hi[1]),
-                       cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
-        ax.set_title(title)
-        ax.set_xlabel("x [m]")
-        ax.set_aspect("equal")
-    for ax in axes[:, 0]:
-        ax.set_ylabel("y [m]")
-    for s in scans:
-        axes[0, 0].plot(*s.origin[:2], "r^", ms=6)
-    fig.colorbar(im, ax=axes, shrink=0.8 / nrows ** 0.5,
-                 label="p(occupied); grey: unknown")
-    fig.suptitle(f"horizontal slice at z = {z:.2f} m")
-    fig.savefig(path, dpi=110)
-
-
-def _cmap():
-    from matplotlib import colormaps
-
-    return colormaps["viridis"].with_extremes(bad="0.75")
-
-
-def _plot_roc(rows, test, path: Path) -> None:
-    from matplotlib.figure import Figure
-
-    from .metrics import roc_curve
-
-    fig = Figure(figsize=(5.2, 4.8), layout="constrained")
-    ax = fig.subplots()
-    for r in rows:
-        fpr, tpr, _ = roc_curve(test.labels, r.map.occupancy(test.points))
-        ax.plot(fpr, tpr, label=f"{r.method} (AUC {r.auc:.3f})")
-    ax.plot([0, 1], [0, 1], "k:", lw=0.8)
-    ax.set_xlabel("false positive rate")
-    ax.set_ylabel("true positive rate")
-    ax.set_title("ROC on held-out test points")
-    ax.legend(loc="lower right", fontsize="small")
-    fig.savefig(path, dpi=110)
-
-
 def _check_knn_options(knn_params) -> dict:
     """KNNMap's defaults updated by `knn_params`, checked (see :func:`map_scans`)."""
     if not isinstance(knn_params, Mapping):
@@ -769,8 +540,9 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("demo", help="map the synthetic structured room with every method "
-                       "(and noisy scans of it with the octree and the k-NN map), print "
-                       "scores, write map.bt and figures")
+                       "(and noisy scans of it with the octree and the k-NN map) and the 2D "
+                       "room with the GP maps, print scores against the exact ground truth, "
+                       "write map.bt and figures")
     p.add_argument("-o", "--output", default="demo_out", help="output folder (default: %(default)s)")
     p.add_argument("--resolution", type=float, default=0.1,
                    help="cell size in metres (default: %(default)s)")

@@ -3,11 +3,14 @@
 A *map* is any object with ``insert_scan(points, origin)`` and
 ``occupancy(points)`` (probabilities, NaN where unknown). A *scan* is any
 ``(points, origin)`` pair, e.g. :class:`occgp.datasets.Scan`. Test sets come
-from the ground truth of a synthetic scene (:func:`grid_test_set`) or, for real
-scans, from the held-out protocol (:func:`held_out_split`). Every method is
-then built and scored the same way (:func:`run_method`,
-:func:`compare_methods`, :func:`equal_time_comparison`) and the rows print as
-a table (:func:`format_table`).
+from the ground truth of a synthetic scene (:func:`grid_test_set` over a box;
+:func:`exact_test_set` over the cells the scans could see, see
+:func:`cells_in_view`) or, for real scans, from the held-out protocol
+(:func:`held_out_split`), which scores only where the sensor looked and so
+rates every method near perfect on a synthetic scene. Every method is then
+built and scored the same way (:func:`run_method`, :func:`compare_methods`,
+:func:`equal_time_comparison`) and the rows print as a table
+(:func:`format_table`).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from tqdm.auto import tqdm
 
+from ._ground_truth import cells_in_view, exact_test_set
 from ._nca import NCAResult, nca_feature_weights
 from ._search import (
     KNN_GRID, KNN_WEIGHT_GRID, OCTOMAP_GRID, THRESHOLDS, GridSearchResult, cell_labels, grid_search,
@@ -29,7 +33,8 @@ from ._search import (
 from ._validation import as_point, as_points, check_real, check_seed
 from .metrics import score_all
 
-__all__ = ["TestSet", "MapResult", "held_out_split", "grid_test_set", "evaluate_map",
+__all__ = ["TestSet", "MapResult", "held_out_split", "grid_test_set", "exact_test_set",
+           "cells_in_view", "evaluate_map",
            "run_method", "compare_methods", "equal_time_comparison", "format_table",
            "rows_to_records", "nca_feature_weights", "NCAResult", "grid_search",
            "GridSearchResult", "cell_labels", "KNN_GRID", "OCTOMAP_GRID", "KNN_WEIGHT_GRID",

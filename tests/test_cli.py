@@ -1,4 +1,5 @@
-"""The occgp command: demo writes its table and files, map builds a map from scan files."""
+"""The occgp command: the demo's methods (the demo itself: test_demo.py), map builds a map
+from scan files."""
 
 import io
 import re
@@ -7,37 +8,11 @@ import numpy as np
 import pytest
 
 from occgp import AKIMap, BGKMap, KNNMap, OccupancyOctree
-from occgp.cli import _noisy_scans, demo, main, map_scans, mapping_methods, noisy_mapping_methods
+from occgp.cli import _noisy_scans, main, map_scans, mapping_methods, noisy_mapping_methods
 from occgp.datasets import Scan, read_scans, structured_room, write_pcd
 
 KERNEL_METHODS = {"BGK", "AKIMap", "AKIMap (published)"}
 NOISY_METHODS = {"octree (scan), noisy", "k-NN, noisy"}
-
-
-def test_demo_prints_table_and_writes_files(tmp_path):
-    out = io.StringIO()
-    rows = demo(tmp_path, resolution=0.2, progress=False, out=out)
-    text = out.getvalue()
-    assert "octree (scan)" in text and "octree (ray)" in text and "AUC" in text
-    assert [r.method for r in rows] == ["octree (scan)", "octree (ray)", "grid (scan)",
-                                        "grid (ray)", "BGK", "AKIMap", "AKIMap (published)",
-                                        "k-NN", "octree (scan), noisy", "k-NN, noisy"]
-    assert all(name in text for name in KERNEL_METHODS | NOISY_METHODS | {"k-NN"})
-    # the noisy rows are a second table, after the first, on the same test points
-    assert text.index("noisy scans:") > text.index("k-NN ")
-    assert text.index("noisy scans:") < text.index("octree (scan), noisy")
-    assert len({r.n_test for r in rows}) == 1 and len({r.n_points for r in rows}) == 1
-    by_name = {r.method: r for r in rows}   # the grid is the octree cell for cell
-    assert by_name["grid (scan)"].auc == by_name["octree (scan)"].auc
-    assert by_name["grid (ray)"].mse == by_name["octree (ray)"].mse
-    assert all(0.5 < r.auc <= 1 and r.seconds > 0 for r in rows)
-    for name in ("map.bt", "slice.png", "roc.png"):
-        assert (tmp_path / name).stat().st_size > 1000
-    assert (tmp_path / "slice.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    tree = OccupancyOctree.load(tmp_path / "map.bt")    # the scan-mode octree
-    assert tree.resolution == 0.2 and tree.num_leaves > 100
-    assert tree.num_leaves == OccupancyOctree.from_bytes(
-        by_name["octree (scan)"].map.to_bytes("bt")).num_leaves
 
 
 def test_mapping_methods_include_the_kernel_maps():

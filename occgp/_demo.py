@@ -1,0 +1,436 @@
+"""``occgp demo``: every mapping method on synthetic scenes, scored against their exact
+ground truth (:func:`demo`; re-exported by :mod:`occgp.cli`).
+
+The 3D methods (:func:`mapping_methods`) map the structured room's scans, the octree
+and the k-NN map (:func:`noisy_mapping_methods`) a noisy copy of them, and the 2D GP
+maps (:func:`gp_mapping_methods`) the 2D room's laser scans; each table is scored on
+:func:`occgp.evaluation.exact_test_set`, the cells the scans could see.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .grid import GridMap
+from .kernel import AKIMap, BGKMap
+from .knn import KNNMap
+from .octree import OccupancyOctree
+
+__all__ = ["demo", "mapping_methods", "noisy_mapping_methods", "gp_mapping_methods"]
+
+# the demo's scanner range (Scene.scan's max_range): every return lies within it, so
+# the k-NN map's sensor_range of that length cuts no clean ray
+_DEMO_RANGE = 8.0
+
+
+class _RayModeOctree(OccupancyOctree):
+    """An octree whose scans go in with per-ray counting (``mode="ray"``)."""
+
+    def insert_scan(self, points, origin, **kwargs):
+        return super().insert_scan(points, origin, mode="ray", **kwargs)
+
+
+class _RayModeGrid(GridMap):
+    """A grid whose scans go in with per-ray counting (``mode="ray"``)."""
+
+    def insert_scan(self, points, origin, **kwargs):
+        return super().insert_scan(points, origin, mode="ray", **kwargs)
+
+
+class _RangedOctree(OccupancyOctree):
+    """An octree whose scans go in with a range limit (``max_range=``), in scan mode."""
+
+    def __init__(self, resolution, max_range):
+        super().__init__(resolution)
+        self._max_range = max_range
+
+    def insert_scan(self, points, origin, **kwargs):
+        return super().insert_scan(points, origin, max_range=self._max_range, **kwargs)
+
+
+def mapping_methods(resolution: float) -> dict:
+    """Every mapping method of ``occgp demo``, as name → factory of an empty map.
+
+    The octree and the grid in scan and ray mode, :class:`~occgp.BGKMap`
+    ("BGK"), :class:`~occgp.AKIMap` in its two variants ("AKIMap",
+    "AKIMap (published)") and :class:`~occgp.KNNMap` ("k-NN", its default
+    parameters, with ``sensor_range`` 8 m, the demo scanner's range: it cuts
+    no ray, as the octree's unlimited range); the kernel maps use every core
+    and AKIMap draws its free samples with ``random_state=0``.
+
+    Parameters
+    ----------
+    resolution : float
+        Cell size of every map, in metres.
+
+    Returns
+    -------
+    methods : dict of str to callable
+        Each factory returns a new, empty map with ``insert_scan(points, origin)``
+        and ``occupancy(points)``.
+    """
+    return {
+        "octree (scan)": lambda: OccupancyOctree(resolution),
+        "octree (ray)": lambda: _RayModeOctree(resolution),
+        "grid (scan)": lambda: GridMap(resolution),
+        "grid (ray)": lambda: _RayModeGrid(resolution),
+        "BGK": lambda: BGKMap(resolution, n_jobs=-1),
+        "AKIMap": lambda: AKIMap(resolution, random_state=0, n_jobs=-1),
+        "AKIMap (published)": lambda: AKIMap(resolution, variant="published", random_state=0,
+                                             n_jobs=-1),
+        "k-NN": lambda: KNNMap(resolution, sensor_range=_DEMO_RANGE),
+    }
+
+
+def noisy_mapping_methods(resolution: float) -> dict:
+    """The methods of ``occgp demo``'s noisy-scan table, as name → factory of an empty map.
+
+    "octree (scan), noisy": :class:`~occgp.OccupancyOctree` in scan mode with
+    ``max_range`` 8 m, and "k-NN, noisy": :class:`~occgp.KNNMap` (its default
+    parameters) with ``sensor_range`` 8 m: both cut the rays that depth noise
+    takes past the demo scanner's range at the same length, so the two read
+    the same scans alike.
+
+    Parameters
+    ----------
+    resolution : float
+        Cell size of every map, in metres.
+
+    Returns
+    -------
+    methods : dict of str to callable
+        Each factory returns a new, empty map.
+    """
+    return {
+        "octree (scan), noisy": lambda: _RangedOctree(resolution, _DEMO_RANGE),
+        "k-NN, noisy": lambda: KNNMap(resolution, sensor_range=_DEMO_RANGE),
+    }
+
+
+def _noisy_scans(scans, *, depth_noise: float, speckle: float, seed: int) -> list:
+    """The scans with stereo-like noise (the error model of
+    :class:`occgp.datasets.StereoCamera`, on the range ``d``): each point is, with
+    probability `speckle`, moved to ``U(0, 1)`` times its range on its ray (an
+    outlier between the sensor and the surface), else along its ray by
+    ``depth_noise * d**2 * N(0, 1)`` (kept at 0.001 of its range at least, in
+    front of the sensor). One generator, ``default_rng([seed, 1])``,
+    draws over the scans in order."""
+    rng = np.random.default_rng([seed, 1])
+    out = []
+    for scan in scans:
+        points = np.asarray(scan.points, dtype=np.float64)
+        origin = np.asarray(scan.origin, dtype=np.float64)
+        rays = points - origin
+        dist = np.linalg.norm(rays, axis=1)
+        n = len(points)
+        outlier = rng.random(n) < speckle
+        fraction = rng.random(n)
+        noise = rng.standard_normal(n)
+        scale = np.where(outlier, fraction, np.maximum(1.0 + depth_noise * dist * noise, 1e-3))
+        out.append(scan._replace(points=origin + scale[:, None] * rays))
+    return out
+
+
+def gp_mapping_methods(resolution: float) -> dict:
+    """The 2D maps of ``occgp demo``'s second table, as name → factory of an unfitted model.
+
+    :class:`~occgp.gp.GPOMIK` (integral kernels, one model for every query)
+    and :class:`~occgp.gp.GPOM` (beams cut into free points, a local GP per
+    query) with the squared-exponential hyper-parameters their optimisers find
+    on :func:`~occgp.datasets.room_2d`, rounded, and the optimiser off
+    (``GPOMIK``: variance 1.7, length scale 0.6 m, noise 1e-4; ``GPOM``: 0.66,
+    1.0 m, 0.13; as in the gallery's GP example), so that the demo runs in
+    seconds; :class:`~occgp.gp.GPMixture` ("GP mixture", line-tracking
+    clusters, its own hyper-parameter fit); and the log-odds
+    :class:`~occgp.gp.OccupancyGrid` ("log-odds grid") with cells of
+    `resolution`. Every model is seeded with ``random_state=0``.
+
+    Parameters
+    ----------
+    resolution : float
+        Cell size of the log-odds grid, in metres.
+
+    Returns
+    -------
+    methods : dict of str to callable
+        Each factory returns a new, unfitted model with
+        ``fit(hits, segment_starts, segment_ends)`` and ``predict_proba(X)``.
+    """
+    from .gp import GPOM, GPOMIK, GPMixture, OccupancyGrid, SquaredExponential
+
+    return {
+        "GPOMIK": lambda: GPOMIK(SquaredExponential(1.7, 0.6), noise=1e-4, optimizer=False,
+                                 random_state=0),
+        "GPOM": lambda: GPOM(SquaredExponential(0.66, 1.0), noise=0.13, optimizer=False,
+                             random_state=0),
+        "GP mixture": lambda: GPMixture(clustering="line", random_state=0),
+        "log-odds grid": lambda: OccupancyGrid(resolution),
+    }
+
+
+class _Proba:
+    """A fitted 2D model seen as a map: ``occupancy`` is its ``predict_proba``, NaN
+    where a log-odds grid has no evidence; `test_proba` keeps its answer on the test
+    points (for the ROC curves)."""
+
+    def __init__(self, model):
+        self.model = model
+        self.test_proba = None
+
+    def occupancy(self, points):
+        p = self.model.predict_proba(points)
+        if hasattr(self.model, "is_known"):
+            p = np.where(self.model.is_known(points), p, np.nan)
+        return p
+
+
+def _run_gp(name, factory, observations, n_scans, test):
+    """Fit one 2D model on all observations at once (timed) and score it (a MapResult)."""
+    from .evaluation import MapResult
+    from .metrics import score_all
+
+    hits, starts, ends = observations
+    model = factory()
+    t0 = time.perf_counter()
+    model.fit(hits, starts, ends)
+    seconds = time.perf_counter() - t0
+    answer = _Proba(model)
+    answer.test_proba = answer.occupancy(test.points)
+    sc = score_all(test.labels, answer.test_proba)
+    return MapResult(name, sc["auc"], sc["mse"], sc["acc_occupied"], sc["acc_free"],
+                     sc["tpr_fdr_auc"], seconds, n_scans, len(hits) + len(starts),
+                     sc["n_test"], sc["unknown_fraction"], 1.0, answer)
+
+
+# the demo's tables: no "data" column (every method gets all of it), "unknown" added
+_DEMO_COLUMNS = ("method", "auc", "mse", "acc_occupied", "acc_free", "tpr_fdr_auc",
+                 "unknown_fraction", "seconds")
+
+
+def demo(outdir: str | Path = "demo_out", *, resolution: float = 0.1, seed: int = 0,
+         progress: bool | None = None, out=None) -> list:
+    """Map the synthetic rooms with every method and score them against exact ground truth.
+
+    **3D.** The structured room (10 x 7 x 2 m) is scanned like the la3dm data
+    set (4 poses x 3 scans x 3500 points, ranges up to 8 m); every method of
+    :func:`mapping_methods` maps all the scans. **Protocol:** the test points
+    are the centres of the cells of `resolution` that the scans could see
+    (:func:`occgp.evaluation.exact_test_set`: within 8 m of a scan's origin,
+    in its field of view, in line of sight by exact ray casting), labelled by
+    the room's exact geometry (occupied where a solid reaches into the
+    cell); cells that no scan could see (inside solids, behind walls, the
+    floor below the scanners' lowest ray) are left out, cells in view but
+    between the rays are kept, and the free cells are subsampled (seeded) to
+    as many as the occupied ones. A map that leaves a cell unknown scores
+    p = 0.5 there. Then the same scans get the noise of
+    :class:`occgp.datasets.StereoCamera` at its defaults (depth noise
+    ``depth_noise * d**2`` along each ray, a fraction `speckle` of outliers
+    between the sensor and the surface; seeded by `seed`) and are mapped by
+    the methods of :func:`noisy_mapping_methods` (the octree and the k-NN
+    map, both cut at 8 m), scored on the same test cells.
+
+    **2D.** :func:`occgp.datasets.room_2d` (22 x 18 m) seen by a 180-degree,
+    17-beam, 8 m laser at 26 poses; the models of :func:`gp_mapping_methods`
+    are fitted on all its hits and beams at once and scored by the same
+    protocol on 2D cells of `resolution`.
+
+    Prints a table for each (AUC, MSE, accuracies, TPR-FDR AUC, the fraction
+    of test cells left unknown, and the update or fit time) and writes
+    ``map.bt`` (the scan-mode octree of the clean scans), ``slice.png`` (a
+    horizontal slice of each 3D map beside the ground truth), ``roc.png``
+    (the 3D maps' ROC curves) and ``gp_2d.png`` (the 2D maps beside the
+    ground truth, and their ROC curves) to `outdir`.
+
+    Parameters
+    ----------
+    outdir : str or Path, default="demo_out"
+        Folder of the written files; created if missing.
+    resolution : float, default=0.1
+        Cell size of the maps and of the test cells, in metres.
+    seed : int, default=0
+        Seed of the scene, the 3D scans, the noise and the test cells'
+        subsampling.
+    progress : bool or None, default=None
+        Show progress bars; None shows them only on a terminal.
+    out : file, optional
+        Where to print; default ``sys.stdout``.
+
+    Returns
+    -------
+    rows : list of MapResult
+        The rows of :func:`mapping_methods`, then those of
+        :func:`noisy_mapping_methods` (names ending in ", noisy"), then those
+        of :func:`gp_mapping_methods` (their ``map`` answers ``occupancy``
+        with the model's ``predict_proba``).
+    """
+    from .datasets import StereoCamera, room_2d, structured_room
+    from .evaluation import compare_methods, exact_test_set, format_table
+    from .gp import observations_from_scans
+
+    out = sys.stdout if out is None else out
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    scene = structured_room(seed=seed)
+    scans = scene.scan(max_range=_DEMO_RANGE, seed=seed)
+    test = exact_test_set(scene, resolution, scans, max_range=_DEMO_RANGE, seed=seed)
+    n_points = sum(len(s.points) for s in scans)
+    n_occ = int(test.labels.sum())
+    print(f"occgp {__version__} demo: every map scored against the scene's exact ground "
+          f"truth\n\n3D: structured room 10 x 7 x 2 m, {len(scans)} scans, {n_points:,} "
+          f"points mapped, resolution {resolution:g} m\ntest points: the {resolution:g} m "
+          f"cells the scans could see (within {_DEMO_RANGE:g} m, in a field of view, in line "
+          f"of sight),\nlabelled by the room (occupied where a solid reaches into the cell): "
+          f"{n_occ:,} occupied, {len(test.points) - n_occ:,} free\n(subsampled); cells no "
+          f"scan could see are left out; unknown: the fraction of test cells a map\nleaves "
+          f"unknown (scored p = 0.5); time: the map's updates", file=out)
+    rows = compare_methods(mapping_methods(resolution), scans, test, progress=progress)
+    print(format_table(rows, columns=_DEMO_COLUMNS), file=out)
+
+    camera = StereoCamera()
+    noisy = _noisy_scans(scans, depth_noise=camera.depth_noise, speckle=camera.speckle,
+                         seed=seed)
+    print(f"\nnoisy scans: the same scans with stereo-camera noise (depth noise "
+          f"{camera.depth_noise:g} m x (range / 1 m)^2,\n{camera.speckle:.0%} speckle outliers "
+          f"between sensor and surface), rays cut at {_DEMO_RANGE:g} m, the same test points",
+          file=out)
+    noisy_rows = compare_methods(noisy_mapping_methods(resolution), noisy, test,
+                                 progress=progress)
+    print(format_table(noisy_rows, columns=_DEMO_COLUMNS), file=out)
+    rows += noisy_rows
+
+    room = room_2d()
+    scans_2d = room.scan(n_poses=26, n_beams=17, fov=np.pi, max_range=_DEMO_RANGE)
+    observations = observations_from_scans(scans_2d)
+    test_2d = exact_test_set(room, resolution, scans_2d, max_range=_DEMO_RANGE, seed=seed)
+    n_occ = int(test_2d.labels.sum())
+    print(f"\n2D: room 22 x 18 m, {len(scans_2d)} laser scans (180 deg, 17 beams, "
+          f"{_DEMO_RANGE:g} m): {len(observations[0])} hits and {len(observations[1])} beams, "
+          f"fitted at once\ntest points: the {resolution:g} m cells in view by the same "
+          f"protocol, {n_occ:,} occupied, {len(test_2d.points) - n_occ:,} free; time: the "
+          f"fit", file=out)
+    gp_rows = [_run_gp(name, factory, observations, len(scans_2d), test_2d)
+               for name, factory in gp_mapping_methods(resolution).items()]
+    print(format_table(gp_rows, columns=_DEMO_COLUMNS), file=out)
+
+    next(r for r in rows if r.method == "octree (scan)").map.save(outdir / "map.bt")
+    _plot_slice(rows, scene, scans, outdir / "slice.png")
+    _plot_roc(rows, test, outdir / "roc.png")
+    _plot_2d(gp_rows, room, scans_2d, test_2d, resolution, outdir / "gp_2d.png")
+    print(f"wrote {outdir / 'map.bt'}, {outdir / 'slice.png'}, {outdir / 'roc.png'}, "
+          f"{outdir / 'gp_2d.png'}", file=out)
+    return rows + gp_rows
+
+
+def _lattice(lo, hi, res):
+    """The centres ``(k + 0.5) * res`` of the map cells inside ``[lo, hi]`` on each axis."""
+    return [(np.arange(np.ceil(a / res - 0.5 - 1e-9), np.floor(b / res - 0.5 + 1e-9) + 1)
+             + 0.5) * res for a, b in zip(lo, hi)]
+
+
+def _truth_panel(scene, centres, res, scans):
+    """The cells' exact labels (closed-cell rule), NaN where no scan could see them."""
+    from ._ground_truth import exact_labels
+    from .evaluation import cells_in_view
+
+    truth = exact_labels(scene, centres, res).astype(float)
+    truth[~cells_in_view(scene, centres, res, scans, max_range=_DEMO_RANGE)] = np.nan
+    return truth
+
+
+def _plot_slice(rows, scene, scans, path: Path, z: float | None = None) -> None:
+
+    lo, hi = (np.asarray(b, dtype=float) for b in scene.bounds)
+    res = rows[0].map.resolution
+    if z is None:   # the cell layer holding the mean sensor height: the best observed plane
+        z = (np.floor(np.mean([s.origin[2] for s in scans]) / res + 1e-9) + 0.5) * res
+    xs, ys = _lattice(lo[:2], hi[:2], res)
+    gx, gy = np.meshgrid(xs, ys)
+    q = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, z)])
+    panels = [("ground truth (grey: not in view)",
+               _truth_panel(scene, q, res, scans).reshape(gx.shape))]
+    panels += [(r.method, r.map.occupancy(q).reshape(gx.shape)) for r in rows]
+    extent = (xs[0] - res / 2, xs[-1] + res / 2, ys[0] - res / 2, ys[-1] + res / 2)
+    fig, axes = _panels(panels, extent, (4.2, 3.6))
+    for s in scans:
+        axes[0, 0].plot(*s.origin[:2], "r^", ms=6)
+    fig.suptitle(f"horizontal slice at z = {z:.2f} m")
+    fig.savefig(path, dpi=110)
+
+
+def _panels(panels, extent, size, extra=0):
+    """A figure of p(occupied) images, up to 4 in a row, `extra` empty axes after them."""
+    from matplotlib.figure import Figure
+
+    n = len(panels) + extra
+    nrows = -(-n // 4)
+    ncols = -(-n // nrows)
+    fig = Figure(figsize=(size[0] * ncols, size[1] * nrows), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    cmap = _cmap()
+    for ax in axes.flat[n:]:
+        ax.set_axis_off()
+    for ax, (title, img) in zip(axes.flat, panels):
+        im = ax.imshow(img, origin="lower", extent=extent, cmap=cmap, vmin=0, vmax=1,
+                       interpolation="nearest")
+        ax.set_title(title)
+        ax.set_xlabel("x [m]")
+        ax.set_aspect("equal")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("y [m]")
+    fig.colorbar(im, ax=axes, shrink=0.8 / nrows ** 0.5,
+                 label="p(occupied); grey: unknown")
+    return fig, axes
+
+
+def _cmap():
+    from matplotlib import colormaps
+
+    return colormaps["viridis"].with_extremes(bad="0.75")
+
+
+def _roc_axes(ax, rows, test, title):
+    from .metrics import roc_curve
+
+    for r in rows:
+        proba = getattr(r.map, "test_proba", None)
+        proba = r.map.occupancy(test.points) if proba is None else proba
+        fpr, tpr, _ = roc_curve(test.labels, proba)
+        ax.plot(fpr, tpr, label=f"{r.method} (AUC {r.auc:.3f})")
+    ax.plot([0, 1], [0, 1], "k:", lw=0.8)
+    ax.set_xlabel("false positive rate")
+    ax.set_ylabel("true positive rate")
+    ax.set_title(title)
+    ax.legend(loc="lower right", fontsize="small")
+
+
+def _plot_roc(rows, test, path: Path) -> None:
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(5.2, 4.8), layout="constrained")
+    _roc_axes(fig.subplots(), rows, test, "ROC on the cells in view (exact ground truth)")
+    fig.savefig(path, dpi=110)
+
+
+def _plot_2d(rows, room, scans, test, resolution, path: Path) -> None:
+    """The 2D maps on cells of `resolution` (0.25 m at least, for speed) over the room,
+    beside the ground truth, and their ROC curves."""
+    lo, hi = (np.asarray(b, dtype=float) for b in room.bounds)
+    res = max(resolution, 0.25)
+    xs, ys = _lattice(lo, hi, res)
+    gx, gy = np.meshgrid(xs, ys)
+    q = np.column_stack([gx.ravel(), gy.ravel()])
+    panels = [("ground truth (grey: not in view)",
+               _truth_panel(room, q, res, scans).reshape(gx.shape))]
+    panels += [(r.method, r.map.occupancy(q).reshape(gx.shape)) for r in rows]
+    extent = (xs[0] - res / 2, xs[-1] + res / 2, ys[0] - res / 2, ys[-1] + res / 2)
+    fig, axes = _panels(panels, extent, (4.4, 3.8), extra=1)
+    axes[0, 0].plot(*np.array([s.origin for s in scans]).T, "r.", ms=3)
+    _roc_axes(axes.flat[len(panels)], rows, test, "ROC on the 2D cells in view")
+    axes.flat[len(panels)].set_aspect("auto")
+    fig.suptitle(f"2D room: GP maps, cells of {res:g} m")
+    fig.savefig(path, dpi=110)
