@@ -224,11 +224,23 @@ default="auto"
         return self._bounds()
 
     def memory_usage(self) -> int:
-        """Bytes used by the cells' hash map (an estimate of its nodes and buckets)."""
+        """Bytes used by the cells' hash map.
+
+        Returns
+        -------
+        nbytes : int
+            An estimate of its nodes and buckets.
+        """
         return self._memory_usage()
 
     def clear(self) -> "GridMap":
-        """Remove every cell; return self."""
+        """Remove every cell (the parameters stay).
+
+        Returns
+        -------
+        self
+            The map.
+        """
         self._clear()
         return self
 

@@ -497,11 +497,29 @@ class ScanReplay:
         return len(self.keys)
 
     def knn_log_odds(self, params: Sequence[dict[str, Any]]) -> NDArray[np.float32]:
-        """Final log-odds of every cell (rows: the combinations, columns: :attr:`keys`)
-        of the KNNMap each parameter dict builds. Each dict holds ``k`` (one of
-        :attr:`ks`), ``p_u``, ``p_l``, ``p_m``, ``p_m_out``, ``p_min``, ``p_max``
-        (checked as :func:`check_knn_params` checks them, with ``p_t`` and
-        ``sensor_range`` left out: the threshold does not change log-odds)."""
+        """Final log-odds of every cell of the KNNMap each parameter dict builds.
+
+        Parameters
+        ----------
+        params : sequence of dict
+            One dict per combination, holding ``k`` (one of :attr:`ks`),
+            ``p_u``, ``p_l``, ``p_m``, ``p_m_out``, ``p_min`` and ``p_max``
+            (checked as :func:`check_knn_params` checks them, with ``p_t`` and
+            ``sensor_range`` left out: the threshold does not change log-odds).
+
+        Returns
+        -------
+        log_odds : ndarray of float32, shape (len(params), n_cells)
+            Rows: the combinations; columns: the cells of :attr:`keys`. Equal,
+            bit for bit, to the maps :class:`KNNMap` builds from the scans.
+
+        Raises
+        ------
+        TypeError, ValueError
+            If a parameter is of the wrong type (TypeError), or a dict lacks
+            one or one is out of range (ValueError); the message names the
+            dict's index (``params[i]``).
+        """
         checked = [self._check_knn(p, i) for i, p in enumerate(params)]
         kidx = np.array([self.ks.index(p["k"]) for p in checked])
         l_in = np.array([_log_odds(p["p_m"]) for p in checked], dtype=np.float32)
@@ -525,14 +543,35 @@ class ScanReplay:
         return self._replay(checked, updates)
 
     def octomap_log_odds(self, params: Sequence[dict[str, Any]]) -> NDArray[np.float32]:
-        """Like :meth:`knn_log_odds` for OctoMap (``prob_hit``, ``prob_miss``,
-        ``clamping_min``, ``clamping_max``): liboctomap's ``insertPointCloud`` with
-        ``max_range=sensor_range``, one update per cell (hit wins)."""
+        """Like :meth:`knn_log_odds`, for OctoMap.
+
+        liboctomap's ``insertPointCloud`` with ``max_range=sensor_range``: one
+        update per cell and scan (a hit wins), clamped per scan.
+
+        Parameters
+        ----------
+        params : sequence of dict
+            One dict per combination, holding ``prob_hit``, ``prob_miss``,
+            ``clamping_min`` and ``clamping_max`` (checked as
+            :func:`check_octomap_params` checks them).
+
+        Returns
+        -------
+        log_odds : ndarray of float32, shape (len(params), n_cells)
+            Rows: the combinations; columns: the cells of :attr:`keys`.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`knn_log_odds`.
+        """
         checked = []
         for i, p in enumerate(params):
             try:
                 q = check_octomap_params(p)
-            except (KeyError, TypeError, ValueError) as exc:
+            except KeyError as exc:
+                raise ValueError(f"params[{i}] lacks the OctoMap parameter {exc}") from None
+            except (TypeError, ValueError) as exc:
                 raise type(exc)(f"params[{i}]: {exc}") from None
             checked.append({"p_min": q["clamping_min"], "p_max": q["clamping_max"],
                             "l_hit": _log_odds(q["prob_hit"]),
