@@ -6,7 +6,10 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.occgp-installed
-EXTRAS ?= test,dask,ros
+EXTRAS ?= test,dask,ros,iln
+# the CPU build of PyTorch, installed before the iln extra (an unpinned torch pulls the CUDA
+# build, several GB); the package itself asks for torch>=2.1
+TORCH  ?= torch==2.13.0
 BUILD_INPUTS := setup.py pyproject.toml $(wildcard ext/*.pyx ext/*.pxd ext/*.h)
 
 .PHONY: all demo test bench docs asan soak fuzz system venv install clean distclean
@@ -24,6 +27,7 @@ $(PY):
 $(STAMP): $(PY) $(BUILD_INPUTS)
 	@PYTHON=$(PYTHON) bash tools/install-system-deps.sh
 	$(PY) -m pip install -q "setuptools>=77" wheel "Cython>=3.0" "numpy>=2.0"
+	$(PY) -m pip install -q "$(TORCH)"
 	$(PY) -m pip install -q --no-build-isolation -e ".[$(EXTRAS)]"
 	@touch $@
 

@@ -30,9 +30,10 @@ threads); the threaded map is checked to equal the single-threaded one. The
 liboctomap ``insertPointCloud`` method (octree, ``mode="scan"``, ``"plain"``) runs
 on one thread whatever ``n_jobs`` says: its ratio stays near 1.
 
-Run: ``python bench/bench_updates.py [--scans 4] [--resolutions 0.2 ...] [--threads 2]``
-(the default run takes 40-90 s on two shared cores; the
-dissertation's tables: ``--scans 20 --resolutions 0.1 0.2 0.4 0.8 1.0``).
+Run: ``python bench/bench_updates.py [--scans 20] [--resolutions 0.1 0.2 ...] [--threads 2]``
+(the default is the dissertation's tables: 20 geb079 poses and 4 scan.dat poses at
+0.1, 0.2, 0.4, 0.8 and 1 m, whose dense trajectory the targets are set on);
+``--quick`` runs 4 + 2 scans at 0.2 m (about 30 s on two cores).
 """
 
 import os
@@ -211,13 +212,24 @@ def print_targets(results):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--scans", type=int, default=4)
-    parser.add_argument("--poses", type=int, default=2)
-    parser.add_argument("--resolutions", type=float, nargs="+", default=[0.2])
+    parser.add_argument("--scans", type=int, default=None,
+                        help="poses of the geb079 trajectory (default 20; --quick: 4)")
+    parser.add_argument("--poses", type=int, default=None,
+                        help="poses of scan.dat (default 4; --quick: 2)")
+    parser.add_argument("--resolutions", type=float, nargs="+", default=None,
+                        help="default 0.1 0.2 0.4 0.8 1.0 (the dissertation's); --quick: 0.2")
+    parser.add_argument("--quick", action="store_true",
+                        help="a short run (4 + 2 scans at 0.2 m); the targets need the "
+                             "dense default trajectory")
     parser.add_argument("--threads", type=int, default=2,
                         help="n_jobs of the threaded columns (default 2)")
     parser.add_argument("--datasets", nargs="+", default=["geb079", "scan.dat"])
     args = parser.parse_args(argv)
+    quick = args.quick
+    args.scans = args.scans if args.scans is not None else (4 if quick else 20)
+    args.poses = args.poses if args.poses is not None else (2 if quick else 4)
+    if args.resolutions is None:
+        args.resolutions = [0.2] if quick else [0.1, 0.2, 0.4, 0.8, 1.0]
     if not DATA.exists():
         sys.exit(f"{DATA} is absent (../shared/data beside the project root)")
     with tempfile.TemporaryDirectory() as tmp:
