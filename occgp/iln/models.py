@@ -39,6 +39,9 @@ __all__ = [
 
 _MODELS: dict[str, type] = {}
 
+#: Largest range accepted in an input image, in metres (larger values are bad input).
+MAX_RANGE = 1e6
+
 #: Queries evaluated at once by ``predict`` (bounds the memory of one forward pass).
 DEFAULT_CHUNK = 65536
 
@@ -202,6 +205,10 @@ def _check_image(images: torch.Tensor, name: str = "range_image") -> None:
         raise ValueError(f"{name} must be finite (0 marks no return), got NaN or inf")
     if bool((images < 0).any()):
         raise ValueError(f"{name} must be non-negative (0 marks no return), got a negative range")
+    if bool((images > MAX_RANGE).any()):
+        raise ValueError(
+            f"{name} must hold ranges <= {MAX_RANGE:g} m, got {float(images.max()):g}"
+        )
 
 
 def _check_queries(queries: torch.Tensor, rows: int, cols: int, name: str = "queries") -> None:
@@ -425,7 +432,7 @@ class RangeModel(nn.Module):
         Parameters
         ----------
         range_image : array-like or torch.Tensor of shape (rows, cols) or (batch, rows, cols)
-            Ranges in metres, 0 where there is no return. Finite and non-negative.
+            Ranges in metres, 0 where there is no return. Finite, in [0, 1e6].
         queries : array-like or torch.Tensor of shape (n_queries, 2) or (batch, n_queries, 2)
             ``(v, u)`` in the input image's pixel units (pixel centres at integer + 0.5), with
             ``0 <= v <= rows`` and ``0 <= u <= cols``. Unbatched queries with a batch of images
@@ -439,7 +446,7 @@ class RangeModel(nn.Module):
         Returns
         -------
         ranges : numpy.ndarray or torch.Tensor of shape (n_queries,) or (batch, n_queries)
-            float32 ranges in metres, 0 for no return; numpy if `range_image` was not a tensor,
+            float32 ranges in metres (>= 0), 0 for no return; numpy if `range_image` was not a tensor,
             else a tensor on `range_image`'s device.
 
         Raises
@@ -447,8 +454,8 @@ class RangeModel(nn.Module):
         TypeError
             If `range_image` or `queries` is not numeric array data.
         ValueError
-            If a shape is wrong, `range_image` is empty, holds NaN, inf or negative ranges, or a
-            query is not finite or lies outside the image.
+            If a shape is wrong, `range_image` is empty, holds NaN, inf, negative ranges or ranges
+            above 1e6 m, or a query is not finite or lies outside the image.
         """
         chunk = _check_int(chunk, "chunk", 1)
         wrap = self.wrap if wrap is None else _check_bool(wrap, "wrap")
@@ -469,7 +476,7 @@ class RangeModel(nn.Module):
         finally:
             self.train(was_training)
         pred = torch.cat(parts, dim=1) if parts else images.new_zeros((images.shape[0], 0))
-        pred = pred * self.max_range
+        pred = (pred * self.max_range).clamp_min_(0.0)  # LIIF may predict below 0
         if not batched:
             pred = pred[0]
         if was_numpy:
