@@ -225,3 +225,50 @@ M = LidarModel.carla(8, 64)
 def test_bad_input(call, exc, match):
     with pytest.raises(exc, match=match):
         call()
+
+
+# --------------------------------------------------------------------------- #
+# nuScenes ring index (occgp.datasets.read_kitti_bin(..., return_fields=True))
+# --------------------------------------------------------------------------- #
+def test_read_nuscenes_ring_into_range_image(tmp_path):
+    from occgp.datasets import read_kitti_bin
+
+    m = LidarModel.hdl32e(rows=32, cols=64)
+    rng = np.random.default_rng(1)
+    n = 300
+    ring = rng.integers(0, 32, n)
+    az = rng.uniform(-np.pi, np.pi, n)
+    r = rng.uniform(2, 60, n)
+    el = np.radians(-30.67 + ring * 41.34 / 31)
+    records = np.column_stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az),
+                               r * np.sin(el), rng.uniform(0, 255, n), ring]).astype(np.float32)
+    records[5, 0] = np.nan                                  # dropped with its fields
+    path = tmp_path / "n008__LIDAR_TOP__1.pcd.bin"
+    records.tofile(path)
+    scan, extra = read_kitti_bin(path, return_fields=True)
+    assert sorted(extra) == ["intensity", "ring"]
+    assert extra["ring"].dtype == np.int64 and extra["intensity"].dtype == np.float32
+    keep = np.arange(n) != 5
+    assert_array_equal(extra["ring"], ring[keep])
+    assert_array_equal(extra["intensity"], records[keep, 3])
+    assert len(scan.points) == n - 1
+    image = range_image_from_points(scan.points, m, ring=extra["ring"])
+    assert_array_equal(np.flatnonzero(image.any(axis=1)), np.unique(31 - ring[keep]))
+    # KITTI names its fourth field; int layouts f3, f4, ...
+    records[:, :4].copy().tofile(tmp_path / "k.bin")
+    assert list(read_kitti_bin(tmp_path / "k.bin", return_fields=True)[1]) == ["reflectance"]
+    assert list(read_kitti_bin(path, fields=5, return_fields=True)[1]) == ["f3", "f4"]
+    assert isinstance(read_kitti_bin(path), type(scan))
+
+
+def test_read_nuscenes_bad_ring(tmp_path):
+    from occgp.datasets import read_kitti_bin
+
+    path = tmp_path / "bad.pcd.bin"
+    np.array([[1, 2, 3, 4, 2.5]], dtype=np.float32).tofile(path)
+    with pytest.raises(ValueError, match=r"bad.pcd.bin: the ring field must hold integer laser "
+                                         r"indices, found 2.5"):
+        read_kitti_bin(path, return_fields=True)
+    read_kitti_bin(path)                                       # points alone are fine
+    with pytest.raises(TypeError, match="return_fields must be a bool, got str"):
+        read_kitti_bin(path, return_fields="yes")
