@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose, assert_array_equal
+from numpy.testing import assert_array_equal
 
 from occgp.datasets import outdoor_scene, structured_room
 from occgp.datasets._geometry import rotation_matrix
@@ -172,6 +172,13 @@ def test_make_dataset_is_seeded_and_refuses_to_overwrite(dataset, tmp_path):
                  overwrite=True, progress=False)
     other = load_shards(tmp_path / "train", ["16x1024"])["16x1024"]
     assert other.shape == again.shape and not np.array_equal(other, again)
+    # two workers write the same shards
+    import joblib
+
+    with joblib.parallel_config(backend="threading"):
+        make_dataset(tmp_path, 2, 0, ["16x1024"], images_per_scene=1, scene_size=30, seed=1,
+                     overwrite=True, n_jobs=2, progress=False)
+    assert_array_equal(load_shards(tmp_path / "train", ["16x1024"])["16x1024"][:1], other[:1])
 
 
 def _shard_bytes(**changes):
@@ -252,6 +259,7 @@ def test_load_shards_bad_folder_or_sizes(tmp_path, dataset):
     (dict(scene_size=1e30), ValueError, r"scene_size must lie in \[30.0, 400.0\]"),
     (dict(overwrite="yes"), TypeError, r"overwrite must be a bool"),
     (dict(progress="yes"), TypeError, r"progress must be a bool or None"),
+    (dict(n_jobs=0), ValueError, r"n_jobs must be None, a positive int or a negative int"),
     (dict(folder=3), TypeError, r"folder must be a str or os.PathLike, got int"),
 ])
 def test_make_dataset_bad_input(tmp_path, kwargs, exc, match):

@@ -67,6 +67,8 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
                       help="most images in one shard file (default: 32)")
     make.add_argument("--seed", type=_positive_int, default=0, metavar="S",
                       help="seed of the sensor poses (default: 0)")
+    make.add_argument("--n-jobs", type=int, default=None, metavar="N",
+                      help="scenes simulated in parallel (joblib; -1: every core; default: 1)")
     make.add_argument("--overwrite", action="store_true",
                       help="replace the shards of an earlier run in FOLDER")
     make.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -86,7 +88,7 @@ def run(args) -> int:
             counts = make_dataset(args.folder, args.n_train, args.n_test, sizes,
                                   images_per_scene=args.images_per_scene,
                                   images_per_shard=args.images_per_shard, seed=args.seed,
-                                  overwrite=args.overwrite,
+                                  overwrite=args.overwrite, n_jobs=args.n_jobs,
                                   progress=False if args.no_progress else None)
             print(f"wrote {counts['train']} train and {counts['test']} test images "
                   f"({counts['shards']} shards) to {args.folder}")

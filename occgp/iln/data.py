@@ -28,7 +28,6 @@ drawn in each scene.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import re
@@ -36,9 +35,9 @@ import zipfile
 import zlib
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
-from .._validation import as_numeric, as_path, check_bool, check_int
+from .._validation import as_numeric, as_path, check_bool, check_int, check_n_jobs
 from ._range import LidarModel
 
 __all__ = ["simulate_range_image", "make_dataset", "load_shards", "parse_size", "ShardImages",
@@ -332,7 +331,8 @@ def _check_progress(progress):
 def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024"), *,
                  images_per_scene: int = 4, images_per_shard: int = 32, seed: int = 0,
                  model: LidarModel | None = None, scene_size: float = 80.0,
-                 overwrite: bool = False, progress: bool | None = True) -> dict:
+                 overwrite: bool = False, n_jobs: int | None = None,
+                 progress: bool | None = True) -> dict:
     """Simulate range images in procedural outdoor scenes and write them as shards.
 
     For each scene (train seeds ``0 .. n_train - 1``, test seeds ``100000 +
@@ -371,6 +371,10 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
     overwrite : bool, default=False
         Replace the shards of an earlier run in `folder` (they are deleted
         first); without it such shards raise ValueError.
+    n_jobs : int, optional
+        Scenes simulated in parallel through joblib (None: one at a time,
+        unless a ``joblib.parallel_config`` says otherwise; -1: every
+        core). The shards are the same whatever `n_jobs`.
     progress : bool or None, default=True
         Show a progress bar (tqdm; None: only on a terminal).
 
@@ -398,6 +402,7 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
     >>> load_shards(f"{folder}/train", ["16x1024"])["16x1024"].shape
     (1, 16, 1024)
     """
+    from joblib import Parallel, delayed  # noqa: PLC0415
     from tqdm.auto import tqdm  # noqa: PLC0415
 
     from .._validation import check_real  # noqa: PLC0415
@@ -417,6 +422,7 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
     scene_size = check_real(scene_size, "scene_size", low=30.0, high=400.0, low_open=False,
                             high_open=False)
     overwrite = check_bool(overwrite, "overwrite")
+    n_jobs = check_n_jobs(n_jobs)
     disable = _check_progress(progress)
     splits = {"train": range(n_train), "test": range(TEST_SEED_OFFSET, TEST_SEED_OFFSET + n_test)}
     for split in splits:
@@ -450,10 +456,11 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
                     v.clear()
                 buf_seeds, buf_poses = [], []
 
-            for scene_seed in scene_seeds:
+            results = Parallel(n_jobs=n_jobs, return_as="generator")(
+                delayed(_scene_images)(scene_seed, images_per_scene, seed, sizes, model,
+                                       scene_size) for scene_seed in scene_seeds)
+            for (images, poses), scene_seed in zip(results, scene_seeds):  # results first
                 left = images_per_scene
-                images, poses = _scene_images(scene_seed, images_per_scene, seed, sizes, model,
-                                              scene_size)
                 start = 0
                 while left:
                     room = images_per_shard - sum(len(s) for s in buf_seeds)
