@@ -181,6 +181,21 @@ def test_make_dataset_is_seeded_and_refuses_to_overwrite(dataset, tmp_path):
     assert_array_equal(load_shards(tmp_path / "train", ["16x1024"])["16x1024"][:1], other[:1])
 
 
+def test_make_dataset_chunks_scenes_across_shards(tmp_path):
+    counts = make_dataset(tmp_path, 1, 0, ["16x1024"], images_per_scene=9, images_per_shard=5,
+                          scene_size=30, seed=4, progress=False)
+    assert counts == {"train": 9, "test": 0, "shards": 2}
+    images, meta = load_shards(tmp_path / "train", ["16x1024"], return_meta=True)
+    assert images["16x1024"].shape == (9, 16, 1024)
+    from occgp.iln.data import _pose_seed
+
+    scene = outdoor_scene(0, size=30)
+    assert_array_equal(meta["poses"], scene.random_poses(9, seed=_pose_seed(4, 0)))
+    assert_array_equal(images["16x1024"][8],
+                       simulate_range_image(scene, meta["poses"][8], LidarModel.carla()))
+    assert not (tmp_path / "test").exists() or not any((tmp_path / "test").iterdir())
+
+
 def _shard_bytes(**changes):
     """A valid 1-image 16x1024 shard, with `changes` applied (None deletes a key)."""
     entries = {"r16x1024": np.zeros((1, 16, 1024), np.float32), "seeds": np.zeros(1, np.int64),
@@ -259,6 +274,8 @@ def test_load_shards_bad_folder_or_sizes(tmp_path, dataset):
     (dict(scene_size=1e30), ValueError, r"scene_size must lie in \[30.0, 400.0\]"),
     (dict(overwrite="yes"), TypeError, r"overwrite must be a bool"),
     (dict(progress="yes"), TypeError, r"progress must be a bool or None"),
+    (dict(sizes=["256x4096", "16x1024"], images_per_shard=600), ValueError,
+     r"images_per_shard=600 images of 4259840 bytes \(all sizes\) exceed 2147483648 bytes"),
     (dict(n_jobs=0), ValueError, r"n_jobs must be None, a positive int or a negative int"),
     (dict(folder=3), TypeError, r"folder must be a str or os.PathLike, got int"),
 ])

@@ -28,6 +28,7 @@ drawn in each scene.
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import re
@@ -55,6 +56,9 @@ TEST_SEED_OFFSET = 100_000
 _MAX_IMAGES = 1_000_000  # per shard
 _MAX_SCENES = TEST_SEED_OFFSET
 _SHARD_KEYS = ("lidar", "seeds", "poses", "format", "version")
+_CHUNK = 8  # poses simulated per task of make_dataset
+#: Most bytes of images one shard of make_dataset holds (uncompressed).
+MAX_SHARD_BYTES = 2**31
 _ORTHO_TOL = 1e-6
 
 
@@ -299,12 +303,20 @@ def _pose_seed(seed, scene_seed):
     return int(np.random.SeedSequence([seed, scene_seed, 7177]).generate_state(1)[0])
 
 
-def _scene_images(scene_seed, n_images, seed, sizes, model, scene_size):
-    """The images of one scene: (dict key -> (n, rows, cols) float32, poses (n, 4, 4))."""
+@functools.lru_cache(maxsize=4)
+def _scene_and_poses(scene_seed, n_images, pose_seed, scene_size):
     from ..datasets import outdoor_scene  # noqa: PLC0415 - datasets imports nothing of iln
 
     scene = outdoor_scene(scene_seed, size=scene_size)
-    poses = scene.random_poses(n_images, seed=_pose_seed(seed, scene_seed))
+    return scene, scene.random_poses(n_images, seed=pose_seed)
+
+
+def _chunk_images(scene_seed, start, stop, n_images, seed, sizes, model, scene_size):
+    """Images ``start:stop`` of the `n_images` poses of one scene: (key -> (k, rows, cols)
+    float32, poses (k, 4, 4))."""
+    scene, poses = _scene_and_poses(scene_seed, n_images, _pose_seed(seed, scene_seed),
+                                    scene_size)
+    poses = poses[start:stop]
     images = {_key(sz): np.stack([simulate_range_image(scene, p, model.with_size(*sz))
                                   for p in poses]) for sz in sizes}
     return images, poses
@@ -359,7 +371,9 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
     images_per_scene : int, default=4
         Sensor poses per scene, 1 to 10,000.
     images_per_shard : int, default=32
-        Most images (poses) in one shard, 1 to 1,000,000.
+        Most images (poses) in one shard, 1 to 1,000,000, and at most 2 GiB
+        of images (uncompressed, all sizes; e.g. 405 poses at all four
+        sizes). Memory use is about two shards' worth.
     seed : int, default=0
         Seeds the poses; the scenes are fixed by their seeds.
     model : LidarModel, optional
@@ -388,8 +402,9 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
     TypeError
         If an argument has a wrong type.
     ValueError
-        If a count or size is out of range, a size is repeated or unknown,
-        or `folder` already holds shards and `overwrite` is False.
+        If a count or size is out of range (a shard above 2 GiB included),
+        a size is repeated or unknown, or `folder` already holds shards and
+        `overwrite` is False.
     OSError
         If `folder` cannot be created or written.
 
@@ -421,6 +436,11 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
         raise TypeError(f"model must be a LidarModel or None, got {type(model).__name__}")
     scene_size = check_real(scene_size, "scene_size", low=30.0, high=400.0, low_open=False,
                             high_open=False)
+    per_image = 4 * sum(r * c for r, c in sizes)
+    if images_per_shard * per_image > MAX_SHARD_BYTES:
+        raise ValueError(f"images_per_shard={images_per_shard} images of {per_image} bytes "
+                         f"(all sizes) exceed {MAX_SHARD_BYTES} bytes per shard; use at most "
+                         f"{MAX_SHARD_BYTES // per_image}")
     overwrite = check_bool(overwrite, "overwrite")
     n_jobs = check_n_jobs(n_jobs)
     disable = _check_progress(progress)
@@ -456,12 +476,13 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
                     v.clear()
                 buf_seeds, buf_poses = [], []
 
+            tasks = [(scene_seed, a, min(a + _CHUNK, images_per_scene))
+                     for scene_seed in scene_seeds for a in range(0, images_per_scene, _CHUNK)]
             results = Parallel(n_jobs=n_jobs, return_as="generator")(
-                delayed(_scene_images)(scene_seed, images_per_scene, seed, sizes, model,
-                                       scene_size) for scene_seed in scene_seeds)
-            for (images, poses), scene_seed in zip(results, scene_seeds):  # results first
-                left = images_per_scene
-                start = 0
+                delayed(_chunk_images)(scene_seed, a, b, images_per_scene, seed, sizes, model,
+                                       scene_size) for scene_seed, a, b in tasks)
+            for (images, poses), (scene_seed, _, _) in zip(results, tasks):  # results first
+                left, start = len(poses), 0
                 while left:
                     room = images_per_shard - sum(len(s) for s in buf_seeds)
                     take = min(room, left)
@@ -473,7 +494,7 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
                     left -= take
                     if sum(len(s) for s in buf_seeds) == images_per_shard:
                         flush()
-                bar.update(images_per_scene)
+                bar.update(len(poses))
             flush()
     logger.info("make_dataset: wrote %d train and %d test images in %d shards to %s",
                 written["train"], written["test"], written["shards"], folder)
