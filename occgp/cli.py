@@ -551,6 +551,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true",
                    help="no progress bars (default: shown on a terminal)")
 
+    p = sub.add_parser("iln", help="the Implicit LiDAR Network: simulated range-image data "
+                       "sets and model training (occgp iln -h)")
+    from .iln.cli import build_parser as _iln_parser  # numpy only; torch when training
+    _iln_parser(p)
+
     p = sub.add_parser("map", help="build a map from scan files (.pcd, .bin, .pcd.bin, "
                        ".graph, x y z text, a folder of them) and ROS bags, and write it as "
                        "an OctoMap file, PLY / PCD cells or a kernel map's .npz",
@@ -668,6 +673,9 @@ def _knn_args(args) -> dict | None:
 
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
+    if args.command == "iln":
+        from .iln.cli import run as _iln_run
+        return _iln_run(args)
     progress = False if args.no_progress else None
     knn_params = _knn_args(args) if args.command == "map" else None
     try:

@@ -363,7 +363,8 @@ def _hills(b, rng, half, cross):
             continue
         pitch = np.radians(rng.uniform(4.0, 12.0))
         thick = 1.0
-        rise = rng.uniform(0.5, a * np.sin(pitch))  # height of the top edge above ground
+        top = a * np.sin(pitch)
+        rise = rng.uniform(min(0.5, top), top)  # height of the top edge above ground
         # top face at local z = +thick; its high edge (local x = +a) at world z = rise
         zc = rise - a * np.sin(pitch) - thick * np.cos(pitch)
         rot = rotation_matrix(yaw=rng.uniform(-np.pi, np.pi), pitch=-pitch)

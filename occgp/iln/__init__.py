@@ -1,1 +1,56 @@
-""""""
+"""occgp.iln: the Implicit LiDAR Network and its range images (Kwon, dissertation ch. 4).
+
+Range images and their training data need numpy alone and are imported here
+eagerly: :class:`LidarModel` (a spinning LiDAR's pixel grid, with the CARLA,
+HDL-64E and HDL-32E presets), :func:`points_to_range_image`,
+:func:`range_image_to_points`, :func:`range_image_from_points` (a real scan, by
+elevation or by its ring index), :func:`simulate_range_image` (exact ray casting
+in the procedural outdoor scenes of :func:`occgp.datasets.outdoor_scene`),
+:func:`make_dataset` and :func:`load_shards` (the ``occgp iln make-dataset``
+shards).
+
+The models and their training need PyTorch (the ``iln`` extra: ``pip install
+torch==2.13.0`` on CPU machines, then ``pip install 'occgp[iln]'``). Their names
+-- :func:`make`, :func:`register`, :func:`available_models`, :class:`ILN`,
+:class:`LIIF`, :class:`Bilinear`, :func:`upsample_image`, :func:`train`,
+:func:`train_from_yaml`, :func:`load_checkpoint` -- are imported from this
+package on first use, so that ``import occgp.iln`` works without torch and
+raises a clear ImportError only when a torch part is asked for.
+"""
+
+import importlib
+
+from ._range import LidarModel, points_to_range_image, range_image_from_points, \
+    range_image_to_points
+from .data import load_shards, make_dataset, simulate_range_image
+
+#: The torch parts of the package: public name -> submodule.
+_TORCH_NAMES = {
+    "make": "models", "register": "models", "available_models": "models",
+    "EDSRBaseline": "models", "ILN": "models", "LIIF": "models", "Bilinear": "models",
+    "upsample_image": "models",
+    "train": "train", "train_from_yaml": "train", "load_checkpoint": "train",
+}
+
+__all__ = ["LidarModel", "points_to_range_image", "range_image_to_points",
+           "range_image_from_points", "simulate_range_image", "make_dataset", "load_shards",
+           *_TORCH_NAMES]
+
+
+def __getattr__(name):
+    module = _TORCH_NAMES.get(name)
+    if module is None:
+        raise AttributeError(f"module 'occgp.iln' has no attribute {name!r}")
+    try:
+        importlib.import_module("torch")
+    except ImportError as exc:
+        raise ImportError(
+            f"occgp.iln.{name} needs PyTorch: pip install 'occgp[iln]' (on CPU machines "
+            f"first pip install torch==2.13.0, the CPU build)") from exc
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_TORCH_NAMES))
