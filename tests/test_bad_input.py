@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import occgp
+import occgp.iln as iln
 from occgp import (
     AKIMap, BGKMap, GridMap, KNNMap, OccupancyOctree, datasets, evaluation, gp, metrics,
 )
@@ -28,7 +29,7 @@ def rows():
 def namespace(tmp_path):
     """What the table's calls may use: occgp's public names, small maps, a folder."""
     ns = {"np": np, "occgp": occgp, "datasets": datasets, "evaluation": evaluation,
-          "metrics": metrics, "gp": gp, "files": tmp_path}
+          "metrics": metrics, "gp": gp, "iln": iln, "files": tmp_path}
     for module in (occgp, datasets, evaluation, metrics, gp):
         ns.update({name: getattr(module, name) for name in module.__all__})
     ns["tree"] = OccupancyOctree(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
