@@ -69,6 +69,8 @@ BIN_LAYOUTS = {
     "nuscenes": (5, "nuScenes: float32 x y z intensity ring_index"),
 }
 _MAX_BIN_FIELDS = 1024
+#: Names of the fields after x y z in the named layouts (``return_fields=True``).
+_BIN_NAMES = {"kitti": ["reflectance"], "nuscenes": ["intensity", "ring"]}
 
 
 def _bin_record(fields, path):
@@ -82,7 +84,9 @@ def _bin_record(fields, path):
                 f"fields must be a number of float32 fields, a numpy record dtype or one of "
                 f"{sorted(BIN_LAYOUTS)}, got {fields!r}"
             )
-        fields, what = BIN_LAYOUTS[key]
+        n, what = BIN_LAYOUTS[key]
+        names = ["x", "y", "z"] + _BIN_NAMES[key]
+        return np.dtype({"names": names, "formats": ["<f4"] * n}), what
     elif isinstance(fields, np.dtype):
         if fields.names is None or not {"x", "y", "z"} <= set(fields.names):
             raise ValueError(f"fields as a dtype must be a record dtype with fields x, y and z, "
@@ -115,7 +119,8 @@ def _bin_record(fields, path):
     return np.dtype({"names": names, "formats": ["<f4"] * fields}), what
 
 
-def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0), *, fields=None) -> Scan:
+def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0), *, fields=None,
+                   return_fields: bool = False):
     """Read a KITTI or nuScenes lidar scan: packed records whose first fields are x y z.
 
     KITTI Velodyne files (``*.bin``) hold float32 ``x y z reflectance``
@@ -141,10 +146,22 @@ def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0), *, fields=None) ->
         x y z first (e.g. ``fields=3`` for bare ``x y z``). A numpy record
         dtype with fields ``x``, ``y`` and ``z`` for any other layout, e.g.
         ``np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("t", "<u4")])``.
+    return_fields : bool, default=False
+        Also return the fields after x y z, by name, for the points kept
+        (same order as ``scan.points``).
 
     Returns
     -------
     scan : Scan
+    extra : dict of str to ndarray of shape (n_points,)
+        Only if `return_fields`. The named layouts name their fields:
+        ``"kitti"`` gives ``{"reflectance": float32}``, ``"nuscenes"``
+        ``{"intensity": float32, "ring": int64}`` (the laser index, 0 to 31
+        on nuScenes' HDL-32E, counted from the bottom beam: pass it to
+        ``occgp.iln.range_image_from_points(points, model, ring=...)``); an
+        int layout names its extra fields ``"f3"``, ``"f4"``, ...; a record
+        dtype gives its own field names (values in the dtype's native byte
+        order).
 
     Raises
     ------
@@ -155,9 +172,10 @@ def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0), *, fields=None) ->
         gives the file, its size and the record size, and suggests
         ``fields=5`` when a KITTI-named file fits nuScenes' layout), if
         `fields` is not a known layout, or `origin` is not of shape (3,)
-        or not finite.
+        or not finite; with `return_fields`, if a nuScenes ring index of a
+        kept point is not a finite integer in [0, 2**31).
     TypeError
-        If `path`, `origin` or `fields` has a wrong type.
+        If `path`, `origin`, `fields` or `return_fields` has a wrong type.
 
     Examples
     --------
@@ -171,9 +189,14 @@ def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0), *, fields=None) ->
     >>> np.array([[1, 2, 3, 7, 31]], dtype=np.float32).tofile(path)
     >>> read_kitti_bin(path).points.tolist()
     [[1.0, 2.0, 3.0]]
+    >>> scan, extra = read_kitti_bin(path, return_fields=True)
+    >>> extra["ring"].tolist(), extra["intensity"].tolist()
+    ([31], [7.0])
     """
     path = as_path(path)
     origin = check_origin(origin)
+    if not isinstance(return_fields, (bool, np.bool_)):
+        raise TypeError(f"return_fields must be a bool, got {type(return_fields).__name__}")
     record, what = _bin_record(fields, path)
     raw = read_bytes(path)
     if len(raw) % record.itemsize:
@@ -192,7 +215,31 @@ def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0), *, fields=None) ->
     with np.errstate(over="ignore", invalid="ignore"):
         for k, axis in enumerate("xyz"):
             points[:, k] = data[axis]
-    return Scan(_drop_non_finite(points, path), origin)
+    scan = Scan(_drop_non_finite(points, path), origin)
+    if not return_fields:
+        return scan
+    keep = np.isfinite(points).all(axis=1)
+    extra = {}
+    for name in record.names:
+        if name in ("x", "y", "z"):
+            continue
+        values = data[name][keep]
+        values = values.astype(values.dtype.newbyteorder("="))
+        if name == "ring" and (fields is None or isinstance(fields, str)):  # nuScenes' layout
+            values = _ring_index(values, path)
+        extra[name] = values
+    return scan, extra
+
+
+def _ring_index(values, path):
+    """nuScenes ring indices (stored as float32) as int64, checked."""
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.isfinite(values) & (values >= 0) & (values < 2**31) & (values == np.round(values)))
+    if bad.any():
+        bad = values[bad][0]
+        raise ValueError(f"{path}: the ring field must hold integer laser indices, "
+                         f"found {float(bad)!r}")
+    return values.astype(np.int64)
 
 
 # --------------------------------------------------------------------------- #
