@@ -37,6 +37,7 @@ Examples
 """
 
 from ._floorplan import FloorPlan2D, floor_plan_2d
+from ._outdoor import OutdoorScene, outdoor_scene
 from ._pcd import lzf_decompress, read_pcd, write_pcd
 from ._readers import (
     load_scan_folder,
@@ -71,6 +72,8 @@ __all__ = [
     "structured_room",
     "unstructured_room",
     "make_scene",
+    "OutdoorScene",
+    "outdoor_scene",
     "room_2d",
     "FloorPlan2D",
     "floor_plan_2d",
