@@ -1,0 +1,567 @@
+"""Training of the range-image models (ILN, LIIF) on simulated range-image shards.
+
+:func:`train` takes a configuration dict (:func:`train_from_yaml` reads it from YAML)::
+
+    seed: 0                    # model init, data order and query sampling
+    device: cpu                # cpu, cuda, cuda:1, auto
+    progress: null             # tqdm bar: null = only on a terminal, true, false
+    model: {name: iln, args: {channels: 32, n_resblocks: 4, depth: 1}}
+    data:
+      folder: ~/.cache/occgp/iln   # shards (.npz), or a folder holding split/
+      split: train
+      input: 16x1024
+      target: 64x1024
+      max_images: null             # use only the first N images
+    train:
+      epochs: 1
+      batch_size: 4
+      queries_per_image: 16384
+      lr: 1.0e-4
+      max_steps: null              # stop after this many steps in all
+    output:
+      dir: null                    # checkpoints here (last.pt, model.pt); null: none
+      checkpoint_every: 0          # also every N steps (0: at epoch ends only)
+    resume: null                   # a checkpoint (last.pt) to continue from
+
+Each step draws a batch of images (a seeded, per-epoch shuffle, split across processes by a
+``DistributedSampler``), samples ``queries_per_image`` random pixel centres of each target
+(high-resolution) image, converts them to the input image's pixel coordinates through the two
+LidarModels, and minimises the L1 loss between predicted and true normalised ranges over the
+queries whose target has a return (Adam). On the CPU a run is reproducible, and a run resumed from
+a checkpoint continues exactly as the uninterrupted run.
+
+Multi-process training uses ``torch.distributed`` when ``WORLD_SIZE`` > 1 is set (``torchrun``
+sets ``RANK``, ``WORLD_SIZE``, ``LOCAL_RANK``, ``MASTER_ADDR``, ``MASTER_PORT``): gloo on the CPU,
+nccl on GPUs, one GPU per process (``cuda:LOCAL_RANK``). Only rank 0 writes checkpoints and shows
+the progress bar.
+"""
+
+from __future__ import annotations
+
+import copy
+import glob
+import json
+import logging
+import math
+import numbers
+import os
+import zipfile
+import zlib
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import torch
+import torch.distributed as dist
+from torch.nn.parallel import DistributedDataParallel
+from torch.utils.data import DistributedSampler
+
+from .models import RangeModel, make
+
+__all__ = ["train", "train_from_yaml", "load_checkpoint", "sample_queries", "masked_l1"]
+
+logger = logging.getLogger("occgp")
+logger.addHandler(logging.NullHandler())
+
+CHECKPOINT_FORMAT = "occgp.iln.checkpoint"
+CHECKPOINT_VERSION = 1
+_SHARD_FORMAT = "occgp.iln.shard"
+
+DEFAULTS: dict[str, Any] = {
+    "seed": 0,
+    "device": "cpu",
+    "progress": None,
+    "model": {"name": "iln", "args": {}},
+    "data": {"folder": None, "split": "train", "input": "16x1024", "target": "64x1024",
+             "max_images": None},
+    "train": {"epochs": 1, "batch_size": 4, "queries_per_image": 16384, "lr": 1e-4,
+              "max_steps": None},
+    "output": {"dir": None, "checkpoint_every": 0},
+    "resume": None,
+}
+
+
+# ------------------------------------------------------------------------------------- config
+
+
+def _merge(config: Any) -> dict:
+    if not isinstance(config, dict):
+        raise TypeError(f"config must be a dict, got {type(config).__name__}")
+    out = copy.deepcopy(DEFAULTS)
+    unknown = sorted(set(config) - set(DEFAULTS))
+    if unknown:
+        raise ValueError(f"config has unknown key(s) {unknown}; expected some of {sorted(DEFAULTS)}")
+    for key, value in config.items():
+        if isinstance(DEFAULTS[key], dict) and key != "model":
+            if value is None:
+                continue
+            if not isinstance(value, dict):
+                raise TypeError(f"config['{key}'] must be a dict, got {type(value).__name__}")
+            bad = sorted(set(value) - set(DEFAULTS[key]))
+            if bad:
+                raise ValueError(
+                    f"config['{key}'] has unknown key(s) {bad}; expected some of {sorted(DEFAULTS[key])}"
+                )
+            out[key].update(copy.deepcopy(value))
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def _int(value, name, low, allow_none=False):
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
+    if value < low:
+        raise ValueError(f"{name} must be >= {low}, got {value}")
+    return int(value)
+
+
+def _size(value, name):
+    if isinstance(value, str):
+        parts = value.lower().lstrip("r").split("x")
+        if len(parts) == 2 and all(p.strip().isdigit() for p in parts):
+            rows, cols = (int(p) for p in parts)
+            if rows > 0 and cols > 0:
+                return rows, cols
+    elif isinstance(value, (list, tuple)) and len(value) == 2:
+        return _int(value[0], f"{name}[0]", 1), _int(value[1], f"{name}[1]", 1)
+    raise ValueError(f"{name} must be a size like '64x1024' or [64, 1024], got {value!r}")
+
+
+def _device(value) -> torch.device:
+    if value is None or value == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if not isinstance(value, (str, torch.device)):
+        raise TypeError(f"config['device'] must be a str like 'cpu' or 'cuda:0', got {type(value).__name__}")
+    try:
+        device = torch.device(value)
+    except (RuntimeError, ValueError):
+        raise ValueError(f"config['device'] must be 'cpu', 'cuda', 'cuda:N' or 'auto', got {value!r}") from None
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"config['device'] is {value!r} but CUDA is not available here")
+    if device.type not in ("cpu", "cuda"):
+        raise ValueError(f"config['device'] must be 'cpu', 'cuda', 'cuda:N' or 'auto', got {value!r}")
+    return device
+
+
+def _check_config(cfg: dict) -> dict:
+    """Validated values of a merged config (raises before any work)."""
+    t, d, o = cfg["train"], cfg["data"], cfg["output"]
+    out = {
+        "seed": _int(cfg["seed"], "config['seed']", 0),
+        "epochs": _int(t["epochs"], "config['train']['epochs']", 1),
+        "batch_size": _int(t["batch_size"], "config['train']['batch_size']", 1),
+        "queries": _int(t["queries_per_image"], "config['train']['queries_per_image']", 1),
+        "max_steps": _int(t["max_steps"], "config['train']['max_steps']", 1, allow_none=True),
+        "max_images": _int(d["max_images"], "config['data']['max_images']", 1, allow_none=True),
+        "checkpoint_every": _int(o["checkpoint_every"], "config['output']['checkpoint_every']", 0),
+        "input": _size(d["input"], "config['data']['input']"),
+        "target": _size(d["target"], "config['data']['target']"),
+    }
+    lr = t["lr"]
+    if isinstance(lr, bool) or not isinstance(lr, numbers.Real) or not (math.isfinite(lr) and lr > 0):
+        raise ValueError(f"config['train']['lr'] must be a finite number > 0, got {lr!r}")
+    out["lr"] = float(lr)
+    if cfg["progress"] is not None and not isinstance(cfg["progress"], bool):
+        raise TypeError(f"config['progress'] must be true, false or null, got {cfg['progress']!r}")
+    for key, value in (("config['data']['folder']", d["folder"]), ("config['output']['dir']", o["dir"]),
+                       ("config['resume']", cfg["resume"])):
+        if value is not None and not isinstance(value, (str, os.PathLike)):
+            raise TypeError(f"{key} must be a path (str), got {type(value).__name__}")
+    if d["folder"] is None:
+        raise ValueError("config['data']['folder'] must name the folder of the training shards")
+    if not isinstance(d["split"], str):
+        raise TypeError(f"config['data']['split'] must be a str, got {type(d['split']).__name__}")
+    model = cfg["model"]
+    if not isinstance(model, dict):
+        raise TypeError(f"config['model'] must be a dict {{name:, args:}}, got {type(model).__name__}")
+    return out
+
+
+# --------------------------------------------------------------------------------------- data
+
+
+def _shard_files(folder: Path, split: str) -> list[Path]:
+    if not folder.is_dir():
+        raise FileNotFoundError(f"config['data']['folder'] {str(folder)!r} is not a folder")
+    sub = folder / split
+    if sub.is_dir() and glob.glob(str(sub / "*.npz")):
+        folder = sub
+    files = sorted(Path(p) for p in glob.glob(str(folder / "*.npz")))
+    if not files:
+        raise FileNotFoundError(f"no .npz shards in {str(folder)!r} (nor in its {split!r} subfolder)")
+    return files
+
+
+def _read_shards(files: list[Path], keys: list[str]) -> tuple[dict, dict]:
+    """Arrays of `keys` concatenated over the shards, and the lidar fields; checks every entry."""
+    arrays: dict[str, list] = {k: [] for k in keys}
+    lidar = None
+    for f in files:
+        try:
+            z = np.load(f, allow_pickle=False)
+        except (ValueError, zipfile.BadZipFile, EOFError, OSError) as exc:
+            raise OSError(f"cannot read shard {str(f)!r}: not an .npz archive ({exc})") from None
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise OSError(f"cannot read shard {str(f)!r}: not an .npz archive (a single .npy array)")
+        try:
+            with z:
+                names = set(z.files)
+                missing = [k for k in ("format", "lidar", *keys) if k not in names]
+                if missing:
+                    raise ValueError(f"shard {str(f)!r} lacks the entries {missing}")
+                if str(z["format"]) != _SHARD_FORMAT:
+                    raise ValueError(f"shard {str(f)!r} has format {str(z['format'])!r}, expected {_SHARD_FORMAT!r}")
+                text = str(z["lidar"])
+                for k in keys:
+                    a = z[k]
+                    rows, cols = (int(s) for s in k[1:].split("x"))
+                    if a.dtype != np.float32 or a.ndim != 3 or a.shape[1:] != (rows, cols):
+                        raise ValueError(
+                            f"shard {str(f)!r} entry {k!r} must be float32 (n, {rows}, {cols}), "
+                            f"got {a.dtype} {a.shape}"
+                        )
+                    arrays[k].append(a)
+        except (zipfile.BadZipFile, EOFError, OSError, zlib.error) as exc:
+            raise OSError(f"cannot read shard {str(f)!r}: {exc}") from None
+        try:
+            fields = json.loads(text)
+        except ValueError:
+            raise ValueError(f"shard {str(f)!r} has a 'lidar' entry that is not JSON") from None
+        if lidar is None:
+            lidar = fields
+        elif fields != lidar:
+            raise ValueError(f"shard {str(f)!r} has another LidarModel ({fields}) than the first ({lidar})")
+    out = {k: np.concatenate(v) for k, v in arrays.items()}
+    n = {k: len(v) for k, v in out.items()}
+    if len(set(n.values())) != 1:
+        raise ValueError(f"shards hold different numbers of images per size: {n}")
+    return out, lidar
+
+
+def _lidar_model(fields: dict, size: tuple[int, int]):
+    try:
+        from ._range import LidarModel
+    except ImportError:  # pragma: no cover - until occgp.iln._range lands
+        return SimpleNamespace(rows=size[0], cols=size[1], vertical_fov=tuple(fields["vertical_fov"]),
+                               horizontal_fov=float(fields["horizontal_fov"]),
+                               max_range=float(fields["max_range"]))
+    return LidarModel(size[0], size[1], tuple(fields["vertical_fov"]), fields["horizontal_fov"],
+                      fields["max_range"])
+
+
+def _load_data(cfg: dict, chk: dict):
+    d = cfg["data"]
+    folder = Path(os.path.expanduser(str(d["folder"])))
+    files = _shard_files(folder, d["split"])
+    keys = [f"r{s[0]}x{s[1]}" for s in (chk["input"], chk["target"])]
+    if keys[0] == keys[1]:
+        raise ValueError(f"config['data']['input'] and ['target'] must differ, both are {keys[0][1:]}")
+    arrays, lidar = _read_shards(files, keys)
+    inputs, targets = arrays[keys[0]], arrays[keys[1]]
+    if chk["max_images"] is not None:
+        inputs, targets = inputs[: chk["max_images"]], targets[: chk["max_images"]]
+    for name, a in (("input", inputs), ("target", targets)):
+        if len(a) == 0:
+            raise ValueError(f"the shards in {str(folder)!r} hold no {name} images")
+        if not np.isfinite(a).all() or (a < 0).any():
+            raise ValueError(f"the {name} images of the shards in {str(folder)!r} must be finite and >= 0")
+    return inputs, targets, lidar
+
+
+def _query_table(in_model, out_model) -> torch.Tensor:
+    """Input-pixel coordinates (v, u) of every target pixel centre, shape (rows * cols, 2)."""
+    from .models import _angles_to_pixels, _pixel_angles
+
+    elev, azim = _pixel_angles(out_model)
+    v, u = _angles_to_pixels(in_model, elev.ravel(), azim.ravel())
+    v = np.clip(v, 0, in_model.rows)
+    u = np.clip(u, 0, in_model.cols)
+    return torch.from_numpy(np.stack([v, u], axis=-1).astype(np.float32))
+
+
+def sample_queries(targets: torch.Tensor, table: torch.Tensor, n: int, generator: torch.Generator):
+    """Random target pixels of each image: their input-pixel coordinates and target ranges.
+
+    Parameters
+    ----------
+    targets : torch.Tensor of shape (batch, rows, cols)
+        Target (high-resolution) range images.
+    table : torch.Tensor of shape (rows * cols, 2)
+        Input-pixel coordinates (v, u) of each target pixel centre.
+    n : int
+        Queries per image (drawn uniformly, with replacement).
+    generator : torch.Generator
+        Source of the draws (on the CPU).
+
+    Returns
+    -------
+    queries : torch.Tensor of shape (batch, n, 2)
+    ranges : torch.Tensor of shape (batch, n)
+    """
+    b = targets.shape[0]
+    idx = torch.randint(0, table.shape[0], (b, n), generator=generator).to(targets.device)
+    queries = table.to(targets.device)[idx]
+    ranges = torch.gather(targets.reshape(b, -1), 1, idx)
+    return queries, ranges
+
+
+def masked_l1(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean |pred − target| over the entries whose target has a return (target > 0)."""
+    mask = (target > 0).to(pred.dtype)
+    return (torch.abs(pred - target) * mask).sum() / mask.sum().clamp_min(1.0)
+
+
+def _step_generator(seed: int, step: int, rank: int) -> torch.Generator:
+    state = np.random.SeedSequence([seed, step, rank]).generate_state(2, dtype=np.uint32)
+    return torch.Generator().manual_seed(int(state[0]) << 32 | int(state[1]))
+
+
+# ---------------------------------------------------------------------------------- checkpoint
+
+
+def _save(path: Path, payload: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(payload, tmp)
+    os.replace(tmp, path)
+
+
+def load_checkpoint(path, map_location="cpu") -> dict:
+    """Read a checkpoint written by :func:`train`.
+
+    Returns the dict with keys ``model`` (a spec with ``sd``: ``make(ckpt["model"],
+    load_sd=True)`` rebuilds the model), ``optimizer``, ``epoch``, ``step``, ``config``,
+    ``losses``, ``format`` and ``version``. ``model.pt`` files hold only ``model``, ``config``,
+    ``step``, ``format`` and ``version``.
+
+    Raises
+    ------
+    OSError
+        If `path` cannot be read or is not a torch checkpoint.
+    ValueError
+        If it is not an occgp.iln checkpoint.
+    """
+    path = Path(os.path.expanduser(str(path)))
+    try:
+        ckpt = torch.load(path, map_location=map_location, weights_only=True)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"checkpoint {str(path)!r} does not exist") from None
+    except Exception as exc:  # torch raises many types for a corrupt file
+        raise OSError(f"cannot read checkpoint {str(path)!r}: {exc}") from None
+    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{str(path)!r} is not an occgp.iln checkpoint (format {CHECKPOINT_FORMAT!r})")
+    if ckpt.get("version") != CHECKPOINT_VERSION:
+        raise ValueError(f"checkpoint {str(path)!r} has version {ckpt.get('version')!r}, expected {CHECKPOINT_VERSION}")
+    return ckpt
+
+
+# ---------------------------------------------------------------------------------- training
+
+
+def _setup_distributed(device: torch.device):
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world <= 1:
+        return 0, 1, device, False
+    rank = int(os.environ["RANK"])
+    local_rank = int(os.environ.get("LOCAL_RANK", rank))
+    if device.type == "cuda":
+        device = torch.device("cuda", local_rank)
+        torch.cuda.set_device(device)
+    created = False
+    if not dist.is_initialized():
+        dist.init_process_group("nccl" if device.type == "cuda" else "gloo", rank=rank, world_size=world)
+        created = True
+    return dist.get_rank(), dist.get_world_size(), device, created
+
+
+def train(config: dict) -> dict:
+    """Train a range-image model (see the module docstring for the configuration).
+
+    Parameters
+    ----------
+    config : dict
+        Configuration; missing keys take the defaults of ``DEFAULTS``.
+
+    Returns
+    -------
+    result : dict
+        ``model`` (the trained model, unwrapped, on the training device), ``losses`` (the loss of
+        every step run here, averaged over processes), ``step`` (steps done in all, including
+        those before a resume) and ``checkpoint`` (path of ``last.pt`` or None).
+
+    Raises
+    ------
+    TypeError, ValueError
+        If a configuration value has a wrong type or value (the message names it), or the model
+        has no parameters to train (``bilinear``).
+    OSError
+        If the shard folder, a shard or the checkpoint to resume from cannot be read.
+    """
+    cfg = _merge(config)
+    chk = _check_config(cfg)
+    device = _device(cfg["device"])
+    resume = None
+    if cfg["resume"] is not None:
+        resume = load_checkpoint(cfg["resume"])
+    inputs, targets, lidar = _load_data(cfg, chk)
+    in_model = _lidar_model(lidar, chk["input"])
+    out_model = _lidar_model(lidar, chk["target"])
+
+    rank, world, device, created = _setup_distributed(device)
+    try:
+        return _run(cfg, chk, device, rank, world, resume, inputs, targets, in_model, out_model)
+    finally:
+        if created:
+            dist.destroy_process_group()
+
+
+def _run(cfg, chk, device, rank, world, resume, inputs, targets, in_model, out_model):
+    seed = chk["seed"]
+    torch.manual_seed(seed)
+    if resume is not None:
+        spec = resume["model"]
+    else:
+        spec = copy.deepcopy(cfg["model"])
+        args = spec.setdefault("args", {}) or {}
+        spec["args"] = args
+        if isinstance(args, dict) and spec.get("name") != "edsr-baseline":
+            args.setdefault("max_range", float(in_model.max_range))
+            args.setdefault("wrap", float(in_model.horizontal_fov) >= 360.0)
+    model = make(spec, load_sd=resume is not None)
+    if not isinstance(model, RangeModel):
+        raise ValueError(f"config['model'] must be a range-image model (iln, liif), got {spec.get('name')!r}")
+    if not any(True for _ in model.parameters()):
+        raise ValueError(f"config['model'] {spec.get('name')!r} has no parameters to train")
+    model.to(device)
+    max_range = model.max_range
+    optimizer = torch.optim.Adam(model.parameters(), lr=chk["lr"])
+    if resume is not None:
+        optimizer.load_state_dict(resume["optimizer"])
+    net = model
+    if world > 1:
+        net = DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
+
+    x_all = torch.from_numpy(inputs) / max_range
+    y_all = torch.from_numpy(targets) / max_range
+    table = _query_table(in_model, out_model)
+    sampler = DistributedSampler(range(len(x_all)), num_replicas=world, rank=rank, shuffle=True,
+                                 seed=seed, drop_last=False)
+    bs = chk["batch_size"]
+    steps_per_epoch = math.ceil(len(sampler) / bs)
+    total = chk["epochs"] * steps_per_epoch
+    if chk["max_steps"] is not None:
+        total = min(total, chk["max_steps"])
+    step = 0
+    losses: list[float] = []
+    if resume is not None:
+        step = int(resume["step"])
+        if int(resume.get("steps_per_epoch", steps_per_epoch)) != steps_per_epoch:
+            raise ValueError(
+                f"config['resume'] checkpoint has {resume['steps_per_epoch']} steps per epoch, this "
+                f"configuration {steps_per_epoch}: use the same data, batch_size and processes"
+            )
+    out_dir = cfg["output"]["dir"]
+    out_dir = Path(os.path.expanduser(str(out_dir))) if out_dir is not None else None
+    last = out_dir / "last.pt" if out_dir is not None else None
+
+    def save(epoch: int) -> None:
+        if last is None or rank != 0:
+            return
+        _save(last, {
+            "format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION,
+            "model": model.spec(), "optimizer": optimizer.state_dict(), "epoch": epoch,
+            "step": step, "steps_per_epoch": steps_per_epoch, "config": _plain(cfg),
+            "losses": [float(v) for v in losses], "world_size": world,
+        })
+
+    from tqdm.auto import tqdm
+
+    show = cfg["progress"]
+    bar = tqdm(total=total, initial=min(step, total), desc="iln train", unit="step",
+               disable=(rank != 0) or (None if show is None else not show))
+    net.train()
+    running = None
+    try:
+        while step < total:
+            epoch, k = divmod(step, steps_per_epoch)
+            sampler.set_epoch(epoch)
+            order = list(sampler)[k * bs:]
+            for s in range(0, len(order), bs):
+                if step >= total:
+                    break
+                idx = torch.tensor(order[s:s + bs])
+                x = x_all[idx].to(device)
+                y = y_all[idx].to(device)
+                q, t = sample_queries(y, table, chk["queries"], _step_generator(seed, step, rank))
+                loss = masked_l1(net(x, q), t)
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                optimizer.step()
+                value = loss.detach()
+                if world > 1:
+                    dist.all_reduce(value)
+                    value = value / world
+                value = float(value)
+                losses.append(value)
+                step += 1
+                running = value if running is None else 0.9 * running + 0.1 * value
+                bar.update(1)
+                bar.set_postfix(loss=f"{running:.4f}")
+                every = chk["checkpoint_every"]
+                if every and step % every == 0:
+                    save(epoch)
+                if step % steps_per_epoch == 0:
+                    logger.info("iln train: epoch %d done, step %d, loss %.5f", epoch + 1, step, running)
+                    save(epoch + 1)
+    finally:
+        bar.close()
+    save(step // steps_per_epoch)
+    if out_dir is not None and rank == 0:
+        _save(out_dir / "model.pt", {
+            "format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION,
+            "model": model.spec(), "step": step, "config": _plain(cfg),
+        })
+    return {"model": model, "losses": losses, "step": step, "checkpoint": str(last) if last else None}
+
+
+def _plain(cfg: dict) -> dict:
+    """The config with paths as str (torch.load(weights_only=True) reads it back)."""
+    def conv(v):
+        if isinstance(v, dict):
+            return {str(k): conv(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [conv(x) for x in v]
+        if isinstance(v, os.PathLike):
+            return str(v)
+        return v
+    return conv(cfg)
+
+
+def train_from_yaml(path) -> dict:
+    """Read a YAML configuration file and :func:`train` with it.
+
+    Raises
+    ------
+    OSError
+        If `path` cannot be read.
+    ValueError
+        If the file is not YAML of a mapping, or as :func:`train`.
+    """
+    import yaml
+
+    path = Path(os.path.expanduser(str(path)))
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise type(exc)(f"cannot read the configuration {str(path)!r}: {exc.strerror or exc}") from None
+    try:
+        config = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ValueError(f"configuration {str(path)!r} is not valid YAML: {exc}") from None
+    if not isinstance(config, dict):
+        raise ValueError(f"configuration {str(path)!r} must be a YAML mapping, got {type(config).__name__}")
+    return train(config)
