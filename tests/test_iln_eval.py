@@ -240,3 +240,104 @@ def test_evaluate_rejects_bad_types(models, images, kwargs, match):
     args = {"in_size": "4x64", "out_sizes": ["16x128"], **kwargs}
     with pytest.raises(TypeError, match=match):
         evaluate(models, images, progress=False, **args)
+
+
+# ----------------------------------------------------------------------------- mapping
+SMALL = dict(n_scans=2, in_size="8x256", sizes=["16x256"], truth_sizes=["16x256"],
+             n_test_cells=3000, test_range=8.0, progress=False)
+
+
+@pytest.fixture(scope="module")
+def street():
+    from occgp.datasets import outdoor_scene
+    return outdoor_scene(1, size=40)
+
+
+@pytest.fixture(scope="module")
+def mapping_rows(street):
+    from occgp.iln.experiment import mapping_experiment
+    return mapping_experiment(["bilinear"], scene=street, keep_maps=True, **SMALL)
+
+
+def test_mapping_experiment_rows(mapping_rows, street):
+    from occgp import OccupancyOctree
+    from occgp.evaluation import evaluate_map
+
+    assert [r["method"] for r in mapping_rows] == ["8x256 (input)", "bilinear 16x256",
+                                                   "16x256 (true)"]
+    for r in mapping_rows:
+        assert 0.5 < r["auc"] < 1 and 0 < r["known"] <= 1
+        assert r["n_test"] > r["n_occupied"] > 0 and r["n_scans"] == 2
+        assert r["total_seconds"] == pytest.approx(r["upsample_seconds"] + r["update_seconds"])
+        assert isinstance(r["map"], OccupancyOctree) and r["map"].resolution == 0.2
+    assert mapping_rows[0]["upsample_seconds"] == 0 == mapping_rows[2]["upsample_seconds"]
+    # more points from the denser scans, and the true dense map knows more than the sparse
+    assert mapping_rows[0]["n_points"] < mapping_rows[2]["n_points"]
+    assert mapping_rows[0]["known"] < mapping_rows[2]["known"]
+
+
+def test_mapping_experiment_maps_the_true_scans_like_a_direct_build(mapping_rows, street):
+    from occgp import OccupancyOctree
+    from occgp.iln.data import simulate_range_image
+
+    lidar = LidarModel.carla(16, 256)
+    tree = OccupancyOctree(0.2)
+    for pose in street.trajectory(2):
+        pts = range_image_to_points(simulate_range_image(street, pose, lidar), lidar)
+        tree.insert_scan(pts @ pose[:3, :3].T + pose[:3, 3], pose[:3, 3])
+    mine = mapping_rows[2]["map"]
+    probe = np.random.default_rng(0).uniform([-15, -8, -0.2], [15, 5, 3], (2000, 3))
+    assert_array_equal(mine.occupancy(probe), tree.occupancy(probe))
+
+
+def test_mapping_experiment_is_seeded(mapping_rows, street):
+    from occgp.iln.experiment import mapping_experiment
+    again = mapping_experiment({}, scene=street, **SMALL)
+    assert [r["method"] for r in again] == ["8x256 (input)", "16x256 (true)"]
+    assert again[0]["auc"] == mapping_rows[0]["auc"] and again[1]["auc"] == mapping_rows[2]["auc"]
+
+
+def test_format_mapping_table(mapping_rows):
+    from occgp.iln.experiment import format_mapping_table
+    lines = format_mapping_table(mapping_rows).splitlines()
+    assert lines[0].split()[:4] == ["Map", "from", "points/scan", "AUC"]
+    assert len(lines) == 5 and lines[3].startswith("bilinear 16x256")
+    with pytest.raises(ValueError, match=r"rows\[0\] lacks \['auc'\]"):
+        format_mapping_table([{k: v for k, v in mapping_rows[0].items() if k != "auc"}])
+    with pytest.raises(TypeError, match=r"rows\[0\] must be a dict"):
+        format_mapping_table(["x"])
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"n_scans": 0}, r"n_scans must lie in \[1, 1000\], got 0"),
+    ({"truth_sizes": []}, "truth_sizes must hold at least one size"),
+    ({"sizes": ["4096x4096"]}, r"rows \* cols must be at most 4194304 pixels"),
+    ({"resolution": 0.0}, r"resolution must lie in \(0.0, 10.0\]"),
+    ({"resolution": 1e-9}, r"resolution must lie in \[0.001, 10\] m"),
+    ({"resolution": 1e20}, r"resolution must lie in \(0.0, 10.0\]"),
+    ({"n_test_cells": 10**9}, r"n_test_cells must lie in \[1, 10000000\]"),
+    ({"test_range": 100.0}, r"test_range must lie in \(0.0, 80.0\]"),
+    ({"poses": np.zeros((2, 3, 3))}, r"poses must have shape \(n_scans, 4, 4\)"),
+    ({"poses": np.full((1, 4, 4), np.nan)}, r"poses\[0\]: pose must be finite"),
+    ({"models": ["cubic"]}, "model must be one of"),
+    ({"n_test_cells": 1}, "a test set needs both classes"),
+])
+def test_mapping_experiment_rejects_bad_input(street, kwargs, match):
+    from occgp.iln.experiment import mapping_experiment
+    args = {**SMALL, "models": ["bilinear"], **kwargs}
+    with pytest.raises(ValueError, match=match):
+        mapping_experiment(args.pop("models"), scene=street, **args)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"scene": object()}, "scene must be a Scene of occgp.datasets"),
+    ({"lidar": "carla"}, "lidar must be a LidarModel"),
+    ({"keep_maps": "yes"}, "keep_maps must be a bool"),
+    ({"sizes": 3}, "sizes must be a sequence of sizes"),
+    ({"n_scans": 2.0}, "n_scans must be a positive int, got float"),
+])
+def test_mapping_experiment_rejects_bad_types(street, kwargs, match):
+    from occgp.iln.experiment import mapping_experiment
+    args = {**SMALL, "scene": street, **kwargs}
+    with pytest.raises(TypeError, match=match):
+        mapping_experiment(["bilinear"], **args)
