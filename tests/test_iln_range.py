@@ -153,6 +153,8 @@ def test_range_image_from_points_ring():
     (dict(rows=0, cols=8), ValueError, r"rows must lie in \[1, 65536\], got 0"),
     (dict(rows=8, cols=10**6), ValueError, r"cols must lie in \[1, 65536\]"),
     (dict(rows=65536, cols=65536), ValueError, r"rows \* cols must be at most"),
+    (dict(rows=4097, cols=4096), ValueError, r"rows \* cols must be at most 16777216 pixels, "
+                                             r"got 4097 x 4096"),
     (dict(rows=8.0, cols=8), TypeError, r"rows must be a positive int, got float"),
     (dict(rows=True, cols=8), TypeError, r"rows must be a positive int, got bool"),
     (dict(rows=8, cols=8, vertical_fov=(10, -10)), ValueError, r"vertical_fov must satisfy"),

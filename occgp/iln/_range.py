@@ -37,9 +37,9 @@ __all__ = [
     "MAX_RANGE_LIMIT",
 ]
 
-#: Most pixels (rows * cols) of a :class:`LidarModel` (4096 x 65536): larger images
-#: would need gigabytes per image.
-MAX_PIXELS = 2**28
+#: Most pixels (rows * cols) of a :class:`LidarModel` (e.g. 4096 x 4096, 16x the
+#: largest training size): the pixel directions alone take 400 MB there.
+MAX_PIXELS = 2**24
 #: Largest ``max_range`` (metres) a :class:`LidarModel` accepts.
 MAX_RANGE_LIMIT = 1e5
 _MAX_SIDE = 65536
@@ -72,7 +72,7 @@ class LidarModel:
         Beams (image rows), 1 to 65536.
     cols : int
         Firings per revolution, or per horizontal field of view (image
-        columns), 1 to 65536; ``rows * cols`` at most ``MAX_PIXELS`` (2**28).
+        columns), 1 to 65536; ``rows * cols`` at most ``MAX_PIXELS`` (2**24).
     vertical_fov : tuple of two float
         ``(low, high)`` elevations of the field of view's bottom and top
         edges, degrees, ``-90 <= low < high <= 90``. Stored as a tuple of

@@ -1,0 +1,113 @@
+"""``occgp iln ...``: the command line of occgp.iln.
+
+Subcommands:
+
+``occgp iln make-dataset FOLDER --n-train N --n-test N --sizes 16x1024 64x1024 ... --seed S``
+    Simulate range images in procedural outdoor scenes and write them as
+    compressed shards (:func:`occgp.iln.data.make_dataset`).
+``occgp iln train CONFIG.yaml``
+    Train a model from a YAML configuration (``occgp.iln.train``; needs
+    PyTorch).
+
+:func:`main` takes the arguments after ``iln`` and returns the exit status:
+0 on success, 1 for a failed command (its message on stderr), 2 for bad
+arguments (argparse's usage message).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["main", "build_parser"]
+
+
+def _positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an int, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative int, got {value}")
+    return value
+
+
+def _size(text):
+    from .data import parse_size  # noqa: PLC0415
+
+    try:
+        return parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
+    """The ``iln`` argument parser, or its subcommands added to `parser` (e.g. a subparser
+    of ``occgp``)."""
+    if parser is None:
+        parser = argparse.ArgumentParser(
+            prog="occgp iln", description="Implicit LiDAR network: training data and models.")
+    sub = parser.add_subparsers(dest="iln_command", required=True, metavar="COMMAND")
+    make = sub.add_parser(
+        "make-dataset", help="simulate range images and write them as .npz shards",
+        description="Simulate range images in procedural outdoor scenes (train scenes seeded "
+        "0..N-1, test scenes 100000..) and write them as compressed .npz shards to "
+        "FOLDER/train and FOLDER/test. Nothing is downloaded.")
+    make.add_argument("folder", metavar="FOLDER", help="the dataset folder (created if missing)")
+    make.add_argument("--n-train", type=_positive_int, required=True, metavar="N",
+                      help="number of train scenes")
+    make.add_argument("--n-test", type=_positive_int, required=True, metavar="N",
+                      help="number of test scenes")
+    make.add_argument("--sizes", type=_size, nargs="+", default=None, metavar="ROWSxCOLS",
+                      help="image sizes, any of 16x1024 64x1024 128x2048 256x4096 "
+                      "(default: 16x1024 64x1024)")
+    make.add_argument("--images-per-scene", type=_positive_int, default=4, metavar="N",
+                      help="sensor poses per scene (default: 4)")
+    make.add_argument("--images-per-shard", type=_positive_int, default=32, metavar="N",
+                      help="most images in one shard file (default: 32)")
+    make.add_argument("--seed", type=_positive_int, default=0, metavar="S",
+                      help="seed of the sensor poses (default: 0)")
+    make.add_argument("--n-jobs", type=int, default=None, metavar="N",
+                      help="scenes simulated in parallel (joblib; -1: every core; default: 1)")
+    make.add_argument("--overwrite", action="store_true",
+                      help="replace the shards of an earlier run in FOLDER")
+    make.add_argument("--no-progress", action="store_true", help="no progress bar")
+    train = sub.add_parser("train", help="train a model from a YAML configuration (PyTorch)",
+                           description="Train an occgp.iln model from a YAML configuration.")
+    train.add_argument("config", metavar="CONFIG.yaml", help="the training configuration")
+    return parser
+
+
+def run(args) -> int:
+    """Run the parsed ``iln`` command `args`; returns the exit status."""
+    try:
+        if args.iln_command == "make-dataset":
+            from .data import make_dataset  # noqa: PLC0415
+
+            sizes = args.sizes if args.sizes is not None else ["16x1024", "64x1024"]
+            counts = make_dataset(args.folder, args.n_train, args.n_test, sizes,
+                                  images_per_scene=args.images_per_scene,
+                                  images_per_shard=args.images_per_shard, seed=args.seed,
+                                  overwrite=args.overwrite, n_jobs=args.n_jobs,
+                                  progress=False if args.no_progress else None)
+            print(f"wrote {counts['train']} train and {counts['test']} test images "
+                  f"({counts['shards']} shards) to {args.folder}")
+        else:
+            from .train import train_from_yaml  # noqa: PLC0415 - needs torch
+
+            train_from_yaml(args.config)
+    except (ValueError, TypeError, OSError, ImportError) as exc:
+        print(f"occgp iln {args.iln_command}: error: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def main(argv=None) -> int:
+    """``occgp iln`` with the arguments `argv` (default: ``sys.argv[1:]``); returns the exit
+    status."""
+    args = build_parser().parse_args(argv)
+    return run(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
