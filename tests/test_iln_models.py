@@ -222,6 +222,7 @@ BAD_PREDICT = [
     (np.full((8, 32), np.nan), _queries(3), ValueError, "range_image must be finite"),
     (np.full((8, 32), np.inf), _queries(3), ValueError, "range_image must be finite"),
     (-np.ones((8, 32)), _queries(3), ValueError, "range_image must be non-negative"),
+    (np.full((8, 32), 1e30), _queries(3), ValueError, r"range_image must hold ranges <= 1e\+06 m"),
     ("image", _queries(3), TypeError, "range_image must be a numpy array or a torch tensor"),
     (None, _queries(3), TypeError, "range_image must be a numpy array or a torch tensor"),
     (np.ones((8, 32), dtype=complex), _queries(3), TypeError, "range_image must hold real numbers"),

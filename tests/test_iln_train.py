@@ -209,6 +209,9 @@ def test_ddp_two_processes_two_steps(shards, tmp_path):
         ({"model": {"name": "nope"}}, ValueError, r"spec\['name'\] must be one of"),
         ({"progress": "yes"}, TypeError, r"config\['progress'\] must be true, false or null"),
         ({"seed": -1}, ValueError, r"config\['seed'\] must be >= 0"),
+        ({"seed": 2**40}, ValueError, r"config\['seed'\] must be <= 4294967295"),
+        ({"train": {"queries_per_image": 10**12}}, ValueError, r"queries_per_image'\] must be <= 4194304"),
+        ({"train": {"batch_size": 10**9}}, ValueError, r"batch_size'\] must be <= 4096"),
     ],
 )
 def test_train_rejects_bad_config(shards, change, exc, match):

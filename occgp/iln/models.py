@@ -39,6 +39,9 @@ __all__ = [
 
 _MODELS: dict[str, type] = {}
 
+#: Largest range accepted in an input image, in metres (larger values are bad input).
+MAX_RANGE = 1e6
+
 #: Queries evaluated at once by ``predict`` (bounds the memory of one forward pass).
 DEFAULT_CHUNK = 65536
 
@@ -202,6 +205,10 @@ def _check_image(images: torch.Tensor, name: str = "range_image") -> None:
         raise ValueError(f"{name} must be finite (0 marks no return), got NaN or inf")
     if bool((images < 0).any()):
         raise ValueError(f"{name} must be non-negative (0 marks no return), got a negative range")
+    if bool((images > MAX_RANGE).any()):
+        raise ValueError(
+            f"{name} must hold ranges <= {MAX_RANGE:g} m, got {float(images.max()):g}"
+        )
 
 
 def _check_queries(queries: torch.Tensor, rows: int, cols: int, name: str = "queries") -> None:
@@ -425,7 +432,7 @@ class RangeModel(nn.Module):
         Parameters
         ----------
         range_image : array-like or torch.Tensor of shape (rows, cols) or (batch, rows, cols)
-            Ranges in metres, 0 where there is no return. Finite and non-negative.
+            Ranges in metres, 0 where there is no return. Finite, in [0, 1e6].
         queries : array-like or torch.Tensor of shape (n_queries, 2) or (batch, n_queries, 2)
             ``(v, u)`` in the input image's pixel units (pixel centres at integer + 0.5), with
             ``0 <= v <= rows`` and ``0 <= u <= cols``. Unbatched queries with a batch of images
@@ -439,7 +446,7 @@ class RangeModel(nn.Module):
         Returns
         -------
         ranges : numpy.ndarray or torch.Tensor of shape (n_queries,) or (batch, n_queries)
-            float32 ranges in metres, 0 for no return; numpy if `range_image` was not a tensor,
+            float32 ranges in metres (>= 0), 0 for no return; numpy if `range_image` was not a tensor,
             else a tensor on `range_image`'s device.
 
         Raises
@@ -447,8 +454,8 @@ class RangeModel(nn.Module):
         TypeError
             If `range_image` or `queries` is not numeric array data.
         ValueError
-            If a shape is wrong, `range_image` is empty, holds NaN, inf or negative ranges, or a
-            query is not finite or lies outside the image.
+            If a shape is wrong, `range_image` is empty, holds NaN, inf, negative ranges or ranges
+            above 1e6 m, or a query is not finite or lies outside the image.
         """
         chunk = _check_int(chunk, "chunk", 1)
         wrap = self.wrap if wrap is None else _check_bool(wrap, "wrap")
@@ -469,7 +476,7 @@ class RangeModel(nn.Module):
         finally:
             self.train(was_training)
         pred = torch.cat(parts, dim=1) if parts else images.new_zeros((images.shape[0], 0))
-        pred = pred * self.max_range
+        pred = (pred * self.max_range).clamp_min_(0.0)  # LIIF may predict below 0
         if not batched:
             pred = pred[0]
         if was_numpy:
@@ -511,8 +518,9 @@ class _SelfAttention(nn.Module):
         n, t, c = x.shape
         d = c // self.heads
         q, k, v = self.qkv(x).reshape(n, t, 3, self.heads, d).permute(2, 0, 3, 1, 4)
-        out = F.scaled_dot_product_attention(q, k, v)  # (n, heads, t, d), scale d**-0.5
-        return self.proj(out.transpose(1, 2).reshape(n, t, c))
+        # explicit matmuls: faster than scaled_dot_product_attention for 4 tokens (fwd + bwd)
+        att = torch.softmax((q @ k.transpose(-1, -2)) * d**-0.5, dim=-1)  # (n, heads, t, t)
+        return self.proj((att @ v).transpose(1, 2).reshape(n, t, c))
 
 
 class _PreNormBlock(nn.Module):
@@ -753,10 +761,13 @@ def _pixel_angles(m) -> tuple[np.ndarray, np.ndarray]:
 
 def _angles_to_pixels(m, elev: np.ndarray, azim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Fractional (v, u) of angles in model `m` (pixel centres at integer + 0.5); u wraps at 360°."""
+    if hasattr(m, "angles_to_pixels"):
+        v, u = m.angles_to_pixels(elev, azim)
+        return np.asarray(v, dtype=np.float64), np.asarray(u, dtype=np.float64)
     low, high = (float(a) for a in m.vertical_fov)
     hfov = float(m.horizontal_fov)
     v = (high - elev) * m.rows / (high - low)
-    u = (hfov / 2 - azim) * m.cols / hfov
+    u = (hfov / 2 - ((azim + 180.0) % 360.0 - 180.0)) * m.cols / hfov
     if hfov >= 360.0:
         u = np.mod(u, m.cols)
     return v, u

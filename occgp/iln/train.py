@@ -2,7 +2,7 @@
 
 :func:`train` takes a configuration dict (:func:`train_from_yaml` reads it from YAML)::
 
-    seed: 0                    # model init, data order and query sampling
+    seed: 0                    # model init, data order and query sampling (0 .. 2**32 - 1)
     device: cpu                # cpu, cuda, cuda:1, auto
     progress: null             # tqdm bar: null = only on a terminal, true, false
     model: {name: iln, args: {channels: 32, n_resblocks: 4, depth: 1}}
@@ -14,8 +14,8 @@
       max_images: null             # use only the first N images
     train:
       epochs: 1
-      batch_size: 4
-      queries_per_image: 16384
+      batch_size: 4                # at most 4096
+      queries_per_image: 16384     # at most 2**22
       lr: 1.0e-4
       max_steps: null              # stop after this many steps in all
     output:
@@ -67,6 +67,8 @@ logger.addHandler(logging.NullHandler())
 CHECKPOINT_FORMAT = "occgp.iln.checkpoint"
 CHECKPOINT_VERSION = 1
 _SHARD_FORMAT = "occgp.iln.shard"
+#: Upper bound of ``queries_per_image`` (memory of one step).
+MAX_QUERIES = 2**22
 
 DEFAULTS: dict[str, Any] = {
     "seed": 0,
@@ -109,13 +111,15 @@ def _merge(config: Any) -> dict:
     return out
 
 
-def _int(value, name, low, allow_none=False):
+def _int(value, name, low, allow_none=False, high=None):
     if value is None and allow_none:
         return None
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise TypeError(f"{name} must be an int, got {type(value).__name__}")
     if value < low:
         raise ValueError(f"{name} must be >= {low}, got {value}")
+    if high is not None and value > high:
+        raise ValueError(f"{name} must be <= {high}, got {value}")
     return int(value)
 
 
@@ -151,11 +155,13 @@ def _check_config(cfg: dict) -> dict:
     """Validated values of a merged config (raises before any work)."""
     t, d, o = cfg["train"], cfg["data"], cfg["output"]
     out = {
-        "seed": _int(cfg["seed"], "config['seed']", 0),
-        "epochs": _int(t["epochs"], "config['train']['epochs']", 1),
-        "batch_size": _int(t["batch_size"], "config['train']['batch_size']", 1),
-        "queries": _int(t["queries_per_image"], "config['train']['queries_per_image']", 1),
-        "max_steps": _int(t["max_steps"], "config['train']['max_steps']", 1, allow_none=True),
+        "seed": _int(cfg["seed"], "config['seed']", 0, high=2**32 - 1),
+        "epochs": _int(t["epochs"], "config['train']['epochs']", 1, high=10**6),
+        "batch_size": _int(t["batch_size"], "config['train']['batch_size']", 1, high=4096),
+        "queries": _int(t["queries_per_image"], "config['train']['queries_per_image']", 1,
+                        high=MAX_QUERIES),
+        "max_steps": _int(t["max_steps"], "config['train']['max_steps']", 1, allow_none=True,
+                          high=10**9),
         "max_images": _int(d["max_images"], "config['data']['max_images']", 1, allow_none=True),
         "checkpoint_every": _int(o["checkpoint_every"], "config['output']['checkpoint_every']", 0),
         "input": _size(d["input"], "config['data']['input']"),
