@@ -125,3 +125,41 @@ def test_voxel_scores_reject_bad_types():
         voxel_scores(np.zeros((1, 3)), np.zeros((1, 3)), "0.1")
     with pytest.raises(TypeError, match="pred_points must hold real numbers"):
         voxel_scores(np.array([["a", "b", "c"]]), np.zeros((1, 3)))
+
+
+# ------------------------------------------------------------------- without torch
+@pytest.fixture
+def no_torch(monkeypatch):
+    """Hide torch (and drop the torch modules of occgp.iln) for one test."""
+    import sys
+    monkeypatch.setitem(sys.modules, "torch", None)
+    for name in list(sys.modules):
+        if name.startswith("torch.") or name in ("occgp.iln.models", "occgp.iln.train"):
+            monkeypatch.delitem(sys.modules, name)
+
+
+def test_metrics_and_tables_work_without_torch(no_torch):
+    from occgp.iln.evaluate import format_table
+    from occgp.iln.experiment import format_mapping_table
+    assert range_mae([[1.0]], [[2.0]]) == 1.0
+    row = {"method": "m", "resolution": "64x1024", "mae": 1.0, "iou": 0.5, "precision": 0.5,
+           "recall": 0.5, "f1": 0.5}
+    assert "Test resolution: 64x1024" in format_table([row])
+    row.update(n_points=1, auc=0.5, known=0.5, upsample_seconds=0.0, update_seconds=0.0,
+               total_seconds=0.0)
+    assert format_mapping_table([row]).startswith("Map from")
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: __import__("occgp.iln.upsample", fromlist=["x"]).upsample(np.ones((4, 64))),
+     "upsample"),
+    (lambda: __import__("occgp.iln.upsample", fromlist=["x"]).resolve_model("bilinear"),
+     "resolve_model"),
+    (lambda: __import__("occgp.iln.evaluate", fromlist=["x"]).evaluate(
+        ["bilinear"], {"4x64": np.ones((1, 4, 64)), "8x64": np.ones((1, 8, 64))},
+        in_size="4x64", out_sizes="8x64", progress=False), "evaluate"),
+])
+def test_model_calls_without_torch_raise_a_clear_import_error(no_torch, call, name):
+    with pytest.raises(ImportError, match=rf"occgp.iln.{name} needs PyTorch: pip install "
+                                          r"'occgp\[iln\]'"):
+        call()

@@ -88,8 +88,8 @@ def _images(test_images, sizes):
     return out
 
 
-def _models(models, lidar, device):
-    from .upsample import resolve_model
+def _models(models, lidar, device, caller="evaluate"):
+    from .upsample import _resolve
 
     if isinstance(models, str):
         models = [models]
@@ -111,7 +111,7 @@ def _models(models, lidar, device):
     for name, model in items:
         if not isinstance(name, str):
             raise TypeError(f"models keys must be str, got {type(name).__name__}")
-        out[name] = resolve_model(model, lidar, device)
+        out[name] = _resolve(model, lidar, device, caller)
     return out
 
 
@@ -179,6 +179,8 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
     OSError
         If ``"pretrained"`` is asked and no weights ship with this
         installation.
+    ImportError
+        If PyTorch is not installed.
 
     Examples
     --------

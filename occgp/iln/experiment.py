@@ -186,6 +186,8 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
     OSError
         If ``"pretrained"`` is asked and no weights ship with this
         installation.
+    ImportError
+        If PyTorch is not installed.
 
     Examples
     --------
@@ -235,7 +237,7 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
                             high_open=False)
     seed = check_int(seed, "seed", low=0)
     keep_maps = check_bool(keep_maps, "keep_maps")
-    nets = _models(models, lidar, device) if (not hasattr(models, "__len__") or len(models)) \
+    nets = _models(models, lidar, device, "mapping_experiment") if (not hasattr(models, "__len__") or len(models)) \
         else {}
     scene, poses = _check_scene(scene, poses, n_scans)
     n = len(poses)

@@ -27,6 +27,18 @@ MAX_OUTPUT_PIXELS = 2 ** 22
 MODEL_NAMES = ("bilinear", "pretrained")
 
 
+def _torch_models(name):
+    """``(RangeModel, make)`` of occgp.iln.models, or the ImportError of a missing torch."""
+    try:
+        from .models import RangeModel, make
+    except ModuleNotFoundError as exc:
+        if exc.name != "torch":
+            raise
+        raise ImportError(f"occgp.iln.{name} needs PyTorch: pip install 'occgp[iln]' (after "
+                          f"pip install torch==2.13.0 on CPU machines)") from None
+    return RangeModel, make
+
+
 def _pretrained():
     try:
         from . import pretrained
@@ -68,9 +80,14 @@ def resolve_model(model: Any, lidar: LidarModel | None = None, device: Any = Non
     OSError
         If ``"pretrained"`` is asked and no weights ship with this
         installation.
+    ImportError
+        If PyTorch is not installed.
     """
-    from .models import RangeModel, make
+    return _resolve(model, lidar, device, "resolve_model")
 
+
+def _resolve(model, lidar, device, caller):
+    RangeModel, make = _torch_models(caller)
     if isinstance(model, str):
         if model == "bilinear":
             args = {} if lidar is None else {"max_range": float(lidar.max_range)}
@@ -167,6 +184,8 @@ def upsample_range_image(range_image: ArrayLike, *, rows: int = 64, cols: int = 
         If an argument has a wrong type.
     OSError
         If ``model="pretrained"`` and no weights ship with this installation.
+    ImportError
+        If PyTorch is not installed.
 
     Examples
     --------
@@ -185,7 +204,7 @@ def upsample_range_image(range_image: ArrayLike, *, rows: int = 64, cols: int = 
                              f"{arr.shape}")
     image, lidar = _input_image(arr, lidar if lidar is not None else LidarModel.carla(*arr.shape))
     out_lidar = _out_model(lidar, rows, cols)
-    net = resolve_model(model, lidar, device)
+    net = _resolve(model, lidar, device, "upsample_range_image")
     return _predict(net, image, lidar, out_lidar)
 
 
@@ -249,6 +268,8 @@ def upsample(points_or_range_image: ArrayLike, *, rows: int = 64, cols: int = 10
         If an argument has a wrong type.
     OSError
         If ``model="pretrained"`` and no weights ship with this installation.
+    ImportError
+        If PyTorch is not installed.
 
     Examples
     --------
@@ -261,7 +282,7 @@ def upsample(points_or_range_image: ArrayLike, *, rows: int = 64, cols: int = 10
     return_image = check_bool(return_image, "return_image")
     image, lidar = _input_image(points_or_range_image, lidar)
     out_lidar = _out_model(lidar, rows, cols)
-    net = resolve_model(model, lidar, device)
+    net = _resolve(model, lidar, device, "upsample")
     out = _predict(net, image, lidar, out_lidar)
     points = range_image_to_points(out, out_lidar)
     return (points, out) if return_image else points
