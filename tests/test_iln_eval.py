@@ -215,6 +215,8 @@ def test_format_table_layout():
     (lambda d: None, {"models": ["cubic"]}, "model must be one of"),
     (lambda d: None, {"out_sizes": []}, "out_sizes must hold at least one size"),
     (lambda d: None, {"out_sizes": [(0, 128)]}, r"out_sizes\[0\] must be positive"),
+    (lambda d: None, {"out_sizes": ["16x128", (16, 128)]},
+     r"out_sizes must not repeat a size, got \['16x128', '16x128'\]"),
     (lambda d: None, {"voxel_size": 0.0}, r"voxel_size must lie in \(0.0, inf\)"),
 ])
 def test_evaluate_rejects_bad_input(change, kwargs, match):
@@ -311,6 +313,7 @@ def test_format_mapping_table(mapping_rows):
 @pytest.mark.parametrize("kwargs, match", [
     ({"n_scans": 0}, r"n_scans must lie in \[1, 1000\], got 0"),
     ({"truth_sizes": []}, "truth_sizes must hold at least one size"),
+    ({"sizes": ["16x256", "16x256"]}, r"sizes must not repeat a size, got \['16x256', '16x256'\]"),
     ({"sizes": ["4096x4096"]}, r"rows \* cols must be at most 4194304 pixels"),
     ({"resolution": 0.0}, r"resolution must lie in \(0.0, 10.0\]"),
     ({"resolution": 1e-9}, r"resolution must lie in \[0.001, 10\] m"),

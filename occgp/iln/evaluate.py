@@ -169,7 +169,8 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
     Raises
     ------
     ValueError
-        If a size is malformed or missing from `test_images`, the images of a
+        If a size is malformed, repeated in `out_sizes` or missing from
+        `test_images`, the images of a
         size are not of shape (n_images, rows, cols), hold NaN, inf or
         negative ranges or ranges beyond ``lidar.max_range``, the sizes hold
         different numbers of images, `models` is empty or names an unknown
@@ -206,6 +207,9 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
     out_sizes = [_size(s, f"out_sizes[{i}]") for i, s in enumerate(out_sizes)]
     if not out_sizes:
         raise ValueError("out_sizes must hold at least one size")
+    if len(set(out_sizes)) != len(out_sizes):
+        raise ValueError(f"out_sizes must not repeat a size, got "
+                         f"{['%dx%d' % s for s in out_sizes]}")
     voxel_size = check_real(voxel_size, "voxel_size", low=0.0)
     lidar = LidarModel.carla() if lidar is None else lidar
     if not isinstance(lidar, LidarModel):

@@ -179,7 +179,7 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
     ------
     ValueError
         If a size, count, range, resolution or the poses are malformed or
-        out of range, `truth_sizes` is empty, a model name is unknown, or the
+        out of range, a size is repeated, `truth_sizes` is empty, a model name is unknown, or the
         sampled test cells in view hold only one class.
     TypeError
         If an argument has a wrong type or `scene` is not a Scene.
@@ -222,6 +222,8 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
         out = [_size(s, f"{name}[{i}]") for i, s in enumerate(value)]
         if not out and not allow_empty:
             raise ValueError(f"{name} must hold at least one size")
+        if len(set(out)) != len(out):
+            raise ValueError(f"{name} must not repeat a size, got {['%dx%d' % s for s in out]}")
         for s in out:
             _out_model(lidar, *s)               # checks the pixel count
         return out
