@@ -177,6 +177,7 @@ def test_spec_round_trip_gives_identical_outputs(key):
 
 def test_iln_depth_zero_has_no_attention():
     m = _model("iln0")
+    assert isinstance(m, ILN) and isinstance(_model("liif"), LIIF)
     assert len(m.blocks) == 0 and not any("attn" in k for k in m.state_dict())
 
 

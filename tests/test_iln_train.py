@@ -141,13 +141,14 @@ def test_train_from_yaml(shards, tmp_path):
     assert train_from_yaml(path)["step"] == 1
 
 
-def test_small_config_is_valid():
+@pytest.mark.parametrize("name", ["small.yaml", "small_liif.yaml"])
+def test_small_config_is_valid(name):
     yaml = pytest.importorskip("yaml")
     from pathlib import Path
 
     import occgp.iln.models
 
-    path = Path(occgp.iln.models.__file__).parent / "configs" / "small.yaml"
+    path = Path(occgp.iln.models.__file__).parent / "configs" / name
     cfg = yaml.safe_load(path.read_text())
     from occgp.iln.train import _check_config, _merge
 
