@@ -194,7 +194,7 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
     >>> from occgp.datasets import outdoor_scene
     >>> rows = mapping_experiment(["bilinear"], scene=outdoor_scene(1, size=40), n_scans=2,
     ...                           in_size="8x256", sizes=["16x256"], truth_sizes=["16x256"],
-    ...                           n_test_cells=5000, test_range=10.0, progress=False)
+    ...                           n_test_cells=3000, test_range=8.0, progress=False)
     >>> [r["method"] for r in rows]
     ['8x256 (input)', 'bilinear 16x256', '16x256 (true)']
     """
