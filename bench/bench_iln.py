@@ -220,54 +220,63 @@ def cpu_inference_time(model, *, repeats=5, in_size=(16, 1024), out_size=(64, 10
     return float(np.median(times))
 
 
-def gpu_benchmark(steps=50, batch_size=16, quick=False):
+def gpu_benchmark(steps=50, batch_size=16, quick=False, device="cuda", spec=None):
     """Train the full-size ILN on the GPU for `steps` steps; throughput and inference time.
 
     The training data are simulated here (16 x 1024 inputs, 128 x 2048 targets, as the
-    dissertation trains). Returns a list of printable lines, or None without CUDA.
+    dissertation trains). Returns a list of printable lines, or None without CUDA
+    (`device` and `spec` let a CPU smoke run check this code with a small model).
     """
     import torch
 
-    if not torch.cuda.is_available():
+    device = torch.device(device)
+    if device.type == "cuda" and not torch.cuda.is_available():
         return None
     from occgp.iln._range import LidarModel
     from occgp.iln.data import load_shards, make_dataset
     from occgp.iln.models import upsample_image
     from occgp.iln.train import train
 
-    lines = [f"GPU: {torch.cuda.get_device_name(0)}"]
+    spec = FULL_ILN if spec is None else spec
+
+    def sync():
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+
+    name = torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu"
+    lines = [f"device: {name}"]
     n_scenes = 2 if quick else 8
     with tempfile.TemporaryDirectory(prefix="occgp-bench-iln-gpu-") as tmp:
         make_dataset(tmp, n_scenes, 1, sizes=("16x1024", "128x2048"),
-                     images_per_scene=batch_size // 2, progress=False)
-        config = {"seed": 0, "device": "cuda", "progress": False, "model": FULL_ILN,
+                     images_per_scene=max(1, batch_size // 2), progress=False)
+        config = {"seed": 0, "device": str(device), "progress": False, "model": spec,
                   "data": {"folder": tmp, "split": "train", "input": "16x1024",
                            "target": "128x2048"},
                   "train": {"epochs": 10_000, "batch_size": batch_size,
-                            "queries_per_image": 16384, "lr": 1e-4, "max_steps": 5}}
+                            "queries_per_image": 16384, "lr": 1e-4, "max_steps": 2}}
         train(config)                                        # warm-up (cuDNN, allocator)
-        torch.cuda.synchronize()
+        sync()
         config["train"]["max_steps"] = steps
         t0 = time.perf_counter()
         result = train(config)
-        torch.cuda.synchronize()
+        sync()
         seconds = time.perf_counter() - t0
-        lines.append(f"full-size ILN {FULL_ILN['args']}: {steps} steps of {batch_size} images "
-                     f"x 16,384 queries in {seconds:.1f} s (data loading included): "
+        lines.append(f"ILN {spec['args']}: {steps} steps of {batch_size} images x 16,384 "
+                     f"queries in {seconds:.1f} s (data loading included): "
                      f"{steps / seconds:.2f} steps/s, {steps * batch_size / seconds:.1f} "
                      f"images/s; loss {result['losses'][0]:.4f} -> {result['losses'][-1]:.4f}")
         model = result["model"].eval()
         images = load_shards(Path(tmp) / "test", ["16x1024"])[(16, 1024)]
     lidar = LidarModel.carla()
-    x = torch.from_numpy(images[:1]).to("cuda")
+    x = torch.from_numpy(images[:1]).to(device)
     for out in OUT_SIZES:
         upsample_image(model, x, lidar, lidar.with_size(*out))
-        torch.cuda.synchronize()
+        sync()
         t0 = time.perf_counter()
         for _ in range(5):
             upsample_image(model, x, lidar, lidar.with_size(*out))
-        torch.cuda.synchronize()
-        lines.append(f"GPU inference 16x1024 -> {out[0]}x{out[1]}: "
+        sync()
+        lines.append(f"inference 16x1024 -> {out[0]}x{out[1]}: "
                      f"{(time.perf_counter() - t0) / 5 * 1e3:.1f} ms per scan")
     return lines
 
