@@ -322,6 +322,9 @@ def test_format_mapping_table(mapping_rows):
     ({"test_range": 100.0}, r"test_range must lie in \(0.0, 80.0\]"),
     ({"poses": np.zeros((2, 3, 3))}, r"poses must have shape \(n_scans, 4, 4\)"),
     ({"poses": np.full((1, 4, 4), np.nan)}, r"poses\[0\]: pose must be finite"),
+    ({"poses": [[[1, 0, 0, 1e30], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]]},
+     r"poses\[0\]: pose translation must have coordinates of magnitude at most 1e7 m"),
+    ({"test_range": np.inf}, r"test_range must lie in"),
     ({"models": ["cubic"]}, "model must be one of"),
     ({"n_test_cells": 1}, "a test set needs both classes"),
 ])
