@@ -1,0 +1,321 @@
+"""Table 4.1 of the dissertation: up-sampling models scored on held-out range images.
+
+:func:`evaluate` up-samples every low-resolution test image with each model
+to each test resolution and scores the result against the true image of that
+resolution (the same pose): the range MAE (:func:`~occgp.iln.metrics.range_mae`)
+and IoU, precision, recall and F1 of the 3D points on a 0.1 m voxel grid
+(:func:`~occgp.iln.metrics.voxel_scores`), each averaged over the images.
+:func:`format_table` prints the rows in Table 4.1's layout.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_numeric, check_real
+from ._range import LidarModel, range_image_to_points
+from .metrics import range_mae, voxel_scores
+
+__all__ = ["evaluate", "format_table", "METRICS", "DEFAULT_OUT_SIZES"]
+
+#: The scores of a row, in Table 4.1's order.
+METRICS = ("mae", "iou", "precision", "recall", "f1")
+#: Table 4.1's test resolutions (from 16 x 1024 inputs).
+DEFAULT_OUT_SIZES = ((64, 1024), (128, 2048), (256, 4096))
+_LABELS = {"mae": "MAE", "iou": "IoU", "precision": "Precision", "recall": "Recall",
+           "f1": "F1"}
+
+
+def _size(size, name):
+    """``(rows, cols)`` from a pair or a string ``"64x1024"`` / ``"r64x1024"``."""
+    if isinstance(size, str):
+        m = re.fullmatch(r"\s*r?(\d+)\s*[xX]\s*(\d+)\s*", size)
+        if not m:
+            raise ValueError(f"{name} must be a (rows, cols) pair or a string like '64x1024', "
+                             f"got {size!r}")
+        rows, cols = int(m.group(1)), int(m.group(2))
+    else:
+        try:
+            rows, cols = size
+        except (TypeError, ValueError):
+            raise TypeError(f"{name} must be a (rows, cols) pair or a string like '64x1024', "
+                            f"got {size!r}") from None
+        if isinstance(rows, (bool, np.bool_)) or isinstance(cols, (bool, np.bool_)) or not (
+                isinstance(rows, (int, np.integer)) and isinstance(cols, (int, np.integer))):
+            raise TypeError(f"{name} must hold two ints, got {size!r}")
+        rows, cols = int(rows), int(cols)
+    if rows < 1 or cols < 1:
+        raise ValueError(f"{name} must be positive (rows, cols), got ({rows}, {cols})")
+    return rows, cols
+
+
+def _images(test_images, sizes):
+    """Checked ``{(rows, cols): float32 array (n, rows, cols)}`` for each of `sizes`."""
+    if not isinstance(test_images, Mapping):
+        raise TypeError(f"test_images must be a dict of size -> images (n, rows, cols), e.g. "
+                        f"load_shards' result, got {type(test_images).__name__}")
+    by_size = {}
+    for key, value in test_images.items():
+        size = _size(key, f"test_images key {key!r}")
+        if size in by_size:
+            raise ValueError(f"test_images holds size {size[0]}x{size[1]} twice")
+        by_size[size] = value
+    out, n = {}, None
+    for size in sizes:
+        if size not in by_size:
+            have = ", ".join(f"{r}x{c}" for r, c in by_size) or "none"
+            raise ValueError(f"test_images lacks size {size[0]}x{size[1]} (has {have})")
+        name = f"test_images[{size[0]}x{size[1]}]"
+        arr = as_numeric(by_size[size], name)
+        if arr.ndim != 3 or arr.shape[1:] != size or arr.shape[0] == 0:
+            raise ValueError(f"{name} must have shape (n_images, {size[0]}, {size[1]}) with "
+                             f"n_images >= 1, got {arr.shape}")
+        if n is not None and arr.shape[0] != n:
+            raise ValueError(f"test_images must hold as many images of every size, got {n} "
+                             f"and {arr.shape[0]} ({name})")
+        n = arr.shape[0]
+        arr = np.asarray(arr, dtype=np.float32)
+        if not np.isfinite(arr).all():
+            raise ValueError(f"{name} must be finite (0.0 marks no return)")
+        if (arr < 0).any():
+            raise ValueError(f"{name} must hold ranges >= 0 (0.0 marks no return)")
+        out[size] = arr
+    return out
+
+
+def _models(models, lidar, device, caller="evaluate"):
+    from .upsample import _resolve
+
+    if isinstance(models, str):
+        models = [models]
+    if isinstance(models, Mapping):
+        items = list(models.items())
+    elif isinstance(models, (list, tuple)):
+        items = []
+        for m in models:
+            if not isinstance(m, str):
+                raise TypeError(f"models given as a list must hold names; pass a dict "
+                                f"name -> model for models, got {type(m).__name__}")
+            items.append((m, m))
+    else:
+        raise TypeError(f"models must be a dict name -> model (or name), or a list of names, "
+                        f"got {type(models).__name__}")
+    if not items:
+        raise ValueError("models must name at least one model, got none")
+    out = {}
+    for name, model in items:
+        if not isinstance(name, str):
+            raise TypeError(f"models keys must be str, got {type(name).__name__}")
+        out[name] = _resolve(model, lidar, device, caller)
+    return out
+
+
+def evaluate(models: Any, test_images: Mapping[Any, Any], *,
+             in_size: Any = (16, 1024), out_sizes: Any = DEFAULT_OUT_SIZES,
+             lidar: LidarModel | None = None, voxel_size: float = 0.1,
+             device: Any = None, progress: bool | None = None) -> list[dict[str, Any]]:
+    """Score up-sampling models on held-out range images (Table 4.1).
+
+    For each test resolution and each model, every image of `in_size` is
+    up-sampled to that resolution over the same fields of view
+    (:func:`occgp.iln.upsample.upsample_range_image`) and compared with the
+    true image of that resolution: the MAE of the ranges over the pixels
+    where the truth has a return (a predicted no-return counts with the true
+    range as its error), and IoU, precision, recall and F1 of the two point
+    clouds (pixel-centre directions, no-return pixels dropped) on a
+    `voxel_size` grid in the sensor frame. Each score is the mean over the
+    images (images whose truth holds no return are skipped, and counted in
+    ``n_images``' complement).
+
+    Parameters
+    ----------
+    models : dict of str to model, or list of str
+        Row names to models: ``"bilinear"``, ``"pretrained"`` or a model of
+        :mod:`occgp.iln.models` (see :func:`occgp.iln.upsample.resolve_model`).
+        A list of names uses each name as its row's name.
+    test_images : dict
+        Size -> float32 images of shape (n_images, rows, cols), the same
+        poses at every size (e.g. the result of
+        ``occgp.iln.data.load_shards(folder, sizes)``). Sizes are
+        ``(rows, cols)`` pairs or strings like ``"64x1024"`` /
+        ``"r64x1024"``; it must hold `in_size` and every `out_sizes`.
+    in_size : (int, int) or str, default=(16, 1024)
+        Size of the input images.
+    out_sizes : sequence of (int, int) or str, default=((64, 1024), (128, 2048), (256, 4096))
+        Test resolutions.
+    lidar : LidarModel, optional
+        The sensor's fields of view and range (its size is ignored); default
+        ``LidarModel.carla()``.
+    voxel_size : float, default=0.1
+        Voxel edge of the point scores, metres, > 0.
+    device : str or torch.device, optional
+        Where models built from names run.
+    progress : bool or None, default=None
+        Show a progress bar; None shows it only on a terminal.
+
+    Returns
+    -------
+    rows : list of dict
+        One per (resolution, model), resolution by resolution in the order of
+        `out_sizes`, models in the order given: ``method``, ``resolution``
+        (``"64x1024"``), ``mae``, ``iou``, ``precision``, ``recall``, ``f1``,
+        ``n_images`` and ``seconds_per_image`` (up-sampling time).
+
+    Raises
+    ------
+    ValueError
+        If a size is malformed, repeated in `out_sizes` or missing from
+        `test_images`, the images of a
+        size are not of shape (n_images, rows, cols), hold NaN, inf or
+        negative ranges or ranges beyond ``lidar.max_range``, the sizes hold
+        different numbers of images, `models` is empty or names an unknown
+        model, or `voxel_size` is not positive.
+    TypeError
+        If an argument has a wrong type.
+    OSError
+        If ``"pretrained"`` is asked and no weights ship with this
+        installation.
+    ImportError
+        If PyTorch is not installed.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> low = rng.uniform(5, 20, (1, 4, 64)).astype(np.float32)
+    >>> high = np.repeat(low, 4, axis=1)
+    >>> rows = evaluate(["bilinear"], {"4x64": low, "16x64": high}, in_size="4x64",
+    ...                 out_sizes=["16x64"], progress=False)
+    >>> rows[0]["method"], rows[0]["resolution"], rows[0]["n_images"]
+    ('bilinear', '16x64', 1)
+    """
+    from tqdm.auto import tqdm
+
+    from .upsample import _out_model, _predict
+
+    in_size = _size(in_size, "in_size")
+    if isinstance(out_sizes, str) or (isinstance(out_sizes, tuple) and len(out_sizes) == 2
+                                      and all(isinstance(s, (int, np.integer))
+                                              for s in out_sizes)):
+        out_sizes = [out_sizes]                   # one size
+    if not hasattr(out_sizes, "__iter__"):
+        raise TypeError(f"out_sizes must be a sequence of sizes, got {type(out_sizes).__name__}")
+    out_sizes = [_size(s, f"out_sizes[{i}]") for i, s in enumerate(out_sizes)]
+    if not out_sizes:
+        raise ValueError("out_sizes must hold at least one size")
+    if len(set(out_sizes)) != len(out_sizes):
+        raise ValueError(f"out_sizes must not repeat a size, got "
+                         f"{['%dx%d' % s for s in out_sizes]}")
+    voxel_size = check_real(voxel_size, "voxel_size", low=0.0)
+    lidar = LidarModel.carla() if lidar is None else lidar
+    if not isinstance(lidar, LidarModel):
+        raise TypeError(f"lidar must be a LidarModel (occgp.iln), got {type(lidar).__name__}")
+    images = _images(test_images, [in_size] + [s for s in out_sizes if s != in_size])
+    in_lidar = lidar.with_size(*in_size)
+    for size, arr in images.items():
+        if arr.max() > lidar.max_range:
+            raise ValueError(f"test_images[{size[0]}x{size[1]}] holds ranges up to "
+                             f"{arr.max():g} m, beyond lidar.max_range = {lidar.max_range:g}")
+    nets = _models(models, lidar, device)
+    low = images[in_size]
+    n = len(low)
+    rows = []
+    bar = tqdm(total=len(out_sizes) * len(nets) * n, disable=None if progress is None
+               else not progress, desc="evaluate", unit="image")
+    try:
+        for size in out_sizes:
+            out_lidar = _out_model(lidar, *size)
+            truth = images[size]
+            for name, net in nets.items():
+                sums = dict.fromkeys(METRICS, 0.0)
+                counted, seconds = 0, 0.0
+                for k in range(n):
+                    t0 = time.perf_counter()
+                    pred = _predict(net, low[k], in_lidar, out_lidar)
+                    seconds += time.perf_counter() - t0
+                    bar.update()
+                    if not (truth[k] > 0).any():
+                        continue
+                    sums["mae"] += range_mae(pred, truth[k])
+                    scores = voxel_scores(range_image_to_points(pred, out_lidar),
+                                          range_image_to_points(truth[k], out_lidar),
+                                          voxel_size)
+                    for key, value in scores.items():
+                        sums[key] += value
+                    counted += 1
+                row = {"method": name, "resolution": f"{size[0]}x{size[1]}"}
+                row.update({key: (sums[key] / counted if counted else float("nan"))
+                            for key in METRICS})
+                row.update(n_images=counted, seconds_per_image=seconds / n)
+                rows.append(row)
+    finally:
+        bar.close()
+    return rows
+
+
+def format_table(rows: Any, *, floatfmt: str = ".3f", with_time: bool = False) -> str:
+    """Rows of :func:`evaluate` in Table 4.1's layout.
+
+    One block per test resolution, headed ``Test resolution: 64x1024``, with
+    a line per method: MAE, IoU, Precision, Recall, F1 (and, with `with_time`,
+    the up-sampling seconds per image).
+
+    Parameters
+    ----------
+    rows : iterable of dict
+        With ``method``, ``resolution`` and the scores of :data:`METRICS`.
+    floatfmt : str, default=".3f"
+        Format of the scores.
+    with_time : bool, default=False
+        Add a column of ``seconds_per_image``.
+
+    Returns
+    -------
+    table : str
+
+    Raises
+    ------
+    ValueError
+        If a row lacks a field.
+    TypeError
+        If a row is not a mapping.
+
+    Examples
+    --------
+    >>> print(format_table([{"method": "Bilinear", "resolution": "64x1024", "mae": 2.372,
+    ...                      "iou": 0.202, "precision": 0.322, "recall": 0.328, "f1": 0.325}]))
+    Method      MAE    IoU  Precision  Recall     F1
+    Test resolution: 64x1024
+    Bilinear  2.372  0.202      0.322   0.328  0.325
+    """
+    fields = ("method", "resolution") + METRICS + (("seconds_per_image",) if with_time else ())
+    records = []
+    for i, row in enumerate(rows):
+        if not isinstance(row, Mapping):
+            raise TypeError(f"rows[{i}] must be a dict, got {type(row).__name__}")
+        missing = [f for f in fields if f not in row]
+        if missing:
+            raise ValueError(f"rows[{i}] lacks {missing}")
+        records.append(row)
+    columns = METRICS + (("seconds_per_image",) if with_time else ())
+    header = ["Method"] + [_LABELS.get(c, "time [s]") for c in columns]
+    cells = [[str(r["method"])] + [format(float(r[c]), floatfmt) for c in columns]
+             for r in records]
+    widths = [max([len(h)] + [len(c[j]) for c in cells]) for j, h in enumerate(header)]
+
+    def line(items):
+        return "  ".join(s.ljust(w) if j == 0 else s.rjust(w)
+                         for j, (s, w) in enumerate(zip(items, widths)))
+
+    lines = [line(header)]
+    current = None
+    for rec, cell in zip(records, cells):
+        if rec["resolution"] != current:
+            current = rec["resolution"]
+            lines.append(f"Test resolution: {current}")
+        lines.append(line(cell))
+    return "\n".join(lines)
