@@ -117,6 +117,8 @@ def test_train_is_reproducible_and_writes_checkpoints(shards, tmp_path):
     np.testing.assert_array_equal(restored.predict(lo, q), a["model"].predict(lo, q))
     small = load_checkpoint(tmp_path / "run" / "model.pt")
     assert "optimizer" not in small
+    assert 0 < small["train_seconds"] and ckpt["train_seconds"] <= small["train_seconds"]
+    assert "torch " + torch.__version__ in small["hardware"] and "device cpu" in small["hardware"]
     np.testing.assert_array_equal(make(small["model"], load_sd=True).predict(lo, q), restored.predict(lo, q))
 
 

@@ -45,6 +45,7 @@ import logging
 import math
 import numbers
 import os
+import time
 import zipfile
 import zlib
 from pathlib import Path
@@ -384,6 +385,24 @@ def _setup_distributed(device: torch.device):
     return dist.get_rank(), dist.get_world_size(), device, created
 
 
+def _hardware(device, world: int) -> str:
+    """Where training runs, in words: processor, threads, torch version, device, processes."""
+    import platform
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next((line.split(":", 1)[1].strip() for line in f
+                        if line.startswith("model name")), cpu)
+    except OSError:
+        pass
+    where = str(device)
+    if device.type == "cuda":
+        where = f"{device} ({torch.cuda.get_device_name(device)})"
+    return (f"{cpu}, {os.cpu_count()} cores, {torch.get_num_threads()} torch threads, "
+            f"torch {torch.__version__}, device {where}, {world} process(es)")
+
+
 def train(config: dict) -> dict:
     """Train a range-image model (see the module docstring for the configuration).
 
@@ -470,6 +489,10 @@ def _run(cfg, chk, device, rank, world, resume, inputs, targets, in_model, out_m
                 f"config['resume'] checkpoint has {resume['steps_per_epoch']} steps per epoch, this "
                 f"configuration {steps_per_epoch}: use the same data, batch_size and processes"
             )
+    # wall-clock seconds of training, summed over resumes, and where it ran
+    seconds_before = float(resume.get("train_seconds", 0.0)) if resume is not None else 0.0
+    started = time.perf_counter()
+    hardware = _hardware(device, world)
     out_dir = cfg["output"]["dir"]
     out_dir = Path(os.path.expanduser(str(out_dir))) if out_dir is not None else None
     last = out_dir / "last.pt" if out_dir is not None else None
@@ -482,6 +505,8 @@ def _run(cfg, chk, device, rank, world, resume, inputs, targets, in_model, out_m
             "model": model.spec(), "optimizer": optimizer.state_dict(), "epoch": epoch,
             "step": step, "steps_per_epoch": steps_per_epoch, "config": _plain(cfg),
             "losses": [float(v) for v in losses], "world_size": world,
+            "train_seconds": seconds_before + time.perf_counter() - started,
+            "hardware": hardware,
         })
 
     from tqdm.auto import tqdm
@@ -530,6 +555,8 @@ def _run(cfg, chk, device, rank, world, resume, inputs, targets, in_model, out_m
         _save(out_dir / "model.pt", {
             "format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION,
             "model": model.spec(), "step": step, "config": _plain(cfg),
+            "train_seconds": seconds_before + time.perf_counter() - started,
+            "hardware": hardware,
         })
     return {"model": model, "losses": losses, "step": step, "checkpoint": str(last) if last else None}
 
