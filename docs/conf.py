@@ -59,10 +59,27 @@ html_theme_options = {"show_toc_level": 2, "secondary_sidebar_items": ["page-toc
 
 def _skip_metadata_requests(app, what, name, obj, skip, options):
     """Skip scikit-learn's metadata-routing methods (``set_*_request``,
-    ``get_metadata_routing``): scikit-learn's machinery, not occgp's API."""
-    if is_metadata_routing(name):
+    ``get_metadata_routing``) and what occgp.iln's models inherit from
+    ``torch.nn.Module``: other libraries' machinery, not occgp's API."""
+    if is_metadata_routing(name) or is_torch_member(obj):
         return True
     return None
+
+
+def is_torch_member(obj):
+    """Whether `obj` (a class member) is defined by PyTorch, e.g. what occgp.iln's models
+    inherit from ``torch.nn.Module`` (also used by tests/test_api_docs.py)."""
+    module = getattr(obj, "__module__", None) or ""
+    return module == "torch" or module.startswith("torch.")
+
+
+try:  # the names occgp.iln's models inherit from torch.nn.Module, for the class template
+    import torch
+
+    _TORCH_MODULE_MEMBERS = sorted(n for n in dir(torch.nn.Module) if not n.startswith("_"))
+except ImportError:
+    _TORCH_MODULE_MEMBERS = []
+autosummary_context = {"torch_module_members": _TORCH_MODULE_MEMBERS}
 
 
 def is_metadata_routing(name):

@@ -56,6 +56,8 @@ def _public_methods(cls, conf):
         raw = inspect.getattr_static(cls, name)
         if isinstance(raw, (property, type)) or not callable(getattr(cls, name)):
             continue
+        if conf["is_torch_member"](getattr(cls, name)):
+            continue            # torch.nn.Module's, inherited by occgp.iln's models
         out.append(name)
     return out
 

@@ -7,11 +7,15 @@ HDL-64E and HDL-32E presets), :func:`points_to_range_image`,
 elevation or by its ring index), :func:`simulate_range_image` (exact ray casting
 in the procedural outdoor scenes of :func:`occgp.datasets.outdoor_scene`),
 :func:`make_dataset` and :func:`load_shards` (the ``occgp iln make-dataset``
-shards).
+shards), and the evaluation: :func:`range_mae` and :func:`voxel_scores`
+(dissertation §4.4), :func:`evaluate` / :func:`format_table` (Table 4.1),
+:func:`upsample` (sparse scan in, dense sensor-frame points out) and
+:func:`mapping_experiment` (§4.4.5: maps from up-sampled scans). These run
+without torch and ask for it only when a learned model is used.
 
 The models and their training need PyTorch (the ``iln`` extra: ``pip install
 torch==2.13.0`` on CPU machines, then ``pip install 'occgp[iln]'``). Their names
--- :func:`make`, :func:`register`, :func:`available_models`, :class:`ILN`,
+-- :func:`pretrained` (the shipped models), :func:`make`, :func:`register`, :func:`available_models`, :class:`ILN`,
 :class:`LIIF`, :class:`Bilinear`, :func:`upsample_image`, :func:`train`,
 :func:`train_from_yaml`, :func:`load_checkpoint` -- are imported from this
 package on first use, so that ``import occgp.iln`` works without torch and
@@ -23,6 +27,10 @@ import importlib
 from ._range import LidarModel, points_to_range_image, range_image_from_points, \
     range_image_to_points
 from .data import load_shards, make_dataset, simulate_range_image
+from .evaluate import evaluate, format_table
+from .experiment import format_mapping_table, mapping_experiment
+from .metrics import range_mae, voxel_scores
+from .upsample import upsample, upsample_range_image
 
 #: The torch parts of the package: public name -> submodule.
 _TORCH_NAMES = {
@@ -30,11 +38,13 @@ _TORCH_NAMES = {
     "EDSRBaseline": "models", "ILN": "models", "LIIF": "models", "Bilinear": "models",
     "upsample_image": "models",
     "train": "train", "train_from_yaml": "train", "load_checkpoint": "train",
+    "pretrained": "_weights",
 }
 
 __all__ = ["LidarModel", "points_to_range_image", "range_image_to_points",
            "range_image_from_points", "simulate_range_image", "make_dataset", "load_shards",
-           *_TORCH_NAMES]
+           "upsample", "upsample_range_image", "evaluate", "format_table", "mapping_experiment",
+           "format_mapping_table", "range_mae", "voxel_scores", *_TORCH_NAMES]
 
 
 def __getattr__(name):
