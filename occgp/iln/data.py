@@ -536,6 +536,19 @@ class ShardImages(dict):
             return False
 
     def get(self, size, default=None):
+        """The images of `size`, or `default` when that size was not loaded (or is no size).
+
+        Parameters
+        ----------
+        size : str or pair of int
+            ``"64x1024"`` or ``(64, 1024)``, as :func:`parse_size` reads it.
+        default : object, default=None
+            Returned when `size` is not a key (a malformed or unknown size included).
+
+        Returns
+        -------
+        images : ndarray of float32, shape (n_images, rows, cols), or `default`
+        """
         return self[size] if size in self else default
 
 
