@@ -12,6 +12,10 @@ as ``count`` / ``index`` and properties are skipped), and reports
   or, for compiled ones, a return annotation other than None) without a
   ``Returns`` section, and generators without ``Yields``.
 
+``occgp.iln`` is checked with its torch parts (skipped without torch); members
+defined by PyTorch (what its models inherit from ``torch.nn.Module``) are left
+to torch's docs, as docs/conf.py's ``is_torch_member`` does.
+
 Run ``python tests/test_docstrings.py`` to print the report for every module.
 """
 
@@ -19,6 +23,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import importlib.util
 import inspect
 import textwrap
 
@@ -26,11 +31,22 @@ import pytest
 
 numpydoc_docscrape = pytest.importorskip("numpydoc.docscrape")
 
-MODULES = ["occgp", "occgp.gp", "occgp.datasets", "occgp.evaluation", "occgp.metrics"]
+MODULES = ["occgp", "occgp.gp", "occgp.datasets", "occgp.evaluation", "occgp.metrics", "occgp.iln"]
+
+#: Modules that need an optional dependency to import all of their API.
+NEEDS = {"occgp.iln": "torch"}
 
 #: Modules whose docstrings are still being completed; their test reports
 #: what is missing as an expected failure. Empty this set once they are done.
-PENDING_MODULES: set = set()
+#: occgp.iln: train_from_yaml and load_checkpoint (occgp/iln/train.py) lack
+#: Parameters and Returns sections.
+PENDING_MODULES: set = {"occgp.iln"}
+
+
+def _is_torch_member(obj):
+    """Whether `obj` is defined by PyTorch (docs/conf.py's ``is_torch_member``)."""
+    module = getattr(obj, "__module__", None) or ""
+    return module == "torch" or module.startswith("torch.")
 
 
 def _defining_class(cls, name):
@@ -55,7 +71,7 @@ def _public_callables(module):
                 if isinstance(raw, property) or inspect.isclass(raw):
                     continue
                 member = getattr(obj, attr)
-                if callable(member):
+                if callable(member) and not _is_torch_member(member):
                     yield f"{module.__name__}.{name}.{attr}", member
         elif callable(obj) and not inspect.isclass(obj) and inspect.isroutine(obj):
             yield f"{module.__name__}.{name}", obj
@@ -130,6 +146,8 @@ def report(module_name):
 
 @pytest.mark.parametrize("module_name", MODULES)
 def test_public_api_documents_parameters_and_returns(module_name):
+    if module_name in NEEDS:
+        pytest.importorskip(NEEDS[module_name])
     found = report(module_name)
     text = "\n".join(f"{name}: {'; '.join(issues)}" for name, issues in found.items())
     if found and module_name in PENDING_MODULES:
@@ -166,6 +184,12 @@ def test_checker_flags_a_missing_parameter_and_return():
 
 
 if __name__ == "__main__":
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's occgp
     for name in MODULES:
+        if name in NEEDS and importlib.util.find_spec(NEEDS[name]) is None:
+            continue
         for qualname, issues in report(name).items():
             print(f"{qualname}: {'; '.join(issues)}")

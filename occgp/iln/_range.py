@@ -139,21 +139,106 @@ class LidarModel:
     # ------------------------------------------------------------------ presets
     @classmethod
     def carla(cls, rows: int = 16, cols: int = 1024) -> "LidarModel":
-        """The dissertation's CARLA sensor: -15 to 15 degrees, 360 degrees, 80 m."""
+        """The dissertation's CARLA sensor: -15 to 15 degrees, 360 degrees, 80 m.
+
+        Parameters
+        ----------
+        rows : int, default=16
+            Beams (image rows), 1 to 65536.
+        cols : int, default=1024
+            Firings per revolution (image columns), 1 to 65536; ``rows * cols``
+            at most ``MAX_PIXELS`` (2**24).
+
+        Returns
+        -------
+        LidarModel
+
+        Raises
+        ------
+        TypeError
+            If `rows` or `cols` is not an int.
+        ValueError
+            If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
+            exceeds ``MAX_PIXELS`` (2**24).
+        """
         return cls(rows, cols, (-15.0, 15.0), 360.0, 80.0)
 
     @classmethod
     def hdl64e(cls, rows: int = 64, cols: int = 1024) -> "LidarModel":
-        """KITTI's Velodyne HDL-64E: -24.8 to 2.0 degrees, 360 degrees, 120 m."""
+        """KITTI's Velodyne HDL-64E: -24.8 to 2.0 degrees, 360 degrees, 120 m.
+
+        Parameters
+        ----------
+        rows : int, default=64
+            Beams (image rows), 1 to 65536.
+        cols : int, default=1024
+            Firings per revolution (image columns), 1 to 65536; ``rows * cols``
+            at most ``MAX_PIXELS`` (2**24).
+
+        Returns
+        -------
+        LidarModel
+
+        Raises
+        ------
+        TypeError
+            If `rows` or `cols` is not an int.
+        ValueError
+            If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
+            exceeds ``MAX_PIXELS`` (2**24).
+        """
         return cls(rows, cols, (-24.8, 2.0), 360.0, 120.0)
 
     @classmethod
     def hdl32e(cls, rows: int = 32, cols: int = 1024) -> "LidarModel":
-        """nuScenes' Velodyne HDL-32E: -30.67 to 10.67 degrees, 360 degrees, 100 m."""
+        """nuScenes' Velodyne HDL-32E: -30.67 to 10.67 degrees, 360 degrees, 100 m.
+
+        Parameters
+        ----------
+        rows : int, default=32
+            Beams (image rows), 1 to 65536.
+        cols : int, default=1024
+            Firings per revolution (image columns), 1 to 65536; ``rows * cols``
+            at most ``MAX_PIXELS`` (2**24).
+
+        Returns
+        -------
+        LidarModel
+
+        Raises
+        ------
+        TypeError
+            If `rows` or `cols` is not an int.
+        ValueError
+            If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
+            exceeds ``MAX_PIXELS`` (2**24).
+        """
         return cls(rows, cols, (-30.67, 10.67), 360.0, 100.0)
 
     def with_size(self, rows: int, cols: int) -> "LidarModel":
-        """The same fields of view and range at another image size."""
+        """The same fields of view and range at another image size.
+
+        Parameters
+        ----------
+        rows : int
+            Beams (image rows), 1 to 65536.
+        cols : int
+            Image columns, 1 to 65536; ``rows * cols`` at most
+            ``MAX_PIXELS`` (2**24).
+
+        Returns
+        -------
+        LidarModel
+            A new model; this one is unchanged.
+
+        Raises
+        ------
+        TypeError
+            If `rows` or `cols` is not an int.
+        ValueError
+            If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
+            exceeds ``MAX_PIXELS`` (2**24).
+        """
         return dataclasses.replace(self, rows=rows, cols=cols)
 
     @property
@@ -163,7 +248,15 @@ class LidarModel:
 
     # ------------------------------------------------------------------ JSON
     def to_json(self) -> str:
-        """JSON of the fields except rows and cols (the shards' ``lidar`` entry)."""
+        """JSON of the fields except rows and cols (the shards' ``lidar`` entry).
+
+        Returns
+        -------
+        str
+            A JSON object with the keys ``horizontal_fov``, ``max_range`` and
+            ``vertical_fov`` (a list of two floats), sorted; read back by
+            :meth:`from_json`.
+        """
         return json.dumps({"vertical_fov": list(self.vertical_fov),
                            "horizontal_fov": self.horizontal_fov, "max_range": self.max_range},
                           sort_keys=True)
@@ -172,14 +265,31 @@ class LidarModel:
     def from_json(cls, text: str, rows: int, cols: int) -> "LidarModel":
         """The model of :meth:`to_json`'s `text` at size ``(rows, cols)``.
 
+        Parameters
+        ----------
+        text : str
+            JSON of an object with exactly the keys ``vertical_fov`` (a list
+            of two numbers), ``horizontal_fov`` and ``max_range``, as
+            :meth:`to_json` writes.
+        rows : int
+            Beams (image rows), 1 to 65536.
+        cols : int
+            Image columns, 1 to 65536; ``rows * cols`` at most
+            ``MAX_PIXELS`` (2**24).
+
+        Returns
+        -------
+        LidarModel
+
         Raises
         ------
         ValueError
             If `text` is not JSON of an object with exactly the keys
             ``vertical_fov``, ``horizontal_fov`` and ``max_range``, or a
-            value is out of range.
+            value (or `rows`, `cols`) is out of range.
         TypeError
-            If `text` is not a str, or a value has a wrong type.
+            If `text` is not a str, or a value (or `rows`, `cols`) has a
+            wrong type.
         """
         if not isinstance(text, str):
             raise TypeError(f"text must be a JSON str, got {type(text).__name__}")
@@ -202,12 +312,24 @@ class LidarModel:
         return self.horizontal_fov == 360.0
 
     def elevations(self) -> NDArray[np.float64]:
-        """Elevation of each row's centre, degrees, shape (rows,), top row first."""
+        """Elevation of each row's centre, degrees, top row first.
+
+        Returns
+        -------
+        ndarray of float64, shape (rows,)
+            ``high - (i + 0.5) * (high - low) / rows`` for row ``i``.
+        """
         low, high = self.vertical_fov
         return high - (np.arange(self.rows) + 0.5) * (high - low) / self.rows
 
     def azimuths(self) -> NDArray[np.float64]:
-        """Azimuth of each column's centre, degrees, shape (cols,), left edge first."""
+        """Azimuth of each column's centre, degrees, left edge first.
+
+        Returns
+        -------
+        ndarray of float64, shape (cols,)
+            ``hfov / 2 - (j + 0.5) * hfov / cols`` for column ``j``.
+        """
         h = self.horizontal_fov
         return h / 2 - (np.arange(self.cols) + 0.5) * h / self.cols
 
@@ -222,7 +344,13 @@ class LidarModel:
         return e, a
 
     def directions(self) -> NDArray[np.float64]:
-        """Unit ray directions of the pixel centres in the sensor frame, shape (rows, cols, 3)."""
+        """Unit ray directions of the pixel centres in the sensor frame.
+
+        Returns
+        -------
+        ndarray of float64, shape (rows, cols, 3)
+            ``(x, y, z)`` of each pixel centre's direction (+x forward, +z up).
+        """
         e = np.radians(self.elevations())[:, None]
         a = np.radians(self.azimuths())[None, :]
         ce = np.cos(e)
@@ -280,10 +408,29 @@ class LidarModel:
 
         The inverse of :meth:`angles_to_pixels` (azimuths not wrapped).
 
+        Parameters
+        ----------
+        v : array-like of real numbers
+            Fractional row coordinates, pixel units (row ``i``'s centre at
+            ``i + 0.5``); any finite value, not limited to ``[0, rows)``.
+        u : array-like of real numbers
+            Fractional column coordinates, pixel units (column ``j``'s centre
+            at ``j + 0.5``); any finite value, not limited to ``[0, cols)``.
+
+        Returns
+        -------
+        elevation : ndarray of float64, shape of `v`
+            Degrees, ``high - v * (high - low) / rows``.
+        azimuth : ndarray of float64, shape of `u`
+            Degrees, ``hfov / 2 - u * hfov / cols`` (not wrapped). `v` and
+            `u` are converted independently, so they need not broadcast.
+
         Raises
         ------
-        TypeError, ValueError
-            As :meth:`angles_to_pixels`.
+        TypeError
+            If `v` or `u` does not hold real numbers.
+        ValueError
+            If `v` or `u` holds NaN or inf, or cannot be converted to an array.
         """
         v = _finite(v, "v")
         u = _finite(u, "u")

@@ -43,7 +43,19 @@ def _size(text):
 
 def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
     """The ``iln`` argument parser, or its subcommands added to `parser` (e.g. a subparser
-    of ``occgp``)."""
+    of ``occgp``).
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser, optional
+        Parser to add the ``make-dataset`` and ``train`` subcommands to (as
+        ``args.iln_command``); default: a new parser with ``prog="occgp iln"``.
+
+    Returns
+    -------
+    parser : argparse.ArgumentParser
+        `parser` itself when given, else the new parser.
+    """
     if parser is None:
         parser = argparse.ArgumentParser(
             prog="occgp iln", description="Implicit LiDAR network: training data and models.")
@@ -79,7 +91,19 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
 
 
 def run(args) -> int:
-    """Run the parsed ``iln`` command `args`; returns the exit status."""
+    """Run the parsed ``iln`` command `args`.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        What :func:`build_parser`'s parser returned.
+
+    Returns
+    -------
+    status : int
+        0 on success; 1 if the command raised ValueError, TypeError, OSError or ImportError
+        (its message printed on stderr).
+    """
     try:
         if args.iln_command == "make-dataset":
             from .data import make_dataset  # noqa: PLC0415
@@ -103,8 +127,24 @@ def run(args) -> int:
 
 
 def main(argv=None) -> int:
-    """``occgp iln`` with the arguments `argv` (default: ``sys.argv[1:]``); returns the exit
-    status."""
+    """``occgp iln`` with the arguments `argv`.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after ``iln``; default: ``sys.argv[1:]``.
+
+    Returns
+    -------
+    status : int
+        0 on success; 1 for a failed command (its message on stderr).
+
+    Raises
+    ------
+    SystemExit
+        From argparse: code 2 for bad arguments (the usage message on stderr), 0 for
+        ``--help``.
+    """
     args = build_parser().parse_args(argv)
     return run(args)
 

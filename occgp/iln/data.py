@@ -70,12 +70,23 @@ def _key(size):
 def parse_size(size) -> tuple:
     """``(rows, cols)`` of a size given as ``"16x1024"`` or a pair, checked against ``SIZES``.
 
+    Parameters
+    ----------
+    size : str or pair of int
+        ``"ROWSxCOLS"`` (``x`` or ``X``, surrounding spaces allowed), or ``(rows, cols)``.
+
+    Returns
+    -------
+    size : tuple of two int
+        ``(rows, cols)``, one of ``SIZES``.
+
     Raises
     ------
     ValueError
-        If `size` is not one of ``SIZES`` (16x1024, 64x1024, 128x2048, 256x4096).
+        If `size` is a str not of the form ``"ROWSxCOLS"``, a pair holds an int below 1, or
+        the size is not one of ``SIZES`` (16x1024, 64x1024, 128x2048, 256x4096).
     TypeError
-        If `size` is neither a str nor a pair of ints.
+        If `size` is neither a str nor a pair, or a pair does not hold ints.
     """
     if isinstance(size, str):
         m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", size)
@@ -525,6 +536,19 @@ class ShardImages(dict):
             return False
 
     def get(self, size, default=None):
+        """The images of `size`, or `default` when that size was not loaded (or is no size).
+
+        Parameters
+        ----------
+        size : str or pair of int
+            ``"64x1024"`` or ``(64, 1024)``, as :func:`parse_size` reads it.
+        default : object, default=None
+            Returned when `size` is not a key (a malformed or unknown size included).
+
+        Returns
+        -------
+        images : ndarray of float32, shape (n_images, rows, cols), or `default`
+        """
         return self[size] if size in self else default
 
 

@@ -82,7 +82,15 @@ def register(name: str) -> Callable[[type], type]:
 
 
 def available_models() -> list[str]:
-    """Names of the registered models, sorted."""
+    """Names of the registered models, sorted.
+
+    Returns
+    -------
+    names : list of str
+        The names :func:`make` accepts as ``spec["name"]`` (``"bilinear"``,
+        ``"edsr-baseline"``, ``"iln"``, ``"liif"`` and any added with
+        :func:`register`).
+    """
     return sorted(_MODELS)
 
 
@@ -293,7 +301,23 @@ class EDSRBaseline(nn.Module):
         self.body_tail = _Conv(channels, channels)
 
     def forward(self, x: torch.Tensor, wrap: bool = True) -> torch.Tensor:
-        """Features (B, C, H, W) of normalised range images (B, 1, H, W)."""
+        """Features of normalised range images.
+
+        No input checks (the models call it on checked input).
+
+        Parameters
+        ----------
+        x : torch.Tensor of shape (B, 1, H, W)
+            Range images divided by the model's normalising range (0 for no return).
+        wrap : bool, default=True
+            Circular horizontal padding (a 360° sensor); replicate padding when false.
+            Vertical padding always replicates.
+
+        Returns
+        -------
+        features : torch.Tensor of shape (B, C, H, W)
+            ``C`` = `channels`, on `x`'s device.
+        """
         x = self.head(x, wrap)
         y = x
         for block in self.body:
@@ -301,7 +325,20 @@ class EDSRBaseline(nn.Module):
         return x + self.body_tail(y, wrap)
 
     def spec(self, with_sd: bool = True) -> dict:
-        """Spec ``{"name", "args"[, "sd"]}`` that :func:`make` rebuilds this encoder from."""
+        """Spec ``{"name", "args"[, "sd"]}`` that :func:`make` rebuilds this encoder from.
+
+        Parameters
+        ----------
+        with_sd : bool, default=True
+            Include the state_dict (``self.state_dict()``: detached tensors on the
+            encoder's device, sharing its parameters' storage).
+
+        Returns
+        -------
+        spec : dict
+            ``"name"``: ``"edsr-baseline"``; ``"args"``: a new dict of `channels`,
+            `n_resblocks` and `res_scale`; ``"sd"`` if `with_sd`.
+        """
         spec = {"name": self.registry_name, "args": dict(self._spec_args)}
         if with_sd:
             spec["sd"] = self.state_dict()
@@ -385,15 +422,46 @@ class RangeModel(nn.Module):
 
     # -- subclass interface
     def encode(self, images: torch.Tensor, wrap: bool) -> torch.Tensor | None:
+        """Features of normalised range images; this base (the bilinear model) has none.
+
+        Parameters
+        ----------
+        images : torch.Tensor of shape (B, H, W)
+            Range images divided by `max_range` (0 for no return). Not used here.
+        wrap : bool
+            Horizontal wrap-around (360° sensor). Not used here.
+
+        Returns
+        -------
+        None
+            Subclasses with an encoder (:class:`ILN`, :class:`LIIF`) return a tensor
+            of shape (B, C, H, W).
+        """
         return None
 
     def query(self, features, images, queries, wrap):  # pragma: no cover - abstract
         raise NotImplementedError
 
     def forward(self, images: torch.Tensor, queries: torch.Tensor, wrap: bool | None = None) -> torch.Tensor:
-        """Normalised ranges (B, N) at `queries` (B, N, 2) of normalised images (B, H, W).
+        """Normalised ranges at `queries` of normalised images (the training path).
 
-        No input checks (training path); :meth:`predict` checks its input and un-normalises.
+        No input checks; :meth:`predict` checks its input and un-normalises.
+
+        Parameters
+        ----------
+        images : torch.Tensor of shape (B, H, W)
+            Range images divided by `max_range` (0 for no return).
+        queries : torch.Tensor of shape (B, N, 2)
+            ``(v, u)`` in the input images' pixel units (pixel centres at integer + 0.5),
+            ``0 <= v <= H``, ``0 <= u <= W``.
+        wrap : bool, optional
+            Horizontal wrap-around; default: the model's `wrap`.
+
+        Returns
+        -------
+        ranges : torch.Tensor of shape (B, N)
+            Normalised ranges (metres / `max_range`), 0 for no return; not clamped
+            (the LIIF model may predict below 0).
         """
         wrap = self.wrap if wrap is None else bool(wrap)
         features = self.encode(images, wrap)
@@ -452,10 +520,12 @@ class RangeModel(nn.Module):
         Raises
         ------
         TypeError
-            If `range_image` or `queries` is not numeric array data.
+            If `range_image` or `queries` is not numeric array data, `wrap` is not a bool (or
+            None), or `chunk` is not an int.
         ValueError
-            If a shape is wrong, `range_image` is empty, holds NaN, inf, negative ranges or ranges
-            above 1e6 m, or a query is not finite or lies outside the image.
+            If a shape is wrong (batched queries with an unbatched image, or batch sizes that
+            differ), `range_image` is empty, holds NaN, inf, negative ranges or ranges above
+            1e6 m, a query is not finite or lies outside the image, or `chunk` < 1.
         """
         chunk = _check_int(chunk, "chunk", 1)
         wrap = self.wrap if wrap is None else _check_bool(wrap, "wrap")
@@ -484,11 +554,40 @@ class RangeModel(nn.Module):
         return pred.to(out_device)
 
     def weights(self, range_image, queries, wrap: bool | None = None) -> np.ndarray:
-        """Weights (…, n_queries, 4) the model gives the 4 neighbours of each query.
+        """Weights the model gives the 4 neighbours of each query.
 
-        Order (top, left), (top, right), (bottom, left), (bottom, right); 0 for no-return
-        neighbours; rows sum to 1, or are all 0 for a query that returns no return. Same input
-        rules as :meth:`predict`; returns numpy.
+        Interpolation weights for :class:`ILN` and :class:`Bilinear`, ensemble (area) weights
+        for :class:`LIIF`. Same input rules as :meth:`predict`, evaluated in one pass (no
+        chunking).
+
+        Parameters
+        ----------
+        range_image : array-like or torch.Tensor of shape (rows, cols) or (batch, rows, cols)
+            Ranges in metres, 0 where there is no return. Finite, in [0, 1e6].
+        queries : array-like or torch.Tensor of shape (n_queries, 2) or (batch, n_queries, 2)
+            ``(v, u)`` in the input image's pixel units (pixel centres at integer + 0.5), with
+            ``0 <= v <= rows`` and ``0 <= u <= cols``. Unbatched queries with a batch of images
+            are used for every image.
+        wrap : bool, optional
+            Horizontal neighbours (and encoder padding) wrap around (360° sensor); default: the
+            model's `wrap`.
+
+        Returns
+        -------
+        weights : numpy.ndarray of float32, shape (n_queries, 4) or (batch, n_queries, 4)
+            Neighbour order (top, left), (top, right), (bottom, left), (bottom, right); 0 for
+            no-return neighbours; each row sums to 1, or is all 0 for a query that returns no
+            return. Always numpy, whatever the input type.
+
+        Raises
+        ------
+        TypeError
+            If `range_image` or `queries` is not numeric array data, or `wrap` is not a bool
+            (or None).
+        ValueError
+            If a shape is wrong (batched queries with an unbatched image, or batch sizes that
+            differ), `range_image` is empty, holds NaN, inf, negative ranges or ranges above
+            1e6 m, or a query is not finite or lies outside the image.
         """
         wrap = self.wrap if wrap is None else _check_bool(wrap, "wrap")
         images, q, batched, _, _ = self._prepare(range_image, queries)
@@ -605,9 +704,48 @@ class ILN(RangeModel):
         self.head = nn.Linear(channels, 1)
 
     def encode(self, images, wrap):
+        """EDSR-baseline features of normalised range images (no input checks).
+
+        Parameters
+        ----------
+        images : torch.Tensor of shape (B, H, W)
+            Range images divided by `max_range` (0 for no return).
+        wrap : bool
+            Circular horizontal padding of the encoder (360° sensor); replicate otherwise.
+
+        Returns
+        -------
+        features : torch.Tensor of shape (B, C, H, W)
+            ``C`` = `channels`.
+        """
         return self.encoder(images[:, None], wrap)
 
     def query(self, features, images, queries, wrap):
+        """Ranges and interpolation weights at queries: Σ w_t r_t over the 4 neighbours.
+
+        No input checks (:meth:`predict` and :meth:`weights` check theirs).
+
+        Parameters
+        ----------
+        features : torch.Tensor of shape (B, C, H, W)
+            What :meth:`encode` returned for `images`.
+        images : torch.Tensor of shape (B, H, W)
+            Range images divided by `max_range` (0 for no return).
+        queries : torch.Tensor of shape (B, N, 2)
+            ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
+            ``0 <= v <= H``, ``0 <= u <= W``.
+        wrap : bool
+            Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
+            neighbours are always clamped.
+
+        Returns
+        -------
+        ranges : torch.Tensor of shape (B, N)
+            Normalised ranges (metres / `max_range`), 0 for no return.
+        weights : torch.Tensor of shape (B, N, 4)
+            Softmax weights of the neighbours (top, left), (top, right), (bottom, left),
+            (bottom, right); 0 for no-return neighbours; all 0 when none has a return.
+        """
         bsz, rows, cols = images.shape
         n = queries.shape[1]
         idx, rel, _ = _neighbours(queries, rows, cols, wrap)
@@ -687,9 +825,49 @@ class LIIF(RangeModel):
         self.imnet = _MLP(channels + 2, hidden, 1)
 
     def encode(self, images, wrap):
+        """EDSR-baseline features of normalised range images (no input checks).
+
+        Parameters
+        ----------
+        images : torch.Tensor of shape (B, H, W)
+            Range images divided by `max_range` (0 for no return).
+        wrap : bool
+            Circular horizontal padding of the encoder (360° sensor); replicate otherwise.
+
+        Returns
+        -------
+        features : torch.Tensor of shape (B, C, H, W)
+            ``C`` = `channels`.
+        """
         return self.encoder(images[:, None], wrap)
 
     def query(self, features, images, queries, wrap):
+        """Ranges at queries: the MLP's 4 per-neighbour predictions blended by area weights.
+
+        No input checks (:meth:`predict` and :meth:`weights` check theirs).
+
+        Parameters
+        ----------
+        features : torch.Tensor of shape (B, C, H, W)
+            What :meth:`encode` returned for `images`.
+        images : torch.Tensor of shape (B, H, W)
+            Range images divided by `max_range` (0 for no return).
+        queries : torch.Tensor of shape (B, N, 2)
+            ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
+            ``0 <= v <= H``, ``0 <= u <= W``.
+        wrap : bool
+            Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
+            neighbours are always clamped.
+
+        Returns
+        -------
+        ranges : torch.Tensor of shape (B, N)
+            Normalised ranges (metres / `max_range`), 0 for no return.
+        weights : torch.Tensor of shape (B, N, 4)
+            Renormalised area (bilinear) weights of the neighbours (top, left), (top, right),
+            (bottom, left), (bottom, right); 0 for no-return neighbours; all 0 when no weight
+            is left (the range is then 0). The ranges are not clamped and may be below 0.
+        """
         bsz, rows, cols = images.shape
         n = queries.shape[1]
         idx, rel, wb = _neighbours(queries, rows, cols, wrap)
@@ -730,6 +908,32 @@ class Bilinear(RangeModel):
         self._spec_args = {"max_range": self.max_range, "wrap": self.wrap}
 
     def query(self, features, images, queries, wrap):
+        """Bilinear interpolation at queries, no-return neighbours dropped.
+
+        No input checks (:meth:`predict` and :meth:`weights` check theirs).
+
+        Parameters
+        ----------
+        features : None
+            What :meth:`encode` returned (ignored).
+        images : torch.Tensor of shape (B, H, W)
+            Range images divided by `max_range` (0 for no return).
+        queries : torch.Tensor of shape (B, N, 2)
+            ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
+            ``0 <= v <= H``, ``0 <= u <= W``.
+        wrap : bool
+            Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
+            neighbours are always clamped.
+
+        Returns
+        -------
+        ranges : torch.Tensor of shape (B, N)
+            Normalised ranges (metres / `max_range`), 0 for no return.
+        weights : torch.Tensor of shape (B, N, 4)
+            Renormalised bilinear weights of the neighbours (top, left), (top, right),
+            (bottom, left), (bottom, right); 0 for no-return neighbours; all 0 when no weight
+            is left (the range is then 0).
+        """
         bsz, rows, cols = images.shape
         n = queries.shape[1]
         idx, _, wb = _neighbours(queries, rows, cols, wrap)
