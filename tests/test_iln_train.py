@@ -282,3 +282,10 @@ def test_resume_and_yaml_errors(shards, tmp_path):
         train_from_yaml(tmp_path / "broken.yaml")
     with pytest.raises(TypeError, match="config must be a dict"):
         train("config.yaml")
+
+
+def test_train_from_yaml_rejects_a_binary_file(tmp_path):
+    path = tmp_path / "config.yaml"
+    path.write_bytes(b"\xff\xfe\x00binary")
+    with pytest.raises(ValueError, match="is not UTF-8 text"):
+        train_from_yaml(path)

@@ -317,7 +317,20 @@ def sample_queries(targets: torch.Tensor, table: torch.Tensor, n: int, generator
 
 
 def masked_l1(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Mean |pred − target| over the entries whose target has a return (target > 0)."""
+    """Mean |pred − target| over the entries whose target has a return (target > 0).
+
+    Parameters
+    ----------
+    pred : torch.Tensor
+        Predicted (normalised) ranges.
+    target : torch.Tensor
+        True ranges, same shape as `pred` (or broadcastable to it); 0 marks no return.
+
+    Returns
+    -------
+    loss : torch.Tensor
+        0-d tensor of `pred`'s dtype; 0 when no target has a return.
+    """
     mask = (target > 0).to(pred.dtype)
     return (torch.abs(pred - target) * mask).sum() / mask.sum().clamp_min(1.0)
 
@@ -340,17 +353,31 @@ def _save(path: Path, payload: dict) -> None:
 def load_checkpoint(path, map_location="cpu") -> dict:
     """Read a checkpoint written by :func:`train`.
 
-    Returns the dict with keys ``model`` (a spec with ``sd``: ``make(ckpt["model"],
-    load_sd=True)`` rebuilds the model), ``optimizer``, ``epoch``, ``step``, ``config``,
-    ``losses``, ``format`` and ``version``. ``model.pt`` files hold only ``model``, ``config``,
-    ``step``, ``format`` and ``version``.
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The checkpoint file (``last.pt``, ``epoch-*.pt`` or ``model.pt``); ``~`` is expanded.
+    map_location : str, torch.device, dict or callable, default="cpu"
+        Where the tensors are loaded, as ``torch.load``'s `map_location`.
+
+    Returns
+    -------
+    checkpoint : dict
+        Keys ``model`` (a spec with ``sd``: ``make(ckpt["model"], load_sd=True)`` rebuilds the
+        model), ``optimizer``, ``epoch``, ``step``, ``config``, ``losses``, ``format`` and
+        ``version``. ``model.pt`` files hold only ``model``, ``config``, ``step``, ``format``
+        and ``version``.
 
     Raises
     ------
+    FileNotFoundError
+        If `path` does not exist.
     OSError
-        If `path` cannot be read or is not a torch checkpoint.
+        If `path` cannot be read or is not a torch checkpoint (also when ``torch.load``
+        rejects `map_location`).
     ValueError
-        If it is not an occgp.iln checkpoint.
+        If it is not an occgp.iln checkpoint (not a dict, or another ``format``), or has
+        another ``version``.
     """
     path = Path(os.path.expanduser(str(path)))
     try:
@@ -577,20 +604,35 @@ def _plain(cfg: dict) -> dict:
 def train_from_yaml(path) -> dict:
     """Read a YAML configuration file and :func:`train` with it.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A YAML file holding one mapping, the configuration :func:`train` takes (missing keys
+        take the defaults of ``DEFAULTS``); ``~`` is expanded.
+
+    Returns
+    -------
+    result : dict
+        What :func:`train` returns: ``model``, ``losses``, ``step`` and ``checkpoint``.
+
     Raises
     ------
     OSError
-        If `path` cannot be read.
+        If `path` cannot be read, or as :func:`train`.
     ValueError
-        If the file is not YAML of a mapping, or as :func:`train`.
+        If the file is not valid YAML of a mapping, or as :func:`train`.
+    TypeError
+        As :func:`train`.
     """
     import yaml
 
     path = Path(os.path.expanduser(str(path)))
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise type(exc)(f"cannot read the configuration {str(path)!r}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"configuration {str(path)!r} is not UTF-8 text (a YAML file)") from None
     try:
         config = yaml.safe_load(text)
     except yaml.YAMLError as exc:
