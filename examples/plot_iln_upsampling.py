@@ -31,11 +31,11 @@ import numpy as np
 
 import occgp.iln
 from occgp.datasets import outdoor_scene
-from occgp.iln.data import TEST_SEED_OFFSET, simulate_range_image
-from occgp.iln.experiment import format_mapping_table, mapping_experiment
-from occgp.iln._range import LidarModel, range_image_to_points
-from occgp.iln.metrics import range_mae, voxel_scores
-from occgp.iln.upsample import upsample
+from occgp.iln import (
+    LidarModel, format_mapping_table, mapping_experiment, range_image_to_points, range_mae,
+    simulate_range_image, upsample, voxel_scores,
+)
+from occgp.iln.data import TEST_SEED_OFFSET
 
 scene = outdoor_scene(TEST_SEED_OFFSET)
 poses = scene.trajectory(3, margin=25.0)   # x = -15, 0, 15 m
@@ -86,7 +86,7 @@ for ax, (title, image) in zip(axes, panels):
 # %%
 # Maps from each
 # --------------
-# :func:`occgp.iln.experiment.mapping_experiment` drives the sensor along the
+# :func:`occgp.iln.mapping_experiment` drives the sensor along the
 # road (3 poses, 15 m apart), builds a 0.2 m octree from the 16-beam scans,
 # from their bilinear and ILN up-sampling and from the true 64-beam scans,
 # and scores every map on cells of the scene's exact ground truth (cells a
