@@ -92,12 +92,18 @@ def test_resolve_model_names_and_models():
         resolve_model(3)
 
 
-def test_pretrained_without_shipped_weights_raises_oserror():
+def test_pretrained_up_samples_with_the_shipped_model_and_says_when_it_is_missing(
+        monkeypatch, tmp_path):
     import occgp.iln as iln
-    if callable(getattr(iln, "pretrained", None)):
-        pytest.skip("this installation ships occgp.iln.pretrained")
-    with pytest.raises(OSError, match="model='pretrained' needs occgp.iln.pretrained"):
-        upsample(np.ones((4, 64)), model="pretrained")
+    from occgp.iln import _weights
+    image = np.full((16, 1024), 10.0, dtype=np.float32)
+    got = upsample(image, rows=64, cols=1024, model="pretrained", return_image=True)[1]
+    want = upsample(image, rows=64, cols=1024, model=iln.pretrained(), return_image=True)[1]
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_allclose(got[got > 0], 10.0, rtol=1e-6)   # convex: a flat wall stays
+    monkeypatch.setattr(_weights, "FOLDER", tmp_path)
+    with pytest.raises(OSError, match="the shipped weights .*iln_small.pt are missing"):
+        upsample(image, model="pretrained")
 
 
 @pytest.mark.parametrize("data, kwargs, match", [
