@@ -861,9 +861,13 @@ def _check_binary_data(const uint8_t[::1] data, Py_ssize_t offset):
     return nodes, pos
 
 
-def _check_full_data(const uint8_t[::1] data, Py_ssize_t offset):
-    """Like :func:`_check_binary_data` for a .ot data block (float log-odds + child mask)."""
+def _check_full_data(const uint8_t[::1] data, Py_ssize_t offset, int node_bytes=5):
+    """Like :func:`_check_binary_data` for a .ot data block: per node a float log-odds,
+    then ``node_bytes - 5`` bytes of payload (3 for a ColorOcTree's r, g, b), then the
+    child mask."""
     cdef Py_ssize_t pos = offset, n = data.shape[0], nodes = 0
+    if node_bytes < 5:
+        raise ValueError(f"node_bytes must be at least 5, got {node_bytes}")
     cdef vector[uint8_t] stack
     cdef uint8_t depth, mask
     cdef float value
@@ -873,12 +877,12 @@ def _check_full_data(const uint8_t[::1] data, Py_ssize_t offset):
         while not stack.empty():
             depth = stack.back()
             stack.pop_back()
-            if pos + 5 > n:
+            if pos + node_bytes > n:
                 err = 1
                 break
             memcpy(&value, &data[pos], sizeof(float))
-            mask = data[pos + 4]
-            pos += 5
+            mask = data[pos + node_bytes - 1]
+            pos += node_bytes
             nodes += 1
             if not isfinite(value):
                 err = 3

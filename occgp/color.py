@@ -9,9 +9,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _octomap_format as fmt
-from ._color import FUSE_AVERAGE, FUSE_MEAN, _check_color_data, _ColorOcTree
+from ._color import FUSE_AVERAGE, FUSE_MEAN, _ColorOcTree
 from ._logodds_map import LogOddsMap
-from ._octree import KEYRAY_CELLS
+from ._octree import KEYRAY_CELLS, _check_full_data
 from ._validation import as_path, check_bool, check_choice, check_resolution
 
 __all__ = ["ColorOctree", "ColorLeaves", "FUSIONS"]
@@ -511,7 +511,7 @@ class ColorOctree(LogOddsMap, _ColorOcTree):
             return tree
         buf = np.frombuffer(data, dtype=np.uint8)
         try:
-            nodes, end = _check_color_data(buf, header.data_offset)
+            nodes, end = _check_full_data(buf, header.data_offset, 8)  # + r, g, b
         except ValueError as exc:
             raise ValueError(f"{source}: {exc}") from None
         if nodes != header.size:
