@@ -85,7 +85,7 @@ def hardware():
 def _find_checkpoint(name):
     """The first checkpoint in occgp/iln/weights/ whose spec is model `name`, or None."""
     import occgp.iln.models  # noqa: F401  (the weights folder lies beside it)
-    from occgp.iln.train import load_checkpoint
+    from occgp.iln.training import load_checkpoint
 
     folder = Path(occgp.iln.models.__file__).parent / "weights"
     for path in sorted(glob.glob(str(folder / "*.pt"))):
@@ -101,7 +101,7 @@ def _find_checkpoint(name):
 def load_model(path):
     """``(model, checkpoint dict)`` of a checkpoint written by occgp iln train."""
     from occgp.iln.models import make
-    from occgp.iln.train import load_checkpoint
+    from occgp.iln.training import load_checkpoint
 
     ckpt = load_checkpoint(path)
     return make(ckpt["model"], load_sd=True).eval(), ckpt
@@ -235,7 +235,7 @@ def gpu_benchmark(steps=50, batch_size=16, quick=False, device="cuda", spec=None
     from occgp.iln._range import LidarModel
     from occgp.iln.data import load_shards, make_dataset
     from occgp.iln.models import upsample_image
-    from occgp.iln.train import train
+    from occgp.iln.training import train
 
     spec = FULL_ILN if spec is None else spec
 

@@ -1,7 +1,7 @@
 """
-==========================================================
+================================================================
 Denser maps from a 16-beam LiDAR with the Implicit LiDAR Network
-==========================================================
+================================================================
 
 A 16-beam LiDAR leaves most of an outdoor map unknown: its beams lie 2
 degrees apart, 0.7 m apart on a wall 20 m away. The Implicit LiDAR Network

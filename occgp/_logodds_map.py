@@ -18,7 +18,7 @@ from ._validation import (
     check_resolution,
 )
 
-__all__ = ["LogOddsMap", "Leaves", "MODES", "METHODS"]
+__all__ = ["LogOddsMap", "OctreeFace", "Leaves", "MODES", "METHODS"]
 
 MODES = ("scan", "ray")
 # codes of the compiled cores' _check_rays (ext/_keys.pxd)
@@ -619,6 +619,57 @@ class LogOddsMap:
             f"[{lo:g}, {hi:g}) m on some axis at resolution {self.resolution:g} "
             f"(first: row {int(np.flatnonzero(~ok)[0])}); the map is unchanged"
         )
+
+
+class OctreeFace(LogOddsMap):
+    """What the octrees (:class:`occgp.OccupancyOctree`, :class:`occgp.ColorOctree`) add to
+    the log-odds face: the tree's size and extent, from their compiled cores'
+    ``_num_leaves``, ``_num_nodes``, ``_bounds``, ``_memory_usage`` and ``_clear``."""
+
+    if TYPE_CHECKING:  # provided by the compiled core the subclass also derives from
+        def _num_leaves(self) -> int: ...
+        def _num_nodes(self) -> int: ...
+        def _bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+        def _memory_usage(self) -> int: ...
+        def _clear(self) -> None: ...
+
+    @property
+    def num_leaves(self) -> int:
+        """Number of leaves (known cells, after pruning)."""
+        return self._num_leaves()
+
+    @property
+    def num_nodes(self) -> int:
+        """Number of nodes in the tree, inner nodes included."""
+        return self._num_nodes()
+
+    @property
+    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(min corner, max corner) of the known space, in metres; NaN when empty."""
+        if self.num_nodes == 0:
+            return np.full(3, np.nan), np.full(3, np.nan)
+        return self._bounds()
+
+    def memory_usage(self) -> int:
+        """Bytes used by the tree's nodes.
+
+        Returns
+        -------
+        nbytes : int
+            liboctomap's ``memoryUsage`` estimate.
+        """
+        return self._memory_usage()
+
+    def clear(self):
+        """Remove every cell (the parameters stay).
+
+        Returns
+        -------
+        self
+            The map.
+        """
+        self._clear()
+        return self
 
 
 def check_params(params: dict) -> dict:

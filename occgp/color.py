@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import _octomap_format as fmt
 from ._color import FUSE_AVERAGE, FUSE_MEAN, _ColorOcTree
-from ._logodds_map import LogOddsMap
+from ._logodds_map import OctreeFace
 from ._octree import KEYRAY_CELLS, _check_full_data
 from ._validation import as_path, check_bool, check_choice, check_resolution
 
@@ -38,7 +38,7 @@ class ColorLeaves(NamedTuple):
     colors: NDArray[np.uint8]
 
 
-class ColorOctree(LogOddsMap, _ColorOcTree):
+class ColorOctree(OctreeFace, _ColorOcTree):
     """Probabilistic 3D occupancy map whose cells also hold a colour (OctoMap's ColorOcTree).
 
     Occupancy works as in :class:`occgp.OccupancyOctree` (scan mode): each
@@ -349,44 +349,6 @@ class ColorOctree(LogOddsMap, _ColorOcTree):
         return centres[keep], sizes[keep], rgb[keep]
 
     # ------------------------------------------------------------------ structure
-    @property
-    def num_leaves(self) -> int:
-        """Number of leaves (known cells, after pruning)."""
-        return self._num_leaves()
-
-    @property
-    def num_nodes(self) -> int:
-        """Number of nodes in the tree, inner nodes included."""
-        return self._num_nodes()
-
-    @property
-    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """(min corner, max corner) of the known space, in metres; NaN when empty."""
-        if self.num_nodes == 0:
-            return np.full(3, np.nan), np.full(3, np.nan)
-        return self._bounds()
-
-    def memory_usage(self) -> int:
-        """Bytes used by the tree's nodes.
-
-        Returns
-        -------
-        nbytes : int
-            liboctomap's ``memoryUsage`` estimate.
-        """
-        return self._memory_usage()
-
-    def clear(self) -> "ColorOctree":
-        """Remove every cell (the parameters stay).
-
-        Returns
-        -------
-        self : ColorOctree
-        """
-        self._clear()
-        return self
-
-    # ------------------------------------------------------------------ maps out
     # ------------------------------------------------------------------ I/O
     def to_bytes(self) -> bytes:
         """Serialise the map as a ColorOcTree ``.ot`` file (every log-odds and colour).

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _octomap_format as fmt
-from ._logodds_map import MODES, Leaves, LogOddsMap, check_params
+from ._logodds_map import MODES, Leaves, OctreeFace
 from ._octree import (
     KEYRAY_CELLS, TREE_DEPTH, TREE_MAX_VAL, _check_binary_data, _check_full_data, _OcTree,
 )
@@ -49,7 +49,7 @@ class Nodes(NamedTuple):
     #: listing's ``max_depth``.
     is_leaf: NDArray[np.bool_]
 
-class OccupancyOctree(LogOddsMap, _OcTree):
+class OccupancyOctree(OctreeFace, _OcTree):
     """Probabilistic 3D occupancy map on an octree (OctoMap).
 
     Each cell holds the log-odds of being occupied. A range scan marks the cells
@@ -1147,33 +1147,6 @@ default="auto"
         return np.ascontiguousarray(np.clip(keys, 0, 2 * TREE_MAX_VAL - 1), dtype=np.uint16)
 
     # ------------------------------------------------------------------ structure
-    @property
-    def num_leaves(self) -> int:
-        """Number of leaves (known cells, after pruning)."""
-        return self._num_leaves()
-
-    @property
-    def num_nodes(self) -> int:
-        """Number of nodes in the tree, inner nodes included."""
-        return self._num_nodes()
-
-    @property
-    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """(min corner, max corner) of the known space, in metres; NaN when empty."""
-        if self.num_nodes == 0:
-            return np.full(3, np.nan), np.full(3, np.nan)
-        return self._bounds()
-
-    def memory_usage(self) -> int:
-        """Bytes used by the tree's nodes.
-
-        Returns
-        -------
-        nbytes : int
-            liboctomap's ``memoryUsage`` estimate.
-        """
-        return self._memory_usage()
-
     def prune(self) -> "OccupancyOctree":
         """Merge every set of eight identical leaves into their parent (liboctomap's ``prune``).
 
@@ -1194,17 +1167,6 @@ default="auto"
             The map.
         """
         self._expand()
-        return self
-
-    def clear(self) -> "OccupancyOctree":
-        """Remove every cell (the parameters stay).
-
-        Returns
-        -------
-        self
-            The map.
-        """
-        self._clear()
         return self
 
     # ------------------------------------------------------------------ I/O

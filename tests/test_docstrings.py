@@ -38,7 +38,7 @@ NEEDS = {"occgp.iln": "torch"}
 
 #: Modules whose docstrings are still being completed; their test reports
 #: what is missing as an expected failure. Empty this set once they are done.
-#: occgp.iln: train_from_yaml and load_checkpoint (occgp/iln/train.py) lack
+#: occgp.iln: train_from_yaml and load_checkpoint (occgp/iln/training.py) lack
 #: Parameters and Returns sections.
 PENDING_MODULES: set = set()
 

@@ -10,7 +10,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from occgp.iln.models import make  # noqa: E402
-from occgp.iln.train import (  # noqa: E402
+from occgp.iln.training import (  # noqa: E402
     load_checkpoint,
     masked_l1,
     sample_queries,
@@ -152,7 +152,7 @@ def test_small_config_is_valid(name):
 
     path = Path(occgp.iln.models.__file__).parent / "configs" / name
     cfg = yaml.safe_load(path.read_text())
-    from occgp.iln.train import _check_config, _merge
+    from occgp.iln.training import _check_config, _merge
 
     chk = _check_config(_merge(cfg))
     assert chk["queries"] == 16384 and chk["lr"] == 1e-4
@@ -289,3 +289,12 @@ def test_train_from_yaml_rejects_a_binary_file(tmp_path):
     path.write_bytes(b"\xff\xfe\x00binary")
     with pytest.raises(ValueError, match="is not UTF-8 text"):
         train_from_yaml(path)
+
+
+def test_package_train_is_the_function_even_after_the_module_is_imported():
+    import importlib
+
+    import occgp.iln
+    importlib.import_module("occgp.iln.training")
+    assert callable(occgp.iln.train) and occgp.iln.train is train
+    assert occgp.iln.load_checkpoint is load_checkpoint

@@ -37,7 +37,7 @@ _TORCH_NAMES = {
     "make": "models", "register": "models", "available_models": "models",
     "EDSRBaseline": "models", "ILN": "models", "LIIF": "models", "Bilinear": "models",
     "upsample_image": "models",
-    "train": "train", "train_from_yaml": "train", "load_checkpoint": "train",
+    "train": "training", "train_from_yaml": "training", "load_checkpoint": "training",
     "pretrained": "_weights",
 }
 

@@ -45,7 +45,7 @@ def pretrained(name: str = "iln", *, device="cpu"):
     if not isinstance(name, str) or name not in WEIGHTS:
         raise ValueError(f"name must be one of {sorted(WEIGHTS)}, got {name!r}")
     from .models import make
-    from .train import load_checkpoint
+    from .training import load_checkpoint
 
     path = FOLDER / WEIGHTS[name]
     if not path.is_file():

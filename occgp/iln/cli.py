@@ -117,7 +117,7 @@ def run(args) -> int:
             print(f"wrote {counts['train']} train and {counts['test']} test images "
                   f"({counts['shards']} shards) to {args.folder}")
         else:
-            from .train import train_from_yaml  # noqa: PLC0415 - needs torch
+            from .training import train_from_yaml  # noqa: PLC0415 - needs torch
 
             train_from_yaml(args.config)
     except (ValueError, TypeError, OSError, ImportError) as exc:

@@ -317,7 +317,7 @@ def sample_queries(targets: torch.Tensor, table: torch.Tensor, n: int, generator
 
 
 def masked_l1(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Mean |pred − target| over the entries whose target has a return (target > 0).
+    """Mean ``|pred - target|`` over the entries whose target has a return (target > 0).
 
     Parameters
     ----------
