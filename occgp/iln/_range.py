@@ -62,6 +62,38 @@ def _side(value, name):
     return value
 
 
+_PRESET_DOC = """{summary}
+
+        Parameters
+        ----------
+        rows : int, default={rows}
+            Beams (image rows), 1 to 65536.
+        cols : int, default=1024
+            Firings per revolution (image columns), 1 to 65536; ``rows * cols``
+            at most ``MAX_PIXELS`` (2**24).
+
+        Returns
+        -------
+        LidarModel
+
+        Raises
+        ------
+        TypeError
+            If `rows` or `cols` is not an int.
+        ValueError
+            If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
+            exceeds ``MAX_PIXELS`` (2**24).
+        """
+
+
+def _preset(summary: str, rows: int):
+    """Give a preset constructor of :class:`LidarModel` its docstring."""
+    def decorate(fn):
+        fn.__doc__ = _PRESET_DOC.format(summary=summary, rows=rows)
+        return fn
+    return decorate
+
+
 @dataclasses.dataclass(frozen=True)
 class LidarModel:
     """A spinning LiDAR's beam layout: the geometry of its range images.
@@ -138,81 +170,18 @@ class LidarModel:
 
     # ------------------------------------------------------------------ presets
     @classmethod
+    @_preset("The dissertation's CARLA sensor: -15 to 15 degrees, 360 degrees, 80 m.", 16)
     def carla(cls, rows: int = 16, cols: int = 1024) -> "LidarModel":
-        """The dissertation's CARLA sensor: -15 to 15 degrees, 360 degrees, 80 m.
-
-        Parameters
-        ----------
-        rows : int, default=16
-            Beams (image rows), 1 to 65536.
-        cols : int, default=1024
-            Firings per revolution (image columns), 1 to 65536; ``rows * cols``
-            at most ``MAX_PIXELS`` (2**24).
-
-        Returns
-        -------
-        LidarModel
-
-        Raises
-        ------
-        TypeError
-            If `rows` or `cols` is not an int.
-        ValueError
-            If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
-            exceeds ``MAX_PIXELS`` (2**24).
-        """
         return cls(rows, cols, (-15.0, 15.0), 360.0, 80.0)
 
     @classmethod
+    @_preset("KITTI's Velodyne HDL-64E: -24.8 to 2.0 degrees, 360 degrees, 120 m.", 64)
     def hdl64e(cls, rows: int = 64, cols: int = 1024) -> "LidarModel":
-        """KITTI's Velodyne HDL-64E: -24.8 to 2.0 degrees, 360 degrees, 120 m.
-
-        Parameters
-        ----------
-        rows : int, default=64
-            Beams (image rows), 1 to 65536.
-        cols : int, default=1024
-            Firings per revolution (image columns), 1 to 65536; ``rows * cols``
-            at most ``MAX_PIXELS`` (2**24).
-
-        Returns
-        -------
-        LidarModel
-
-        Raises
-        ------
-        TypeError
-            If `rows` or `cols` is not an int.
-        ValueError
-            If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
-            exceeds ``MAX_PIXELS`` (2**24).
-        """
         return cls(rows, cols, (-24.8, 2.0), 360.0, 120.0)
 
     @classmethod
+    @_preset("nuScenes' Velodyne HDL-32E: -30.67 to 10.67 degrees, 360 degrees, 100 m.", 32)
     def hdl32e(cls, rows: int = 32, cols: int = 1024) -> "LidarModel":
-        """nuScenes' Velodyne HDL-32E: -30.67 to 10.67 degrees, 360 degrees, 100 m.
-
-        Parameters
-        ----------
-        rows : int, default=32
-            Beams (image rows), 1 to 65536.
-        cols : int, default=1024
-            Firings per revolution (image columns), 1 to 65536; ``rows * cols``
-            at most ``MAX_PIXELS`` (2**24).
-
-        Returns
-        -------
-        LidarModel
-
-        Raises
-        ------
-        TypeError
-            If `rows` or `cols` is not an int.
-        ValueError
-            If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
-            exceeds ``MAX_PIXELS`` (2**24).
-        """
         return cls(rows, cols, (-30.67, 10.67), 360.0, 100.0)
 
     def with_size(self, rows: int, cols: int) -> "LidarModel":

@@ -637,8 +637,29 @@ class _PreNormBlock(nn.Module):
         return x + self.mlp(self.norm2(x))
 
 
+class _Encoded(RangeModel):
+    """A range model over the features of an EDSR-baseline encoder (``self.encoder``)."""
+
+    def encode(self, images, wrap):
+        """EDSR-baseline features of normalised range images (no input checks).
+
+        Parameters
+        ----------
+        images : torch.Tensor of shape (B, H, W)
+            Range images divided by `max_range` (0 for no return).
+        wrap : bool
+            Circular horizontal padding of the encoder (360° sensor); replicate otherwise.
+
+        Returns
+        -------
+        features : torch.Tensor of shape (B, C, H, W)
+            ``C`` = `channels`.
+        """
+        return self.encoder(images[:, None], wrap)
+
+
 @register("iln")
-class ILN(RangeModel):
+class ILN(_Encoded):
     """Implicit LiDAR Network: predicts interpolation weights over the 4 neighbouring pixels.
 
     For a query q and each of its 4 neighbouring input pixels t: the encoder feature z_t plus a
@@ -703,23 +724,6 @@ class ILN(RangeModel):
         self.norm = nn.LayerNorm(channels) if depth > 0 else nn.Identity()
         self.head = nn.Linear(channels, 1)
 
-    def encode(self, images, wrap):
-        """EDSR-baseline features of normalised range images (no input checks).
-
-        Parameters
-        ----------
-        images : torch.Tensor of shape (B, H, W)
-            Range images divided by `max_range` (0 for no return).
-        wrap : bool
-            Circular horizontal padding of the encoder (360° sensor); replicate otherwise.
-
-        Returns
-        -------
-        features : torch.Tensor of shape (B, C, H, W)
-            ``C`` = `channels`.
-        """
-        return self.encoder(images[:, None], wrap)
-
     def query(self, features, images, queries, wrap):
         """Ranges and interpolation weights at queries: Σ w_t r_t over the 4 neighbours.
 
@@ -773,7 +777,7 @@ class _MLP(nn.Sequential):
 
 
 @register("liif")
-class LIIF(RangeModel):
+class LIIF(_Encoded):
     """LIIF-style value prediction (Eq. 4.2): an MLP predicts a range from each neighbour.
 
     For each of the 4 neighbouring pixels, an MLP maps ``[z_t, Δq_t]`` (encoder feature and
@@ -823,23 +827,6 @@ class LIIF(RangeModel):
         }
         self.encoder = EDSRBaseline(channels, n_resblocks)
         self.imnet = _MLP(channels + 2, hidden, 1)
-
-    def encode(self, images, wrap):
-        """EDSR-baseline features of normalised range images (no input checks).
-
-        Parameters
-        ----------
-        images : torch.Tensor of shape (B, H, W)
-            Range images divided by `max_range` (0 for no return).
-        wrap : bool
-            Circular horizontal padding of the encoder (360° sensor); replicate otherwise.
-
-        Returns
-        -------
-        features : torch.Tensor of shape (B, C, H, W)
-            ``C`` = `channels`.
-        """
-        return self.encoder(images[:, None], wrap)
 
     def query(self, features, images, queries, wrap):
         """Ranges at queries: the MLP's 4 per-neighbour predictions blended by area weights.
