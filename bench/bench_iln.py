@@ -3,7 +3,9 @@
 Prints, all measured in this run:
 
 1. The hardware: CPU model, cores, torch threads, torch version, device.
-2. **Table 4.1's layout**: bilinear, LIIF and ILN up-sampling 16 x 1024 range
+2. **Table 4.1's layout**: bilinear, inverse bilinear (bilinear interpolation
+   of 1 / r, ILN's untrained weight prior: what the training adds is ILN's
+   row against it), LIIF and ILN up-sampling 16 x 1024 range
    images to 64 x 1024, 128 x 2048 and 256 x 4096 (the last out of the
    training distribution) on held-out simulated outdoor scenes (test seeds
    ``100000 + ...`` of ``occgp.iln.data.make_dataset``): MAE of the ranges
@@ -137,7 +139,8 @@ def resolve_models(args):
 
     from occgp.iln.models import make
 
-    models = {"Bilinear": make({"name": "bilinear"})}
+    models = {"Bilinear": make({"name": "bilinear"}),
+              "Inverse bilinear": make({"name": "inverse-bilinear"})}
     ckpts, notes = {}, []
     for label, name, path in (("LIIF", "liif", args.liif), ("ILN", "iln", args.iln)):
         path = path or _find_checkpoint(name)
@@ -322,6 +325,11 @@ def targets(rows, mapping_rows, inference, models):
     if iln in inference:
         out.append(f"CPU inference 16x1024 -> 64x1024 <= 1 s per scan: {inference[iln]:.3f} s: "
                    f"{mark(inference[iln] <= 1.0)}")
+    v = _row(rows, "Inverse bilinear", "64x1024")
+    if v is not None:
+        out.append(f"(not a target) ILN against inverse bilinear, its untrained weight prior, at "
+                   f"64x1024: IoU {i['iou']:.3f} vs {v['iou']:.3f}, MAE {i['mae']:.3f} vs "
+                   f"{v['mae']:.3f}")
     if "untrained" in iln:
         out.append("(untrained models: these verdicts say nothing about ILN)")
     return out

@@ -11,6 +11,7 @@ from occgp.iln.models import (  # noqa: E402
     ILN,
     LIIF,
     Bilinear,
+    InverseBilinear,
     available_models,
     make,
     register,
@@ -20,8 +21,12 @@ from occgp.iln.models import (  # noqa: E402
 SMALL = {
     "iln": {"channels": 16, "n_resblocks": 1, "depth": 1},
     "iln0": {"channels": 16, "n_resblocks": 1, "depth": 0},
+    "iln-plain": {"channels": 16, "n_resblocks": 1, "depth": 1, "range_tokens": False,
+                  "weight_prior": "none"},
+    "iln-bilinear": {"channels": 16, "n_resblocks": 1, "depth": 1, "weight_prior": "bilinear"},
     "liif": {"channels": 16, "n_resblocks": 1, "hidden": [32]},
     "bilinear": {},
+    "inverse-bilinear": {},
 }
 
 
@@ -121,6 +126,23 @@ def test_bilinear_equals_direct_formula():
     np.testing.assert_allclose(Bilinear().predict(img, centres), img[[2, 0, 7], [3, 0, 31]], rtol=1e-6)
 
 
+def test_inverse_bilinear_equals_direct_formula():
+    img, q = _image(), _queries(500)
+    img[2:4, 5:9] = 0.0
+    r = _neighbour_ranges(img, q).astype(np.float64)
+    b = _bilinear_weights(q) * (r > 0)
+    inverse = (b / np.where(r > 0, r, 1.0)).sum(1)
+    ok = b.sum(1) > 1e-12
+    expected = np.where(ok, b.sum(1) / np.where(ok, inverse, 1.0), 0.0)
+    m = InverseBilinear()
+    np.testing.assert_allclose(m.predict(img, q), expected, rtol=1e-5)
+    w = m.weights(img, q)
+    np.testing.assert_allclose(w[ok].sum(1), 1.0, atol=1e-6)
+    np.testing.assert_allclose((w * r).sum(1), expected, rtol=1e-5)
+    flat = np.full((8, 32), 12.5, np.float32)   # a constant image stays constant
+    np.testing.assert_allclose(m.predict(flat, q), 12.5, rtol=1e-6)
+
+
 def test_bilinear_wraps_horizontally_and_clamps_vertically():
     img = _image()
     q = np.array([[3.0, 0.0], [3.0, 32.0], [0.0, 10.0]], dtype=np.float32)
@@ -173,6 +195,60 @@ def test_spec_round_trip_gives_identical_outputs(key):
     m2 = make(spec, load_sd=True)
     np.testing.assert_array_equal(m.predict(img, q), m2.predict(img, q))
     assert m2.spec(with_sd=False) == {"name": spec["name"], "args": spec["args"]}
+
+
+def test_iln_range_tokens_embed_relative_log_ranges_of_neighbours_with_returns():
+    # Encoder and position embedding zeroed, no attention: the logits are head(range_embed(
+    # log r_t - mean log r)). With logit_t = -(log r_t - mean) the weights are proportional to
+    # 1 / r_t and the output is the harmonic mean of the neighbours with returns.
+    m = _model("iln0", weight_prior="none")
+    with torch.no_grad():
+        for p in list(m.encoder.parameters()) + list(m.pos_embed.parameters()):
+            p.zero_()
+        m.range_embed.weight.zero_()
+        m.range_embed.bias.zero_()
+        m.range_embed.weight[0, 0] = 1.0
+        m.head.weight.zero_()
+        m.head.bias.fill_(3.0)
+        m.head.weight[0, 0] = -1.0
+    img = _image()
+    img[2:4, 5:9] = 0.0
+    q = _queries(2000)
+    r = _neighbour_ranges(img, q)
+    valid = r > 0
+    has = valid.any(1)
+    inverse = np.where(valid, 1.0 / np.where(valid, r, 1.0), 0.0).sum(1)
+    out = m.predict(img, q)
+    np.testing.assert_allclose(out[has], valid.sum(1)[has] / inverse[has], rtol=1e-4)
+    assert np.all(out[~has] == 0)
+    assert _model("iln-plain").range_embed is None
+    assert not any("range_embed" in k for k in _model("iln-plain").state_dict())
+
+
+def _bilinear_weights(q, rows=8, cols=32):
+    v, u = q[:, 0] - 0.5, q[:, 1] - 0.5
+    a, b = v - np.floor(v), u - np.floor(u)
+    return np.stack([(1 - a) * (1 - b), (1 - a) * b, a * (1 - b), a * b], 1)
+
+
+@pytest.mark.parametrize("prior", ["bilinear", "inverse-range"])
+def test_untrained_iln_is_its_weight_prior(prior):
+    # The head starts at zero: the logits are the prior alone, log(b_t + eps) [- log r_t].
+    m = _model("iln", weight_prior=prior)
+    img = _image()
+    img[2:4, 5:9] = 0.0
+    q = _queries(3000)
+    r = _neighbour_ranges(img, q).astype(np.float64)
+    valid = r > 0
+    has = valid.any(1)
+    w = (_bilinear_weights(q) + 1e-4) * valid
+    if prior == "inverse-range":
+        w = w / np.where(valid, r, 1.0)
+    w = w / np.where(has, w.sum(1), 1.0)[:, None]
+    np.testing.assert_allclose(m.weights(img, q), w, atol=2e-5)
+    np.testing.assert_allclose(m.predict(img, q), (w * r).sum(1), rtol=1e-4, atol=1e-3)
+    if prior == "inverse-range":  # on a flat range image it is plain inverse-range bilinear
+        assert np.allclose(m.predict(np.full((8, 32), 7.0, np.float32), q), 7.0)
 
 
 def test_iln_depth_zero_has_no_attention():
@@ -269,6 +345,10 @@ def test_predict_rejects_bad_chunk_and_wrap():
         ({"name": "iln", "args": {"max_range": float("nan")}}, ValueError, "max_range must be a finite"),
         ({"name": "liif", "args": {"hidden": "64"}}, TypeError, "hidden must be a list of ints"),
         ({"name": "bilinear", "args": {"wrap": 1}}, TypeError, "wrap must be a bool"),
+        ({"name": "iln", "args": {"range_tokens": "yes"}}, TypeError, "range_tokens must be a bool"),
+        ({"name": "iln", "args": {"weight_prior": "cubic"}}, ValueError,
+         r"weight_prior must be one of \['inverse-range', 'bilinear', 'none'\], got 'cubic'"),
+        ({"name": "iln", "args": {"weight_prior": None}}, TypeError, "weight_prior must be one of"),
     ],
 )
 def test_make_rejects_bad_specs(spec, exc, match):

@@ -371,7 +371,7 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
     For each scene (train seeds ``0 .. n_train - 1``, test seeds ``100000 +
     0 .. n_test - 1``, see :func:`occgp.datasets.outdoor_scene`),
     `images_per_scene` sensor poses are drawn on its roads
-    (:meth:`~occgp.datasets.OutdoorScene.random_poses`, 1.7 m high) and each
+    (:meth:`~occgp.datasets.OutdoorScene.random_poses`, 1.73 m high) and each
     pose is ray cast (:func:`simulate_range_image`) at every size of `sizes`:
     the images of one pose at all sizes share the pose. Images are written
     in compressed ``.npz`` shards of up to `images_per_shard` images,

@@ -135,8 +135,9 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
     Parameters
     ----------
     models : dict of str to model, or list of str
-        Row names to models: ``"bilinear"``, ``"pretrained"`` or a model of
-        :mod:`occgp.iln.models` (see :func:`occgp.iln.upsample.resolve_model`).
+        Row names to models: ``"bilinear"``, ``"inverse-bilinear"``,
+        ``"pretrained"`` or a model of :mod:`occgp.iln.models` (see
+        :func:`occgp.iln.upsample.resolve_model`).
         A list of names uses each name as its row's name.
     test_images : dict
         Size -> float32 images of shape (n_images, rows, cols), the same

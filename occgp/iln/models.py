@@ -34,6 +34,7 @@ __all__ = [
     "ILN",
     "LIIF",
     "Bilinear",
+    "InverseBilinear",
     "upsample_image",
 ]
 
@@ -44,6 +45,13 @@ MAX_RANGE = 1e6
 
 #: Queries evaluated at once by ``predict`` (bounds the memory of one forward pass).
 DEFAULT_CHUNK = 65536
+
+#: The weight priors of :class:`ILN` (``weight_prior``).
+WEIGHT_PRIORS = ("inverse-range", "bilinear", "none")
+
+#: Added to the bilinear weights before their log in ILN's weight prior: a neighbour of
+#: bilinear weight 0 starts at a logit of log(1e-4) = -9.2 (reachable, never -inf).
+PRIOR_EPS = 1e-4
 
 
 def register(name: str) -> Callable[[type], type]:
@@ -176,6 +184,14 @@ def _check_positive(value: Any, name: str) -> float:
     value = float(value)
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be a finite number > 0, got {value}")
+    return value
+
+
+def _check_choice(value: Any, name: str, choices: tuple[str, ...]) -> str:
+    if not isinstance(value, str):
+        raise TypeError(f"{name} must be one of {list(choices)}, got {type(value).__name__}")
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
     return value
 
 
@@ -686,6 +702,24 @@ class ILN(_Encoded):
         Normalising range in metres (the sensor's maximum range).
     wrap : bool, default=True
         Horizontal wrap-around (360° sensors).
+    range_tokens : bool, default=True
+        Also add to each token a linear embedding of its neighbour's log range relative to the
+        mean log range of the query's neighbours with returns. Interpolation weights of the form
+        ``softmax(log b_t - log r_t)`` (``b_t`` bilinear weights) interpolate the inverse range,
+        which is exact on flat ground; with this embedding they lie one linear map away from the
+        tokens, where from the encoder's features alone they have to be learnt over the whole
+        dynamic range of the sensor. False gives the token of the dissertation (feature plus
+        position embedding only).
+    weight_prior : {"inverse-range", "bilinear", "none"}, default="inverse-range"
+        A fixed term added to the logits, so that the network learns a correction to a known
+        interpolation rather than the interpolation itself; its head starts at zero, so an
+        untrained model *is* the prior. ``"bilinear"`` adds ``log(b_t + 1e-4)`` (``b_t`` the
+        bilinear weights): bilinear interpolation of the ranges. ``"inverse-range"`` also
+        subtracts ``log r_t``: bilinear interpolation of the inverse ranges, exact to first
+        order on any plane (``1 / r`` is linear in the beam direction there), so on ground and
+        walls. ``"none"`` is the dissertation's ILN (weights learnt from scratch, default
+        initialisation of the head). Outputs stay convex combinations of the neighbours with
+        returns.
 
     References
     ----------
@@ -693,7 +727,8 @@ class ILN(_Encoded):
     Interpolation Weight Prediction", ICRA 2022.
     """
 
-    arg_names = ("channels", "n_resblocks", "depth", "heads", "mlp_ratio", "max_range", "wrap")
+    arg_names = ("channels", "n_resblocks", "depth", "heads", "mlp_ratio", "max_range", "wrap",
+                 "range_tokens", "weight_prior")
 
     def __init__(
         self,
@@ -704,6 +739,8 @@ class ILN(_Encoded):
         mlp_ratio: float = 2.0,
         max_range: float = 80.0,
         wrap: bool = True,
+        range_tokens: bool = True,
+        weight_prior: str = "inverse-range",
     ):
         super().__init__(max_range, wrap)
         channels = _check_int(channels, "channels", 1)
@@ -716,13 +753,19 @@ class ILN(_Encoded):
         self._spec_args = {
             "channels": channels, "n_resblocks": n_resblocks, "depth": depth, "heads": heads,
             "mlp_ratio": mlp_ratio, "max_range": self.max_range, "wrap": self.wrap,
+            "range_tokens": _check_bool(range_tokens, "range_tokens"),
+            "weight_prior": _check_choice(weight_prior, "weight_prior", WEIGHT_PRIORS),
         }
         self.encoder = EDSRBaseline(channels, n_resblocks)
         self.pos_embed = nn.Linear(2, channels)
+        self.range_embed = nn.Linear(1, channels) if self._spec_args["range_tokens"] else None
         mlp_dim = max(1, int(round(mlp_ratio * channels)))
         self.blocks = nn.ModuleList(_PreNormBlock(channels, heads, mlp_dim) for _ in range(depth))
         self.norm = nn.LayerNorm(channels) if depth > 0 else nn.Identity()
         self.head = nn.Linear(channels, 1)
+        if self._spec_args["weight_prior"] != "none":
+            nn.init.zeros_(self.head.weight)
+            nn.init.zeros_(self.head.bias)
 
     def query(self, features, images, queries, wrap):
         """Ranges and interpolation weights at queries: Σ w_t r_t over the 4 neighbours.
@@ -752,15 +795,25 @@ class ILN(_Encoded):
         """
         bsz, rows, cols = images.shape
         n = queries.shape[1]
-        idx, rel, _ = _neighbours(queries, rows, cols, wrap)
+        idx, rel, wb = _neighbours(queries, rows, cols, wrap)
         flat = features.flatten(2).transpose(1, 2)  # (B, H*W, C)
         z = _gather(flat, idx) + self.pos_embed(rel)  # (B, N, 4, C)
         r = torch.gather(images.reshape(bsz, -1), 1, idx.reshape(bsz, -1)).reshape(bsz, n, 4)
+        valid = r > 0
+        log_r = torch.log(torch.where(valid, r, torch.ones_like(r)))  # 0 where no return
+        if self.range_embed is not None:
+            count = valid.sum(-1, keepdim=True).clamp_min(1)
+            mean = log_r.sum(-1, keepdim=True) / count  # no-return tokens hold log 1 = 0
+            z = z + self.range_embed(torch.where(valid, log_r - mean, 0.0)[..., None])
         x = z.reshape(bsz * n, 4, -1)
         for block in self.blocks:
             x = block(x)
         logits = self.head(self.norm(x)).reshape(bsz, n, 4)
-        valid = r > 0
+        prior = self._spec_args["weight_prior"]
+        if prior != "none":
+            logits = logits + torch.log(wb + PRIOR_EPS)
+            if prior == "inverse-range":
+                logits = logits - log_r
         logits = logits.masked_fill(~valid, torch.finfo(logits.dtype).min)
         w = torch.softmax(logits, dim=-1) * valid.any(dim=-1, keepdim=True)
         return (w * r).sum(-1), w
@@ -926,6 +979,62 @@ class Bilinear(RangeModel):
         idx, _, wb = _neighbours(queries, rows, cols, wrap)
         r = torch.gather(images.reshape(bsz, -1), 1, idx.reshape(bsz, -1)).reshape(bsz, n, 4)
         w = _renormalise(wb * (r > 0))
+        return (w * r).sum(-1), w
+
+
+@register("inverse-bilinear")
+class InverseBilinear(Bilinear):
+    """Bilinear interpolation of the inverse ranges of the 4 neighbouring pixels (no parameters).
+
+    On a plane ``n . x = d`` a beam of direction ``e`` has ``1 / r = (n . e) / d``, linear in
+    ``e``: interpolating ``1 / r`` is exact to first order in the beam spacing on ground and walls,
+    where interpolating ``r`` (:class:`Bilinear`) bends the plane. It is the weight prior of
+    :class:`ILN` (``weight_prior="inverse-range"``, which is this model before any training) and
+    a no-training baseline of its own. As a convex combination of the ranges its weights are
+    ``b_t / r_t`` renormalised (``b_t`` the bilinear weights); no-return neighbours are dropped
+    as in :class:`Bilinear`.
+
+    Parameters
+    ----------
+    max_range : float, default=80.0
+        Normalising range in metres (no effect on the result).
+    wrap : bool, default=True
+        Horizontal wrap-around (360° sensors).
+    """
+
+    def query(self, features, images, queries, wrap):
+        """Inverse-range bilinear interpolation at queries, no-return neighbours dropped.
+
+        No input checks (:meth:`predict` and :meth:`weights` check theirs).
+
+        Parameters
+        ----------
+        features : None
+            What :meth:`encode` returned (ignored).
+        images : torch.Tensor of shape (B, H, W)
+            Range images divided by `max_range` (0 for no return).
+        queries : torch.Tensor of shape (B, N, 2)
+            ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
+            ``0 <= v <= H``, ``0 <= u <= W``.
+        wrap : bool
+            Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
+            neighbours are always clamped.
+
+        Returns
+        -------
+        ranges : torch.Tensor of shape (B, N)
+            Normalised ranges (metres / `max_range`), 0 for no return.
+        weights : torch.Tensor of shape (B, N, 4)
+            The weights ``b_t / r_t`` renormalised over the neighbours with returns, in the
+            order (top, left), (top, right), (bottom, left), (bottom, right); all 0 when no
+            bilinear weight lies on a return (the range is then 0).
+        """
+        bsz, rows, cols = images.shape
+        n = queries.shape[1]
+        idx, _, wb = _neighbours(queries, rows, cols, wrap)
+        r = torch.gather(images.reshape(bsz, -1), 1, idx.reshape(bsz, -1)).reshape(bsz, n, 4)
+        valid = r > 0
+        w = _renormalise(torch.where(valid, wb / torch.where(valid, r, torch.ones_like(r)), 0.0))
         return (w * r).sum(-1), w
 
 

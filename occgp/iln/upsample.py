@@ -24,7 +24,7 @@ __all__ = ["upsample", "upsample_range_image", "resolve_model", "MAX_OUTPUT_PIXE
 #: Largest up-sampled image, pixels (e.g. 512 x 8192): bounds the memory of one call.
 MAX_OUTPUT_PIXELS = 2 ** 22
 #: Model names :func:`resolve_model` accepts.
-MODEL_NAMES = ("bilinear", "pretrained")
+MODEL_NAMES = ("bilinear", "inverse-bilinear", "pretrained")
 
 
 def _torch_models(name):
@@ -56,9 +56,10 @@ def resolve_model(model: Any, lidar: LidarModel | None = None, device: Any = Non
 
     Parameters
     ----------
-    model : {"bilinear", "pretrained"} or RangeModel
+    model : {"bilinear", "inverse-bilinear", "pretrained"} or RangeModel
         ``"bilinear"``: bilinear interpolation of the 4 neighbours (no
-        training); ``"pretrained"``: the ILN shipped with occgp
+        training); ``"inverse-bilinear"``: bilinear interpolation of their
+        inverse ranges (no training); ``"pretrained"``: the ILN shipped with occgp
         (``occgp.iln.pretrained()``); or a model of
         :mod:`occgp.iln.models` (used as it is, on its own device).
     lidar : LidarModel, optional
@@ -89,9 +90,9 @@ def resolve_model(model: Any, lidar: LidarModel | None = None, device: Any = Non
 def _resolve(model, lidar, device, caller):
     RangeModel, make = _torch_models(caller)
     if isinstance(model, str):
-        if model == "bilinear":
+        if model in ("bilinear", "inverse-bilinear"):
             args = {} if lidar is None else {"max_range": float(lidar.max_range)}
-            built = make({"name": "bilinear", "args": args})
+            built = make({"name": model, "args": args})
         elif model == "pretrained":
             built = _pretrained()
         else:
@@ -162,7 +163,7 @@ def upsample_range_image(range_image: ArrayLike, *, rows: int = 64, cols: int = 
         Ranges in metres in ``[0, lidar.max_range]``; 0.0 means no return.
     rows, cols : int, default=64, 1024
         Output size, ``rows * cols <= MAX_OUTPUT_PIXELS`` (4,194,304).
-    model : {"bilinear", "pretrained"} or RangeModel, default="bilinear"
+    model : {"bilinear", "inverse-bilinear", "pretrained"} or RangeModel, default="bilinear"
         See :func:`resolve_model`.
     lidar : LidarModel, optional
         The input image's sensor; default ``LidarModel.carla(*shape)``.
@@ -238,7 +239,7 @@ def upsample(points_or_range_image: ArrayLike, *, rows: int = 64, cols: int = 10
     rows, cols : int, default=64, 1024
         Size of the up-sampled range image, ``rows * cols <=
         MAX_OUTPUT_PIXELS``.
-    model : {"bilinear", "pretrained"} or RangeModel, default="bilinear"
+    model : {"bilinear", "inverse-bilinear", "pretrained"} or RangeModel, default="bilinear"
         ``"pretrained"`` is the shipped ILN (``occgp.iln.pretrained()``); see
         :func:`resolve_model`.
     lidar : LidarModel, optional
