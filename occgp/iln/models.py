@@ -947,8 +947,12 @@ class Bilinear(RangeModel):
         super().__init__(max_range, wrap)
         self._spec_args = {"max_range": self.max_range, "wrap": self.wrap}
 
+    @staticmethod
+    def _neighbour_weights(wb: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
+        return _renormalise(wb * (r > 0))
+
     def query(self, features, images, queries, wrap):
-        """Bilinear interpolation at queries, no-return neighbours dropped.
+        """Interpolation at queries (see the class), no-return neighbours dropped.
 
         No input checks (:meth:`predict` and :meth:`weights` check theirs).
 
@@ -970,15 +974,16 @@ class Bilinear(RangeModel):
         ranges : torch.Tensor of shape (B, N)
             Normalised ranges (metres / `max_range`), 0 for no return.
         weights : torch.Tensor of shape (B, N, 4)
-            Renormalised bilinear weights of the neighbours (top, left), (top, right),
-            (bottom, left), (bottom, right); 0 for no-return neighbours; all 0 when no weight
-            is left (the range is then 0).
+            The interpolation weights of the neighbours (top, left), (top, right),
+            (bottom, left), (bottom, right), renormalised over those with a return; 0 for
+            no-return neighbours; all 0 when no bilinear weight lies on a return (the range
+            is then 0).
         """
         bsz, rows, cols = images.shape
         n = queries.shape[1]
         idx, _, wb = _neighbours(queries, rows, cols, wrap)
         r = torch.gather(images.reshape(bsz, -1), 1, idx.reshape(bsz, -1)).reshape(bsz, n, 4)
-        w = _renormalise(wb * (r > 0))
+        w = self._neighbour_weights(wb, r)
         return (w * r).sum(-1), w
 
 
@@ -1002,40 +1007,10 @@ class InverseBilinear(Bilinear):
         Horizontal wrap-around (360° sensors).
     """
 
-    def query(self, features, images, queries, wrap):
-        """Inverse-range bilinear interpolation at queries, no-return neighbours dropped.
-
-        No input checks (:meth:`predict` and :meth:`weights` check theirs).
-
-        Parameters
-        ----------
-        features : None
-            What :meth:`encode` returned (ignored).
-        images : torch.Tensor of shape (B, H, W)
-            Range images divided by `max_range` (0 for no return).
-        queries : torch.Tensor of shape (B, N, 2)
-            ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
-            ``0 <= v <= H``, ``0 <= u <= W``.
-        wrap : bool
-            Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
-            neighbours are always clamped.
-
-        Returns
-        -------
-        ranges : torch.Tensor of shape (B, N)
-            Normalised ranges (metres / `max_range`), 0 for no return.
-        weights : torch.Tensor of shape (B, N, 4)
-            The weights ``b_t / r_t`` renormalised over the neighbours with returns, in the
-            order (top, left), (top, right), (bottom, left), (bottom, right); all 0 when no
-            bilinear weight lies on a return (the range is then 0).
-        """
-        bsz, rows, cols = images.shape
-        n = queries.shape[1]
-        idx, _, wb = _neighbours(queries, rows, cols, wrap)
-        r = torch.gather(images.reshape(bsz, -1), 1, idx.reshape(bsz, -1)).reshape(bsz, n, 4)
+    @staticmethod
+    def _neighbour_weights(wb: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
         valid = r > 0
-        w = _renormalise(torch.where(valid, wb / torch.where(valid, r, torch.ones_like(r)), 0.0))
-        return (w * r).sum(-1), w
+        return _renormalise(torch.where(valid, wb / torch.where(valid, r, torch.ones_like(r)), 0.0))
 
 
 # ------------------------------------------------------------------------------- full images
