@@ -679,12 +679,14 @@ class ILN(_Encoded):
     """Implicit LiDAR Network: predicts interpolation weights over the 4 neighbouring pixels.
 
     For a query q and each of its 4 neighbouring input pixels t: the encoder feature z_t plus a
-    linear embedding of the relative position Δq_t (pixel centre − query, in pixels) gives the
-    token z'_t; a pre-norm transformer of depth `depth` (`heads` heads) mixes the 4 tokens; a
-    shared linear head and a softmax give w_t, and the output is Σ w_t r_t (Eq. 4.3) with r_t the
+    linear embedding of the relative position Δq_t (pixel centre − query, in pixels), and with
+    `range_tokens` one of its relative log range, gives the token z'_t; a pre-norm transformer of
+    depth `depth` (`heads` heads) mixes the 4 tokens; a shared linear head, plus the fixed
+    `weight_prior`, and a softmax give w_t, and the output is Σ w_t r_t (Eq. 4.3) with r_t the
     neighbours' input ranges. No-return neighbours are masked out before the softmax; a query whose
     neighbours all lack a return returns 0 (no return). The output is therefore a convex
     combination of the neighbours with returns. Inputs are normalised by `max_range`.
+    ``range_tokens=False, weight_prior="none"`` is the dissertation's ILN.
 
     Parameters
     ----------
