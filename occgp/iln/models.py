@@ -400,6 +400,44 @@ def _gather(flat: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
     return out.reshape(b, n, k, c)
 
 
+def _neighbourhood(images: torch.Tensor, queries: torch.Tensor, wrap: bool):
+    """:func:`_neighbours` of `queries` in `images` (B, H, W), and the 4 neighbours' ranges.
+
+    Returns flat pixel indices (B, N, 4), relative positions (B, N, 4, 2), bilinear weights
+    (B, N, 4) and ranges (B, N, 4).
+    """
+    bsz, rows, cols = images.shape
+    idx, rel, wb = _neighbours(queries, rows, cols, wrap)
+    r = torch.gather(images.reshape(bsz, -1), 1, idx.reshape(bsz, -1)).reshape(idx.shape)
+    return idx, rel, wb, r
+
+
+#: The Parameters section of every model's ``query`` (filled in by :func:`_query_doc`).
+_QUERY_PARAMS = """        Parameters
+        ----------
+        features : {features}
+        images : torch.Tensor of shape (B, H, W)
+            Range images divided by `max_range` (0 for no return).
+        queries : torch.Tensor of shape (B, N, 2)
+            ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
+            ``0 <= v <= H``, ``0 <= u <= W``.
+        wrap : bool
+            Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
+            neighbours are always clamped.
+"""
+_ENCODED_FEATURES = ("torch.Tensor of shape (B, C, H, W)\n"
+                     "            What :meth:`encode` returned for `images`.")
+
+
+def _query_doc(features: str = _ENCODED_FEATURES) -> Callable:
+    """Decorator: fill the shared Parameters section into a ``query`` docstring."""
+    def fill(method: Callable) -> Callable:
+        text = _QUERY_PARAMS.format(features=features)
+        method.__doc__ = method.__doc__.replace("{query_params}", text)
+        return method
+    return fill
+
+
 class RangeModel(nn.Module):
     """Base of the range-image models: spec, input checks, chunked ``predict``.
 
@@ -769,24 +807,13 @@ class ILN(_Encoded):
             nn.init.zeros_(self.head.weight)
             nn.init.zeros_(self.head.bias)
 
+    @_query_doc()
     def query(self, features, images, queries, wrap):
         """Ranges and interpolation weights at queries: Σ w_t r_t over the 4 neighbours.
 
         No input checks (:meth:`predict` and :meth:`weights` check theirs).
 
-        Parameters
-        ----------
-        features : torch.Tensor of shape (B, C, H, W)
-            What :meth:`encode` returned for `images`.
-        images : torch.Tensor of shape (B, H, W)
-            Range images divided by `max_range` (0 for no return).
-        queries : torch.Tensor of shape (B, N, 2)
-            ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
-            ``0 <= v <= H``, ``0 <= u <= W``.
-        wrap : bool
-            Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
-            neighbours are always clamped.
-
+{query_params}
         Returns
         -------
         ranges : torch.Tensor of shape (B, N)
@@ -795,12 +822,10 @@ class ILN(_Encoded):
             Softmax weights of the neighbours (top, left), (top, right), (bottom, left),
             (bottom, right); 0 for no-return neighbours; all 0 when none has a return.
         """
-        bsz, rows, cols = images.shape
-        n = queries.shape[1]
-        idx, rel, wb = _neighbours(queries, rows, cols, wrap)
+        bsz, n = queries.shape[:2]
+        idx, rel, wb, r = _neighbourhood(images, queries, wrap)
         flat = features.flatten(2).transpose(1, 2)  # (B, H*W, C)
         z = _gather(flat, idx) + self.pos_embed(rel)  # (B, N, 4, C)
-        r = torch.gather(images.reshape(bsz, -1), 1, idx.reshape(bsz, -1)).reshape(bsz, n, 4)
         valid = r > 0
         log_r = torch.log(torch.where(valid, r, torch.ones_like(r)))  # 0 where no return
         if self.range_embed is not None:
@@ -883,24 +908,13 @@ class LIIF(_Encoded):
         self.encoder = EDSRBaseline(channels, n_resblocks)
         self.imnet = _MLP(channels + 2, hidden, 1)
 
+    @_query_doc()
     def query(self, features, images, queries, wrap):
         """Ranges at queries: the MLP's 4 per-neighbour predictions blended by area weights.
 
         No input checks (:meth:`predict` and :meth:`weights` check theirs).
 
-        Parameters
-        ----------
-        features : torch.Tensor of shape (B, C, H, W)
-            What :meth:`encode` returned for `images`.
-        images : torch.Tensor of shape (B, H, W)
-            Range images divided by `max_range` (0 for no return).
-        queries : torch.Tensor of shape (B, N, 2)
-            ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
-            ``0 <= v <= H``, ``0 <= u <= W``.
-        wrap : bool
-            Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
-            neighbours are always clamped.
-
+{query_params}
         Returns
         -------
         ranges : torch.Tensor of shape (B, N)
@@ -910,13 +924,10 @@ class LIIF(_Encoded):
             (bottom, left), (bottom, right); 0 for no-return neighbours; all 0 when no weight
             is left (the range is then 0). The ranges are not clamped and may be below 0.
         """
-        bsz, rows, cols = images.shape
-        n = queries.shape[1]
-        idx, rel, wb = _neighbours(queries, rows, cols, wrap)
+        idx, rel, wb, r = _neighbourhood(images, queries, wrap)
         flat = features.flatten(2).transpose(1, 2)
         z = torch.cat([_gather(flat, idx), rel], dim=-1)  # (B, N, 4, C + 2)
         values = self.imnet(z).squeeze(-1)  # (B, N, 4)
-        r = torch.gather(images.reshape(bsz, -1), 1, idx.reshape(bsz, -1)).reshape(bsz, n, 4)
         w = _renormalise(wb * (r > 0))
         return (w * values).sum(-1), w
 
@@ -953,24 +964,13 @@ class Bilinear(RangeModel):
     def _neighbour_weights(wb: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
         return _renormalise(wb * (r > 0))
 
+    @_query_doc(features="None\n            What :meth:`encode` returned (ignored).")
     def query(self, features, images, queries, wrap):
         """Interpolation at queries (see the class), no-return neighbours dropped.
 
         No input checks (:meth:`predict` and :meth:`weights` check theirs).
 
-        Parameters
-        ----------
-        features : None
-            What :meth:`encode` returned (ignored).
-        images : torch.Tensor of shape (B, H, W)
-            Range images divided by `max_range` (0 for no return).
-        queries : torch.Tensor of shape (B, N, 2)
-            ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
-            ``0 <= v <= H``, ``0 <= u <= W``.
-        wrap : bool
-            Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
-            neighbours are always clamped.
-
+{query_params}
         Returns
         -------
         ranges : torch.Tensor of shape (B, N)
@@ -981,10 +981,7 @@ class Bilinear(RangeModel):
             no-return neighbours; all 0 when no bilinear weight lies on a return (the range
             is then 0).
         """
-        bsz, rows, cols = images.shape
-        n = queries.shape[1]
-        idx, _, wb = _neighbours(queries, rows, cols, wrap)
-        r = torch.gather(images.reshape(bsz, -1), 1, idx.reshape(bsz, -1)).reshape(bsz, n, 4)
+        _, _, wb, r = _neighbourhood(images, queries, wrap)
         w = self._neighbour_weights(wb, r)
         return (w * r).sum(-1), w
 
