@@ -10,15 +10,17 @@ scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
 
 import logging
 
-from ._export import DistanceField
+from .octree import Changes, Leaves, Nodes, OccupancyOctree
 from .color import ColorLeaves, ColorOctree
 from .grid import GridMap
 from .kernel import AKIMap, BGKMap
 from .knn import KNNMap
-from .octree import Changes, Leaves, Nodes, OccupancyOctree
+from ._export import DistanceField
+from .maps import OccupancyMap, available_maps, make_map, register
 
 __version__ = "0.1.0.dev0"
 __all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "Nodes", "ColorLeaves", "Changes",
-           "AKIMap", "BGKMap", "KNNMap", "DistanceField", "__version__"]
+           "AKIMap", "BGKMap", "KNNMap", "DistanceField", "OccupancyMap", "available_maps",
+           "make_map", "register", "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())

@@ -11,6 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 from . import _octomap_format as fmt
 from ._color import FUSE_AVERAGE, FUSE_MEAN, _ColorOcTree
 from ._logodds_map import OctreeFace
+from .maps import register
 from ._octree import KEYRAY_CELLS, _check_full_data
 from ._validation import as_path, check_bool, check_choice, check_resolution
 
@@ -38,6 +39,7 @@ class ColorLeaves(NamedTuple):
     colors: NDArray[np.uint8]
 
 
+@register("color-octree", formats=(".ot",), description="OctoMap's octree with a colour per cell")
 class ColorOctree(OctreeFace, _ColorOcTree):
     """Probabilistic 3D occupancy map whose cells also hold a colour (OctoMap's ColorOcTree).
 

@@ -7,6 +7,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._grid import _Grid
 from ._logodds_map import Leaves, LogOddsMap
+from .maps import register
 from ._validation import check_bool, check_n_jobs, n_threads
 
 __all__ = ["GridMap"]
@@ -16,6 +17,7 @@ _KEY_DTYPE, _VALUE_DTYPE = np.dtype("<u2"), np.dtype("<f4")
 _CELL_BYTES = 3 * _KEY_DTYPE.itemsize + _VALUE_DTYPE.itemsize
 
 
+@register("grid", formats=(".npz",), description="A uniform 3D log-odds grid (OctoMap's update, 3D-DDA)")
 class GridMap(LogOddsMap, _Grid):
     """Probabilistic 3D occupancy map on a uniform grid (hashed cells).
 

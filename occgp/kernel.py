@@ -26,6 +26,7 @@ from ._kernel_samples import (  # noqa: F401 (MAX_FREE_SAMPLES: the documented l
     _packed_keys, _search_cell, _support_cells, voxel_first,
 )
 from . import _npz_io
+from .maps import register
 from .octree import OccupancyOctree
 from ._validation import as_point, as_points, check_n_jobs, check_real, n_threads
 
@@ -599,6 +600,7 @@ def _read_kernel_file(cls, path):
     return path, version, params, arrays
 
 
+@register("bgk", formats=(".npz",), description="Bayesian generalised kernel inference on cells (isotropic)")
 class BGKMap(_KernelMap):
     """Occupancy by Bayesian generalized kernel inference (Doherty et al., "BGKOctoMap").
 
@@ -814,6 +816,7 @@ class BGKMap(_KernelMap):
         return precision, np.full((n, 3), self.ell), np.ones(n), self.sf2, None
 
 
+@register("akimap", formats=(".npz",), description="Adaptive anisotropic kernel inference on cells", random_state=0)
 class AKIMap(_KernelMap):
     """Occupancy by adaptive anisotropic kernel inference (Kwon et al., AKIMap).
 

@@ -29,6 +29,7 @@ from ._octree import _welford
 from ._validation import (
     check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
 )
+from .maps import register
 from .octree import OccupancyOctree, unpack_keys
 
 __all__ = ["KNNMap", "ScanReplay", "check_knn_params", "check_octomap_params",
@@ -144,6 +145,7 @@ def point_log_odds(s: NDArray[np.float64], count: int, mean: float, m2: float, p
     return np.log(p / (1.0 - p))
 
 
+@register("knn", formats=(".bt", ".ot"), description="The k-NN inverse sensor model on an octree (Miao et al.)")
 class KNNMap(OccupancyOctree):
     """Occupancy octree updated by the k-NN inverse sensor model (Miao et al.).
 

@@ -11,6 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import _octomap_format as fmt
 from ._logodds_map import MODES, Leaves, OctreeFace
+from .maps import register
 from ._octree import (
     KEYRAY_CELLS, TREE_DEPTH, TREE_MAX_VAL, _check_binary_data, _check_full_data, _OcTree,
 )
@@ -49,6 +50,7 @@ class Nodes(NamedTuple):
     #: listing's ``max_depth``.
     is_leaf: NDArray[np.bool_]
 
+@register("octree", formats=(".bt", ".ot"), description="OctoMap's log-odds octree")
 class OccupancyOctree(OctreeFace, _OcTree):
     """Probabilistic 3D occupancy map on an octree (OctoMap).
 

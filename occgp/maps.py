@@ -1,0 +1,366 @@
+"""The one face every map shows, and the registry of map types.
+
+Every map in occgp, whatever its method, answers the calls of
+:class:`OccupancyMap` the same way, so that the command line, the demo and
+the evaluation harness handle any map through it. The registry
+(:func:`register`, :func:`available_maps`, :func:`make_map`) is the one list of
+map types they read: a new map type is one module and one decorator.
+
+Examples
+--------
+>>> from occgp.maps import OccupancyMap, available_maps, make_map
+>>> "octree" in available_maps()
+True
+>>> m = make_map("octree", resolution=0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0])
+>>> isinstance(m, OccupancyMap)
+True
+>>> m.is_occupied([[1.0, 0, 0], [0.5, 0, 0]]).tolist()
+[True, False]
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Protocol, TypeVar, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["OccupancyMap", "MapType", "CAPABILITIES", "capabilities", "register",
+           "available_maps", "map_type", "make_map", "OCTREE_FORMATS"]
+
+
+@runtime_checkable
+class OccupancyMap(Protocol):
+    """The calls every map answers, whatever its method.
+
+    A map integrates range scans (:meth:`insert_scan`) and answers queries
+    at points (:meth:`occupancy`, :meth:`is_occupied`). Every map class in
+    occgp satisfies this protocol; ``isinstance(m, OccupancyMap)`` checks that
+    an object has each call (not their signatures).
+
+    The one threshold rule: a point is occupied when its cell's log-odds is
+    at least the map's threshold (OctoMap's rule), i.e. its probability is at
+    least ``occupancy_threshold``; cells the map knows nothing about are
+    unknown, reported as not occupied and, with ``return_unknown=True``, in a
+    second mask.
+
+    Parameters follow scikit-learn's convention: ``get_params()`` returns
+    the constructor's arguments, ``set_params(**params)`` changes those a
+    map can change (a rejected call changes nothing), and
+    :func:`sklearn.base.clone` builds an empty map with the same parameters.
+
+    Optional capabilities (:data:`CAPABILITIES`) are further methods a map
+    may have; :func:`capabilities` lists those of a map.
+    """
+
+    def insert_scan(self, points: ArrayLike, origin: ArrayLike, **options: Any) -> Any:
+        """Integrate one scan (end points seen from `origin`); return the map."""
+
+    def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Probability of occupancy at each point, NaN where unknown."""
+
+    def is_occupied(self, points: ArrayLike, *, return_unknown: bool = False) -> Any:
+        """Occupied mask (probability >= threshold), and the unknown mask on request."""
+
+    @property
+    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(min corner, max corner) of the known space; NaN when the map is empty."""
+
+    @property
+    def num_cells(self) -> int:
+        """Number of cells holding evidence."""
+
+    def memory_usage(self) -> int:
+        """Bytes the map's cells use."""
+
+    def get_params(self, deep: bool = True) -> dict:
+        """The constructor's parameters."""
+
+    def set_params(self, **params: Any) -> Any:
+        """Change parameters; return the map (unchanged when rejected)."""
+
+    def save(self, path: str | os.PathLike) -> Any:
+        """Write the map with its evidence; return the map."""
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Any:
+        """Read a map written by :meth:`save`."""
+
+    def to_octree(self) -> Any:
+        """The map as an :class:`occgp.OccupancyOctree` (OctoMap's files)."""
+
+
+#: Optional capabilities a map may have: name -> what the method gives.
+CAPABILITIES = MappingProxyType({
+    "variance": "variance(points): the predictive variance at each point",
+    "changed_cells": "changed_cells(): the cells changed since the last reset_changes()",
+    "distance_field": "distance_field(bbox, ...): Euclidean distances to the occupied cells",
+    "colors": "colors(points): the colour of each point's cell",
+})
+
+#: The OctoMap files (and the point clouds of occupied cells) every map writes through
+#: its ``to_octree()``.
+OCTREE_FORMATS = (".bt", ".ot", ".ply", ".pcd")
+
+
+def capabilities(map: Any) -> frozenset[str]:
+    """The optional capabilities of a map or map class.
+
+    Parameters
+    ----------
+    map : object or type
+        A map, or its class.
+
+    Returns
+    -------
+    names : frozenset of str
+        The names of :data:`CAPABILITIES` that `map` has as a callable.
+
+    Examples
+    --------
+    >>> from occgp import OccupancyOctree, BGKMap
+    >>> from occgp.maps import capabilities
+    >>> sorted(capabilities(OccupancyOctree))
+    ['changed_cells', 'distance_field']
+    >>> sorted(capabilities(BGKMap))
+    ['variance']
+    """
+    cls = map if isinstance(map, type) else type(map)
+    return frozenset(name for name in CAPABILITIES
+                     if callable(inspect.getattr_static(cls, name, None)))
+
+
+@dataclass(frozen=True)
+class MapType:
+    """One registered map type (see :func:`register`)."""
+
+    #: The name :func:`make_map`, ``occgp map --method`` and the demo use.
+    name: str
+    #: The map class (or a callable building a map from keyword parameters).
+    cls: Callable[..., Any]
+    #: The dimensions of the points the map takes (3, or 2 for the 2D GP maps).
+    dims: tuple[int, ...]
+    #: The file suffixes the class's ``save`` writes and ``load`` reads.
+    formats: tuple[str, ...]
+    #: One line that says what the map is.
+    description: str
+    #: Parameters :func:`make_map` passes before the caller's (which override them).
+    defaults: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        """Every suffix a map of this type can be written to: its own formats, then
+        OctoMap's files and point clouds through ``to_octree()``."""
+        return self.formats + tuple(s for s in OCTREE_FORMATS if s not in self.formats)
+
+    @property
+    def capabilities(self) -> frozenset[str]:
+        """The optional capabilities of the class (see :func:`capabilities`)."""
+        return capabilities(self.cls)
+
+    def parameters(self) -> tuple[str, ...]:
+        """The names of the class's constructor parameters."""
+        return _init_parameters(self.cls)
+
+
+_REGISTRY: dict[str, MapType] = {}
+# the modules whose import registers the built-in map types (the 2D GP maps live in a
+# subpackage that `import occgp` does not load)
+_BUILTIN_MODULES = ("occgp", "occgp.gp")
+_loaded = False
+
+C = TypeVar("C")
+
+
+def register(name: str, *, dims: tuple[int, ...] | int = 3,
+             formats: tuple[str, ...] = (".npz",), description: str | None = None,
+             **defaults: Any) -> Callable[[C], C]:
+    """Register a map class under `name`: a class decorator.
+
+    Parameters
+    ----------
+    name : str
+        The map type's name: lower case letters, digits, ``-`` and ``_``,
+        starting with a letter. Registering another class under a name that is
+        taken raises; registering the same class again replaces its entry.
+    dims : int or tuple of int, default=3
+        The dimensions of the points the map takes.
+    formats : tuple of str, default=(".npz",)
+        The file suffixes the class's ``save`` writes and ``load`` reads.
+    description : str, default=None
+        One line that says what the map is; None takes the first line of the
+        class's docstring.
+    **defaults
+        Parameters :func:`make_map` passes unless the caller gives them.
+
+    Returns
+    -------
+    decorator : callable
+        Takes the class, registers it and returns it unchanged.
+
+    Raises
+    ------
+    ValueError
+        If `name` is malformed or taken by another class, `dims` holds
+        other than 2 and 3, or a format does not start with a dot.
+    TypeError
+        If `name` is not a string.
+
+    Examples
+    --------
+    >>> from occgp.maps import register, make_map
+    >>> from occgp import OccupancyOctree
+    >>> @register("coarse-octree", description="An octree of 0.5 m cells", resolution=0.5)
+    ... class CoarseOctree(OccupancyOctree):
+    ...     pass
+    >>> make_map("coarse-octree").resolution
+    0.5
+    """
+    if not isinstance(name, str):
+        raise TypeError(f"name must be a str, got {type(name).__name__}")
+    if not name or not name[0].isalpha() or not name.isascii() or name != name.lower() \
+            or not name.replace("-", "").replace("_", "").isalnum():
+        raise ValueError(f"name must be lower-case letters, digits, '-' and '_', starting "
+                         f"with a letter, got {name!r}")
+    dims = (dims,) if isinstance(dims, int) else tuple(dims)
+    if not dims or any(d not in (2, 3) for d in dims):
+        raise ValueError(f"dims must be 2, 3 or a tuple of them, got {dims!r}")
+    formats = tuple(formats)
+    if any(not isinstance(s, str) or not s.startswith(".") for s in formats):
+        raise ValueError(f"formats must be file suffixes such as '.npz', got {formats!r}")
+
+    def decorator(cls: C) -> C:
+        old = _REGISTRY.get(name)
+        if old is not None and _qualname(old.cls) != _qualname(cls):
+            raise ValueError(f"map type {name!r} is taken by {_qualname(old.cls)}")
+        doc = (inspect.getdoc(cls) or "").strip().splitlines()
+        _REGISTRY[name] = MapType(name, cls, dims, formats,
+                                  description if description is not None else
+                                  (doc[0] if doc else name),
+                                  MappingProxyType(dict(defaults)))
+        return cls
+    return decorator
+
+
+def _qualname(cls: Any) -> str:
+    return f"{getattr(cls, '__module__', '?')}.{getattr(cls, '__qualname__', repr(cls))}"
+
+
+def _load_builtins() -> None:
+    global _loaded
+    if not _loaded:
+        for module in _BUILTIN_MODULES:
+            importlib.import_module(module)
+        _loaded = True
+
+
+def available_maps(*, dims: int | None = None) -> list[str]:
+    """The names of the registered map types, in registration order.
+
+    Parameters
+    ----------
+    dims : {2, 3}, default=None
+        Only the maps that take points of this dimension; None lists all.
+
+    Returns
+    -------
+    names : list of str
+
+    Raises
+    ------
+    ValueError
+        If `dims` is not None, 2 or 3.
+
+    Examples
+    --------
+    >>> from occgp.maps import available_maps
+    >>> {"octree", "bgk", "akimap", "knn"} <= set(available_maps(dims=3))
+    True
+    """
+    if dims is not None and dims not in (2, 3):
+        raise ValueError(f"dims must be 2, 3 or None, got {dims!r}")
+    _load_builtins()
+    return [name for name, t in _REGISTRY.items() if dims is None or dims in t.dims]
+
+
+def map_type(name: str) -> MapType:
+    """The registry entry of a map type.
+
+    Parameters
+    ----------
+    name : str
+        A name of :func:`available_maps`.
+
+    Returns
+    -------
+    entry : MapType
+
+    Raises
+    ------
+    ValueError
+        If no map type has that name (the message lists those there are).
+    """
+    _load_builtins()
+    try:
+        return _REGISTRY[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown map type {name!r}; available: "
+                         f"{', '.join(available_maps())}") from None
+
+
+def make_map(name: str, **params: Any) -> Any:
+    """Build an empty map of a registered type.
+
+    Parameters
+    ----------
+    name : str
+        A name of :func:`available_maps`.
+    **params
+        Constructor parameters; they override the type's registered defaults.
+
+    Returns
+    -------
+    map : OccupancyMap
+
+    Raises
+    ------
+    ValueError
+        If `name` is not registered, a parameter is not one the class takes,
+        or the class rejects a value.
+    TypeError
+        If the class rejects a value's type.
+
+    Examples
+    --------
+    >>> from occgp.maps import make_map
+    >>> make_map("bgk", resolution=0.2).resolution
+    0.2
+    """
+    entry = map_type(name)
+    known = entry.parameters()
+    unknown = [p for p in params if p not in known]
+    if unknown and "**" not in known:
+        raise ValueError(f"the {name!r} map takes no parameter {unknown[0]!r}; it takes "
+                         f"{', '.join(k for k in known if k != '**') or 'none'}")
+    return entry.cls(**{**entry.defaults, **params})
+
+
+def _init_parameters(cls: Callable[..., Any]) -> tuple[str, ...]:
+    """The keyword parameters of `cls`'s constructor ('**' when it takes any)."""
+    try:
+        sig = inspect.signature(cls)
+    except (TypeError, ValueError):
+        return ("**",)
+    names = []
+    for p in sig.parameters.values():
+        if p.kind is p.VAR_KEYWORD:
+            names.append("**")
+        elif p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY):
+            names.append(p.name)
+    return tuple(names)
