@@ -175,7 +175,7 @@ _REGISTRY: dict[str, MapType] = {}
 _BUILTIN_MODULES = ("occgp", "occgp.gp")
 _loaded = False
 
-C = TypeVar("C")
+C = TypeVar("C", bound=Callable[..., Any])
 
 
 def register(name: str, *, dims: tuple[int, ...] | int = 3,
