@@ -79,12 +79,12 @@ def compare(d, n_jobs):
     replay = ScanReplay(scans, RESOLUTION, sensor_range=SENSOR_RANGE, ks=(1,))
     t_replay = time.perf_counter() - t0
     t0 = time.perf_counter()
-    labels = cell_labels(d.scene(), replay.centres, RESOLUTION)
+    labels = cell_labels(d.scene(), replay.centers, RESOLUTION)
     t_labels = time.perf_counter() - t0
     octo = grid_search(replay, labels, OCTOMAP_GRID, method="octomap", n_jobs=n_jobs)
     knn = grid_search(replay, labels, KNN_GRID, method="knn", n_jobs=n_jobs)
     row = dict(name=d.name, noise=d.depth_noise, scans=len(scans), points=replay.n_points,
-               near=replay.n_near, cells=replay.n_cells, occupied=int(labels.sum()),
+               near=replay.n_near, cells=replay.num_cells, occupied=int(labels.sum()),
                octo_auc=octo.best_score, knn_auc=knn.best_score,
                gain=knn.best_score - octo.best_score, octo_params=octo.best_params,
                knn_params=knn.best_params, octo_s=octo.seconds, knn_s=knn.seconds,
@@ -204,7 +204,7 @@ def nca_table(details, n_samples, n_jobs, seed=0):
         t0 = time.perf_counter()
         replay = ScanReplay(scans, RESOLUTION, sensor_range=SENSOR_RANGE, ks=NCA_KS)
         t_replay = time.perf_counter() - t0
-        assert replay.n_cells == len(labels)
+        assert replay.num_cells == len(labels)
         order = rng.permutation(len(combos))
         points, n_maps, t_search = [], 0, 0.0
         while len(points) < n_samples and n_maps < len(combos):

@@ -36,7 +36,7 @@ for ds in stereo_datasets():
         continue
     scans = ds.scans(StereoCamera(160, 90, depth_noise=ds.depth_noise), n_frames=20)
     replay = ScanReplay(scans, 0.1, sensor_range=4.0)
-    labels = cell_labels(ds.scene(), replay.centres, 0.1)
+    labels = cell_labels(ds.scene(), replay.centers, 0.1)
     octomap = grid_search(replay, labels, OCTOMAP_GRID, method="octomap").best_score
     knn = grid_search(replay, labels, KNN_GRID).best_score
     rows.append((ds.name, ds.depth_noise, octomap, knn))

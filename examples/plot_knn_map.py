@@ -52,8 +52,8 @@ print(f"{len(scans)} scans, {sum(len(s.points) for s in scans)} points")
 # grids here are a part of the paper's (its Table 1).
 t0 = time.perf_counter()
 replay = ScanReplay(scans, 0.1, sensor_range=4.0, ks=(1,))
-labels = cell_labels(scene, replay.centres, 0.1)
-print(f"{replay.n_cells} cells reached, {labels.sum()} of them occupied; "
+labels = cell_labels(scene, replay.centers, 0.1)
+print(f"{replay.num_cells} cells reached, {labels.sum()} of them occupied; "
       f"set up in {time.perf_counter() - t0:.1f} s")
 
 steps = (0.02, 0.14, 0.26, 0.38)
@@ -103,10 +103,10 @@ fig, axes = plt.subplots(2, 2, figsize=(10, 7), layout="constrained", sharex=Tru
                          sharey="row")
 c0 = scene.target_center
 lo, hi = c0[:2] - 2.2, c0[:2] + 2.2
-high = replay.centres[:, 2] > 0.3
-slab = np.abs(replay.centres[:, 1] - c0[1]) <= 0.25
+high = replay.centers[:, 2] > 0.3
+slab = np.abs(replay.centers[:, 1] - c0[1]) <= 0.25
 for col, (name, tree) in enumerate((("OctoMap", octree), ("k-NN", knn_map))):
-    occupied = tree.is_occupied(replay.centres)
+    occupied = tree.is_occupied(replay.centers)
     tp = occupied & labels
     fp = occupied & ~labels
     print(f"{name:<8} {tp.sum()} true and {fp.sum()} false positives "
@@ -114,9 +114,9 @@ for col, (name, tree) in enumerate((("OctoMap", octree), ("k-NN", knn_map))):
     top, side = axes[0, col], axes[1, col]
     for mask, colour, label in ((tp, "tab:blue", "true positive"),
                                 (fp, "tab:red", "false positive")):
-        c = replay.centres[mask & high]
+        c = replay.centers[mask & high]
         top.scatter(c[:, 0], c[:, 1], s=5, c=colour, alpha=0.6, lw=0, label=label)
-        c = replay.centres[mask & slab]
+        c = replay.centers[mask & slab]
         side.scatter(c[:, 0], c[:, 2], s=5, c=colour, alpha=0.6, lw=0, label=label)
     for box in scene.targets:
         hx, hy, _ = box.half_extents

@@ -87,20 +87,35 @@ class LogOddsMap:
             clamping_min=clamping_min, clamping_max=clamping_max,
             occupancy_threshold=occupancy_threshold,
         )
-        self._params = check_params(params)
-        self._setup(*self._params.values())
+        checked = check_params(params)
+        self._build(checked, *(checked[k] for k in _SENSOR_PARAMS))
+
+    def _build(self, params: dict, prob_hit: float, prob_miss: float, clamping_min: float,
+               clamping_max: float, occupancy_threshold: float) -> None:
+        """Build the empty map: its checked constructor `params` and the compiled core's
+        sensor model. The map's cells live in the compiled core, so a log-odds map is
+        built (and its parameters checked) at construction."""
+        self._params = params
+        self._setup(params["resolution"], prob_hit, prob_miss, clamping_min, clamping_max,
+                    occupancy_threshold)
         self._superray_skip = 0
         self._superray_pause = self.SUPERRAY_BACKOFF
 
     # ------------------------------------------------------------------ parameters
-    def get_params(self) -> dict:
-        """The constructor's parameters.
+    def get_params(self, deep: bool = True) -> dict:
+        """The constructor's parameters (scikit-learn's ``get_params``).
+
+        Parameters
+        ----------
+        deep : bool, default=True
+            Accepted for scikit-learn's API; a map holds no nested estimators.
 
         Returns
         -------
         params : dict
-            Parameter name to value (``type(m)(**m.get_params())`` builds an
-            empty map with the same parameters).
+            Parameter name to value (``type(m)(**m.get_params())`` and
+            :func:`sklearn.base.clone` build an empty map with the same
+            parameters).
         """
         return dict(self._params)
 
@@ -495,9 +510,9 @@ class LogOddsMap:
     # ------------------------------------------------------------------ helpers
     @staticmethod
     def _check_method(method: str, superray_threshold: int) -> tuple[str, int]:
-        """Validate `method` and `superray_threshold`; return the method ("auto" chosen:
-        "culling", the fastest on bench/bench_updates.py's trajectories) and the
-        threshold the core takes (0: no super rays)."""
+        """Validate `method` and `superray_threshold`; return the method ("auto" becomes
+        "superray+culling", which backs off super rays on scans where grouping does not
+        pay) and the threshold the core takes (0: no super rays)."""
         method = check_choice(method, "method", METHODS)
         superray_threshold = check_int(superray_threshold, "superray_threshold", low=1,
                                        high=2**31 - 1)
@@ -642,6 +657,11 @@ class OctreeFace(LogOddsMap):
     def num_nodes(self) -> int:
         """Number of nodes in the tree, inner nodes included."""
         return self._num_nodes()
+
+    @property
+    def num_cells(self) -> int:
+        """Number of cells holding evidence: the leaves (a pruned leaf counts once)."""
+        return self._num_leaves()
 
     @property
     def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

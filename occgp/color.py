@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -18,6 +18,9 @@ from ._validation import as_path, check_bool, check_choice, check_resolution
 __all__ = ["ColorOctree", "ColorLeaves", "FUSIONS"]
 
 #: The colour fusion rules of :meth:`ColorOctree.insert_scan`.
+if TYPE_CHECKING:
+    from .octree import OccupancyOctree
+
 FUSIONS = ("average", "mean")
 #: The tree type a ColorOcTree file names in its header (liboctomap's getTreeType()).
 TREE_TYPE = "ColorOcTree"
@@ -482,6 +485,35 @@ class ColorOctree(OctreeFace, _ColorOcTree):
             raise ValueError(f"{source}: corrupt data: the header announces {header.size} "
                              f"nodes, the data holds {nodes}")
         tree._read_data(data[header.data_offset:end], header.resolution)
+        return tree
+
+    def to_octree(self) -> "OccupancyOctree":
+        """The map without its colours: an :class:`~occgp.OccupancyOctree` with the same
+        nodes, log-odds and parameters (leaf for leaf).
+
+        The ``.ot`` data of both trees list the nodes depth first, each as its
+        float32 log-odds, the colour's three bytes (ColorOcTree only) and the
+        child mask; dropping the colour bytes gives the OcTree's data.
+
+        Returns
+        -------
+        tree : OccupancyOctree
+
+        Examples
+        --------
+        >>> from occgp import ColorOctree
+        >>> m = ColorOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], colors=[[255, 0, 0]])
+        >>> t = m.to_octree()
+        >>> type(t).__name__, t.num_leaves == m.num_leaves
+        ('OccupancyOctree', True)
+        """
+        from .octree import OccupancyOctree
+
+        tree = OccupancyOctree(**self.get_params())
+        if self.num_nodes:
+            body = np.frombuffer(self._write_data(), dtype=np.uint8).reshape(-1, 8)
+            data = np.ascontiguousarray(body[:, [0, 1, 2, 3, 7]]).tobytes()
+            tree._read_data(data, False, self.resolution)
         return tree
 
     def __reduce__(self):

@@ -2,19 +2,28 @@
 
 from __future__ import annotations
 
+import os
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import _npz_io
 from ._grid import _Grid
 from ._logodds_map import Leaves, LogOddsMap
 from .maps import register
 from ._validation import check_bool, check_n_jobs, n_threads
+
+if TYPE_CHECKING:
+    from .octree import OccupancyOctree
 
 __all__ = ["GridMap"]
 
 #: Pickle payload: per cell three little-endian uint16 keys, then the float32 log-odds.
 _KEY_DTYPE, _VALUE_DTYPE = np.dtype("<u2"), np.dtype("<f4")
 _CELL_BYTES = 3 * _KEY_DTYPE.itemsize + _VALUE_DTYPE.itemsize
+#: The ``.npz`` file of :meth:`GridMap.save`.
+_FORMAT, _VERSIONS = "occgp.grid_map", (1,)
 
 
 @register("grid", formats=(".npz",), description="A uniform 3D log-odds grid (OctoMap's update, 3D-DDA)")
@@ -245,6 +254,104 @@ default="auto"
         """
         self._clear()
         return self
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | os.PathLike) -> "GridMap":
+        """Write the map with every cell to an ``.npz`` file.
+
+        The file is a NumPy archive of plain arrays (see
+        :mod:`occgp._npz_io`): ``format`` ``"occgp.grid_map"``, ``version``
+        1, ``class``, ``params`` (the constructor's parameters as JSON),
+        ``keys`` (uint16, shape (n_cells, 3), the cells' keys in key order)
+        and ``log_odds`` (float32, shape (n_cells,)).
+
+        Parameters
+        ----------
+        path : str or path-like
+            Destination, written as given (no suffix is added).
+
+        Returns
+        -------
+        self : GridMap
+
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or os.PathLike.
+        OSError
+            If the file cannot be written.
+
+        Examples
+        --------
+        >>> import os, tempfile
+        >>> m = GridMap(0.1).insert_scan([[1.0, 0.0, 0.0]], [0.0, 0.0, 0.0])
+        >>> path = os.path.join(tempfile.mkdtemp(), "grid.npz")
+        >>> GridMap.load(m.save(path) and path).num_cells == m.num_cells
+        True
+        """
+        keys, _, values = self._cells_sorted(False)
+        _npz_io.write_npz(path, _FORMAT, _VERSIONS[-1], type(self).__name__,
+                          _npz_io.encode_value(self.get_params()),
+                          {"keys": keys.astype(np.uint16), "log_odds": values.astype(np.float32)})
+        return self
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "GridMap":
+        """Read a map written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or path-like
+
+        Returns
+        -------
+        map : GridMap
+            A map of the class this is called on, with the file's parameters
+            and cells.
+
+        Raises
+        ------
+        OSError
+            If the file cannot be read.
+        ValueError
+            If it is not a grid-map file of this class, is truncated or
+            corrupt, holds non-finite log-odds, or parameters the constructor
+            rejects (the message names the file).
+        """
+        spec = {"keys": (np.uint16, ("n", 3)), "log_odds": (np.float32, ("n",))}
+        _, _, params, arrays = _npz_io.read_npz(path, _FORMAT, _VERSIONS, (cls.__name__,),
+                                                spec)
+        source = os.fspath(path)
+        _npz_io.check_finite(arrays, ("log_odds",), source)
+        if not isinstance(params, dict):
+            raise ValueError(f"{source}: corrupt params: not a JSON object")
+        try:
+            grid = cls(**_npz_io.decode_value(params, source))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{source}: corrupt params: {exc}") from None
+        grid._set_cells(np.ascontiguousarray(arrays["keys"], np.uint16),
+                        np.ascontiguousarray(arrays["log_odds"], np.float32))
+        return grid
+
+    def to_octree(self) -> "OccupancyOctree":
+        """The map as an :class:`~occgp.OccupancyOctree` with the same parameters.
+
+        Each cell's log-odds goes to the octree's finest cell with the same key
+        (the grid's keys are the octree's), then the tree prunes eight equal
+        children into their parent, as after the same scans.
+
+        Returns
+        -------
+        tree : OccupancyOctree
+        """
+        from .octree import OccupancyOctree
+
+        tree = OccupancyOctree(**self.get_params())
+        keys, _, values = self._cells_sorted(False)
+        if len(keys):
+            tree._set_values(np.ascontiguousarray(keys, np.uint16),
+                             np.ascontiguousarray(values, np.float32))
+        return tree
 
     def __reduce__(self):
         keys, _, values = self._cells_sorted(False)

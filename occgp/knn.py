@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -86,6 +87,14 @@ def check_knn_params(params: dict[str, Any]) -> dict[str, Any]:
         raise ValueError(f"p_m_out must be below 0.5 (a miss lowers occupancy), "
                          f"got {out['p_m_out']!r}")
     return out
+
+
+def _check_all(params: dict[str, Any]) -> dict[str, Any]:
+    """Every KNNMap constructor parameter checked, in the constructor's order."""
+    model = check_knn_params({name: params[name] for name in KNN_PARAMS})
+    return {"resolution": check_resolution(params["resolution"]), **model,
+            "cdf": check_choice(params["cdf"], "cdf", CDFS),
+            "n_jobs": check_n_jobs(params["n_jobs"])}
 
 
 def check_octomap_params(params: dict[str, Any]) -> dict[str, float]:
@@ -253,16 +262,12 @@ class KNNMap(OccupancyOctree):
                  p_min: float = 0.02, p_max: float = 0.98, p_t: float = 0.5,
                  sensor_range: float = 4.0, cdf: str = "normal",
                  n_jobs: int | None = None) -> None:
-        params = check_knn_params(dict(k=k, p_u=p_u, p_l=p_l, p_m=p_m, p_m_out=p_m_out,
-                                       p_min=p_min, p_max=p_max, p_t=p_t,
-                                       sensor_range=sensor_range))
-        self._params = {"resolution": check_resolution(resolution), **params,
-                        "cdf": check_choice(cdf, "cdf", CDFS),
-                        "n_jobs": check_n_jobs(n_jobs)}
-        self._setup(self._params["resolution"], _CLASS_HIT, _CLASS_MISS, params["p_min"],
-                    params["p_max"], params["p_t"])
-        self._superray_skip = 0
-        self._superray_pause = self.SUPERRAY_BACKOFF
+        params = _check_all({"resolution": resolution, "k": k, "p_u": p_u, "p_l": p_l,
+                              "p_m": p_m, "p_m_out": p_m_out, "p_min": p_min, "p_max": p_max,
+                              "p_t": p_t, "sensor_range": sensor_range, "cdf": cdf,
+                              "n_jobs": n_jobs})
+        self._build(params, _CLASS_HIT, _CLASS_MISS, params["p_min"], params["p_max"],
+                    params["p_t"])
         self._scores = (0, 0.0, 0.0)       # Welford: count, mean, sum of squared deviations
 
     def __repr__(self) -> str:
@@ -270,15 +275,87 @@ class KNNMap(OccupancyOctree):
                 f"num_leaves={self.num_leaves})")
 
     # ------------------------------------------------------------------ parameters
-    k = property(lambda self: self._params["k"], doc="Number of nearest neighbours.")
-    p_u = property(lambda self: self._params["p_u"], doc="Upper probability of a point.")
-    p_l = property(lambda self: self._params["p_l"], doc="Lower probability of a point.")
-    p_m = property(lambda self: self._params["p_m"], doc="Miss probability within range.")
-    p_m_out = property(lambda self: self._params["p_m_out"],
-                       doc="Miss probability of rays cut at the sensor range.")
-    sensor_range = property(lambda self: self._params["sensor_range"],
-                            doc="The range s_c, metres.")
-    cdf = property(lambda self: self._params["cdf"], doc="The score CDF's kind.")
+    def set_params(self, **params) -> "KNNMap":
+        """Change the model's parameters (scikit-learn's ``set_params``).
+
+        Any constructor parameter but ``resolution`` (accepted only with the
+        map's own value) may change; the values are checked together as the
+        constructor checks them. The cells keep their log-odds: new values apply
+        to later scans, and ``p_min``, ``p_max`` and ``p_t`` also to later
+        clamps and to the queries that compare with the threshold. The score
+        statistics (Welford's) are kept.
+
+        Parameters
+        ----------
+        **params
+            The parameters to change, by name.
+
+        Returns
+        -------
+        self : KNNMap
+
+        Raises
+        ------
+        TypeError
+            If a value has the wrong type.
+        ValueError
+            If a name is not a parameter of KNNMap, `resolution` differs from
+            the map's, or the values break a rule of the constructor. The map
+            is then unchanged.
+
+        Examples
+        --------
+        >>> from occgp import KNNMap
+        >>> m = KNNMap(0.1).set_params(k=3, p_t=0.6)
+        >>> m.k, m.occupancy_threshold
+        (3, 0.6)
+        """
+        unknown = [name for name in params if name not in self._params]
+        if unknown:
+            raise ValueError(f"{unknown[0]!r} is not a parameter of KNNMap (parameters: "
+                             f"{', '.join(self._params)})")
+        if "resolution" in params and params["resolution"] != self.resolution:
+            raise ValueError(f"resolution is fixed at construction ({self.resolution!r}), "
+                             f"got {params['resolution']!r}; build a new map instead")
+        new = _check_all({**self._params, **params})
+        self._set_sensor_model(_CLASS_HIT, _CLASS_MISS, new["p_min"], new["p_max"], new["p_t"])
+        self._params = new
+        return self
+
+    @property
+    def k(self) -> int:
+        """Number of nearest neighbours."""
+        return self._params["k"]
+
+    @property
+    def p_u(self) -> float:
+        """Probability of the best-supported points."""
+        return self._params["p_u"]
+
+    @property
+    def p_l(self) -> float:
+        """Probability of the most isolated points."""
+        return self._params["p_l"]
+
+    @property
+    def p_m(self) -> float:
+        """Miss probability of cells crossed by rays to near points."""
+        return self._params["p_m"]
+
+    @property
+    def p_m_out(self) -> float:
+        """Miss probability of cells crossed only by rays cut at the sensor range."""
+        return self._params["p_m_out"]
+
+    @property
+    def sensor_range(self) -> float:
+        """The range s_c, metres."""
+        return self._params["sensor_range"]
+
+    @property
+    def cdf(self) -> str:
+        """The score CDF's kind."""
+        return self._params["cdf"]
 
     @property
     def prob_hit(self) -> float:
@@ -437,7 +514,7 @@ class ScanReplay:
     ----------
     keys : ndarray of uint64, shape (n_cells,)
         Every cell the scans update (packed keys, x in the low 16 bits), sorted.
-    centres : ndarray of shape (n_cells, 3)
+    centers : ndarray of shape (n_cells, 3)
         Their centres, metres.
     n_scans : int
     n_points : int
@@ -492,11 +569,26 @@ class ScanReplay:
         self.keys = np.unique(all_keys)
         self._scans = [(np.searchsorted(self.keys, keys).astype(np.int64), kinds, point_cell,
                         s, per_k) for keys, kinds, point_cell, s, per_k in local]
-        self.centres = probe.key_to_coord(unpack_keys(self.keys))
+        self.centers = probe.key_to_coord(unpack_keys(self.keys))
+
+    @property
+    def num_cells(self) -> int:
+        """Number of cells the scans update."""
+        return len(self.keys)
+
+    @property
+    def centres(self) -> NDArray[np.float64]:
+        """Deprecated name of :attr:`centers`."""
+        warnings.warn("ScanReplay.centres is deprecated; use centers", DeprecationWarning,
+                      stacklevel=2)
+        return self.centers
 
     @property
     def n_cells(self) -> int:
-        return len(self.keys)
+        """Deprecated name of :attr:`num_cells`."""
+        warnings.warn("ScanReplay.n_cells is deprecated; use num_cells", DeprecationWarning,
+                      stacklevel=2)
+        return self.num_cells
 
     def knn_log_odds(self, params: Sequence[dict[str, Any]]) -> NDArray[np.float32]:
         """Final log-odds of every cell of the KNNMap each parameter dict builds.
@@ -603,7 +695,7 @@ class ScanReplay:
     def _replay(self, checked, updates) -> NDArray[np.float32]:
         lo = np.array([_log_odds(p["p_min"]) for p in checked], dtype=np.float32)[:, None]
         hi = np.array([_log_odds(p["p_max"]) for p in checked], dtype=np.float32)[:, None]
-        values = np.zeros((len(checked), self.n_cells), dtype=np.float32)
+        values = np.zeros((len(checked), self.num_cells), dtype=np.float32)
         for scan in self._scans:
             cells = scan[0]
             u = updates(scan).astype(np.float32, copy=False)

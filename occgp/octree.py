@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numbers
 import os
+import warnings
 from typing import NamedTuple
 
 import numpy as np
@@ -29,9 +30,17 @@ class Changes(NamedTuple):
     #: Keys of the finest cells, uint16, shape (n, 3), sorted.
     keys: NDArray[np.uint16]
     #: Their centres, metres, shape (n, 3).
-    centres: NDArray[np.float64]
+    centers: NDArray[np.float64]
     #: True where the cell was new (unknown before), False where its state flipped.
     new: NDArray[np.bool_]
+
+    @property
+    def centres(self) -> NDArray[np.float64]:
+        """Deprecated name of :attr:`centers` (the spelling of :class:`Nodes` and
+        :class:`Leaves`)."""
+        warnings.warn("Changes.centres is deprecated; use Changes.centers",
+                      DeprecationWarning, stacklevel=2)
+        return self.centers
 
 
 class Nodes(NamedTuple):
@@ -353,7 +362,7 @@ default="auto"
         Returns
         -------
         changes : Changes
-            Named tuple ``(keys, centres, new)``: the finest cells' keys
+            Named tuple ``(keys, centers, new)``: the finest cells' keys
             (uint16, shape (n, 3), sorted), their centres and whether each
             was new (unknown before) rather than flipped. Empty when
             :attr:`track_changes` was never set.
@@ -1303,6 +1312,16 @@ default="auto"
                              f"nodes, the data holds {nodes}")
         tree._read_data(data[header.data_offset:end], header.binary, header.resolution)
         return tree
+
+    def to_octree(self) -> "OccupancyOctree":
+        """The map as an :class:`OccupancyOctree`: the map itself (the map protocol's
+        export to OctoMap's files).
+
+        Returns
+        -------
+        self : OccupancyOctree
+        """
+        return self
 
     def __reduce__(self):
         return (_rebuild, (type(self), self.get_params(), self.to_bytes("ot")))

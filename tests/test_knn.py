@@ -227,7 +227,7 @@ def test_octomap_replay_equals_liboctomap():
         got = leaf_values(m)
         assert set(got) == set(keys)
         assert [got[k] for k in keys] == row.tolist()
-    np.testing.assert_allclose(rep.centres, (np.array(keys) - 32768 + 0.5) * 0.2)
+    np.testing.assert_allclose(rep.centers, (np.array(keys) - 32768 + 0.5) * 0.2)
 
 
 def test_replay_rejects_bad_input():

@@ -205,7 +205,7 @@ def test_change_detection_follows_liboctomaps_rule(method):
     got = m.changed_cells()
     assert {tuple(k): bool(n) for k, n in zip(got.keys.tolist(), got.new)} == expected
     assert expected and not all(expected.values())     # flips were recorded, not only new
-    np.testing.assert_allclose(got.centres, m.key_to_coord(got.keys))
+    np.testing.assert_allclose(got.centers, m.key_to_coord(got.keys))
 
 
 def test_change_detection_off_by_default_and_with_set_cells():

@@ -42,7 +42,7 @@ def curve_of(m, centres, labels, thresholds):
 
 def test_scores_are_those_of_the_built_maps(replay):
     scans, rep = replay
-    labels = cell_labels(Wall(), rep.centres, 0.2)
+    labels = cell_labels(Wall(), rep.centers, 0.2)
     grid = {"k": [3], "p_u": [0.9, 0.7], "p_l": [0.3], "p_m": [0.2], "p_m_out": [0.4],
             "p_min": [0.05], "p_max": [0.95]}
     res = grid_search(rep, labels, grid)
@@ -52,7 +52,7 @@ def test_scores_are_those_of_the_built_maps(replay):
         for points, origin in scans:
             m.insert_scan(points, origin)
         ts = [t for t in sorted(THRESHOLDS, reverse=True) if 0.05 <= t <= 0.95]
-        tpr, fdr = curve_of(m, rep.centres, labels, ts)
+        tpr, fdr = curve_of(m, rep.centers, labels, ts)
         assert row["tpr"] == pytest.approx(tpr) and row["fdr"] == pytest.approx(fdr)
         x, y = np.r_[0, fdr, 1], np.r_[0, tpr, 1]
         assert row["auc"] == pytest.approx(np.trapezoid(y, x))
@@ -65,7 +65,7 @@ def test_scores_are_those_of_the_built_maps(replay):
 
 def test_octomap_search_matches_liboctomap(replay):
     scans, rep = replay
-    labels = cell_labels(Wall(), rep.centres, 0.2)
+    labels = cell_labels(Wall(), rep.centers, 0.2)
     res = grid_search(rep, labels, {"prob_hit": [0.74], "prob_miss": [0.26],
                                     "clamping_min": [0.02], "clamping_max": [0.98]},
                       method="octomap")
@@ -73,14 +73,14 @@ def test_octomap_search_matches_liboctomap(replay):
                         clamping_max=0.98)
     for points, origin in scans:
         m.insert_scan(points, origin, max_range=3.0, method="plain")
-    tpr, fdr = curve_of(m, rep.centres, labels, sorted(THRESHOLDS, reverse=True))
+    tpr, fdr = curve_of(m, rep.centers, labels, sorted(THRESHOLDS, reverse=True))
     assert res.results[0]["tpr"] == pytest.approx(tpr)
     assert res.results[0]["fdr"] == pytest.approx(fdr)
 
 
 def test_the_papers_grids_have_the_papers_counts(replay):
     _, rep = replay
-    labels = cell_labels(Wall(), rep.centres, 0.2)
+    labels = cell_labels(Wall(), rep.centers, 0.2)
     knn = grid_search(rep, labels, KNN_GRID)
     assert len(knn.results) == 450 and knn.n_rejected == 4 * 4 * 81 - 450
     octo = grid_search(rep, labels, OCTOMAP_GRID, method="octomap")
@@ -96,7 +96,7 @@ def test_the_papers_grids_have_the_papers_counts(replay):
 
 def test_parallel_and_dask_give_the_same_table(replay):
     _, rep = replay
-    labels = cell_labels(Wall(), rep.centres, 0.2)
+    labels = cell_labels(Wall(), rep.centers, 0.2)
     grid = {"p_u": [0.98, 0.74], "p_l": [0.26, 0.5], "p_m": [0.14, 0.26]}
     ref = grid_search(rep, labels, grid)
     two = grid_search(rep, labels, grid, n_jobs=2)
@@ -111,7 +111,7 @@ def test_parallel_and_dask_give_the_same_table(replay):
 
 def test_scans_are_replayed_on_the_fly(replay):
     scans, rep = replay
-    labels = cell_labels(Wall(), rep.centres, 0.2)
+    labels = cell_labels(Wall(), rep.centers, 0.2)
     grid = {"k": [1, 3], "p_u": [0.9]}
     a = grid_search(scans, Wall(), grid, resolution=0.2, sensor_range=3.0)
     b = grid_search(rep, labels, grid)
@@ -145,7 +145,7 @@ def test_cell_labels_mark_cells_a_surface_crosses():
 ])
 def test_bad_input(replay, kwargs, exc, match):
     _, rep = replay
-    args = dict(truth=cell_labels(Wall(), rep.centres, 0.2), param_grid={"p_u": [0.9]})
+    args = dict(truth=cell_labels(Wall(), rep.centers, 0.2), param_grid={"p_u": [0.9]})
     args.update(kwargs)
     with pytest.raises(exc, match=match):
         grid_search(rep, args.pop("truth"), args.pop("param_grid"), **args)
@@ -154,4 +154,4 @@ def test_bad_input(replay, kwargs, exc, match):
 def test_no_occupied_cell(replay):
     _, rep = replay
     with pytest.raises(ValueError, match="no occupied cell"):
-        grid_search(rep, np.zeros(rep.n_cells, bool), {"p_u": [0.9]})
+        grid_search(rep, np.zeros(rep.num_cells, bool), {"p_u": [0.9]})
