@@ -10,17 +10,18 @@ truth (:func:`occgp.evaluation.exact_test_set`), prints a table for each and
 writes ``map.bt`` and figures. ``occgp map`` (:func:`map_scans`) builds a map
 from scan files and ROS bags (PointCloud2 posed by TF; ``--topic``,
 ``--fixed-frame``, ``--sensor-frame``), optionally posed by a KITTI or TUM trajectory
-(``--poses``), with ``--method octree`` (the default), ``bgk``
-(:class:`~occgp.BGKMap`), ``akimap`` (:class:`~occgp.AKIMap`) or ``knn``
-(:class:`~occgp.KNNMap`), optionally continuing a saved map
-(``--input-map``), and writes it by the output's suffix: an OctoMap ``.bt`` or
-``.ot`` file, the occupied cells as ``.ply`` or ``.pcd`` (a kernel map through
-its :meth:`~occgp.BGKMap.to_octree`), or a kernel map's ``.npz``.
+(``--poses``), with any registered 3D map type (``--method``, see
+:func:`map_methods` and :mod:`occgp.maps`: ``octree``, the default, ``grid``,
+``bgk``, ``akimap``, ``knn``, ...), optionally continuing a saved map
+(``--input-map``), and writes it by the output's suffix: the map's own format
+(e.g. a kernel map's ``.npz``), or an OctoMap ``.bt`` or ``.ot`` file or the
+occupied cells as ``.ply`` or ``.pcd`` through the map's ``to_octree()``.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import errno
 import inspect
 import re
@@ -34,18 +35,16 @@ import numpy as np
 
 from . import __version__
 from ._validation import check_n_jobs, check_real, check_resolution
-from .kernel import AKIMap, BGKMap
 from .knn import CDFS, KNN_PARAMS, KNNMap, check_knn_params
+from .maps import OCTREE_FORMATS, available_maps, make_map, map_type
 from .octree import OccupancyOctree
 from ._demo import (  # noqa: F401  (re-exported: occgp.cli is the demo's public home)
     _noisy_scans, demo, gp_mapping_methods, mapping_methods, noisy_mapping_methods,
 )
 
-__all__ = ["main", "demo", "map_scans", "mapping_methods", "noisy_mapping_methods",
-           "gp_mapping_methods"]
+__all__ = ["main", "demo", "map_scans", "map_methods", "mapping_methods",
+           "noisy_mapping_methods", "gp_mapping_methods"]
 
-# the maps `occgp map` can build (--method); each is written as an octree
-_MAP_METHODS = ("octree", "bgk", "akimap", "knn")
 # KNNMap's model parameters (those of `occgp map --method knn`) and their defaults,
 # read from its signature
 _KNN_OPTIONS = KNN_PARAMS + ("cdf",)
@@ -82,17 +81,45 @@ _OPTION_OF = {"output": "-o/--output", "method": "--method", "mode": "--mode",
               "fixed_frame": "--fixed-frame", "sensor_frame": "--sensor-frame",
               "tf_tolerance": "--tf-tolerance", "input_map": "--input-map",
               "fields": "--fields", "paths": "scans"}
-_KERNEL_METHODS = ("bgk", "akimap")
 _POSE_FORMATS = ("kitti", "tum")
-# the output suffixes of each method, and the saved maps --input-map takes
-_OUTPUTS = {"octree": (".bt", ".ot", ".ply", ".pcd"), "knn": (".bt", ".ot", ".ply", ".pcd"),
-            "bgk": (".bt", ".ot", ".ply", ".pcd", ".npz"),
-            "akimap": (".bt", ".ot", ".ply", ".pcd", ".npz")}
-_INPUT_MAPS = {"octree": (".bt", ".ot"), "knn": (".bt", ".ot"), "bgk": (".npz",),
-               "akimap": (".npz",)}
 _BAG_SUFFIXES = (".bag", ".db3", ".mcap")
-# whether the octree's insert_scan takes n_jobs (threaded ray counting)
-_OCTREE_N_JOBS = "n_jobs" in inspect.signature(OccupancyOctree.insert_scan).parameters
+
+
+def map_methods() -> list[str]:
+    """The map types ``occgp map --method`` builds: every registered 3D map whose
+    ``insert_scan`` takes a plain scan (points and origin; :class:`~occgp.ColorOctree`
+    also needs colours, which scan files do not carry).
+
+    Returns
+    -------
+    names : list of str
+        Names of :func:`occgp.maps.available_maps`, in its order.
+    """
+    return [name for name in available_maps(dims=3)
+            if _takes_plain_scans(map_type(name).cls)]
+
+
+def _takes_plain_scans(cls) -> bool:
+    try:
+        sig = inspect.signature(cls.insert_scan)
+    except (AttributeError, TypeError, ValueError):
+        return False
+    required = [p for p in list(sig.parameters.values())[1:]
+                if p.default is p.empty and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
+    return len(required) <= 2
+
+
+def _either(names, last: str) -> str:
+    """'a', 'a or b', 'a, b or c' (with `last` the word before the last name)."""
+    return ", ".join(names[:-1]) + last + names[-1] if len(names) > 1 else "".join(names)
+
+
+def _insert_options(cls) -> tuple[str, ...]:
+    """The keyword options of a map class's insert_scan."""
+    try:
+        return tuple(inspect.signature(cls.insert_scan).parameters)
+    except (AttributeError, TypeError, ValueError):
+        return ()
 
 
 def _is_bag(path) -> bool:
@@ -142,28 +169,35 @@ def _check_map_args(paths, output, method, mode, resolution, max_range, knn_para
                                         Path | None]:
     """Check map_scans' arguments before anything is read; return (output, resolution,
     max_range, n_jobs, input_map) as used."""
-    if method not in _MAP_METHODS:
-        raise _OptionError("method", f"method must be one of {_MAP_METHODS}, got {method!r}")
+    methods = map_methods()
+    if method not in methods:
+        raise _OptionError("method", f"method must be one of {tuple(methods)}, got {method!r}")
+    entry = map_type(method)
     output = Path(output)
-    fits = _OUTPUTS[method]
+    fits = entry.outputs
     if _suffix(output) not in fits:
-        note = " (.npz: bgk and akimap only)" if _suffix(output) == ".npz" else ""
+        takers = [n for n in methods if _suffix(output) in map_type(n).formats]
+        note = f" ({_suffix(output)}: {_either(takers, ' and ')} only)" \
+            if _suffix(output) not in OCTREE_FORMATS and takers else ""
         raise _OptionError("output", f"output must end in {', '.join(fits[:-1])} or "
                            f"{fits[-1]} for method={method!r}{note}, got {str(output)!r}")
     if not output.parent.is_dir():
         raise FileNotFoundError(errno.ENOENT, "output: no such folder for the map file",
                                 str(output.parent))
-    if mode is not None and method != "octree":
-        raise _OptionError("mode", f"mode applies to method='octree' only, got mode={mode!r} "
-                           f"with method={method!r}")
+    if mode is not None and "mode" not in _insert_options(entry.cls):
+        takers = [repr(n) for n in methods if "mode" in _insert_options(map_type(n).cls)]
+        raise _OptionError("mode", f"mode applies to method={_either(takers, ' or ')} only, "
+                           f"got mode={mode!r} with method={method!r}")
     if mode is not None and mode not in ("scan", "ray"):
         raise _OptionError("mode", f"mode must be 'scan' or 'ray', got {mode!r}")
     if knn_params is not None and method != "knn":
         raise ValueError(f"knn_params applies to method='knn' only, got method={method!r}")
-    if max_range is not None and method == "knn":
-        raise _OptionError("max_range", f"max_range does not apply to method='knn': its range "
-                           f"limit is knn_params['sensor_range'] (default "
-                           f"{_KNN_DEFAULTS['sensor_range']} m), got max_range={max_range!r}")
+    own = getattr(entry.cls, "RANGE_PARAM", "max_range")
+    if max_range is not None and own != "max_range":
+        raise _OptionError("max_range", f"max_range does not apply to method={method!r}: "
+                           f"its range limit is its {own} (default "
+                           f"{inspect.signature(entry.cls).parameters[own].default} m), got "
+                           f"max_range={max_range!r}")
     try:
         if max_range is not None:
             max_range = check_real(max_range, "max_range", low=0.0)
@@ -200,39 +234,36 @@ def _check_map_args(paths, output, method, mode, resolution, max_range, knn_para
                            f"files or ROS 2 bag folders), and none is among the scans")
     if input_map is not None:
         input_map = Path(input_map)
-        if _suffix(input_map) not in _INPUT_MAPS[method]:
-            kinds = " or ".join(_INPUT_MAPS[method])
+        if _suffix(input_map) not in entry.formats:
+            kinds = " or ".join(entry.formats)
             raise _OptionError("input_map", f"input_map must be a {kinds} file to continue a "
                                f"{method} map, got {str(input_map)!r}")
     return output, resolution, max_range, n_jobs, input_map
 
 
-def _new_map(method, resolution, max_range, knn, n_jobs, input_map):
-    """The map to insert into: loaded from `input_map` or new."""
+def _new_map(method, resolution, max_range, params, n_jobs, input_map):
+    """The map to insert into: loaded from `input_map` or new (through the registry)."""
+    entry = map_type(method)
+    names = entry.parameters()
+    given = dict(params)
+    if "n_jobs" in names:
+        given["n_jobs"] = n_jobs
+    if max_range is not None and "max_range" in names:
+        given["max_range"] = max_range
     if input_map is None:
-        res = 0.1 if resolution is None else resolution
-        if method == "octree":
-            return OccupancyOctree(res)
-        if method == "knn":
-            return KNNMap(res, **knn, n_jobs=n_jobs)
-        if method == "bgk":
-            return BGKMap(res, n_jobs=n_jobs) if max_range is None else \
-                BGKMap(res, max_range=max_range, n_jobs=n_jobs)
-        return AKIMap(res, random_state=0, n_jobs=n_jobs)
-    cls = {"octree": OccupancyOctree, "knn": KNNMap, "bgk": BGKMap, "akimap": AKIMap}[method]
+        if "resolution" in names:
+            given["resolution"] = 0.1 if resolution is None else resolution
+        return make_map(method, **given)
     try:
-        mapper = cls.load(input_map, **knn, n_jobs=n_jobs) if method == "knn" else \
-            cls.load(input_map)
+        mapper = entry.cls.load(input_map)
+        if given:
+            mapper.set_params(**given)
     except ValueError as exc:
         raise ValueError(f"input_map: cannot continue it as a {method} map: {exc}") from None
     if resolution is not None and resolution != mapper.resolution:
         raise _OptionError("resolution", f"resolution {resolution:g} differs from that of "
                            f"input_map {str(input_map)!r} ({mapper.resolution:g}); leave it "
                            f"out to continue the map at its own")
-    if method in _KERNEL_METHODS:
-        mapper.n_jobs = n_jobs
-        if method == "bgk" and max_range is not None:
-            mapper.max_range = max_range
     return mapper
 
 
@@ -243,7 +274,8 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
               topic: str | None = None, fixed_frame: str | None = None,
               sensor_frame: str | None = None, tf_tolerance: float = 0.0, fields=None,
               input_map: str | Path | None = None, n_jobs: int | None = -1,
-              progress: bool | None = None, out=None):
+              params: Mapping[str, Any] | None = None, progress: bool | None = None,
+              out=None):
     """Build a map from scan files and ROS bags and save it.
 
     Every step (loading `input_map`, reading each scan file, inserting each
@@ -261,31 +293,39 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         folder holding ``metadata.yaml``), read with
         :func:`occgp.datasets.read_rosbag`. Scans go in in this order.
     output : str or path-like
-        The map file; its suffix gives the format: ``.bt`` / ``.ot``
-        (OctoMap), ``.ply`` / ``.pcd`` (the occupied cells, see
+        The map file; its suffix gives the format: one of the map type's own
+        formats (:attr:`occgp.maps.MapType.formats`: ``.bt`` / ``.ot`` for
+        the octrees, ``.npz`` with the evidence for the kernel maps and the
+        grid, see their ``save``), or ``.bt`` / ``.ot`` (OctoMap) and
+        ``.ply`` / ``.pcd`` (the occupied cells, see
         :meth:`~occgp.OccupancyOctree.save_ply` /
-        :meth:`~occgp.OccupancyOctree.save_pcd`) or, for ``method="bgk"`` and
-        ``"akimap"`` only, ``.npz`` (the kernel map with its evidence, see
-        :meth:`~occgp.BGKMap.save`). A kernel map goes to the other formats
-        through its ``to_octree()``: each cell holds its posterior mean as
-        log-odds (a ``.bt`` file keeps only whether it is above 0.5); cells
-        no kernel reached stay unknown.
+        :meth:`~occgp.OccupancyOctree.save_pcd`) through the map's
+        ``to_octree()``: a kernel map's cells then hold their posterior mean
+        as log-odds (a ``.bt`` file keeps only whether it is above 0.5);
+        cells no kernel reached stay unknown.
     resolution : float, default=None
         Cell size in metres; None means 0.1, or the resolution of
         `input_map` (which a value given must equal).
-    method : {"octree", "bgk", "akimap", "knn"}, default="octree"
-        The map: :class:`~occgp.OccupancyOctree`, :class:`~occgp.BGKMap`,
-        :class:`~occgp.AKIMap` (``random_state=0``) or :class:`~occgp.KNNMap`
-        (an octree, written as it is).
+    method : str, default="octree"
+        A map type of :func:`map_methods` (the registered 3D maps, see
+        :func:`occgp.maps.available_maps`), built with
+        :func:`occgp.maps.make_map`: e.g. ``"octree"``
+        (:class:`~occgp.OccupancyOctree`), ``"grid"``, ``"bgk"``,
+        ``"akimap"`` (``random_state=0``) or ``"knn"`` (an octree, written as
+        it is). The map gets `resolution` and `n_jobs` (and `max_range`) when
+        its constructor takes them.
     mode : {"scan", "ray"}, default=None
-        The octree's update mode (None: ``"scan"``); only for ``method="octree"``.
+        The update mode (None: ``"scan"``); only for maps whose
+        ``insert_scan`` takes it (the octree and the grid).
     max_range : float, default=None
         Range limit in metres; None means none (and BGKMap's own 8 m for
-        ``method="bgk"``; a loaded BGK map keeps its own). The octree inserts
-        longer beams up to `max_range` as free space only; BGK drops them
-        whole (its ``max_range``); AKIMap gets only the end points within
-        `max_range` of the sensor. Not for ``method="knn"``, whose range
-        limit is its ``sensor_range`` (in `knn_params`). The points beyond
+        ``method="bgk"``; a loaded BGK map keeps its own). A map whose
+        ``insert_scan`` takes ``max_range`` (the octree, the grid) inserts
+        longer beams up to it as free space only; one with a ``max_range``
+        parameter (BGK) gets it and drops them whole; any other map (AKIMap)
+        gets only the end points within `max_range` of the sensor. Not for a
+        map with a ``sensor_range`` parameter (``method="knn"``), its own
+        range limit (in `knn_params`). The points beyond
         the limit are counted and reported (raw points: BGK applies its
         limit to the centroids of its down-sampling cubes).
     knn_params : mapping, default=None
@@ -312,14 +352,19 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         Record layout of ``.bin`` scan files, passed to
         :func:`occgp.datasets.read_scans` (None: by file name).
     input_map : str or path-like, default=None
-        A saved map to continue: ``.bt`` / ``.ot`` for ``method="octree"``
-        and ``"knn"`` (the k-NN parameters then come from `knn_params`),
-        ``.npz`` (written by ``save``) for ``"bgk"`` and ``"akimap"``, which
-        must hold a map of that class. The scans are inserted into it.
+        A saved map to continue, in one of the map type's own formats
+        (``.bt`` / ``.ot`` for ``method="octree"`` and ``"knn"``, ``.npz``
+        written by ``save`` for ``"bgk"``, ``"akimap"`` and ``"grid"``),
+        read with the class's ``load``; `n_jobs`, `max_range`, `knn_params`
+        and `params` are then set with its ``set_params``. The scans are
+        inserted into it.
     n_jobs : int, default=-1
-        Threads of BGKMap, AKIMap and KNNMap (and of the octree's
-        ``insert_scan`` where it takes ``n_jobs``): -1 every core, None or 1
-        one. The map does not depend on it.
+        Threads of the map (a constructor parameter, or an option of its
+        ``insert_scan``): -1 every core, None or 1 one. The map does not
+        depend on it.
+    params : mapping, default=None
+        Further constructor parameters of the map type (e.g.
+        ``{"prob_hit": 0.8}``), checked by the class.
     progress : bool, default=None
         Show a progress bar (None: only on a terminal).
     out : file-like, default=None
@@ -327,7 +372,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
 
     Returns
     -------
-    map : OccupancyOctree, BGKMap, AKIMap or KNNMap
+    map : OccupancyMap
         The map built.
 
     Raises
@@ -369,14 +414,17 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         poses_format, bag_options, input_map)
     knn = _check_knn_options({} if knn_params is None else knn_params) \
         if method == "knn" else {}
+    entry = map_type(method)
     pose_array = None if poses is None else _read_poses(poses, poses_format)
-    convert = method in _KERNEL_METHODS and _suffix(output_path) != ".npz"
+    convert = _suffix(output_path) not in entry.formats and not (
+        isinstance(entry.cls, type) and issubclass(entry.cls, OccupancyOctree))
     bar = tqdm(total=(input_path is not None) + len(paths) + convert + 1, unit="step",
                disable=None if progress is None else not progress)
     try:
         if input_path is not None:
             bar.set_description(f"loading {input_path.name}")
-        mapper: Any = _new_map(method, resolution, max_range, knn, n_jobs, input_path)
+        mapper: Any = _new_map(method, resolution, max_range, {**knn, **dict(params or {})},
+                               n_jobs, input_path)
         if input_path is not None:
             bar.update()
         sources = []
@@ -397,7 +445,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
             raise _OptionError("poses", f"poses file {str(poses)!r} holds {len(pose_array)} "
                                f"poses for {n_scans} scans; expected one pose per scan, in "
                                f"input order")
-        insert, limit = _inserter(mapper, method, mode, max_range, n_jobs)
+        insert, limit, how = _inserter(mapper, mode, max_range, n_jobs)
         n_points = n_beyond = n_done = 0
         beams = np.zeros(2, dtype=np.int64)     # BGK's (kept, dropped) beams
         dropped = []
@@ -414,10 +462,10 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
                                          - np.asarray(scan.origin, dtype=np.float64),
                                          axis=1) > limit
                     n_beyond += int(np.count_nonzero(far))
-                    if method == "akimap":
+                    if how == "drop":
                         points = points[~far]
                 insert(points, scan.origin)
-                if method == "bgk":
+                if how == "param" and hasattr(mapper, "last_beams_"):
                     beams += mapper.last_beams_
                 n_done += 1
                 bar.update()
@@ -430,7 +478,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
             tree = mapper.to_octree()
             bar.update()
         bar.set_description(f"writing {output_path.name}")
-        _save(mapper, tree, output_path)
+        _save(mapper, tree, output_path, entry.formats)
         bar.update()
     finally:
         bar.close()
@@ -439,8 +487,8 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         print(f"dropped {n:,} of {total:,} points of {path} with a NaN or inf coordinate",
               file=out)
     if limit is not None and n_beyond:
-        print(_beyond_message(method, n_beyond, n_points, limit, beams), file=out)
-    if method in ("octree", "knn"):
+        print(_beyond_message(mapper, how, n_beyond, n_points, limit, beams), file=out)
+    if isinstance(mapper, OccupancyOctree):
         built = f"{mapper.num_leaves:,} leaves"
     elif convert:
         built = f"{mapper.num_cells:,} cells ({tree.num_leaves:,} octree leaves)"
@@ -452,41 +500,57 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     return mapper
 
 
-def _inserter(mapper, method, mode, max_range, n_jobs):
-    """(insert(points, origin), the range limit whose points are counted, or None)."""
-    if method == "octree":
-        kwargs = {"max_range": max_range, "mode": "scan" if mode is None else mode}
-        if _OCTREE_N_JOBS:
-            kwargs["n_jobs"] = n_jobs
+def _inserter(mapper, mode, max_range, n_jobs):
+    """(insert(points, origin), the range limit whose points are counted or None, how the
+    map meets it): "sensor_range" (the map's own range parameter cuts rays), "param" (its
+    ``max_range`` parameter), "option" (insert_scan's ``max_range`` cuts rays) or "drop"
+    (the points beyond are not passed)."""
+    options = _insert_options(type(mapper))
+    params = mapper.get_params()
+    kwargs: dict[str, Any] = {}
+    if mode is not None:
+        kwargs["mode"] = mode
+    elif "mode" in options:
+        kwargs["mode"] = "scan"
+    if "n_jobs" in options and "n_jobs" not in params:
+        kwargs["n_jobs"] = n_jobs
+    own = getattr(type(mapper), "RANGE_PARAM", "max_range")
+    if own != "max_range":
+        limit, how = params[own], "sensor_range"
+    elif "max_range" in params:
+        limit, how = params["max_range"], "param"
+    elif max_range is not None and "max_range" in options:
+        kwargs["max_range"] = max_range
+        limit, how = max_range, "option"
+    else:
+        limit, how = max_range, "drop"
 
-        def insert(points, origin):
-            mapper.insert_scan(points, origin, **kwargs)
-        return insert, max_range
-    if method == "knn":
-        return mapper.insert_scan, mapper.sensor_range
-    if method == "bgk":
-        return mapper.update, mapper.max_range
-    return mapper.update, max_range
+    def insert(points, origin):
+        mapper.insert_scan(points, origin, **kwargs)
+    return insert, limit, how
 
 
-def _beyond_message(method, n, total, limit, beams) -> str:
+def _beyond_message(mapper, how, n, total, limit, beams) -> str:
     where = f"{n:,} of {total:,} points lie beyond"
-    if method == "octree":
+    if how == "option":
         return f"{where} max_range {limit:g} m: their rays were cut there (free space only)"
-    if method == "knn":
-        return (f"{where} sensor_range {limit:g} m: not inserted, their rays were cut "
-                f"there")
-    if method == "bgk":
+    if how == "sensor_range":
+        return (f"{where} {type(mapper).RANGE_PARAM} {limit:g} m: not inserted, their rays "
+                f"were cut there")
+    name = type(mapper).__name__
+    if how == "param" and hasattr(mapper, "last_beams_"):
         kept, dropped = (int(b) for b in beams)
-        return (f"{where} max_range {limit:g} m: BGK dropped {dropped:,} of its "
-                f"{kept + dropped:,} beams (to the end points' centroids per cube of "
-                f"ds_resolution) beyond it")
-    return f"{where} max_range {limit:g} m: dropped (AKIMap got only the nearer ones)"
+        return (f"{where} max_range {limit:g} m: {name.removesuffix('Map')} dropped "
+                f"{dropped:,} of its {kept + dropped:,} beams (to the end points' centroids "
+                f"per cube of ds_resolution) beyond it")
+    if how == "param":
+        return f"{where} max_range {limit:g} m: {name} dropped them"
+    return f"{where} max_range {limit:g} m: dropped ({name} got only the nearer ones)"
 
 
-def _save(mapper, tree, output: Path) -> None:
+def _save(mapper, tree, output: Path, formats) -> None:
     suffix = _suffix(output)
-    if suffix == ".npz":
+    if suffix in formats:
         mapper.save(output)
     elif suffix == ".ply":
         tree.save_ply(output)
@@ -509,6 +573,17 @@ def _knn_error(parser: argparse.ArgumentParser, exc: Exception) -> None:
         message)}.items())
     options = "/".join(dict.fromkeys(_option(name) for _, name in named)) or "k-NN options"
     parser.error(f"argument {options}: {message}")
+
+
+def _param(text: str) -> tuple[str, Any]:
+    """--param NAME=VALUE: (name, the value as a Python literal, else the text)."""
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip().isidentifier():
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text[:60]!r}")
+    try:
+        return name.strip(), ast.literal_eval(value.strip())
+    except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
+        return name.strip(), value.strip()
 
 
 _FIELD_NAMES = ("kitti", "nuscenes")
@@ -558,7 +633,7 @@ def _parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("map", help="build a map from scan files (.pcd, .bin, .pcd.bin, "
                        ".graph, x y z text, a folder of them) and ROS bags, and write it as "
-                       "an OctoMap file, PLY / PCD cells or a kernel map's .npz",
+                       "an OctoMap file, PLY / PCD cells or the map's own .npz",
                        description="Build a map from scan files and ROS bags (PointCloud2 "
                        "posed by TF) and write it.")
     p.set_defaults(map_parser=p)
@@ -567,30 +642,33 @@ def _parser() -> argparse.ArgumentParser:
                    "folder), inserted in this order")
     p.add_argument("-o", "--output", required=True,
                    help="the map file, format by suffix: .bt/.ot (OctoMap), .ply/.pcd (the "
-                   "occupied cells), .npz (bgk/akimap only: the kernel map with its "
-                   "evidence, for --input-map); required, no default")
+                   "occupied cells), .npz (bgk, akimap, grid: the map with its evidence, for "
+                   "--input-map); required, no default")
     p.add_argument("--resolution", type=float, default=None,
                    help="cell size in metres (default: 0.1, or the --input-map's)")
-    p.add_argument("--method", choices=_MAP_METHODS, default="octree",
-                   help="octree: OctoMap log-odds; bgk: BGK kernel inference; akimap: "
-                   "adaptive kernel inference; knn: the k-NN inverse sensor model on the "
-                   "octree; a kernel map is written to .bt/.ot/.ply/.pcd as an octree of its "
-                   "posterior means (default: %(default)s)")
+    methods = map_methods()
+    p.add_argument("--method", choices=methods, default="octree",
+                   help="; ".join(f"{n}: {map_type(n).description}" for n in methods) +
+                   "; a map is written to .bt/.ot/.ply/.pcd through its to_octree() unless "
+                   "the suffix is one of its own formats (default: %(default)s)")
     p.add_argument("--mode", choices=["scan", "ray"], default=None,
-                   help="the octree's update mode (default: scan; --method octree only)")
+                   help="the update mode (default: scan; octree and grid only)")
     p.add_argument("--max-range", type=float, default=None,
                    help="range limit in metres: octree: longer beams are free space up to "
                    "it (default: no limit); bgk: longer beams are dropped (default: 8, or the "
                    "--input-map's); akimap: end points farther from the sensor are dropped "
                    "(default: no limit); not with knn, whose range limit is --sensor-range")
     p.add_argument("--n-jobs", type=int, default=-1,
-                   help="threads of bgk, akimap and knn" + (" and the octree" if _OCTREE_N_JOBS
-                                                            else "") +
-                   "; -1: every core; the map does not depend on it (default: %(default)s)")
+                   help="threads of the map; -1: every core; the map does not depend on it "
+                   "(default: %(default)s)")
     p.add_argument("--input-map", default=None, metavar="PATH",
-                   help="continue a saved map: .bt/.ot for octree and knn, .npz (written by "
-                   "-o X.npz) for bgk and akimap; the scans are inserted into it "
-                   "(default: a new map)")
+                   help="continue a saved map in one of the method's own formats: .bt/.ot "
+                   "for octree and knn, .npz (written by -o X.npz) for bgk, akimap and "
+                   "grid; the scans are inserted into it (default: a new map)")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   type=_param, help="a constructor parameter of the map, repeatable (e.g. "
+                   "--param prob_hit=0.8); the value is read as a Python literal, else kept "
+                   "as text (default: the map type's defaults)")
     p.add_argument("--no-progress", action="store_true",
                    help="no progress bar (default: shown on a terminal)")
     g = p.add_argument_group("poses and record layouts")
@@ -688,7 +766,7 @@ def main(argv=None) -> int:
                       topic=args.topic, fixed_frame=args.fixed_frame,
                       sensor_frame=args.sensor_frame, tf_tolerance=args.tf_tolerance,
                       fields=args.fields, input_map=args.input_map, n_jobs=args.n_jobs,
-                      progress=progress)
+                      params=dict(args.param), progress=progress)
     except _OptionError as exc:
         args.map_parser.error(f"argument {_OPTION_OF.get(exc.param, exc.param)}: {exc}")
     except (ValueError, TypeError, OSError, ImportError) as exc:

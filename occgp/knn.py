@@ -256,6 +256,9 @@ class KNNMap(OccupancyOctree):
     """
 
     _kind = "octree"
+    #: The parameter that limits the range of the scans: farther points are not
+    #: inserted and their rays are cut there (``occgp map`` reports them).
+    RANGE_PARAM = "sensor_range"
 
     def __init__(self, resolution: float = 0.1, *, k: int = 1, p_u: float = 0.86,
                  p_l: float = 0.38, p_m: float = 0.26, p_m_out: float = 0.38,

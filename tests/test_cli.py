@@ -246,7 +246,7 @@ def test_map_command_rejects_knn_options_with_other_methods(tmp_path, capsys, mo
      r"knn_params applies to method='knn' only, got method='octree'"),
     (dict(method="knn", max_range=3.0), ValueError,
      r"max_range does not apply to method='knn': its range limit is "
-     r"knn_params\['sensor_range'\] \(default 4.0 m\)"),
+     r"its sensor_range \(default 4.0 m\)"),
     (dict(method="knn", knn_params={"kk": 3}), ValueError,
      r"knn_params holds \['kk'\], which KNNMap does not take"),
     (dict(method="knn", knn_params=[("k", 3)]), TypeError,
@@ -264,7 +264,7 @@ def test_map_scans_checks_knn_params_before_reading(tmp_path, kwargs, exc, messa
     assert not (tmp_path / "m.bt").exists()
 
 
-@pytest.mark.parametrize("method", ["grid", "gp", "BGK"])
+@pytest.mark.parametrize("method", ["color-octree", "gp", "BGK"])
 def test_map_command_rejects_unknown_method(tmp_path, capsys, monkeypatch, method):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit) as exc:
@@ -528,10 +528,11 @@ def test_map_help_shows_every_default():
 @pytest.mark.parametrize("args, message", [
     (["-o", "m.png"], r"argument -o/--output: output must end in .bt, .ot, .ply or .pcd for "
      r"method='octree', got 'm.png'"),
-    (["-o", "m.npz"], r"argument -o/--output: .* \(.npz: bgk and akimap only\), got 'm.npz'"),
+    (["-o", "m.npz"], r"argument -o/--output: .* \(.npz: grid, bgk and akimap only\), got "
+     r"'m.npz'"),
     (["-o", "m.npz", "--method", "knn"], r"argument -o/--output: .*method='knn'"),
     (["-o", "m.bt", "--method", "bgk", "--mode", "ray"],
-     r"argument --mode: mode applies to method='octree' only"),
+     r"argument --mode: mode applies to method='octree' or 'grid' only"),
     (["-o", "m.bt", "--method", "akimap", "--max-range", "0"],
      r"argument --max-range: max_range must lie in \(0.0, inf\), got 0.0"),
     (["-o", "m.bt", "--resolution", "0"], r"argument --resolution: resolution"),
