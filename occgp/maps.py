@@ -60,13 +60,51 @@ class OccupancyMap(Protocol):
     """
 
     def insert_scan(self, points: ArrayLike, origin: ArrayLike, **options: Any) -> Any:
-        """Integrate one scan (end points seen from `origin`); return the map."""
+        """Integrate one scan: rays from `origin` to each end point.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, n_dims)
+            End points in the world frame, metres.
+        origin : array-like of shape (n_dims,)
+            Sensor position, metres.
+        **options
+            Options of the map's own update (e.g. the octree's ``max_range``).
+
+        Returns
+        -------
+        self
+            The updated map; a rejected scan changes nothing.
+        """
 
     def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Probability of occupancy at each point, NaN where unknown."""
+        """Probability of occupancy at each point.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, n_dims)
+
+        Returns
+        -------
+        p : ndarray of shape (n_points,)
+            NaN where the map holds no evidence.
+        """
 
     def is_occupied(self, points: ArrayLike, *, return_unknown: bool = False) -> Any:
-        """Occupied mask (probability >= threshold), and the unknown mask on request."""
+        """Whether each point is occupied: its probability is at least the threshold.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, n_dims)
+        return_unknown : bool, default=False
+            Also return the mask of points without evidence.
+
+        Returns
+        -------
+        occupied : ndarray of bool of shape (n_points,)
+        unknown : ndarray of bool of shape (n_points,)
+            Only when `return_unknown` is True.
+        """
 
     @property
     def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -77,23 +115,74 @@ class OccupancyMap(Protocol):
         """Number of cells holding evidence."""
 
     def memory_usage(self) -> int:
-        """Bytes the map's cells use."""
+        """Bytes the map's cells use.
+
+        Returns
+        -------
+        nbytes : int
+        """
 
     def get_params(self, deep: bool = True) -> dict:
-        """The constructor's parameters."""
+        """The constructor's parameters.
+
+        Parameters
+        ----------
+        deep : bool, default=True
+            scikit-learn's flag (nested estimators' parameters too).
+
+        Returns
+        -------
+        params : dict
+        """
 
     def set_params(self, **params: Any) -> Any:
-        """Change parameters; return the map (unchanged when rejected)."""
+        """Change parameters.
+
+        Parameters
+        ----------
+        **params
+            The parameters to change, by name.
+
+        Returns
+        -------
+        self
+            The map; unchanged when a value is rejected.
+        """
 
     def save(self, path: str | os.PathLike) -> Any:
-        """Write the map with its evidence; return the map."""
+        """Write the map with its evidence.
+
+        Parameters
+        ----------
+        path : str or path-like
+            Destination, in one of the map type's formats.
+
+        Returns
+        -------
+        self
+        """
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Any:
-        """Read a map written by :meth:`save`."""
+        """Read a map written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or path-like
+
+        Returns
+        -------
+        map
+            A map of the class this is called on.
+        """
 
     def to_octree(self) -> Any:
-        """The map as an :class:`occgp.OccupancyOctree` (OctoMap's files)."""
+        """The map as an :class:`occgp.OccupancyOctree` (OctoMap's files).
+
+        Returns
+        -------
+        tree : OccupancyOctree
+        """
 
 
 #: Optional capabilities a map may have: name -> what the method gives.
