@@ -1,0 +1,166 @@
+"""The one face of every map (occgp.maps): the protocol, the registry, and a new map
+type added in one module (docs/toy_map.py, the architecture page's worked example)."""
+
+import importlib.util
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sklearn.base import clone
+
+import occgp
+import occgp.datasets
+import occgp.evaluation
+import occgp.knn
+from occgp import maps
+from occgp.cli import main, map_methods
+from occgp.maps import OccupancyMap, available_maps, capabilities, make_map, map_type, register
+
+TOY = Path(__file__).resolve().parent.parent / "docs" / "toy_map.py"
+
+
+@pytest.fixture
+def toy():
+    """docs/toy_map.py imported as a module of its own; its registration undone after."""
+    spec = importlib.util.spec_from_file_location("toy_map_example", TOY)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["toy_map_example"] = module
+    spec.loader.exec_module(module)
+    yield module.EndPointCounter
+    maps._REGISTRY.pop("toy", None)
+    sys.modules.pop("toy_map_example", None)
+
+
+def _wall_scan(n=400, seed=0):
+    rng = np.random.default_rng(seed)
+    wall = np.column_stack([np.full(n, 2.0), rng.uniform(-1, 1, (n, 2))])
+    return wall, np.zeros(3)
+
+
+@pytest.mark.parametrize("name", ["octree", "grid", "bgk", "akimap", "knn"])
+def test_every_3d_map_answers_the_protocol(name, tmp_path):
+    m = make_map(name, resolution=0.2)
+    assert isinstance(m, OccupancyMap)
+    # on the empty map too: nothing raises, nothing is known
+    assert m.num_cells == 0 and np.isnan(np.concatenate(m.bounds)).all()
+    assert np.isnan(m.occupancy([[2.0, 0.0, 0.0]])).all()
+    points, origin = _wall_scan()
+    assert m.insert_scan(points, origin) is m
+    assert m.num_cells > 0 and m.memory_usage() > 0
+    lo, hi = m.bounds
+    assert (lo <= points.min(axis=0) + 1e-9).all() and (hi >= points.max(axis=0) - 1e-9).all()
+    p = m.occupancy(points)
+    occupied, unknown = m.is_occupied(points, return_unknown=True)
+    assert np.array_equal(unknown, np.isnan(p))
+    threshold = m.get_params().get("occupancy_threshold", m.get_params().get("p_t"))
+    with np.errstate(invalid="ignore"):
+        # the one rule: at or above the threshold (a float32 map compares its log-odds,
+        # so allow the last bit of a probability exactly at it)
+        assert not (occupied & (p < threshold - 1e-6)).any()
+        assert (occupied | unknown | (p < threshold + 1e-6)).all()
+    far = [[50.0, 50.0, 50.0]]
+    occ, unk = m.is_occupied(far, return_unknown=True)
+    assert unk.all() and not occ.any()
+    # parameters: clone builds an empty map of the same parameters
+    c = clone(m)
+    assert type(c) is type(m) and c.num_cells == 0
+    assert c.get_params() == m.get_params()
+    # files: the map's own format round-trips its evidence (.bt keeps only the state)
+    formats = map_type(name).formats
+    path = tmp_path / ("m" + (".ot" if ".ot" in formats else formats[0]))
+    assert m.save(path) is m
+    back = type(m).load(path)
+    np.testing.assert_allclose(back.occupancy(points), p, rtol=0, atol=1e-6)
+    # OctoMap export
+    tree = m.to_octree()
+    assert isinstance(tree, occgp.OccupancyOctree)
+    assert tree.is_occupied(points[occupied]).all()
+
+
+def test_the_threshold_rule_is_at_or_above():
+    m = occgp.OccupancyOctree(0.1).set_cells([[0.05, 0.05, 0.05]], 0.0)   # p = 0.5 exactly
+    assert m.is_occupied([[0.05, 0.05, 0.05]]).tolist() == [True]
+    m.set_params(occupancy_threshold=0.6)
+    assert m.is_occupied([[0.05, 0.05, 0.05]]).tolist() == [False]
+
+
+def test_capabilities_are_discoverable():
+    assert capabilities(occgp.OccupancyOctree) == {"changed_cells", "distance_field"}
+    assert "colors" in capabilities(occgp.ColorOctree(0.1))
+    assert "variance" in map_type("bgk").capabilities
+    assert set(maps.CAPABILITIES) == {"variance", "changed_cells", "distance_field", "colors"}
+
+
+def test_registry_lists_builds_and_rejects():
+    names = available_maps()
+    assert {"octree", "color-octree", "grid", "bgk", "akimap", "knn"} <= set(names)
+    assert set(available_maps(dims=3)) <= set(names)
+    assert map_type("octree").cls is occgp.OccupancyOctree
+    assert map_type("akimap").defaults == {"random_state": 0}
+    assert make_map("akimap").random_state == 0
+    assert make_map("akimap", random_state=3).random_state == 3
+    with pytest.raises(ValueError, match=r"unknown map type 'nope'; available: octree"):
+        make_map("nope")
+    with pytest.raises(ValueError, match=r"the 'octree' map takes no parameter 'k'"):
+        make_map("octree", k=3)
+    with pytest.raises(ValueError, match="dims must be 2, 3 or None"):
+        available_maps(dims=4)
+    with pytest.raises(TypeError, match="name must be a str"):
+        register(3)
+    with pytest.raises(ValueError, match="name must be lower-case"):
+        register("Bad Name")
+    with pytest.raises(ValueError, match="dims must be 2, 3"):
+        register("x", dims=5)
+    with pytest.raises(ValueError, match="formats must be file suffixes"):
+        register("x", formats=("npz",))
+    with pytest.raises(ValueError, match="map type 'octree' is taken by occgp.octree"):
+        register("octree")(type("Other", (), {}))
+    assert "octree" in map_methods() and "color-octree" not in map_methods()
+
+
+def test_a_new_map_type_is_one_module_and_one_line(toy, tmp_path, capsys):
+    assert "toy" in available_maps(dims=3) and "toy" in map_methods()
+    m = make_map("toy", resolution=0.2)
+    assert isinstance(m, toy) and isinstance(m, OccupancyMap)
+    # occgp map builds it from scan files, in its own format and as an octree
+    points, origin = _wall_scan()
+    occgp.datasets.write_pcd(tmp_path / "scan.pcd", points)
+    for out in ("toy.npz", "toy.bt"):
+        assert main(["map", str(tmp_path / "scan.pcd"), "-o", str(tmp_path / out),
+                     "--method", "toy", "--resolution", "0.2", "--no-progress"]) == 0
+    assert "→" in capsys.readouterr().out
+    back = toy.load(tmp_path / "toy.npz")
+    np.testing.assert_array_equal(back.occupancy(points),
+                                  make_map("toy", resolution=0.2)
+                                  .insert_scan(points, origin).occupancy(points))
+    tree = occgp.OccupancyOctree.load(tmp_path / "toy.bt")
+    assert tree.is_occupied(points).all()
+    # the evaluation harness builds and scores it by name, beside the octree
+    test = occgp.evaluation.TestSet(np.vstack([points, [[1.0, 0.0, 0.0]]]),
+                                    np.r_[np.ones(len(points), bool), False])
+    rows = occgp.evaluation.compare_methods(
+        {"toy": lambda: make_map("toy", resolution=0.2),
+         "octree": lambda: make_map("octree", resolution=0.2)},
+        [(points, origin)], test, progress=False)
+    assert [r.method for r in rows] == ["toy", "octree"]
+    assert rows[0].auc == pytest.approx(rows[0].auc) and 0.0 <= rows[0].mse <= 1.0
+
+
+def test_deprecated_names_warn():
+    m = occgp.OccupancyOctree(0.1).set_params()
+    m.track_changes = True
+    m.insert_scan([[1.0, 0, 0]], [0, 0, 0])
+    changes = m.changed_cells()
+    with pytest.deprecated_call(match="Changes.centers"):
+        centres = changes.centres
+    np.testing.assert_array_equal(centres, changes.centers)
+    replay = occgp.knn.ScanReplay([_wall_scan()], 0.2)
+    with pytest.deprecated_call(match="num_cells"):
+        assert replay.n_cells == replay.num_cells
+    with pytest.deprecated_call(match="centers"):
+        np.testing.assert_array_equal(replay.centres, replay.centers)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert replay.num_cells == len(replay.centers)
