@@ -58,6 +58,7 @@ import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DistributedSampler
 
+from ._range import angles_to_pixels, pixel_angles
 from .models import RangeModel, make
 
 __all__ = ["train", "train_from_yaml", "load_checkpoint", "sample_queries", "masked_l1"]
@@ -281,10 +282,8 @@ def _load_data(cfg: dict, chk: dict):
 
 def _query_table(in_model, out_model) -> torch.Tensor:
     """Input-pixel coordinates (v, u) of every target pixel centre, shape (rows * cols, 2)."""
-    from .models import _angles_to_pixels, _pixel_angles
-
-    elev, azim = _pixel_angles(out_model)
-    v, u = _angles_to_pixels(in_model, elev.ravel(), azim.ravel())
+    elev, azim = pixel_angles(out_model)
+    v, u = angles_to_pixels(in_model, elev.ravel(), azim.ravel())
     v = np.clip(v, 0, in_model.rows)
     u = np.clip(u, 0, in_model.cols)
     return torch.from_numpy(np.stack([v, u], axis=-1).astype(np.float32))
