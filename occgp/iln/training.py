@@ -58,6 +58,7 @@ import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DistributedSampler
 
+from .._validation import check_int
 from ._range import angles_to_pixels, pixel_angles
 from .models import RangeModel, make
 
@@ -116,13 +117,7 @@ def _merge(config: Any) -> dict:
 def _int(value, name, low, allow_none=False, high=None):
     if value is None and allow_none:
         return None
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
-    if value < low:
-        raise ValueError(f"{name} must be >= {low}, got {value}")
-    if high is not None and value > high:
-        raise ValueError(f"{name} must be <= {high}, got {value}")
-    return int(value)
+    return check_int(value, name, low=low, high=high, state_bounds=True)
 
 
 def _size(value, name):
