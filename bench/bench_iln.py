@@ -86,10 +86,10 @@ def hardware():
 # ------------------------------------------------------------------------------ models
 def _find_checkpoint(name):
     """The first checkpoint in occgp/iln/weights/ whose spec is model `name`, or None."""
-    import occgp.iln.models  # noqa: F401  (the weights folder lies beside it)
+    import occgp.iln
     from occgp.iln.training import load_checkpoint
 
-    folder = Path(occgp.iln.models.__file__).parent / "weights"
+    folder = Path(occgp.iln.__file__).parent / "weights"
     for path in sorted(glob.glob(str(folder / "*.pt"))):
         try:
             ckpt = load_checkpoint(path)
@@ -126,9 +126,9 @@ def small_spec(name):
     """The model spec of the shipped small configuration of `name` (occgp/iln/configs/)."""
     import yaml
 
-    import occgp.iln.models
+    import occgp.iln
 
-    path = Path(occgp.iln.models.__file__).parent / "configs" / CONFIGS[name]
+    path = Path(occgp.iln.__file__).parent / "configs" / CONFIGS[name]
     with open(path) as fh:
         return yaml.safe_load(fh)["model"]
 

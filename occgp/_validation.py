@@ -9,6 +9,7 @@ from __future__ import annotations
 import numbers
 import os
 import pathlib
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -83,14 +84,23 @@ def as_point(x: ArrayLike, name: str = "origin", dim: int = 3) -> NDArray[np.flo
 
 def check_real(value: object, name: str, *, low: float | None = None,
                high: float | None = None, low_open: bool = True,
-               high_open: bool = True) -> float:
-    """Return `value` as a float after checking it is a finite real in the given interval."""
+               high_open: bool = True, state_bounds: bool = False) -> float:
+    """Return `value` as a float after checking it is a finite real in the given interval.
+
+    The error names the interval (``"x must lie in (0.0, inf), got 0.0"``), or with
+    `state_bounds` the bounds (``"x must be a finite number > 0, got 0.0"``).
+    """
     if isinstance(value, bool) or not isinstance(value, (numbers.Real, np.floating, np.integer)):
         raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
     v = float(value)
     lo_ok = low is None or (v > low if low_open else v >= low)
     hi_ok = high is None or (v < high if high_open else v <= high)
     if not np.isfinite(v) or not lo_ok or not hi_ok:
+        if state_bounds:
+            bounds = " and ".join(f"{op} {bound:g}" for op, bound in
+                                  ((">" if low_open else ">=", low),
+                                   ("<" if high_open else "<=", high)) if bound is not None)
+            raise ValueError(f"{name} must be a finite number {bounds}".rstrip() + f", got {v}")
         lo = "-inf" if low is None else repr(low)
         hi = "inf" if high is None else repr(high)
         interval = f"{'(' if low_open else '['}{lo}, {hi}{')' if high_open else ']'}"
@@ -114,14 +124,24 @@ def check_resolution(value: object, name: str = "resolution") -> float:
 
 
 def check_int(value: object, name: str, *, low: int | None = None,
-              high: int | None = None) -> int:
-    """Return `value` as an int after checking it is an integer (not a bool) in [low, high]."""
+              high: int | None = None, state_bounds: bool = False) -> int:
+    """Return `value` as an int after checking it is an integer (not a bool) in [low, high].
+
+    The errors name the kind of int (``"n must be a positive int, got 0"``), or with
+    `state_bounds` the bound that fails (``"n must be an int"``, ``"n must be >= 1, got 0"``).
+    """
     kind = {0: "a non-negative int", 1: "a positive int"}.get(low, "an int") \
-        if low is not None else "an int"
+        if low is not None and not state_bounds else "an int"
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral,
                                                                      np.integer)):
         raise TypeError(f"{name} must be {kind}, got {type(value).__name__}")
     v = int(value)
+    if state_bounds:
+        if low is not None and v < low:
+            raise ValueError(f"{name} must be >= {low}, got {v}")
+        if high is not None and v > high:
+            raise ValueError(f"{name} must be <= {high}, got {v}")
+        return v
     if (low is not None and v < low) or (high is not None and v > high):
         if high is None:
             raise ValueError(f"{name} must be {kind}, got {v}")
@@ -138,8 +158,14 @@ def check_bool(value: object, name: str) -> bool:
     return bool(value)
 
 
-def check_choice(value: object, name: str, choices: tuple[str, ...]) -> str:
-    """Return `value` after checking it is one of the strings `choices`."""
+def check_choice(value: object, name: str, choices: Sequence[str], *,
+                 strict_type: bool = False) -> str:
+    """Return `value` after checking it is one of the strings `choices`.
+
+    A value that is not a str raises ValueError, or TypeError with `strict_type`.
+    """
+    if strict_type and not isinstance(value, str):
+        raise TypeError(f"{name} must be one of {choices}, got {type(value).__name__}")
     if not isinstance(value, str) or value not in choices:
         raise ValueError(f"{name} must be one of {choices}, got {value!r}")
     return value

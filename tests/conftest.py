@@ -10,7 +10,7 @@ DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 
 if importlib.util.find_spec("torch") is None:  # occgp.iln's torch modules need the extra
     collect_ignore = [str(Path(__file__).resolve().parents[1] / "occgp" / "iln" / name)
-                      for name in ("models.py", "training.py")]
+                      for name in ("models", "training.py")]
 
 
 def data_path(*parts: str) -> Path:

@@ -134,7 +134,8 @@ def no_torch(monkeypatch):
     import sys
     monkeypatch.setitem(sys.modules, "torch", None)
     for name in list(sys.modules):
-        if name.startswith("torch.") or name in ("occgp.iln.models", "occgp.iln.training"):
+        if name.startswith(("torch.", "occgp.iln.models.")) or name in ("occgp.iln.models",
+                                                                        "occgp.iln.training"):
             monkeypatch.delitem(sys.modules, name)
 
 

@@ -148,9 +148,9 @@ def test_small_config_is_valid(name):
     yaml = pytest.importorskip("yaml")
     from pathlib import Path
 
-    import occgp.iln.models
+    import occgp.iln
 
-    path = Path(occgp.iln.models.__file__).parent / "configs" / name
+    path = Path(occgp.iln.__file__).parent / "configs" / name
     cfg = yaml.safe_load(path.read_text())
     from occgp.iln.training import _check_config, _merge
 

@@ -73,7 +73,7 @@ def _quadric_interval(a, b, c):
     return t0, t1
 
 
-def _first_hit(t0, t1):
+def first_hit(t0, t1):
     """First non-negative parameter of the interval, +inf where it is missed."""
     start = np.maximum(t0, 0.0)
     return np.where((t1 >= start) & (t0 <= t1), start, _INF)
@@ -117,7 +117,7 @@ class _Solid:
     def intersect(self, origins, directions):
         """First hit parameter along unit `directions` (+inf where missed)."""
         t0, t1 = self._interval(self._to_local(origins), self._dirs_to_local(directions))
-        return _first_hit(t0, t1)
+        return first_hit(t0, t1)
 
 
 class Box(_Solid):

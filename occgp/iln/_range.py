@@ -408,6 +408,40 @@ class LidarModel:
         return high - v * (high - low) / self.rows, h / 2 - u * h / self.cols
 
 
+def pixel_angles(model) -> tuple[np.ndarray, np.ndarray]:
+    """Elevation and azimuth grids (rows, cols) of the pixel centres of `model`, degrees.
+
+    `model` is a :class:`LidarModel` or any object with its ``rows``, ``cols``,
+    ``vertical_fov`` and ``horizontal_fov`` (the models of occgp.iln.models accept both).
+    """
+    if hasattr(model, "pixel_angles"):
+        elev, azim = model.pixel_angles()
+        return np.asarray(elev, dtype=np.float64), np.asarray(azim, dtype=np.float64)
+    low, high = (float(a) for a in model.vertical_fov)
+    hfov = float(model.horizontal_fov)
+    rows, cols = model.rows, model.cols
+    e = high - (np.arange(rows) + 0.5) * (high - low) / rows
+    a = hfov / 2 - (np.arange(cols) + 0.5) * hfov / cols
+    return np.broadcast_to(e[:, None], (rows, cols)), np.broadcast_to(a[None], (rows, cols))
+
+
+def angles_to_pixels(model, elev: np.ndarray, azim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fractional ``(v, u)`` of angles (degrees) in `model` (pixel centres at integer + 0.5).
+
+    `model` as in :func:`pixel_angles`; ``u`` wraps around for a 360-degree model.
+    """
+    if hasattr(model, "angles_to_pixels"):
+        v, u = model.angles_to_pixels(elev, azim)
+        return np.asarray(v, dtype=np.float64), np.asarray(u, dtype=np.float64)
+    low, high = (float(a) for a in model.vertical_fov)
+    hfov = float(model.horizontal_fov)
+    v = (high - elev) * model.rows / (high - low)
+    u = (hfov / 2 - ((azim + 180.0) % 360.0 - 180.0)) * model.cols / hfov
+    if hfov >= 360.0:
+        u = np.mod(u, model.cols)
+    return v, u
+
+
 def _finite(x, name):
     arr = np.asarray(as_numeric(x, name), dtype=np.float64)
     if not np.isfinite(arr).all():

@@ -38,8 +38,9 @@ import zlib
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import as_numeric, as_path, check_bool, check_int, check_n_jobs
-from ..datasets._geometry import Box, Ellipsoid, Frustum, _first_hit
+from .._validation import as_path, check_bool, check_int, check_n_jobs
+from ..datasets._geometry import Box, Ellipsoid, Frustum, first_hit
+from ._common import as_pose
 from ._range import LidarModel
 
 __all__ = ["simulate_range_image", "make_dataset", "load_shards", "parse_size", "ShardImages",
@@ -60,7 +61,6 @@ _SHARD_KEYS = ("lidar", "seeds", "poses", "format", "version")
 _CHUNK = 8  # poses simulated per task of make_dataset
 #: Most bytes of images one shard of make_dataset holds (uncompressed).
 MAX_SHARD_BYTES = 2**31
-_ORTHO_TOL = 1e-6
 
 
 def _key(size):
@@ -121,45 +121,6 @@ def _parse_sizes(sizes, name="sizes"):
 # --------------------------------------------------------------------------- #
 # ray casting
 # --------------------------------------------------------------------------- #
-def _as_pose(pose):
-    """A checked (4, 4) sensor-to-world pose from a 4x4 array or (origin, heading)."""
-    if isinstance(pose, tuple) and len(pose) == 2:
-        origin = as_numeric(pose[0], "pose origin")
-        if origin.shape != (3,):
-            raise ValueError(f"pose origin must have shape (3,), got {origin.shape}")
-        heading = pose[1]
-        if isinstance(heading, (bool, np.bool_)) or not np.isscalar(heading) or \
-                not isinstance(heading, (int, float, np.integer, np.floating)):
-            raise TypeError(f"pose heading must be a real number (radians), got "
-                            f"{type(heading).__name__}")
-        origin = origin.astype(np.float64)
-        heading = float(heading)
-        if not (np.isfinite(origin).all() and np.isfinite(heading)):
-            raise ValueError("pose origin and heading must be finite")
-        c, s = np.cos(heading), np.sin(heading)
-        out = np.eye(4)
-        out[:2, :2] = [[c, -s], [s, c]]
-        out[:3, 3] = origin
-    else:
-        out = as_numeric(pose, "pose")
-        if out.shape != (4, 4):
-            raise ValueError(f"pose must be a (4, 4) sensor-to-world matrix or an "
-                             f"(origin, heading) pair, got shape {out.shape}")
-        out = out.astype(np.float64)
-        if not np.isfinite(out).all():
-            raise ValueError("pose must be finite (no NaN or inf)")
-        rot = out[:3, :3]
-        if not (np.allclose(out[3], [0, 0, 0, 1], atol=0, rtol=0)
-                and np.abs(rot @ rot.T - np.eye(3)).max() <= _ORTHO_TOL
-                and np.linalg.det(rot) > 0):
-            raise ValueError("pose must be a rigid transform: an orthonormal rotation with "
-                             "determinant 1 (to 1e-6) and last row [0, 0, 0, 1]")
-    if np.abs(out[:3, 3]).max() > 1e7:
-        raise ValueError(f"pose translation must have coordinates of magnitude at most 1e7 m, "
-                         f"got {out[:3, 3].tolist()}")
-    return out
-
-
 def _interval(lo, hi, n, start, step):
     """Indices k in [0, n) with ``start + (k + 0.5) * step`` in [lo, hi] (step may be < 0)."""
     a = (lo - start) / step - 0.5
@@ -198,7 +159,7 @@ def _intersect(solid, origin, directions):
     o = ((origin - solid.center) @ rot)[None]
     d = directions if np.array_equal(rot, np.eye(3)) else np.dot(directions, rot)
     t0, t1 = solid._interval(o, d)
-    return _first_hit(t0, t1)
+    return first_hit(t0, t1)
 
 
 def _cropped_columns(arc, model):
@@ -265,7 +226,7 @@ def simulate_range_image(scene, pose, model: LidarModel) -> NDArray[np.float32]:
     """
     if not isinstance(model, LidarModel):
         raise TypeError(f"model must be a LidarModel, got {type(model).__name__}")
-    pose = _as_pose(pose)
+    pose = as_pose(pose)
     rot, origin = pose[:3, :3], pose[:3, 3]
     # np.dot: numpy's matmul is several times slower for (n, 3) x (3, 3)
     dirs = np.dot(model.directions(), rot.T)  # (rows, cols, 3) in the world frame

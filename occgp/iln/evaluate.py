@@ -10,7 +10,6 @@ and IoU, precision, recall and F1 of the 3D points on a 0.1 m voxel grid
 
 from __future__ import annotations
 
-import re
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -18,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_numeric, check_real
+from ._common import as_size, out_model, predict_image, resolve_models
 from ._range import LidarModel, range_image_to_points
 from .metrics import range_mae, voxel_scores
 
@@ -31,29 +31,6 @@ _LABELS = {"mae": "MAE", "iou": "IoU", "precision": "Precision", "recall": "Reca
            "f1": "F1"}
 
 
-def _size(size, name):
-    """``(rows, cols)`` from a pair or a string ``"64x1024"`` / ``"r64x1024"``."""
-    if isinstance(size, str):
-        m = re.fullmatch(r"\s*r?(\d+)\s*[xX]\s*(\d+)\s*", size)
-        if not m:
-            raise ValueError(f"{name} must be a (rows, cols) pair or a string like '64x1024', "
-                             f"got {size!r}")
-        rows, cols = int(m.group(1)), int(m.group(2))
-    else:
-        try:
-            rows, cols = size
-        except (TypeError, ValueError):
-            raise TypeError(f"{name} must be a (rows, cols) pair or a string like '64x1024', "
-                            f"got {size!r}") from None
-        if isinstance(rows, (bool, np.bool_)) or isinstance(cols, (bool, np.bool_)) or not (
-                isinstance(rows, (int, np.integer)) and isinstance(cols, (int, np.integer))):
-            raise TypeError(f"{name} must hold two ints, got {size!r}")
-        rows, cols = int(rows), int(cols)
-    if rows < 1 or cols < 1:
-        raise ValueError(f"{name} must be positive (rows, cols), got ({rows}, {cols})")
-    return rows, cols
-
-
 def _images(test_images, sizes):
     """Checked ``{(rows, cols): float32 array (n, rows, cols)}`` for each of `sizes`."""
     if not isinstance(test_images, Mapping):
@@ -61,7 +38,7 @@ def _images(test_images, sizes):
                         f"load_shards' result, got {type(test_images).__name__}")
     by_size = {}
     for key, value in test_images.items():
-        size = _size(key, f"test_images key {key!r}")
+        size = as_size(key, f"test_images key {key!r}")
         if size in by_size:
             raise ValueError(f"test_images holds size {size[0]}x{size[1]} twice")
         by_size[size] = value
@@ -85,33 +62,6 @@ def _images(test_images, sizes):
         if (arr < 0).any():
             raise ValueError(f"{name} must hold ranges >= 0 (0.0 marks no return)")
         out[size] = arr
-    return out
-
-
-def _models(models, lidar, device, caller="evaluate"):
-    from .upsample import _resolve
-
-    if isinstance(models, str):
-        models = [models]
-    if isinstance(models, Mapping):
-        items = list(models.items())
-    elif isinstance(models, (list, tuple)):
-        items = []
-        for m in models:
-            if not isinstance(m, str):
-                raise TypeError(f"models given as a list must hold names; pass a dict "
-                                f"name -> model for models, got {type(m).__name__}")
-            items.append((m, m))
-    else:
-        raise TypeError(f"models must be a dict name -> model (or name), or a list of names, "
-                        f"got {type(models).__name__}")
-    if not items:
-        raise ValueError("models must name at least one model, got none")
-    out = {}
-    for name, model in items:
-        if not isinstance(name, str):
-            raise TypeError(f"models keys must be str, got {type(name).__name__}")
-        out[name] = _resolve(model, lidar, device, caller)
     return out
 
 
@@ -196,16 +146,14 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
     """
     from tqdm.auto import tqdm
 
-    from .upsample import _out_model, _predict
-
-    in_size = _size(in_size, "in_size")
+    in_size = as_size(in_size, "in_size")
     if isinstance(out_sizes, str) or (isinstance(out_sizes, tuple) and len(out_sizes) == 2
                                       and all(isinstance(s, (int, np.integer))
                                               for s in out_sizes)):
         out_sizes = [out_sizes]                   # one size
     if not hasattr(out_sizes, "__iter__"):
         raise TypeError(f"out_sizes must be a sequence of sizes, got {type(out_sizes).__name__}")
-    out_sizes = [_size(s, f"out_sizes[{i}]") for i, s in enumerate(out_sizes)]
+    out_sizes = [as_size(s, f"out_sizes[{i}]") for i, s in enumerate(out_sizes)]
     if not out_sizes:
         raise ValueError("out_sizes must hold at least one size")
     if len(set(out_sizes)) != len(out_sizes):
@@ -221,7 +169,7 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
         if arr.max() > lidar.max_range:
             raise ValueError(f"test_images[{size[0]}x{size[1]}] holds ranges up to "
                              f"{arr.max():g} m, beyond lidar.max_range = {lidar.max_range:g}")
-    nets = _models(models, lidar, device)
+    nets = resolve_models(models, lidar, device)
     low = images[in_size]
     n = len(low)
     rows = []
@@ -229,14 +177,14 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
                else not progress, desc="evaluate", unit="image")
     try:
         for size in out_sizes:
-            out_lidar = _out_model(lidar, *size)
+            out_lidar = out_model(lidar, *size)
             truth = images[size]
             for name, net in nets.items():
                 sums = dict.fromkeys(METRICS, 0.0)
                 counted, seconds = 0, 0.0
                 for k in range(n):
                     t0 = time.perf_counter()
-                    pred = _predict(net, low[k], in_lidar, out_lidar)
+                    pred = predict_image(net, low[k], in_lidar, out_lidar)
                     seconds += time.perf_counter() - t0
                     bar.update()
                     if not (truth[k] > 0).any():

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import check_bool, check_int, check_real
+from ._common import as_pose, as_size, out_model, predict_image, resolve_models
 from ._range import LidarModel, range_image_to_points
 
 __all__ = ["mapping_experiment", "format_mapping_table", "DEFAULT_SIZES"]
@@ -36,7 +37,7 @@ _COLUMNS = (("method", "Map from", "s"), ("n_points", "points/scan", "d"),
 def _check_scene(scene, poses, n_scans):
     """The scene and its (n, 4, 4) sensor-to-world poses."""
     from ..datasets import outdoor_scene
-    from .data import TEST_SEED_OFFSET, _as_pose
+    from .data import TEST_SEED_OFFSET
 
     if scene is None:
         scene = outdoor_scene(TEST_SEED_OFFSET)
@@ -57,7 +58,7 @@ def _check_scene(scene, poses, n_scans):
         checked = []
         for i, p in enumerate(arr):
             try:
-                checked.append(_as_pose(p))
+                checked.append(as_pose(p))
             except (TypeError, ValueError) as exc:
                 raise type(exc)(f"poses[{i}]: {exc}") from None
         poses = np.stack(checked)
@@ -203,15 +204,13 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
     from .. import OccupancyOctree
     from ..evaluation import evaluate_map
     from .data import simulate_range_image
-    from .evaluate import _models, _size
-    from .upsample import _out_model, _predict
 
     models = {"ILN": "pretrained"} if models is None else models
     n_scans = check_int(n_scans, "n_scans", low=1, high=1000)
     lidar = LidarModel.carla() if lidar is None else lidar
     if not isinstance(lidar, LidarModel):
         raise TypeError(f"lidar must be a LidarModel (occgp.iln), got {type(lidar).__name__}")
-    in_size = _size(in_size, "in_size")
+    in_size = as_size(in_size, "in_size")
 
     def size_list(value, name, allow_empty):
         if isinstance(value, str) or (isinstance(value, tuple) and len(value) == 2 and all(
@@ -219,18 +218,18 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
             value = [value]
         if not hasattr(value, "__iter__"):
             raise TypeError(f"{name} must be a sequence of sizes, got {type(value).__name__}")
-        out = [_size(s, f"{name}[{i}]") for i, s in enumerate(value)]
+        out = [as_size(s, f"{name}[{i}]") for i, s in enumerate(value)]
         if not out and not allow_empty:
             raise ValueError(f"{name} must hold at least one size")
         if len(set(out)) != len(out):
             raise ValueError(f"{name} must not repeat a size, got {['%dx%d' % s for s in out]}")
         for s in out:
-            _out_model(lidar, *s)               # checks the pixel count
+            out_model(lidar, *s)               # checks the pixel count
         return out
 
     sizes = size_list(sizes, "sizes", True)
     truth_sizes = size_list(truth_sizes, "truth_sizes", False)
-    _out_model(lidar, *in_size)
+    out_model(lidar, *in_size)
     resolution = check_real(resolution, "resolution", low=0.0, high=10.0, high_open=False)
     if resolution < 1e-3:
         raise ValueError(f"resolution must lie in [0.001, 10] m, got {resolution!r}")
@@ -239,7 +238,7 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
                             high_open=False)
     seed = check_int(seed, "seed", low=0)
     keep_maps = check_bool(keep_maps, "keep_maps")
-    nets = _models(models, lidar, device, "mapping_experiment") if (not hasattr(models, "__len__") or len(models)) \
+    nets = resolve_models(models, lidar, device, "mapping_experiment") if (not hasattr(models, "__len__") or len(models)) \
         else {}
     scene, poses = _check_scene(scene, poses, n_scans)
     n = len(poses)
@@ -270,7 +269,7 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
             for image, pose in zip(images, poses):
                 t0 = time.perf_counter()
                 if net is not None:
-                    image = _predict(net, image, in_lidar, out_lidar)
+                    image = predict_image(net, image, in_lidar, out_lidar)
                 points = range_image_to_points(image, out_lidar)
                 t1 = time.perf_counter()
                 tree.insert_scan(_world(points, pose), pose[:3, 3], method="auto")

@@ -58,6 +58,8 @@ import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DistributedSampler
 
+from .._validation import check_int
+from ._range import angles_to_pixels, pixel_angles
 from .models import RangeModel, make
 
 __all__ = ["train", "train_from_yaml", "load_checkpoint", "sample_queries", "masked_l1"]
@@ -115,13 +117,7 @@ def _merge(config: Any) -> dict:
 def _int(value, name, low, allow_none=False, high=None):
     if value is None and allow_none:
         return None
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
-    if value < low:
-        raise ValueError(f"{name} must be >= {low}, got {value}")
-    if high is not None and value > high:
-        raise ValueError(f"{name} must be <= {high}, got {value}")
-    return int(value)
+    return check_int(value, name, low=low, high=high, state_bounds=True)
 
 
 def _size(value, name):
@@ -281,10 +277,8 @@ def _load_data(cfg: dict, chk: dict):
 
 def _query_table(in_model, out_model) -> torch.Tensor:
     """Input-pixel coordinates (v, u) of every target pixel centre, shape (rows * cols, 2)."""
-    from .models import _angles_to_pixels, _pixel_angles
-
-    elev, azim = _pixel_angles(out_model)
-    v, u = _angles_to_pixels(in_model, elev.ravel(), azim.ravel())
+    elev, azim = pixel_angles(out_model)
+    v, u = angles_to_pixels(in_model, elev.ravel(), azim.ravel())
     v = np.clip(v, 0, in_model.rows)
     u = np.clip(u, 0, in_model.cols)
     return torch.from_numpy(np.stack([v, u], axis=-1).astype(np.float32))

@@ -15,41 +15,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_numeric, check_bool, check_int
+from .._validation import as_numeric, check_bool
+from ._common import MAX_OUTPUT_PIXELS, MODEL_NAMES, out_model, predict_image, resolve
 from ._range import LidarModel, points_to_range_image, range_image_to_points
 
 __all__ = ["upsample", "upsample_range_image", "resolve_model", "MAX_OUTPUT_PIXELS",
            "MODEL_NAMES"]
-
-#: Largest up-sampled image, pixels (e.g. 512 x 8192): bounds the memory of one call.
-MAX_OUTPUT_PIXELS = 2 ** 22
-#: Model names :func:`resolve_model` accepts.
-MODEL_NAMES = ("bilinear", "inverse-bilinear", "pretrained")
-
-
-def _torch_models(name):
-    """``(RangeModel, make)`` of occgp.iln.models, or the ImportError of a missing torch."""
-    try:
-        from .models import RangeModel, make
-    except ModuleNotFoundError as exc:
-        if exc.name != "torch":
-            raise
-        raise ImportError(f"occgp.iln.{name} needs PyTorch: pip install 'occgp[iln]' (after "
-                          f"pip install torch==2.13.0 on CPU machines)") from None
-    return RangeModel, make
-
-
-def _pretrained():
-    try:
-        from . import pretrained
-    except ImportError:
-        pretrained = None
-    if not callable(pretrained):
-        raise OSError("model='pretrained' needs occgp.iln.pretrained() and its shipped weights "
-                      "(occgp/iln/weights/), which this installation lacks; pass a trained "
-                      "model (occgp.iln.models.make(spec, load_sd=True)) or 'bilinear'")
-    return pretrained()
-
 
 def resolve_model(model: Any, lidar: LidarModel | None = None, device: Any = None):
     """The range-image model that a name or a model stands for.
@@ -84,40 +55,13 @@ def resolve_model(model: Any, lidar: LidarModel | None = None, device: Any = Non
     ImportError
         If PyTorch is not installed.
     """
-    return _resolve(model, lidar, device, "resolve_model")
-
-
-def _resolve(model, lidar, device, caller):
-    RangeModel, make = _torch_models(caller)
-    if isinstance(model, str):
-        if model in ("bilinear", "inverse-bilinear"):
-            args = {} if lidar is None else {"max_range": float(lidar.max_range)}
-            built = make({"name": model, "args": args})
-        elif model == "pretrained":
-            built = _pretrained()
-        else:
-            raise ValueError(f"model must be one of {MODEL_NAMES} or an occgp.iln model, "
-                             f"got {model!r}")
-        return built.to(device) if device is not None else built
-    if not isinstance(model, RangeModel):
-        raise TypeError(f"model must be one of {MODEL_NAMES} or an occgp.iln model "
-                        f"(occgp.iln.models.make), got {type(model).__name__}")
-    return model
+    return resolve(model, lidar, device, "resolve_model")
 
 
 def _check_lidar(lidar, name="lidar"):
     if not isinstance(lidar, LidarModel):
         raise TypeError(f"{name} must be a LidarModel (occgp.iln), got {type(lidar).__name__}")
     return lidar
-
-
-def _out_model(lidar, rows, cols):
-    rows = check_int(rows, "rows", low=1)
-    cols = check_int(cols, "cols", low=1)
-    if rows * cols > MAX_OUTPUT_PIXELS:
-        raise ValueError(f"rows * cols must be at most {MAX_OUTPUT_PIXELS} pixels, got "
-                         f"{rows} x {cols} = {rows * cols}")
-    return lidar.with_size(rows, cols)
 
 
 def _input_image(data, lidar):
@@ -204,18 +148,9 @@ def upsample_range_image(range_image: ArrayLike, *, rows: int = 64, cols: int = 
             raise ValueError(f"range_image must have lidar's shape {lidar.shape}, got "
                              f"{arr.shape}")
     image, lidar = _input_image(arr, lidar if lidar is not None else LidarModel.carla(*arr.shape))
-    out_lidar = _out_model(lidar, rows, cols)
-    net = _resolve(model, lidar, device, "upsample_range_image")
-    return _predict(net, image, lidar, out_lidar)
-
-
-def _predict(net, image, lidar, out_lidar):
-    """Up-sampled image(s) (..., rows, cols) of checked input, cut to the maximum range."""
-    from .models import upsample_image
-
-    out = np.asarray(upsample_image(net, image, lidar, out_lidar), dtype=np.float32)
-    np.clip(out, 0.0, np.float32(out_lidar.max_range), out=out)
-    return out
+    out_lidar = out_model(lidar, rows, cols)
+    net = resolve(model, lidar, device, "upsample_range_image")
+    return predict_image(net, image, lidar, out_lidar)
 
 
 def upsample(points_or_range_image: ArrayLike, *, rows: int = 64, cols: int = 1024,
@@ -282,8 +217,8 @@ def upsample(points_or_range_image: ArrayLike, *, rows: int = 64, cols: int = 10
     """
     return_image = check_bool(return_image, "return_image")
     image, lidar = _input_image(points_or_range_image, lidar)
-    out_lidar = _out_model(lidar, rows, cols)
-    net = _resolve(model, lidar, device, "upsample")
-    out = _predict(net, image, lidar, out_lidar)
+    out_lidar = out_model(lidar, rows, cols)
+    net = resolve(model, lidar, device, "upsample")
+    out = predict_image(net, image, lidar, out_lidar)
     points = range_image_to_points(out, out_lidar)
     return (points, out) if return_image else points

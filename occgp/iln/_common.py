@@ -1,0 +1,180 @@
+"""Helpers shared by the front ends of occgp.iln (up-sampling, evaluation, experiment, data).
+
+Argument checks (sizes, poses) and the path from a model name to an up-sampled image:
+:func:`resolve` (a name or a model -> a model, torch imported on first use), :func:`out_model`
+(the checked output sensor) and :func:`predict_image`. numpy alone is imported here.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+
+import numpy as np
+
+from .._validation import as_numeric, check_int
+
+__all__ = ["MAX_OUTPUT_PIXELS", "MODEL_NAMES", "torch_models", "pretrained_model", "resolve",
+           "resolve_models", "out_model", "predict_image", "as_size", "as_pose"]
+
+#: Largest up-sampled image, pixels (e.g. 512 x 8192): bounds the memory of one call.
+MAX_OUTPUT_PIXELS = 2 ** 22
+#: Model names :func:`occgp.iln.upsample.resolve_model` accepts.
+MODEL_NAMES = ("bilinear", "inverse-bilinear", "pretrained")
+#: Largest deviation of a pose's rotation from orthonormal (``R R^T - I``).
+_ORTHO_TOL = 1e-6
+
+
+def torch_models(name):
+    """``(RangeModel, make)`` of occgp.iln.models, or the ImportError of a missing torch."""
+    try:
+        from .models import RangeModel, make
+    except ModuleNotFoundError as exc:
+        if exc.name != "torch":
+            raise
+        raise ImportError(f"occgp.iln.{name} needs PyTorch: pip install 'occgp[iln]' (after "
+                          f"pip install torch==2.13.0 on CPU machines)") from None
+    return RangeModel, make
+
+
+def pretrained_model():
+    """``occgp.iln.pretrained()``, or OSError when this installation has no shipped weights."""
+    try:
+        from . import pretrained
+    except ImportError:
+        pretrained = None
+    if not callable(pretrained):
+        raise OSError("model='pretrained' needs occgp.iln.pretrained() and its shipped weights "
+                      "(occgp/iln/weights/), which this installation lacks; pass a trained "
+                      "model (occgp.iln.models.make(spec, load_sd=True)) or 'bilinear'")
+    return pretrained()
+
+
+def resolve(model, lidar, device, caller):
+    """The model that a name of :data:`MODEL_NAMES` or a model stands for.
+
+    A name builds a model on `device` (``max_range`` from `lidar` when given); a model is
+    returned as it is. `caller` names the public function in the ImportError without torch.
+    """
+    RangeModel, make = torch_models(caller)
+    if isinstance(model, str):
+        if model in ("bilinear", "inverse-bilinear"):
+            args = {} if lidar is None else {"max_range": float(lidar.max_range)}
+            built = make({"name": model, "args": args})
+        elif model == "pretrained":
+            built = pretrained_model()
+        else:
+            raise ValueError(f"model must be one of {MODEL_NAMES} or an occgp.iln model, "
+                             f"got {model!r}")
+        return built.to(device) if device is not None else built
+    if not isinstance(model, RangeModel):
+        raise TypeError(f"model must be one of {MODEL_NAMES} or an occgp.iln model "
+                        f"(occgp.iln.models.make), got {type(model).__name__}")
+    return model
+
+
+def resolve_models(models, lidar, device, caller="evaluate"):
+    """``{name: model}`` of a name, a list of names or a dict name -> model (or name)."""
+    if isinstance(models, str):
+        models = [models]
+    if isinstance(models, Mapping):
+        items = list(models.items())
+    elif isinstance(models, (list, tuple)):
+        items = []
+        for m in models:
+            if not isinstance(m, str):
+                raise TypeError(f"models given as a list must hold names; pass a dict "
+                                f"name -> model for models, got {type(m).__name__}")
+            items.append((m, m))
+    else:
+        raise TypeError(f"models must be a dict name -> model (or name), or a list of names, "
+                        f"got {type(models).__name__}")
+    if not items:
+        raise ValueError("models must name at least one model, got none")
+    out = {}
+    for name, model in items:
+        if not isinstance(name, str):
+            raise TypeError(f"models keys must be str, got {type(name).__name__}")
+        out[name] = resolve(model, lidar, device, caller)
+    return out
+
+
+def out_model(lidar, rows, cols):
+    """`lidar` at the output size ``(rows, cols)``, checked against :data:`MAX_OUTPUT_PIXELS`."""
+    rows = check_int(rows, "rows", low=1)
+    cols = check_int(cols, "cols", low=1)
+    if rows * cols > MAX_OUTPUT_PIXELS:
+        raise ValueError(f"rows * cols must be at most {MAX_OUTPUT_PIXELS} pixels, got "
+                         f"{rows} x {cols} = {rows * cols}")
+    return lidar.with_size(rows, cols)
+
+
+def predict_image(net, image, lidar, out_lidar):
+    """Up-sampled image(s) (..., rows, cols) of checked input, cut to the maximum range."""
+    from .models import upsample_image
+
+    out = np.asarray(upsample_image(net, image, lidar, out_lidar), dtype=np.float32)
+    np.clip(out, 0.0, np.float32(out_lidar.max_range), out=out)
+    return out
+
+
+def as_size(size, name):
+    """``(rows, cols)`` from a pair or a string ``"64x1024"`` / ``"r64x1024"``."""
+    if isinstance(size, str):
+        m = re.fullmatch(r"\s*r?(\d+)\s*[xX]\s*(\d+)\s*", size)
+        if not m:
+            raise ValueError(f"{name} must be a (rows, cols) pair or a string like '64x1024', "
+                             f"got {size!r}")
+        rows, cols = int(m.group(1)), int(m.group(2))
+    else:
+        try:
+            rows, cols = size
+        except (TypeError, ValueError):
+            raise TypeError(f"{name} must be a (rows, cols) pair or a string like '64x1024', "
+                            f"got {size!r}") from None
+        if isinstance(rows, (bool, np.bool_)) or isinstance(cols, (bool, np.bool_)) or not (
+                isinstance(rows, (int, np.integer)) and isinstance(cols, (int, np.integer))):
+            raise TypeError(f"{name} must hold two ints, got {size!r}")
+        rows, cols = int(rows), int(cols)
+    if rows < 1 or cols < 1:
+        raise ValueError(f"{name} must be positive (rows, cols), got ({rows}, {cols})")
+    return rows, cols
+
+
+def as_pose(pose):
+    """A checked (4, 4) sensor-to-world pose from a 4x4 array or (origin, heading)."""
+    if isinstance(pose, tuple) and len(pose) == 2:
+        origin = as_numeric(pose[0], "pose origin")
+        if origin.shape != (3,):
+            raise ValueError(f"pose origin must have shape (3,), got {origin.shape}")
+        heading = pose[1]
+        if isinstance(heading, (bool, np.bool_)) or not np.isscalar(heading) or \
+                not isinstance(heading, (int, float, np.integer, np.floating)):
+            raise TypeError(f"pose heading must be a real number (radians), got "
+                            f"{type(heading).__name__}")
+        origin = origin.astype(np.float64)
+        heading = float(heading)
+        if not (np.isfinite(origin).all() and np.isfinite(heading)):
+            raise ValueError("pose origin and heading must be finite")
+        c, s = np.cos(heading), np.sin(heading)
+        out = np.eye(4)
+        out[:2, :2] = [[c, -s], [s, c]]
+        out[:3, 3] = origin
+    else:
+        out = as_numeric(pose, "pose")
+        if out.shape != (4, 4):
+            raise ValueError(f"pose must be a (4, 4) sensor-to-world matrix or an "
+                             f"(origin, heading) pair, got shape {out.shape}")
+        out = out.astype(np.float64)
+        if not np.isfinite(out).all():
+            raise ValueError("pose must be finite (no NaN or inf)")
+        rot = out[:3, :3]
+        if not (np.allclose(out[3], [0, 0, 0, 1], atol=0, rtol=0)
+                and np.abs(rot @ rot.T - np.eye(3)).max() <= _ORTHO_TOL
+                and np.linalg.det(rot) > 0):
+            raise ValueError("pose must be a rigid transform: an orthonormal rotation with "
+                             "determinant 1 (to 1e-6) and last row [0, 0, 0, 1]")
+    if np.abs(out[:3, 3]).max() > 1e7:
+        raise ValueError(f"pose translation must have coordinates of magnitude at most 1e7 m, "
+                         f"got {out[:3, 3].tolist()}")
+    return out
