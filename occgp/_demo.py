@@ -112,7 +112,7 @@ def noisy_mapping_methods(resolution: float) -> dict:
     }
 
 
-def _noisy_scans(scans, *, depth_noise: float, speckle: float, seed: int) -> list:
+def noisy_scans(scans, *, depth_noise: float, speckle: float, seed: int) -> list:
     """The scans with stereo-like noise (the error model of
     :class:`occgp.datasets.StereoCamera`, on the range ``d``): each point is, with
     probability `speckle`, moved to ``U(0, 1)`` times its range on its ray (an
@@ -292,7 +292,7 @@ def demo(outdir: str | Path = "demo_out", *, resolution: float = 0.1, seed: int 
     print(format_table(rows, columns=_DEMO_COLUMNS), file=out)
 
     camera = StereoCamera()
-    noisy = _noisy_scans(scans, depth_noise=camera.depth_noise, speckle=camera.speckle,
+    noisy = noisy_scans(scans, depth_noise=camera.depth_noise, speckle=camera.speckle,
                          seed=seed)
     print(f"\nnoisy scans: the same scans with stereo-camera noise (depth noise "
           f"{camera.depth_noise:g} m x (range / 1 m)^2,\n{camera.speckle:.0%} speckle outliers "

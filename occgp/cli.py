@@ -39,7 +39,7 @@ from .knn import CDFS, KNN_PARAMS, KNNMap, check_knn_params
 from .maps import OCTREE_FORMATS, available_maps, make_map, map_type
 from .octree import OccupancyOctree
 from ._demo import (  # noqa: F401  (re-exported: occgp.cli is the demo's public home)
-    _noisy_scans, demo, gp_mapping_methods, mapping_methods, noisy_mapping_methods,
+    demo, gp_mapping_methods, mapping_methods, noisy_mapping_methods,
 )
 
 __all__ = ["main", "demo", "map_scans", "map_methods", "mapping_methods",

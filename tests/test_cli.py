@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from occgp import AKIMap, BGKMap, KNNMap, OccupancyOctree
-from occgp.cli import _noisy_scans, main, map_scans, mapping_methods, noisy_mapping_methods
+from occgp._demo import noisy_scans
+from occgp.cli import main, map_scans, mapping_methods, noisy_mapping_methods
 from occgp.datasets import Scan, read_scans, structured_room, write_pcd
 
 KERNEL_METHODS = {"BGK", "AKIMap", "AKIMap (published)"}
@@ -62,19 +63,19 @@ def test_noisy_scans_move_points_along_their_rays():
             out.append(scale)
         return np.concatenate(out)
 
-    speckled = scales(_noisy_scans(scans, depth_noise=0.0, speckle=0.1, seed=3))
+    speckled = scales(noisy_scans(scans, depth_noise=0.0, speckle=0.1, seed=3))
     moved = speckled != 1.0              # outliers: uniform between sensor and end point
     assert 0.085 < moved.mean() < 0.115 and (speckled[moved] < 1).all()
     assert abs(speckled[moved].mean() - 0.5) < 0.05
-    noisy = _noisy_scans(scans, depth_noise=0.01, speckle=0.0, seed=3)
+    noisy = noisy_scans(scans, depth_noise=0.01, speckle=0.0, seed=3)
     dist = np.concatenate([np.linalg.norm(s.points - origin, axis=1) for s in scans])
     rel = (scales(noisy) - 1) / (0.01 * dist)     # range error / (0.01 d^2) ~ N(0, 1)
     assert abs(rel.mean()) < 0.1 and 0.9 < rel.std() < 1.1
-    again = _noisy_scans(scans, depth_noise=0.01, speckle=0.0, seed=3)
+    again = noisy_scans(scans, depth_noise=0.01, speckle=0.0, seed=3)
     np.testing.assert_array_equal(again[1].points, noisy[1].points)        # seeded
-    other = _noisy_scans(scans, depth_noise=0.01, speckle=0.0, seed=4)
+    other = noisy_scans(scans, depth_noise=0.01, speckle=0.0, seed=4)
     assert not np.array_equal(other[1].points, noisy[1].points)
-    same = _noisy_scans(scans, depth_noise=0.0, speckle=0.0, seed=3)
+    same = noisy_scans(scans, depth_noise=0.0, speckle=0.0, seed=3)
     np.testing.assert_allclose(same[0].points, scans[0].points, rtol=0, atol=1e-12)
 
 

@@ -6,7 +6,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from occgp.datasets import FloorPlan2D, Scene2D, floor_plan_2d, room_2d
-from occgp.datasets._scene2d import _Circle, _path_samples, _Rect
+from occgp.datasets._scene2d import Circle, Rect, path_samples
 from occgp.gp import observations_from_scans
 
 # (n_poses, observations) of seed 0 at the default size, as floor_plan_2d's docstring
@@ -75,7 +75,7 @@ def test_same_seed_same_scene_other_seed_other_scene(plan):
 ])
 def test_path_is_clear_and_reaches_every_room(kwargs):
     scene = floor_plan_2d(**kwargs)
-    samples = _path_samples(scene.path)
+    samples = path_samples(scene.path)
     assert scene.signed_distance(samples).min() >= 0.5
     assert not scene.occupancy(samples).any()
     assert np.all(np.linalg.norm(np.diff(scene.path, axis=0), axis=1) > 0)
@@ -140,7 +140,7 @@ def test_occupancy_is_exact_on_hand_picked_points(plan):
 def test_room_walls_are_where_the_rooms_end(plan):
     t = plan.wall_thickness
     rooms_walls = [s for s, label in zip(plan.solids, plan.labels) if label.startswith("room_")]
-    assert all(isinstance(s, _Rect) and np.isclose(min(s.half), t / 2) for s in rooms_walls)
+    assert all(isinstance(s, Rect) and np.isclose(min(s.half), t / 2) for s in rooms_walls)
     # every point of a room's free box is at least its distance from the box's edge from
     # the walls: a wall never reaches into a room
     for lo, hi in plan.rooms[:5]:
@@ -156,7 +156,7 @@ def test_furniture_boxes_some_rotated_and_discs(plan):
     boxes = [s for s, label in zip(plan.solids, plan.labels) if label.startswith("box_")]
     discs = [s for s, label in zip(plan.solids, plan.labels) if label.startswith("disc_")]
     assert boxes and discs
-    assert all(isinstance(s, _Rect) for s in boxes) and all(isinstance(s, _Circle)
+    assert all(isinstance(s, Rect) for s in boxes) and all(isinstance(s, Circle)
                                                             for s in discs)
     rotated = [not np.allclose(s.rotation, np.eye(2)) for s in boxes]
     assert any(rotated) and not all(rotated)
@@ -176,7 +176,7 @@ def test_occupancy_equals_the_union_of_every_solid(make):
                              np.arange(lo[1], hi[1], 0.3)), -1).reshape(-1, 2)
     edges = []
     for s in scene.solids:                # points on, just inside and just outside edges
-        if isinstance(s, _Rect):
+        if isinstance(s, Rect):
             local = rng.uniform(-1, 1, (20, 2)) * s.half
             local[:10, 0] = np.sign(local[:10, 0]) * s.half[0]
             local[10:, 1] = np.sign(local[10:, 1]) * s.half[1]

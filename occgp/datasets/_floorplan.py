@@ -11,7 +11,7 @@ along a few hundred poses of the path gives 10,000 to 20,000 observations.
 import numpy as np
 
 from .._validation import check_int, check_real
-from ._scene2d import Scene2D, _Circle, _path_samples, _Rect
+from ._scene2d import Scene2D, Circle, path_samples, Rect
 
 __all__ = ["FloorPlan2D", "floor_plan_2d"]
 
@@ -93,7 +93,7 @@ def _wall(lo, hi, axis, line, t, gaps):
     for g0, g1 in sorted(gaps) + [(hi, hi)]:
         if g0 - a > 1e-9:
             c, h = (a + g0) / 2, (g0 - a) / 2
-            pieces.append(_Rect([c, line] if axis == 0 else [line, c],
+            pieces.append(Rect([c, line] if axis == 0 else [line, c],
                                 [h, t / 2] if axis == 0 else [t / 2, h]))
         a = g1
     return pieces
@@ -101,7 +101,7 @@ def _wall(lo, hi, axis, line, t, gaps):
 
 def _outline(solid, step=0.1):
     """Points on the boundary of a furniture solid, at most `step` apart."""
-    if isinstance(solid, _Circle):
+    if isinstance(solid, Circle):
         n = max(int(np.ceil(2 * np.pi * solid.radius / step)), 8)
         a = np.linspace(0, 2 * np.pi, n, endpoint=False)
         return solid.center + solid.radius * np.column_stack([np.cos(a), np.sin(a)])
@@ -136,7 +136,7 @@ def _furnish(rng, room, path_points, doors, count, first_box, first_disc):
             continue
         for _ in range(_ATTEMPTS):
             centre = rng.uniform(lo, hi)
-            cand = _Rect(centre, half, angle) if is_box else _Circle(centre, radius)
+            cand = Rect(centre, half, angle) if is_box else Circle(centre, radius)
             if cand.signed_distance(path_points).min() < _CLEARANCE + 0.05:
                 continue
             if len(doors) and np.any(cand.signed_distance(doors[:, :2]) < doors[:, 2] + 0.6):
@@ -361,10 +361,10 @@ def floor_plan_2d(seed: int = 0, *, width: float = 60.0, height: float = 40.0,
                 room["v_doors"][side_name] = (door_y(room, w), w)
 
     # ---- walls ----------------------------------------------------------------------
-    solids = [_Rect([x0 - t / 2, 0.0], [t / 2, height / 2 + t]),
-              _Rect([x1 + t / 2, 0.0], [t / 2, height / 2 + t]),
-              _Rect([0.0, y0 - t / 2], [width / 2 + t, t / 2]),
-              _Rect([0.0, y1 + t / 2], [width / 2 + t, t / 2])]
+    solids = [Rect([x0 - t / 2, 0.0], [t / 2, height / 2 + t]),
+              Rect([x1 + t / 2, 0.0], [t / 2, height / 2 + t]),
+              Rect([0.0, y0 - t / 2], [width / 2 + t, t / 2]),
+              Rect([0.0, y1 + t / 2], [width / 2 + t, t / 2])]
     labels = ["outer_wall_-x", "outer_wall_+x", "outer_wall_-y", "outer_wall_+y"]
     doorways = []
 
@@ -487,7 +487,7 @@ def floor_plan_2d(seed: int = 0, *, width: float = 60.0, height: float = 40.0,
         near = np.all((door_centre >= box[0] - t) & (door_centre <= box[1] + t), axis=1)
         doors = np.column_stack([door_centre[near], door_half[near]])
         pieces, names, n_box, n_disc = _furnish(
-            rng, box, _path_samples(excursions[k]), doors, furniture, n_box, n_disc)
+            rng, box, path_samples(excursions[k]), doors, furniture, n_box, n_disc)
         solids += pieces
         labels += names
 

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 
 from .._validation import as_path, check_bool
 from ._fileio import read_bytes
-from ._scan import Scan, _drop_non_finite, _make_scan
+from ._scan import Scan, drop_non_finite, make_scan
 
 __all__ = ["read_pcd", "write_pcd", "lzf_decompress", "lzf_compress_literal"]
 
@@ -419,7 +419,7 @@ def read_pcd(path, *, return_fields: bool = False):
         cols = _columns_compressed(raw, pos, dtypes, counts, n_points, path)
     xyz = np.column_stack([cols[names.index(a)][:, 0].astype(np.float64) for a in "xyz"])
     keep = np.isfinite(xyz).all(axis=1)
-    scan = Scan(_drop_non_finite(xyz, path), origin)
+    scan = Scan(drop_non_finite(xyz, path), origin)
     if not return_fields:
         return scan
     fields = {}
@@ -489,7 +489,7 @@ def write_pcd(
     if fields is not None and not isinstance(fields, dict):
         raise TypeError(f"fields must be a dict of name -> array or None, got "
                         f"{type(fields).__name__}")
-    scan = _make_scan(points, np.zeros(3) if origin is None else origin)
+    scan = make_scan(points, np.zeros(3) if origin is None else origin)
     try:
         dtype = np.dtype(dtype)
     except TypeError:

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike
 
 from ._fileio import as_path, read_bytes, read_maybe_compressed
 from ._pcd import read_pcd
-from ._scan import Scan, _drop_non_finite, _make_scan, check_origin
+from ._scan import Scan, drop_non_finite, make_scan, check_origin
 
 __all__ = [
     "BIN_LAYOUTS", "read_kitti_bin", "read_scan_graph", "write_scan_graph", "read_xyz", "read_scan_log",
@@ -215,7 +215,7 @@ def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0), *, fields=None,
     with np.errstate(over="ignore", invalid="ignore"):
         for k, axis in enumerate("xyz"):
             points[:, k] = data[axis]
-    scan = Scan(_drop_non_finite(points, path), origin)
+    scan = Scan(drop_non_finite(points, path), origin)
     if not return_fields:
         return scan
     keep = np.isfinite(points).all(axis=1)
@@ -336,7 +336,7 @@ def read_scan_graph(path) -> list:
         rotation = _quat_to_matrix(q)
         with np.errstate(over="ignore", invalid="ignore"):
             points = block["xyz"] @ rotation.T + t
-        scans.append(Scan(_drop_non_finite(points, f"{path} node {i}"), t.copy()))
+        scans.append(Scan(drop_non_finite(points, f"{path} node {i}"), t.copy()))
     n_edges = cur.uint32("the edge count")
     edges = cur.take(_EDGE, n_edges, f"{n_edges} edges")
     if n_edges and (np.any(edges["pose"]["tn"] != 3) or np.any(edges["pose"]["qn"] != 4)):
@@ -393,7 +393,7 @@ def write_scan_graph(path, scans) -> None:
             raise TypeError(
                 f"scans[{i}] must be a Scan or a (points, origin) pair, got {type(scan).__name__}"
             ) from None
-        points, origin = _make_scan(points, origin, source=f"scans[{i}].points",
+        points, origin = make_scan(points, origin, source=f"scans[{i}].points",
                                     origin_name=f"scans[{i}].origin")
         if not np.isfinite(points).all():
             raise ValueError(f"scans[{i}].points must be finite (no NaN or inf)")
@@ -504,7 +504,7 @@ def read_xyz(path, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Scan:
             f"{path}: contains NODE lines (an OctoMap scan log with poses); "
             "read it with read_scan_log"
         )
-    return Scan(_drop_non_finite(_parse_xyz(text, path), path), origin)
+    return Scan(drop_non_finite(_parse_xyz(text, path), path), origin)
 
 
 def read_scan_log(path) -> list:
@@ -572,7 +572,7 @@ def _scan_log_from_text(text, path):
         t = np.array(pose[:3])
         with np.errstate(over="ignore", invalid="ignore"):
             points = local @ _euler_to_matrix(*pose[3:]).T + t
-        scans.append(Scan(_drop_non_finite(points, f"{path} NODE on line {start + 1}"), t))
+        scans.append(Scan(drop_non_finite(points, f"{path} NODE on line {start + 1}"), t))
     return scans
 
 
@@ -739,7 +739,7 @@ def read_scans(path, *, fields=None) -> list:
         text = _text_of(path)
         if re.search(r"^\s*NODE\b", text, flags=re.MULTILINE):
             return _scan_log_from_text(text, path)
-        return [Scan(_drop_non_finite(_parse_xyz(text, path), path), np.zeros(3))]
+        return [Scan(drop_non_finite(_parse_xyz(text, path), path), np.zeros(3))]
     raise ValueError(
         f"{path}: unsupported scan file suffix {''.join(path.suffixes)!r}; expected .pcd, "
         ".bin, .graph, .xyz/.txt/.dat/.log (optionally .bz2/.gz/.xz) or a directory"

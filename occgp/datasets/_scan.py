@@ -60,11 +60,11 @@ def check_origin(origin: ArrayLike, name: str = "origin") -> NDArray[np.float64]
     return out
 
 
-def _make_scan(points: ArrayLike, origin: ArrayLike, source: str = "points",
+def make_scan(points: ArrayLike, origin: ArrayLike, source: str = "points",
                origin_name: str = "origin") -> Scan:
     """Coerce to a :class:`Scan` with C-contiguous float64 arrays, checking shapes.
 
-    The origin must be finite; points may hold NaN / inf (see :func:`_drop_non_finite`).
+    The origin must be finite; points may hold NaN / inf (see :func:`drop_non_finite`).
     """
     points = np.ascontiguousarray(_as_float_array(points, source))
     if points.ndim != 2 or points.shape[1] != 3:
@@ -72,7 +72,7 @@ def _make_scan(points: ArrayLike, origin: ArrayLike, source: str = "points",
     return Scan(points, check_origin(origin, origin_name))
 
 
-def _drop_non_finite(points, source):
+def drop_non_finite(points, source):
     """Drop the points with a NaN or inf coordinate, logging how many (PCL's habit).
 
     `points` is a float64 array of shape (n, 3); `source` names the file in the log.

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_points, check_int, check_real
-from ._scenes import _as_rays, _check_max_range
+from ._scenes import as_rays, check_max_range
 
 __all__ = ["LaserScan2D", "Scene2D", "room_2d"]
 
@@ -95,7 +95,7 @@ def _padded(lo, hi):
     return lo - pad, hi + pad
 
 
-class _Rect:
+class Rect:
     """Solid rectangle ``|x_i| <= half_i`` in a frame turned by `angle`."""
 
     def __init__(self, center, half, angle=0.0):
@@ -128,7 +128,7 @@ class _Rect:
         return np.where((t1 >= start) & (t0 <= t1), start, _INF)
 
 
-class _Circle:
+class Circle:
     """Solid disc of `radius` about `center`."""
 
     def __init__(self, center, radius):
@@ -313,8 +313,8 @@ class Scene2D:
         >>> float(d[0]), bool(hit[0])
         (9.0, True)
         """
-        origins, directions = _as_rays(origins, directions, dim=2)
-        max_range = _check_max_range(max_range)
+        origins, directions = as_rays(origins, directions, dim=2)
+        max_range = check_max_range(max_range)
         t = np.full(len(directions), np.inf)
         for solid in self.solids:
             np.minimum(t, solid.intersect(origins, directions), out=t)
@@ -417,7 +417,7 @@ class Scene2D:
                              f"{n_poses} x {n_beams}")
         fov = check_real(fov, "fov", low=0.0, high=2 * np.pi, low_open=False,
                          high_open=False)
-        max_range = _check_max_range(max_range)
+        max_range = check_max_range(max_range)
         if not np.isfinite(max_range):
             raise ValueError("max_range must be finite for a laser scan")
         noise = check_real(noise, "noise", low=0.0, low_open=False)
@@ -474,15 +474,15 @@ def room_2d(seed: int = 0) -> Scene2D:
     seed = check_int(seed, "seed", low=0)
     hx, hy, t = 11.0, 9.0, 0.2
     solids = [
-        _Rect([-hx - t / 2, 0.0], [t / 2, hy + t]),
-        _Rect([hx + t / 2, 0.0], [t / 2, hy + t]),
-        _Rect([0.0, -hy - t / 2], [hx + t, t / 2]),
-        _Rect([0.0, hy + t / 2], [hx + t, t / 2]),
+        Rect([-hx - t / 2, 0.0], [t / 2, hy + t]),
+        Rect([hx + t / 2, 0.0], [t / 2, hy + t]),
+        Rect([0.0, -hy - t / 2], [hx + t, t / 2]),
+        Rect([0.0, hy + t / 2], [hx + t, t / 2]),
         # interior walls (doorways at y in [-2, 1] on x = -3, x in [-2.9, 2.9] at y = 2.5)
-        _Rect([-3.0, -5.5], [0.1, 3.5]),
-        _Rect([-3.0, 5.0], [0.1, 4.0]),
-        _Rect([7.0, 2.5], [4.0, 0.1]),
-        _Rect([-9.0, 3.0], [2.0, 0.1]),
+        Rect([-3.0, -5.5], [0.1, 3.5]),
+        Rect([-3.0, 5.0], [0.1, 4.0]),
+        Rect([7.0, 2.5], [4.0, 0.1]),
+        Rect([-9.0, 3.0], [2.0, 0.1]),
     ]
     labels = ["wall_-x", "wall_+x", "wall_-y", "wall_+y",
               "inner_wall_1", "inner_wall_2", "inner_wall_3", "inner_wall_4"]
@@ -491,19 +491,19 @@ def room_2d(seed: int = 0) -> Scene2D:
         [9.0, -4.0], [9.0, 0.8], [4.0, 1.2], [0.0, 1.5], [0.0, 4.0], [2.0, 7.5], [8.5, 7.5],
     ])
     objects = [
-        ("box_1", lambda dx, dy: _Rect([-8.5 + dx, -7.0 + dy], [1.2, 0.7])),
-        ("box_2", lambda dx, dy: _Rect([-8.0 + dx, 6.5 + dy], [0.8, 0.8], np.radians(30))),
-        ("box_3", lambda dx, dy: _Rect([6.0 + dx, -3.0 + dy], [1.6, 0.5], np.radians(-20))),
-        ("box_4", lambda dx, dy: _Rect([8.0 + dx, 4.5 + dy], [0.6, 1.2])),
-        ("box_5", lambda dx, dy: _Rect([-1.0 + dx, -7.6 + dy], [1.0, 0.5], np.radians(15))),
-        ("disc_1", lambda dx, dy: _Circle([-7.0 + dx, -1.5 + dy], 0.6)),
-        ("disc_2", lambda dx, dy: _Circle([2.5 + dx, -3.0 + dy], 0.8)),
-        ("disc_3", lambda dx, dy: _Circle([6.0 + dx, -0.5 + dy], 0.5)),
-        ("disc_4", lambda dx, dy: _Circle([-1.0 + dx, 6.5 + dy], 0.8)),
-        ("disc_5", lambda dx, dy: _Circle([-6.0 + dx, 6.0 + dy], 0.5)),
+        ("box_1", lambda dx, dy: Rect([-8.5 + dx, -7.0 + dy], [1.2, 0.7])),
+        ("box_2", lambda dx, dy: Rect([-8.0 + dx, 6.5 + dy], [0.8, 0.8], np.radians(30))),
+        ("box_3", lambda dx, dy: Rect([6.0 + dx, -3.0 + dy], [1.6, 0.5], np.radians(-20))),
+        ("box_4", lambda dx, dy: Rect([8.0 + dx, 4.5 + dy], [0.6, 1.2])),
+        ("box_5", lambda dx, dy: Rect([-1.0 + dx, -7.6 + dy], [1.0, 0.5], np.radians(15))),
+        ("disc_1", lambda dx, dy: Circle([-7.0 + dx, -1.5 + dy], 0.6)),
+        ("disc_2", lambda dx, dy: Circle([2.5 + dx, -3.0 + dy], 0.8)),
+        ("disc_3", lambda dx, dy: Circle([6.0 + dx, -0.5 + dy], 0.5)),
+        ("disc_4", lambda dx, dy: Circle([-1.0 + dx, 6.5 + dy], 0.8)),
+        ("disc_5", lambda dx, dy: Circle([-6.0 + dx, 6.0 + dy], 0.5)),
     ]
     rng = np.random.default_rng(seed) if seed else None
-    samples = _path_samples(path)
+    samples = path_samples(path)
     for label, build in objects:
         solid = build(0.0, 0.0)
         if rng is not None:
@@ -517,7 +517,7 @@ def room_2d(seed: int = 0) -> Scene2D:
     return Scene2D(solids, labels, ([-hx, -hy], [hx, hy]), t, path)
 
 
-def _path_samples(path, step=0.05):
+def path_samples(path, step=0.05):
     """Points every `step` metres along a polyline (for clearance checks)."""
     out = [path[:1]]
     for a, b in zip(path[:-1], path[1:]):

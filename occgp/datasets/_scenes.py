@@ -44,7 +44,7 @@ _CLEARANCE = 0.3  # minimum distance from a sensor position to any object
 MAX_POSES = 10_000  # most sensor poses Scene.poses places
 
 
-def _as_rays(origins, directions, dim=3):
+def as_rays(origins, directions, dim=3):
     """Validate rays: returns (origins (n, dim), unit directions (n, dim))."""
     directions = as_points(directions, "directions", dim)
     origins = as_numeric(origins, "origins")
@@ -65,7 +65,7 @@ def _as_rays(origins, directions, dim=3):
     return origins, unit / np.linalg.norm(unit, axis=1, keepdims=True)
 
 
-def _check_max_range(max_range):
+def check_max_range(max_range):
     if isinstance(max_range, (bool, np.bool_)) or not isinstance(
             max_range, (numbers.Real, np.floating, np.integer)):
         raise TypeError(f"max_range must be a real number, got {type(max_range).__name__}")
@@ -238,8 +238,8 @@ class Scene:
         >>> float(d[0]), bool(hit[0])
         (1.0, True)
         """
-        origins, directions = _as_rays(origins, directions)
-        max_range = _check_max_range(max_range)
+        origins, directions = as_rays(origins, directions)
+        max_range = check_max_range(max_range)
         t = np.full(len(directions), np.inf)
         for solid in self.solids:
             np.minimum(t, solid.intersect(origins, directions), out=t)
@@ -382,7 +382,7 @@ class Scene:
         noise = float(noise)
         if not noise >= 0:
             raise ValueError(f"noise must be non-negative, got {noise}")
-        max_range = _check_max_range(max_range)
+        max_range = check_max_range(max_range)
         horizontal_fov = float(horizontal_fov)
         if not 0 < horizontal_fov <= 2 * np.pi:
             raise ValueError(f"horizontal_fov must be in (0, 2 pi], got {horizontal_fov}")

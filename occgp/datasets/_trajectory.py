@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._validation import check_real
 from ._fileio import read_maybe_compressed
-from ._scan import Scan, _make_scan
+from ._scan import Scan, make_scan
 
 __all__ = ["read_kitti_poses", "read_tum_trajectory", "apply_poses"]
 
@@ -287,7 +287,7 @@ def apply_poses(scans, poses: ArrayLike, *, tol: float = _ROT_TOL) -> list:
         except (TypeError, ValueError):
             raise TypeError(f"scans[{i}] must be a Scan or a (points, origin) pair, got "
                             f"{type(item).__name__}") from None
-        checked.append(_make_scan(points, origin, f"scans[{i}].points", f"scans[{i}].origin"))
+        checked.append(make_scan(points, origin, f"scans[{i}].points", f"scans[{i}].origin"))
     poses = _check_poses(poses, len(checked), tol)
     out = []
     for scan, pose in zip(checked, poses):
