@@ -11,7 +11,6 @@ kernels over whole beams, one global model) is compared against.
 from __future__ import annotations
 
 import copy
-import numbers
 import os
 
 import numpy as np
@@ -21,15 +20,15 @@ from sklearn.base import BaseEstimator
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
+from .. import _npz_io
 from .._validation import as_numeric, as_points, check_bool, check_real
+from ._checks import check_at_least
 from ._gpr import JITTER, factorise, optimize_hyperparameters
-from ._integral import _check_kernel, as_segments
-from ._kernels import SquaredExponential, _check_bounds
+from ._integral_kernel import as_segments, check_kernel
+from ._io import GP_FORMAT, GP_VERSIONS, check_gp_fitted, gp_fitted, gp_params, read_gp
+from ._kernels import SquaredExponential, check_bounds
 from ._limits import MAX_DENSE_BYTES, MAX_RESTARTS, check_coordinates, check_dense, threads
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
-from ._gpomik import _GP_FORMAT, _GP_VERSIONS, _check_gp_fitted, _gp_fitted, _gp_params, \
-    _read_gp
-from .. import _npz_io
 
 __all__ = ["GPOM"]
 
@@ -52,14 +51,6 @@ class _PointsOnly:
 
     def table(self, kernel):
         return self._TABLE
-
-
-def _check_int(value, name, low):
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
-    if value < low:
-        raise ValueError(f"{name} must be an int >= {low}, got {value!r}")
-    return int(value)
 
 
 def _free_point_count(starts, ends, step):
@@ -201,13 +192,13 @@ class GPOM(BaseEstimator):
         self.n_jobs = n_jobs
 
     def _check_params(self):
-        kernel = SquaredExponential() if self.kernel is None else _check_kernel(self.kernel)
+        kernel = SquaredExponential() if self.kernel is None else check_kernel(self.kernel)
         check_real(self.noise, "noise", low=0.0)
-        _check_bounds(self.noise_bounds, "noise_bounds")
+        check_bounds(self.noise_bounds, "noise_bounds")
         check_real(self.free_step, "free_step", low=0.0)
         for name, low in [("n_hit_neighbors", 1), ("n_free_neighbors", 1), ("n_restarts", 0),
                           ("max_optimize", 2), ("batch_size", 1)]:
-            _check_int(getattr(self, name), name, low)
+            check_at_least(getattr(self, name), name, low)
         if self.n_restarts > MAX_RESTARTS:
             raise ValueError(f"n_restarts must be at most {MAX_RESTARTS}, got {self.n_restarts!r}")
         check_bool(self.optimizer, "optimizer")
@@ -344,17 +335,17 @@ class GPOM(BaseEstimator):
         OSError
             If the file cannot be written.
         """
-        params = _gp_params(self)
+        params = gp_params(self)
         arrays = {}
         if hasattr(self, "plsc_"):
             lml = float(self.log_marginal_likelihood_value_)
-            arrays["fitted"] = _gp_fitted({
+            arrays["fitted"] = gp_fitted({
                 "kernel_": self.kernel_, "noise_": float(self.noise_),
                 "plsc_": tuple(float(v) for v in self.plsc_),
                 "log_marginal_likelihood_value_": lml if np.isfinite(lml) else None,
                 "n_dims_": int(self.n_dims_)})
             arrays["X_train"], arrays["y_train"] = self.X_train_, self.y_train_
-        _npz_io.write_npz(path, _GP_FORMAT, _GP_VERSIONS[-1], type(self).__name__, params,
+        _npz_io.write_npz(path, GP_FORMAT, GP_VERSIONS[-1], type(self).__name__, params,
                           arrays)
         return self
 
@@ -384,7 +375,7 @@ class GPOM(BaseEstimator):
             parameters or the fitted state are not valid (NaN or inf, targets
             other than hits (+1) then free points (-1), both present).
         """
-        source, model, arrays, fitted = _read_gp(cls, path, cls._TRAIN_SPEC)
+        source, model, arrays, fitted = read_gp(cls, path, cls._TRAIN_SPEC)
         if fitted is None:
             return model
         X, y = arrays["X_train"], arrays["y_train"]
@@ -392,7 +383,7 @@ class GPOM(BaseEstimator):
         if not 1 <= X.shape[1] <= 3:
             raise ValueError(f"{source}: corrupt fitted state of a GPOM: the training points "
                              f"must have 1 to 3 dimensions, got {X.shape[1]}")
-        fitted = _check_gp_fitted(fitted, cls._FITTED, X.shape[1], source, "GPOM")
+        fitted = check_gp_fitted(fitted, cls._FITTED, X.shape[1], source, "GPOM")
         if not (0 < n_hits < len(y) and (y[:n_hits] == 1).all() and (y[n_hits:] == -1).all()):
             raise ValueError(f"{source}: corrupt fitted state of a GPOM: 'y_train' must be "
                              f"+1 (hits) then -1 (free points), both present")

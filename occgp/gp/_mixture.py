@@ -21,14 +21,15 @@ from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
 from .._validation import as_points, check_bool, check_choice, check_int, check_n_jobs, check_real
-from ._beams import _row_index, assign_beams, merge_small_clusters
+from ._beams import row_index, assign_beams, merge_small_clusters
 from ._clustering import DirichletProcessClustering
 from ._lines import LineTracking
 from ._planes import PlaneClustering
 from ._committee import COMBINE_RULES, Committee
-from ._gpomik import GPOMIK, _spatial_groups
+from ._cells import spatial_groups
+from ._gpomik import GPOMIK
 from ._gpr import optimize_shared_hyperparameters
-from ._integral import _check_quadrature, _covariance
+from ._integral_kernel import check_quadrature, covariance
 from ._limits import generator, threads
 from ._observations import Observations, make_observations
 from ._plsc import fit_plsc, plsc_proba
@@ -53,7 +54,7 @@ def hit_origins(hits, segment_starts, segment_ends):
     A hit that ends no beam is its own origin (a scan of one hit).
     """
     origins = hits.copy()
-    beam = _row_index(hits, segment_ends)
+    beam = row_index(hits, segment_ends)
     origins[beam >= 0] = segment_starts[beam[beam >= 0]]
     return origins
 
@@ -151,7 +152,7 @@ def _predict_dense(expert, X):
     mean, var = np.empty(len(X)), np.empty(len(X))
     for i in range(0, len(X), _BLOCK):
         x = X[i:i + _BLOCK]
-        k = _covariance(expert.kernel_, expert._quadrature, cell.obs.starts, cell.obs.ends, x, x,
+        k = covariance(expert.kernel_, expert._quadrature, cell.obs.starts, cell.obs.ends, x, x,
                         n_threads=expert._n_threads)
         mean[i:i + _BLOCK] = k.T @ cell.alpha
         var[i:i + _BLOCK] = np.maximum(prior - np.einsum("ij,ij->j", k, kinv @ k), 0.0)
@@ -422,7 +423,7 @@ class GPMixture(BaseEstimator):
         groups, expert_of = [], np.empty(len(obs.y), dtype=np.int64)
         for g in np.unique(merged):
             idx = np.flatnonzero(merged == g)
-            for part in sorted(_spatial_groups(obs.anchors[idx], self.max_cluster_size),
+            for part in sorted(spatial_groups(obs.anchors[idx], self.max_cluster_size),
                                key=lambda p: int(p.min())):
                 expert_of[idx[part]] = len(groups)
                 groups.append(np.sort(idx[part]))
@@ -463,7 +464,7 @@ class GPMixture(BaseEstimator):
             parts = [(o.starts, o.ends, o.y) for o in
                      (obs.take(groups[e]) for e in np.sort(order[:n_parts]))]
             kernel, noise, _ = optimize_shared_hyperparameters(
-                kernel, noise, noise_bounds, parts, _check_quadrature(template.quadrature),
+                kernel, noise, noise_bounds, parts, check_quadrature(template.quadrature),
                 n_restarts=template.n_restarts, rng=rng,
                 n_threads=threads(template.n_jobs))
         self.kernel_, self.noise_ = kernel, noise
@@ -658,7 +659,7 @@ class GPMixture(BaseEstimator):
                 cluster_experts[int(c)] = {target}
                 continue
             cluster_experts[int(c)] = set()
-            for part in sorted(_spatial_groups(new.anchors[idx], self.max_cluster_size),
+            for part in sorted(spatial_groups(new.anchors[idx], self.max_cluster_size),
                                key=lambda p: int(p.min())):
                 expert_of[idx[part]] = next_id
                 cluster_experts[int(c)].add(next_id)
@@ -719,7 +720,7 @@ def _downdated(gp, X, pos):
     """
     cell = gp.cells_[0]
     kinv = cell.inverse()
-    k = _covariance(gp.kernel_, gp._quadrature, cell.obs.starts, cell.obs.ends, X, X,
+    k = covariance(gp.kernel_, gp._quadrature, cell.obs.starts, cell.obs.ends, X, X,
                     n_threads=gp._n_threads)
     c = kinv @ k
     mean = k.T @ cell.alpha
