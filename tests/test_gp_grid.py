@@ -7,7 +7,8 @@ from scipy.special import logit
 from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 
-from occgp.gp._occupancy_grid import OccupancyGrid, _free_cells, grid_points, predict_grid
+from occgp.gp._grid_eval import grid_points, predict_grid
+from occgp.gp._occupancy_grid import OccupancyGrid, _free_cells
 
 L_HIT, L_MISS = logit(0.7), logit(0.4)
 

@@ -21,13 +21,15 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from .. import _npz_io
-from .._validation import as_numeric, as_points, check_bool, check_real
+from .._validation import as_numeric, as_points, check_bool, check_probability, check_real
+from ..maps import register
 from ._checks import check_at_least
 from ._gpr import JITTER, factorise, optimize_hyperparameters
 from ._integral_kernel import as_segments, check_kernel
 from ._io import GP_FORMAT, GP_VERSIONS, check_gp_fitted, gp_fitted, gp_params, read_gp
 from ._kernels import SquaredExponential, check_bounds
 from ._limits import MAX_DENSE_BYTES, MAX_RESTARTS, check_coordinates, check_dense, threads
+from ._map_protocol import MapProtocol
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
 
 __all__ = ["GPOM"]
@@ -89,7 +91,9 @@ def _subsample(y, size, rng):
     return np.sort(np.concatenate(chosen))
 
 
-class GPOM(BaseEstimator):
+@register("gpom", dims=(2,), formats=(".npz",),
+          description="Gaussian-process occupancy map with a local GP per query (2D)")
+class GPOM(MapProtocol, BaseEstimator):
     """Gaussian-process occupancy map with a local GP per query point.
 
     Laser beams (segments from the sensor origin to the beam end) are
@@ -140,6 +144,9 @@ class GPOM(BaseEstimator):
     n_jobs : int, default=None
         Threads for the covariance matrices and the neighbour searches
         (None: 1; -1: every core).
+    occupancy_threshold : float, default=0.5
+        :meth:`is_occupied`'s threshold: a point is occupied when its
+        probability is at least this; in (0, 1).
 
     Attributes
     ----------
@@ -157,6 +164,20 @@ class GPOM(BaseEstimator):
         PLSC's ``(a, b)``: ``p = Phi((a mu + b) / sqrt(1 + a**2 var))``.
     n_dims_ : int
         Dimension of the inputs (1, 2 or 3).
+
+    Notes
+    -----
+    **As a map** (:class:`occgp.maps.OccupancyMap`, registered as
+    ``"gpom"``): :meth:`insert_scan` turns a 2D scan into hits and beams;
+    the first scan is :meth:`fit`, and as GPOM has no incremental update,
+    each later one fits the model again on all the evidence so far (the
+    free points of earlier beams are kept as they are): a sequence of scans
+    gives the model of one :meth:`fit` on all their observations.
+    **Unknown space**: :meth:`occupancy` is NaN outside the box of the
+    training points widened by the kernel's reach (its cutoff), where
+    :meth:`predict` gives the prior. :attr:`bounds` is that box,
+    :attr:`num_cells` the number of training points, and :meth:`to_octree`
+    evaluates the model on 0.1 m cells by default.
 
     References
     ----------
@@ -177,7 +198,8 @@ class GPOM(BaseEstimator):
 
     def __init__(self, kernel=None, *, noise=0.01, noise_bounds=(1e-4, 1.0), free_step=0.5,
                  n_hit_neighbors=10, n_free_neighbors=20, optimizer=True, n_restarts=2,
-                 max_optimize=1000, random_state=None, batch_size=4096, n_jobs=None):
+                 max_optimize=1000, random_state=None, batch_size=4096, n_jobs=None,
+                 occupancy_threshold=0.5):
         self.kernel = kernel
         self.noise = noise
         self.noise_bounds = noise_bounds
@@ -190,6 +212,7 @@ class GPOM(BaseEstimator):
         self.random_state = random_state
         self.batch_size = batch_size
         self.n_jobs = n_jobs
+        self.occupancy_threshold = occupancy_threshold
 
     def _check_params(self):
         kernel = SquaredExponential() if self.kernel is None else check_kernel(self.kernel)
@@ -202,6 +225,7 @@ class GPOM(BaseEstimator):
         if self.n_restarts > MAX_RESTARTS:
             raise ValueError(f"n_restarts must be at most {MAX_RESTARTS}, got {self.n_restarts!r}")
         check_bool(self.optimizer, "optimizer")
+        check_probability(self.occupancy_threshold, "occupancy_threshold")
         threads(self.n_jobs)
         try:
             check_random_state(self.random_state)
@@ -394,6 +418,35 @@ class GPOM(BaseEstimator):
         model.log_marginal_likelihood_value_ = fitted["log_marginal_likelihood_value_"]
         model.plsc_ = tuple(float(v) for v in fitted["plsc_"])
         return model
+
+    # ---------------------------------------------------------- map protocol
+    def _fitted(self):
+        return hasattr(self, "plsc_")
+
+    def _insert(self, hits, starts, ends):
+        """Fit again on the training points so far (free points as zero-length beams) and
+        the new observations: the same model as one fit on all the observations."""
+        n_hits = int(np.count_nonzero(self.y_train_ > 0))
+        old_hits, old_free = self.X_train_[:n_hits], self.X_train_[n_hits:]
+        self.fit(np.vstack([old_hits, hits]), np.vstack([old_free, starts]),
+                 np.vstack([old_free, ends]))
+
+    def _known_bounds(self):
+        reach = np.sqrt(type(self.kernel_).cutoff2) / self.kernel_.inverse_length_scales(
+            self.n_dims_)
+        return self.X_train_.min(axis=0) - reach, self.X_train_.max(axis=0) + reach
+
+    def _known(self, X):
+        lo, hi = self._known_bounds()
+        return np.all((X >= lo) & (X <= hi), axis=1)
+
+    def _num_cells(self):
+        return len(self.X_train_)
+
+    def _nbytes(self):
+        trees = (self._hit_tree, self._free_tree)
+        return self.X_train_.nbytes + self.y_train_.nbytes + sum(
+            t.data.nbytes + t.indices.nbytes for t in trees)
 
     def _check_X(self, X):
         check_is_fitted(self, "plsc_")

@@ -11,7 +11,8 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from .. import _npz_io
-from .._validation import as_points, check_bool, check_real
+from .._validation import as_points, check_bool, check_probability, check_real
+from ..maps import register
 from ._cells import Cell, kl_gain, predict_cell, spatial_groups
 from ._checks import check_at_least
 from ._gpr import cholesky, jitter_for, optimize_hyperparameters, solve_lower, with_noise
@@ -20,6 +21,7 @@ from ._io import GP_FORMAT, GP_VERSIONS, check_gp_fitted, gp_fitted, gp_params, 
     read_gp
 from ._kernels import SquaredExponential
 from ._limits import MAX_RESTARTS, check_coordinates, check_dense, check_segments, generator, threads
+from ._map_protocol import MapProtocol
 from ._observations import Observations, make_observations
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
 
@@ -27,7 +29,9 @@ __all__ = ["GPOMIK"]
 
 
 
-class GPOMIK(BaseEstimator):
+@register("gpomik", dims=(2,), formats=(".npz",),
+          description="Gaussian-process occupancy map with integral kernels (2D)")
+class GPOMIK(MapProtocol, BaseEstimator):
     """Gaussian-process occupancy map with integral kernels (GPOMIK).
 
     Laser returns are point observations of the latent occupancy (target +1);
@@ -81,6 +85,9 @@ default="clenshaw-curtis"
         Seeds the optimiser restarts and the subset of `max_optimize`.
     n_jobs : int, default=None
         Threads for the kernel matrices (None: 1; -1: every core).
+    occupancy_threshold : float, default=0.5
+        :meth:`is_occupied`'s threshold: a point is occupied when its
+        probability is at least this; in (0, 1).
 
     Attributes
     ----------
@@ -104,6 +111,22 @@ default="clenshaw-curtis"
         Observations accepted into and rejected from the model (``fit``
         accepts all of its).
 
+    Notes
+    -----
+    **As a map** (:class:`occgp.maps.OccupancyMap`, registered as
+    ``"gpomik"``): :meth:`insert_scan` turns a 2D scan into hits and beams;
+    the first scan is :meth:`fit`, each later one :meth:`update` (Cholesky
+    updates, hyper-parameters and PLSC as fitted), so a sequence of scans
+    gives the model of ``fit`` on the first and ``update`` with each next.
+    **Unknown space**: :meth:`occupancy` is NaN outside the box of every
+    local model's observations widened by the kernel's reach (its cutoff,
+    e.g. 9.2 length scales for the squared exponential) or, with several
+    local models, by the three length scales by which :meth:`predict` routes
+    queries when that is less: there :meth:`predict` gives the prior without
+    looking at any observation. :attr:`bounds` is the box of that known
+    space, :attr:`num_cells` the number of observations, and
+    :meth:`to_octree` evaluates the model on 0.1 m cells by default.
+
     References
     ----------
     S. O'Callaghan, F. Ramos, "Continuous occupancy mapping with integral
@@ -125,7 +148,8 @@ default="clenshaw-curtis"
 
     def __init__(self, kernel=None, *, noise=0.01, noise_bounds=(1e-4, 1.0),
                  quadrature="clenshaw-curtis", optimizer=True, n_restarts=2, max_optimize=1000,
-                 max_cell_size=2000, kl_threshold=None, random_state=None, n_jobs=None):
+                 max_cell_size=2000, kl_threshold=None, random_state=None, n_jobs=None,
+                 occupancy_threshold=0.5):
         self.kernel = kernel
         self.noise = noise
         self.noise_bounds = noise_bounds
@@ -137,6 +161,7 @@ default="clenshaw-curtis"
         self.kl_threshold = kl_threshold
         self.random_state = random_state
         self.n_jobs = n_jobs
+        self.occupancy_threshold = occupancy_threshold
 
     # ------------------------------------------------------------ parameters
     def _check_params(self):
@@ -160,6 +185,7 @@ default="clenshaw-curtis"
         if self.kl_threshold is not None:
             check_real(self.kl_threshold, "kl_threshold", low=0.0, low_open=False)
         check_bool(self.optimizer, "optimizer")
+        check_probability(self.occupancy_threshold, "occupancy_threshold")
         return kernel, noise, (lo, hi)
 
     # ------------------------------------------------------------------- fit
@@ -581,6 +607,34 @@ default="clenshaw-curtis"
         model.n_accepted_ = int(fitted["n_accepted_"])
         model.n_rejected_ = int(fitted["n_rejected_"])
         return model
+
+    # ---------------------------------------------------------- map protocol
+    def _fitted(self):
+        return hasattr(self, "cells_")
+
+    def _margin(self):
+        """How far beyond its observations' box a local model may differ from the prior."""
+        inv = self.kernel_.inverse_length_scales(self.n_dims_)
+        reach = float(np.sqrt(type(self.kernel_).cutoff2))
+        return (reach if len(self.cells_) == 1 else min(reach, 3.0)) / inv
+
+    def _known(self, X):
+        margin = self._margin()
+        known = np.zeros(len(X), dtype=bool)
+        for cell in self.cells_:
+            lo, hi = cell.bounds(margin)
+            known |= np.all((X >= lo) & (X <= hi), axis=1)
+        return known
+
+    def _known_bounds(self):
+        boxes = [cell.bounds(self._margin()) for cell in self.cells_]
+        return np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+
+    def _num_cells(self):
+        return sum(cell.size for cell in self.cells_)
+
+    def _nbytes(self):
+        return sum(cell.nbytes for cell in self.cells_)
 
     # --------------------------------------------------------------- predict
     def _check_X(self, X):

@@ -35,13 +35,14 @@ GP_CLASSES = {c.__name__: c for c in (SquaredExponential, Matern32, SparseKernel
 ADDED_PARAMS = frozenset({"occupancy_threshold"})
 
 
-def gp_params(model, classes=None) -> dict:
+def gp_params(model, classes=None, params=None) -> dict:
     """JSON-ready constructor parameters of `model` (TypeError if one cannot be saved).
 
-    `classes` (name -> class) extends :data:`GP_CLASSES`.
+    `classes` (name -> class) extends :data:`GP_CLASSES`; `params` replaces
+    ``model.get_params(deep=False)``.
     """
     try:
-        return _npz_io.encode_value(model.get_params(deep=False),
+        return _npz_io.encode_value(model.get_params(deep=False) if params is None else params,
                                     {**GP_CLASSES, **(classes or {})})
     except TypeError as exc:
         raise TypeError(f"cannot save this {type(model).__name__}: a parameter holds an "
