@@ -30,7 +30,7 @@ from occgp.gp import (GPOM, GPOMIK, ClenshawCurtis, Matern32, OccupancyGrid, Sim
                       SparseKernel, SquaredExponential, grid_points, integral_kernel,
                       observations_from_scans)
 from occgp.gp._gpr import factorise
-from occgp.gp._integral import _covariance
+from occgp.gp._integral_kernel import covariance
 from occgp.metrics import roc_auc, roc_curve
 
 
@@ -190,7 +190,7 @@ def update_table(n_jobs):
     (L_full, _), t_refit = timed(lambda: factorise(
         upd.kernel_, upd._quadrature, upd.noise_, obs.starts, obs.ends, obs.y,
         upd._n_threads, upd.jitter_))
-    K = _covariance(upd.kernel_, upd._quadrature, obs.starts, obs.ends, n_threads=upd._n_threads)
+    K = covariance(upd.kernel_, upd._quadrature, obs.starts, obs.ends, n_threads=upd._n_threads)
     K[np.diag_indices_from(K)] += upd.noise_ + upd.jitter_
     _, t_chol = timed(lambda: sl.cholesky(K, lower=True, check_finite=False))
     L_upd = upd.cells_[0].L

@@ -9,7 +9,7 @@ from numpy.testing import assert_array_equal
 from occgp import _linetrack
 from occgp.gp import Matern32, SquaredExponential, integral_kernel
 from occgp.gp._beams import assign_beams, merge_small_clusters
-from occgp.gp._clustering import DirichletProcessClustering, _segment_distance
+from occgp.gp._clustering import DirichletProcessClustering, segment_distance
 from occgp.gp._lines import LineTracking
 from occgp.gp._planes import PlaneClustering
 
@@ -595,7 +595,7 @@ def test_segment_distance_against_sampling():
     p0, p1, q0, q1 = (rng.normal(size=(60, 3)) for _ in range(4))
     p1[:10] = p0[:10]
     q1[5:15] = q0[5:15]
-    d = _segment_distance(p0, p1, q0, q1)
+    d = segment_distance(p0, p1, q0, q1)
     u = np.linspace(0, 1, 101)[:, None, None]
     a = p0 + u * (p1 - p0)
     b = q0 + u * (q1 - q0)

@@ -1,4 +1,4 @@
-"""Tests of the log-odds grid baseline and the grid evaluation helpers (occgp.gp._grid)."""
+"""Tests of the log-odds grid baseline and the grid evaluation helpers (occgp.gp._occupancy_grid)."""
 
 import numpy as np
 import pytest
@@ -7,7 +7,8 @@ from scipy.special import logit
 from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 
-from occgp.gp._grid import OccupancyGrid, _free_cells, grid_points, predict_grid
+from occgp.gp._grid_eval import grid_points, predict_grid
+from occgp.gp._occupancy_grid import OccupancyGrid, _free_cells
 
 L_HIT, L_MISS = logit(0.7), logit(0.4)
 
@@ -444,7 +445,7 @@ def test_occupancy_grid_far_queries_are_unknown():
 
 
 def test_occupancy_grid_chunked_traversal_matches_one_pass(monkeypatch):
-    import occgp.gp._grid as grid_module
+    import occgp.gp._occupancy_grid as grid_module
     rng = np.random.default_rng(3)
     starts = rng.uniform(-3, 3, (60, 2))
     ends = starts + rng.uniform(-4, 4, (60, 2))

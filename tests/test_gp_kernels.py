@@ -1,4 +1,4 @@
-"""Tests of the GP kernels (occgp.gp._kernels) and the integral kernels (occgp.gp._integral)."""
+"""Tests of the GP kernels (occgp.gp._kernels) and the integral kernels (occgp.gp._integral_kernel)."""
 
 import functools
 import math

@@ -25,8 +25,9 @@ from ._committee import COMBINE_RULES, combine_predictions
 from ._gpom import GPOM
 from ._gpomik import GPOMIK
 from ._mixture import GPMixture
-from ._grid import OccupancyGrid, grid_points, predict_grid
-from ._integral import integral_kernel
+from ._grid_eval import grid_points, predict_grid
+from ._occupancy_grid import OccupancyGrid
+from ._integral_kernel import integral_kernel
 from ._kernels import Matern32, SparseKernel, SquaredExponential
 from ._observations import Observations, observations_from_scans
 from ._plsc import fit_plsc, loo_predictions, plsc_proba

@@ -14,14 +14,14 @@ from scipy.spatial import cKDTree
 from scipy.special import erf, erfc
 
 from .._validation import as_numeric, as_points, check_int
-from ._clustering import _best_per_row, _segment_distance
-from ._integral import _check_kernel, _check_quadrature, _covariance, as_segments
+from ._clustering import best_per_row, segment_distance
+from ._integral_kernel import check_kernel, check_quadrature, covariance, as_segments
 from ._kernels import SquaredExponential
 from ._limits import check_coordinates, check_segments, threads
 
 __all__ = ["assign_beams", "merge_small_clusters"]
 
-#: Free beams per kernel evaluation (one ``_covariance`` call against the union
+#: Free beams per kernel evaluation (one ``covariance`` call against the union
 #: of their candidates); consecutive beams share most candidates.
 _CHUNK = 32
 #: Most balls covering the strip of one free beam (see _candidates).
@@ -44,7 +44,7 @@ def _as_labels(labels, name, n=None):
     return arr
 
 
-def _row_index(rows, table):
+def row_index(rows, table):
     """Index of the first row of `table` equal to each row of `rows` (-1: none)."""
     out = np.full(len(rows), -1, dtype=np.int64)
     if not len(table) or not len(rows):
@@ -163,9 +163,9 @@ def assign_beams(hit_labels: ArrayLike, hits: ArrayLike, segment_starts: ArrayLi
     >>> assign_beams([0, 1], hits, starts, ends).tolist()
     [0, 1, 1]
     """
-    kernel = SquaredExponential(1.0, 1.0) if kernel is None else _check_kernel(kernel)
+    kernel = SquaredExponential(1.0, 1.0) if kernel is None else check_kernel(kernel)
     kernel._checked()
-    quadrature = _check_quadrature(quadrature)
+    quadrature = check_quadrature(quadrature)
     n_threads = threads(n_jobs)
     arr = as_numeric(hits, "hits")
     if arr.ndim != 2 or not 1 <= arr.shape[1] <= 3:
@@ -178,7 +178,7 @@ def assign_beams(hit_labels: ArrayLike, hits: ArrayLike, segment_starts: ArrayLi
     check_coordinates({"hits": hits, "segment_starts": starts, "segment_ends": ends}, inv,
                       fix="shift the data towards the origin or use a longer length scale")
     check_segments(starts, ends, inv)
-    hit_of = _row_index(ends, hits)
+    hit_of = row_index(ends, hits)
     out = np.full(len(ends), -1, dtype=np.int64)
     out[hit_of >= 0] = labels[hit_of[hit_of >= 0]]
     free = np.flatnonzero(hit_of < 0)
@@ -313,7 +313,7 @@ def _most_similar(kernel, quadrature, fs, fe, rs, re, n_threads):
     f_norm, r_norm = np.where(f_len > 0, f_len, 1.0), np.where(r_len > 0, r_len, 1.0)
 
     def similarity(rows, cols):
-        return _covariance(kernel, quadrature, fs[rows], fe[rows], rs[cols], re[cols],
+        return covariance(kernel, quadrature, fs[rows], fe[rows], rs[cols], re[cols],
                            n_threads=n_threads) / (f_norm[rows, None] * r_norm[None, cols])
 
     # pruning geometry in scaled coordinates
@@ -341,7 +341,7 @@ def _most_similar(kernel, quadrature, fs, fe, rs, re, n_threads):
         gap = np.linalg.norm(f_mid[rows[i]] - r_mid[j], axis=1) - f_half[rows[i]] - r_half[j]
         keep = gap <= radius[i]
         i, j = i[keep], j[keep]
-        d = _segment_distance(fs_s[rows[i]], fe_s[rows[i]], rs_s[j], re_s[j])
+        d = segment_distance(fs_s[rows[i]], fe_s[rows[i]], rs_s[j], re_s[j])
         keep = d <= radius[i]
         i, j, d = i[keep], j[keep], d[keep]
         keep = _upper_bound(kernel, table, line_integral, fs_s[rows[i]], fe_s[rows[i]],
@@ -363,7 +363,7 @@ def _most_similar(kernel, quadrature, fs, fe, rs, re, n_threads):
             i = np.r_[i, np.arange(len(rows))]
             j = np.r_[j, col]
             S = np.r_[S, value]
-            _, col, value = _best_per_row(i, j, -S)       # every row is present
+            _, col, value = best_per_row(i, j, -S)       # every row is present
             value = -value
         best[rows] = np.where(value > 0, col, -1)
     lost = np.flatnonzero(best < 0)
@@ -379,10 +379,10 @@ def _nearest_segment(fs, fe, rs, re):
     f_mid, f_half = 0.5 * (fs + fe), 0.5 * np.linalg.norm(fe - fs, axis=1)
     tree = cKDTree(r_mid)
     _, nn = tree.query(f_mid, k=1)
-    bound = _segment_distance(fs, fe, rs[nn], re[nn])
+    bound = segment_distance(fs, fe, rs[nn], re[nn])
     # any nearer segment has its midpoint within bound + both half-lengths
     i, j = _pairs(tree, f_mid, bound + f_half + r_half_max + 1e-12 * (1 + bound))
-    rows, picks, _ = _best_per_row(i, j, _segment_distance(fs[i], fe[i], rs[j], re[j]))
+    rows, picks, _ = best_per_row(i, j, segment_distance(fs[i], fe[i], rs[j], re[j]))
     out = nn.astype(np.int64)
     out[rows] = picks
     return out
@@ -467,7 +467,7 @@ def merge_small_clusters(labels: ArrayLike, points: ArrayLike, is_hit: ArrayLike
     if lone.any():
         anchor = np.flatnonzero(~lone)
         dist, nearest = cKDTree(points[anchor]).query(points[lone], k=1)
-        source, target, _ = _best_per_row(cluster[lone], cluster[anchor[nearest]], dist)
+        source, target, _ = best_per_row(cluster[lone], cluster[anchor[nearest]], dist)
         into = np.arange(k)
         into[source] = target
         out = into[cluster]

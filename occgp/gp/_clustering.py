@@ -71,7 +71,7 @@ def _check_hits(hits, origins, dims, what="", dim=None):
     return hits, origins
 
 
-def _scan_ids(origins):
+def scan_ids(origins):
     """Scan index of each hit: a new scan starts wherever the origin changes."""
     change = np.any(origins[1:] != origins[:-1], axis=1)
     return np.concatenate([[0], np.cumsum(change)])
@@ -92,20 +92,7 @@ def _check_random_state(random_state):
     return int(random_state)
 
 
-def _check_at_least(value, name, low, high=None):
-    """An int in [low, high] (check_int's type check, a message that says the bounds)."""
-    v = check_int(value, name)
-    if v < low or (high is not None and v > high):
-        want = f">= {low}" if high is None else f"in [{low}, {high}]"
-        raise ValueError(f"{name} must be an int {want}, got {v}")
-    return v
-
-
-def _check_angle(value, name):
-    return check_real(value, name, low=0.0, high=90.0, low_open=False, high_open=False)
-
-
-def _first_appearance(labels, k):
+def first_appearance(labels, k):
     """Map labels 0..k-1 to their rank of first appearance in `labels` (-1: absent)."""
     present, first = np.unique(labels, return_index=True)
     out = np.full(k, -1, dtype=np.int64)
@@ -113,7 +100,7 @@ def _first_appearance(labels, k):
     return out
 
 
-def _components(n, i, j):
+def components(n, i, j):
     """Connected components of the graph on `n` nodes with edges (i, j)."""
     if not len(i):
         return np.arange(n, dtype=np.int64)
@@ -122,7 +109,7 @@ def _components(n, i, j):
     return comp.astype(np.int64)
 
 
-def _best_per_row(i, j, score):
+def best_per_row(i, j, score):
     """For each distinct `i`, the `j` of lowest `score` (ties: lowest `j`).
 
     Returns (rows, picks, scores), rows ascending.
@@ -135,7 +122,7 @@ def _best_per_row(i, j, score):
     return i[first], j[first], score[first]
 
 
-def _group_starts(labels):
+def group_starts(labels):
     """(order, starts): `labels` sorted stably and where each group starts."""
     order = np.argsort(labels, kind="stable")
     sorted_labels = labels[order]
@@ -143,7 +130,7 @@ def _group_starts(labels):
     return order, starts
 
 
-def _segment_distance(p0, p1, q0, q1):
+def segment_distance(p0, p1, q0, q1):
     """Distance between segments p0-p1 and q0-q1, row by row (points when ends coincide).
 
     The closest-points algorithm of Ericson, *Real-Time Collision Detection*
@@ -167,7 +154,7 @@ def _segment_distance(p0, p1, q0, q1):
     return np.linalg.norm(p0 + s[:, None] * d1 - q0 - t[:, None] * d2, axis=1)
 
 
-class _Clustering(BaseEstimator):
+class Clustering(BaseEstimator):
     """The clustering protocol: fit, fit_predict and partial_fit over scans of hits."""
 
     _dims: tuple = (1, 2, 3)
@@ -279,7 +266,7 @@ class _Mixture(NamedTuple):
     label_of: NDArray[np.int64]  # cluster label of each component (-1: no hit)
 
 
-class DirichletProcessClustering(_Clustering):
+class DirichletProcessClustering(Clustering):
     """Dirichlet-process Gaussian mixture of hits (Kim & Kim's DP-clustering).
 
     The hits are fitted by scikit-learn's variational
@@ -419,7 +406,7 @@ class DirichletProcessClustering(_Clustering):
             warnings.simplefilter("ignore", ConvergenceWarning)
             model.fit(X)
         comp = model.predict(X)
-        label_of = _first_appearance(comp, model.n_components)
+        label_of = first_appearance(comp, model.n_components)
         label_of[label_of >= 0] += first_label
         threshold = float(np.percentile(model.score_samples(X), _DENSITY_PERCENTILE))
         return (_Mixture(model, shift, scale, threshold, label_of), label_of[comp],

@@ -11,7 +11,6 @@ kernels over whole beams, one global model) is compared against.
 from __future__ import annotations
 
 import copy
-import numbers
 import os
 
 import numpy as np
@@ -21,15 +20,17 @@ from sklearn.base import BaseEstimator
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
-from .._validation import as_numeric, as_points, check_bool, check_real
-from ._gpr import JITTER, factorise, optimize_hyperparameters
-from ._integral import _check_kernel, as_segments
-from ._kernels import SquaredExponential, _check_bounds
-from ._limits import MAX_DENSE_BYTES, MAX_RESTARTS, check_coordinates, check_dense, threads
-from ._plsc import fit_plsc, loo_predictions, plsc_proba
-from ._gpomik import _GP_FORMAT, _GP_VERSIONS, _check_gp_fitted, _gp_fitted, _gp_params, \
-    _read_gp
 from .. import _npz_io
+from .._validation import as_numeric, as_points, check_bool, check_probability, check_real
+from ..maps import register
+from ._checks import check_at_least
+from ._gpr import JITTER, factorise, optimize_hyperparameters
+from ._integral_kernel import as_segments, check_kernel
+from ._io import GP_FORMAT, GP_VERSIONS, check_gp_fitted, gp_fitted, gp_params, read_gp
+from ._kernels import SquaredExponential, check_bounds
+from ._limits import MAX_DENSE_BYTES, MAX_RESTARTS, check_coordinates, check_dense, threads
+from ._map_protocol import MapProtocol
+from ._plsc import fit_plsc, loo_predictions, plsc_proba
 
 __all__ = ["GPOM"]
 
@@ -52,14 +53,6 @@ class _PointsOnly:
 
     def table(self, kernel):
         return self._TABLE
-
-
-def _check_int(value, name, low):
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
-    if value < low:
-        raise ValueError(f"{name} must be an int >= {low}, got {value!r}")
-    return int(value)
 
 
 def _free_point_count(starts, ends, step):
@@ -98,7 +91,9 @@ def _subsample(y, size, rng):
     return np.sort(np.concatenate(chosen))
 
 
-class GPOM(BaseEstimator):
+@register("gpom", dims=(2,), formats=(".npz",),
+          description="Gaussian-process occupancy map with a local GP per query (2D)")
+class GPOM(MapProtocol, BaseEstimator):
     """Gaussian-process occupancy map with a local GP per query point.
 
     Laser beams (segments from the sensor origin to the beam end) are
@@ -149,6 +144,9 @@ class GPOM(BaseEstimator):
     n_jobs : int, default=None
         Threads for the covariance matrices and the neighbour searches
         (None: 1; -1: every core).
+    occupancy_threshold : float, default=0.5
+        :meth:`is_occupied`'s threshold: a point is occupied when its
+        probability is at least this; in (0, 1).
 
     Attributes
     ----------
@@ -166,6 +164,20 @@ class GPOM(BaseEstimator):
         PLSC's ``(a, b)``: ``p = Phi((a mu + b) / sqrt(1 + a**2 var))``.
     n_dims_ : int
         Dimension of the inputs (1, 2 or 3).
+
+    Notes
+    -----
+    **As a map** (:class:`occgp.maps.OccupancyMap`, registered as
+    ``"gpom"``): :meth:`insert_scan` turns a 2D scan into hits and beams;
+    the first scan is :meth:`fit`, and as GPOM has no incremental update,
+    each later one fits the model again on all the evidence so far (the
+    free points of earlier beams are kept as they are): a sequence of scans
+    gives the model of one :meth:`fit` on all their observations.
+    **Unknown space**: :meth:`occupancy` is NaN outside the box of the
+    training points widened by the kernel's reach (its cutoff), where
+    :meth:`predict` gives the prior. :attr:`bounds` is that box,
+    :attr:`num_cells` the number of training points, and :meth:`to_octree`
+    evaluates the model on 0.1 m cells by default.
 
     References
     ----------
@@ -186,7 +198,8 @@ class GPOM(BaseEstimator):
 
     def __init__(self, kernel=None, *, noise=0.01, noise_bounds=(1e-4, 1.0), free_step=0.5,
                  n_hit_neighbors=10, n_free_neighbors=20, optimizer=True, n_restarts=2,
-                 max_optimize=1000, random_state=None, batch_size=4096, n_jobs=None):
+                 max_optimize=1000, random_state=None, batch_size=4096, n_jobs=None,
+                 occupancy_threshold=0.5):
         self.kernel = kernel
         self.noise = noise
         self.noise_bounds = noise_bounds
@@ -199,18 +212,20 @@ class GPOM(BaseEstimator):
         self.random_state = random_state
         self.batch_size = batch_size
         self.n_jobs = n_jobs
+        self.occupancy_threshold = occupancy_threshold
 
     def _check_params(self):
-        kernel = SquaredExponential() if self.kernel is None else _check_kernel(self.kernel)
+        kernel = SquaredExponential() if self.kernel is None else check_kernel(self.kernel)
         check_real(self.noise, "noise", low=0.0)
-        _check_bounds(self.noise_bounds, "noise_bounds")
+        check_bounds(self.noise_bounds, "noise_bounds")
         check_real(self.free_step, "free_step", low=0.0)
         for name, low in [("n_hit_neighbors", 1), ("n_free_neighbors", 1), ("n_restarts", 0),
                           ("max_optimize", 2), ("batch_size", 1)]:
-            _check_int(getattr(self, name), name, low)
+            check_at_least(getattr(self, name), name, low)
         if self.n_restarts > MAX_RESTARTS:
             raise ValueError(f"n_restarts must be at most {MAX_RESTARTS}, got {self.n_restarts!r}")
         check_bool(self.optimizer, "optimizer")
+        check_probability(self.occupancy_threshold, "occupancy_threshold")
         threads(self.n_jobs)
         try:
             check_random_state(self.random_state)
@@ -344,17 +359,17 @@ class GPOM(BaseEstimator):
         OSError
             If the file cannot be written.
         """
-        params = _gp_params(self)
+        params = gp_params(self)
         arrays = {}
         if hasattr(self, "plsc_"):
             lml = float(self.log_marginal_likelihood_value_)
-            arrays["fitted"] = _gp_fitted({
+            arrays["fitted"] = gp_fitted({
                 "kernel_": self.kernel_, "noise_": float(self.noise_),
                 "plsc_": tuple(float(v) for v in self.plsc_),
                 "log_marginal_likelihood_value_": lml if np.isfinite(lml) else None,
                 "n_dims_": int(self.n_dims_)})
             arrays["X_train"], arrays["y_train"] = self.X_train_, self.y_train_
-        _npz_io.write_npz(path, _GP_FORMAT, _GP_VERSIONS[-1], type(self).__name__, params,
+        _npz_io.write_npz(path, GP_FORMAT, GP_VERSIONS[-1], type(self).__name__, params,
                           arrays)
         return self
 
@@ -384,7 +399,7 @@ class GPOM(BaseEstimator):
             parameters or the fitted state are not valid (NaN or inf, targets
             other than hits (+1) then free points (-1), both present).
         """
-        source, model, arrays, fitted = _read_gp(cls, path, cls._TRAIN_SPEC)
+        source, model, arrays, fitted = read_gp(cls, path, cls._TRAIN_SPEC)
         if fitted is None:
             return model
         X, y = arrays["X_train"], arrays["y_train"]
@@ -392,7 +407,7 @@ class GPOM(BaseEstimator):
         if not 1 <= X.shape[1] <= 3:
             raise ValueError(f"{source}: corrupt fitted state of a GPOM: the training points "
                              f"must have 1 to 3 dimensions, got {X.shape[1]}")
-        fitted = _check_gp_fitted(fitted, cls._FITTED, X.shape[1], source, "GPOM")
+        fitted = check_gp_fitted(fitted, cls._FITTED, X.shape[1], source, "GPOM")
         if not (0 < n_hits < len(y) and (y[:n_hits] == 1).all() and (y[n_hits:] == -1).all()):
             raise ValueError(f"{source}: corrupt fitted state of a GPOM: 'y_train' must be "
                              f"+1 (hits) then -1 (free points), both present")
@@ -403,6 +418,35 @@ class GPOM(BaseEstimator):
         model.log_marginal_likelihood_value_ = fitted["log_marginal_likelihood_value_"]
         model.plsc_ = tuple(float(v) for v in fitted["plsc_"])
         return model
+
+    # ---------------------------------------------------------- map protocol
+    def _fitted(self):
+        return hasattr(self, "plsc_")
+
+    def _insert(self, hits, starts, ends):
+        """Fit again on the training points so far (free points as zero-length beams) and
+        the new observations: the same model as one fit on all the observations."""
+        n_hits = int(np.count_nonzero(self.y_train_ > 0))
+        old_hits, old_free = self.X_train_[:n_hits], self.X_train_[n_hits:]
+        self.fit(np.vstack([old_hits, hits]), np.vstack([old_free, starts]),
+                 np.vstack([old_free, ends]))
+
+    def _known_bounds(self):
+        reach = np.sqrt(type(self.kernel_).cutoff2) / self.kernel_.inverse_length_scales(
+            self.n_dims_)
+        return self.X_train_.min(axis=0) - reach, self.X_train_.max(axis=0) + reach
+
+    def _known(self, X):
+        lo, hi = self._known_bounds()
+        return np.all((X >= lo) & (X <= hi), axis=1)
+
+    def _num_cells(self):
+        return len(self.X_train_)
+
+    def _nbytes(self):
+        trees = (self._hit_tree, self._free_tree)
+        return self.X_train_.nbytes + self.y_train_.nbytes + sum(
+            t.data.nbytes + t.indices.nbytes for t in trees)
 
     def _check_X(self, X):
         check_is_fitted(self, "plsc_")

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import inspect
-import numbers
 import os
 
 import numpy as np
@@ -12,170 +10,28 @@ from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from .. import _integral, _npz_io
-from .._validation import as_points, check_bool, check_real
-from ._gpr import _with_noise, cholesky, jitter_for, optimize_hyperparameters, solve_lower
-from ._integral import _check_kernel, _check_quadrature, _covariance
-from ._kernels import Matern32, SparseKernel, SquaredExponential
+from .. import _npz_io
+from .._validation import as_points, check_bool, check_probability, check_real
+from ..maps import register
+from ._cells import Cell, kl_gain, predict_cell, spatial_groups
+from ._checks import check_at_least
+from ._gpr import cholesky, jitter_for, optimize_hyperparameters, solve_lower, with_noise
+from ._integral_kernel import check_kernel, check_quadrature, covariance
+from ._io import GP_FORMAT, GP_VERSIONS, check_gp_fitted, gp_fitted, gp_params, gpomik_cells, \
+    read_gp
+from ._kernels import SquaredExponential
 from ._limits import MAX_RESTARTS, check_coordinates, check_dense, check_segments, generator, threads
+from ._map_protocol import MapProtocol
 from ._observations import Observations, make_observations
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
-from ._quadrature import ClenshawCurtis, Simpson, _Rule
 
 __all__ = ["GPOMIK"]
 
-#: Edge of the query tiles of predict, in length scales.
-_TILE = 4.0
-#: Most cross-covariance entries computed in one call of predict (64 MB).
-_BLOCK_ENTRIES = 8_000_000
 
 
-def _segment_distance(x, A, B):
-    """Distance from point `x` to each segment A[i]-B[i] (points when A[i] == B[i])."""
-    d = B - A
-    dd = np.einsum("ij,ij->i", d, d)
-    t = np.clip(np.einsum("ij,ij->i", x - A, d) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
-    return np.linalg.norm(A + t[:, None] * d - x, axis=1)
-
-
-class _Cell:
-    """One local GP: its observations, Cholesky factor and ``alpha = K^-1 y``."""
-
-    def __init__(self, obs: Observations, L, alpha):
-        self.obs = obs
-        self.L = L
-        self.alpha = alpha
-        self.kinv = None  # K^-1, computed by the first predict that needs it
-
-    @property
-    def size(self) -> int:
-        return len(self.obs.y)
-
-    def inverse(self):
-        """``K^-1`` (noise included), computed once from the factor and kept."""
-        if self.kinv is None:
-            Linv = sl.solve_triangular(self.L, np.eye(self.size), lower=True, check_finite=False)
-            self.kinv = Linv.T @ Linv
-        return self.kinv
-
-    def bounds(self, margin):
-        pts = np.vstack([self.obs.starts, self.obs.ends])
-        return pts.min(axis=0) - margin, pts.max(axis=0) + margin
-
-
-def _kl_gain(var, mu, y, noise):
-    """KL(after || before) of a latent N(mu, var) conditioned on target y with `noise`."""
-    var_after = var * noise / (var + noise)
-    shift = var / (var + noise) * (y - mu)
-    return 0.5 * (np.log(var / var_after) + (var_after + shift ** 2) / var - 1.0)
-
-
-def _check_int(value, name, low):
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
-    if value < low:
-        raise ValueError(f"{name} must be >= {low}, got {value!r}")
-
-
-def _spatial_groups(anchors, max_size):
-    """Split indices into groups of at most `max_size` by median bisection of `anchors`."""
-    todo, done = [np.arange(len(anchors))], []
-    while todo:
-        idx = todo.pop()
-        if len(idx) <= max_size:
-            done.append(idx)
-            continue
-        pts = anchors[idx]
-        axis = int(np.argmax(np.ptp(pts, axis=0)))
-        order = idx[np.argsort(pts[:, axis], kind="stable")]
-        half = len(order) // 2
-        todo += [order[half:], order[:half]]
-    return done
-
-
-# ------------------------------------------------------------------ files
-#: Format of the GP models' files (see GPOMIK.save, GPOM.save).
-_GP_FORMAT = "occgp.gp_model"
-_GP_VERSIONS = (1,)
-#: The objects a GP model's parameters may hold, rebuilt from their get_params().
-_GP_CLASSES = {c.__name__: c for c in (SquaredExponential, Matern32, SparseKernel,
-                                       ClenshawCurtis, Simpson)}
-
-
-def _gp_params(model) -> dict:
-    """JSON-ready constructor parameters of `model` (TypeError if one cannot be saved)."""
-    try:
-        return _npz_io.encode_value(model.get_params(deep=False), _GP_CLASSES)
-    except TypeError as exc:
-        raise TypeError(f"cannot save this {type(model).__name__}: a parameter holds an "
-                        f"unsupported value: {exc}") from None
-
-
-def _gp_fitted(value: dict) -> np.ndarray:
-    return np.array(_npz_io.json_text(_npz_io.encode_value(value, _GP_CLASSES)))
-
-
-def _read_gp(cls, path, spec):
-    """(source, unfitted model of the saved parameters, arrays, fitted dict or None)."""
-    source = os.fspath(_npz_io.as_path(path))
-    spec = {"fitted": (np.str_, ()), **spec}
-    _, _, raw, arrays = _npz_io.read_npz(source, _GP_FORMAT, _GP_VERSIONS, (cls.__name__,),
-                                         spec, tuple(spec))
-    name = cls.__name__
-    params = _npz_io.decode_value(raw, source, _GP_CLASSES)
-    expected = [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
-    if sorted(params) != sorted(expected):
-        raise ValueError(f"{source}: the parameters of a {name} must be {sorted(expected)}, "
-                         f"got {sorted(params)[:20]}")
-    try:
-        model = cls(**params)
-        model._check_params()
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{source}: bad parameters of a {name}: {exc}") from None
-    present = [k for k in spec if k in arrays]
-    if present and len(present) != len(spec):
-        raise ValueError(f"{source}: a fitted {name} needs all of {list(spec)}, got only "
-                         f"{present}")
-    fitted = None
-    if present:
-        text = str(arrays.pop("fitted")[()])
-        fitted = _npz_io.decode_value(_npz_io.parse_json(text, "'fitted' entry", source),
-                                      source, _GP_CLASSES, "'fitted' entry")
-        if not isinstance(fitted, dict):
-            raise ValueError(f"{source}: corrupt 'fitted' entry: expected a JSON object")
-        _npz_io.check_finite(arrays, list(arrays), source)
-    return source, model, arrays, fitted
-
-
-def _check_gp_fitted(fitted: dict, keys, n_dims: int, source: str, name: str) -> dict:
-    """The fitted scalars shared by the GP models, checked; ValueError naming `source`."""
-    if sorted(fitted) != sorted(keys):
-        raise ValueError(f"{source}: the fitted state of a {name} must hold {sorted(keys)}, "
-                         f"got {sorted(fitted)[:20]}")
-    try:
-        kernel = _check_kernel(fitted["kernel_"])
-        kernel._checked()
-        kernel.inverse_length_scales(n_dims)
-        check_real(fitted["noise_"], "noise_", low=0.0)
-        plsc = fitted["plsc_"]
-        if not (isinstance(plsc, tuple) and len(plsc) == 2):
-            raise ValueError(f"plsc_ must be a pair (a, b), got {plsc!r:.80}")
-        for v in plsc:
-            check_real(v, "plsc_")
-        lml = fitted["log_marginal_likelihood_value_"]
-        if lml is not None:
-            check_real(lml, "log_marginal_likelihood_value_")
-        dims = fitted["n_dims_"]
-        if isinstance(dims, bool) or dims != n_dims:
-            raise ValueError(f"n_dims_ must be {n_dims} (the arrays' width), got {dims!r:.40}")
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{source}: corrupt fitted state of a {name}: {exc}") from None
-    fitted = dict(fitted)
-    fitted["log_marginal_likelihood_value_"] = np.nan if lml is None else float(lml)
-    return fitted
-
-
-class GPOMIK(BaseEstimator):
+@register("gpomik", dims=(2,), formats=(".npz",),
+          description="Gaussian-process occupancy map with integral kernels (2D)")
+class GPOMIK(MapProtocol, BaseEstimator):
     """Gaussian-process occupancy map with integral kernels (GPOMIK).
 
     Laser returns are point observations of the latent occupancy (target +1);
@@ -229,6 +85,9 @@ default="clenshaw-curtis"
         Seeds the optimiser restarts and the subset of `max_optimize`.
     n_jobs : int, default=None
         Threads for the kernel matrices (None: 1; -1: every core).
+    occupancy_threshold : float, default=0.5
+        :meth:`is_occupied`'s threshold: a point is occupied when its
+        probability is at least this; in (0, 1).
 
     Attributes
     ----------
@@ -252,6 +111,22 @@ default="clenshaw-curtis"
         Observations accepted into and rejected from the model (``fit``
         accepts all of its).
 
+    Notes
+    -----
+    **As a map** (:class:`occgp.maps.OccupancyMap`, registered as
+    ``"gpomik"``): :meth:`insert_scan` turns a 2D scan into hits and beams;
+    the first scan is :meth:`fit`, each later one :meth:`update` (Cholesky
+    updates, hyper-parameters and PLSC as fitted), so a sequence of scans
+    gives the model of ``fit`` on the first and ``update`` with each next.
+    **Unknown space**: :meth:`occupancy` is NaN outside the box of every
+    local model's observations widened by the kernel's reach (its cutoff,
+    e.g. 9.2 length scales for the squared exponential) or, with several
+    local models, by the three length scales by which :meth:`predict` routes
+    queries when that is less: there :meth:`predict` gives the prior without
+    looking at any observation. :attr:`bounds` is the box of that known
+    space, :attr:`num_cells` the number of observations, and
+    :meth:`to_octree` evaluates the model on 0.1 m cells by default.
+
     References
     ----------
     S. O'Callaghan, F. Ramos, "Continuous occupancy mapping with integral
@@ -273,7 +148,8 @@ default="clenshaw-curtis"
 
     def __init__(self, kernel=None, *, noise=0.01, noise_bounds=(1e-4, 1.0),
                  quadrature="clenshaw-curtis", optimizer=True, n_restarts=2, max_optimize=1000,
-                 max_cell_size=2000, kl_threshold=None, random_state=None, n_jobs=None):
+                 max_cell_size=2000, kl_threshold=None, random_state=None, n_jobs=None,
+                 occupancy_threshold=0.5):
         self.kernel = kernel
         self.noise = noise
         self.noise_bounds = noise_bounds
@@ -285,10 +161,11 @@ default="clenshaw-curtis"
         self.kl_threshold = kl_threshold
         self.random_state = random_state
         self.n_jobs = n_jobs
+        self.occupancy_threshold = occupancy_threshold
 
     # ------------------------------------------------------------ parameters
     def _check_params(self):
-        kernel = SquaredExponential() if self.kernel is None else _check_kernel(self.kernel)
+        kernel = SquaredExponential() if self.kernel is None else check_kernel(self.kernel)
         kernel = type(kernel)(**kernel.get_params())
         kernel._checked()
         noise = check_real(self.noise, "noise", low=0.0)
@@ -299,15 +176,16 @@ default="clenshaw-curtis"
         lo, hi = (check_real(b, "noise_bounds", low=0.0) for b in self.noise_bounds)
         if not lo < hi:
             raise ValueError(f"noise_bounds must satisfy low < high, got {self.noise_bounds!r}")
-        _check_int(self.n_restarts, "n_restarts", 0)
+        check_at_least(self.n_restarts, "n_restarts", 0)
         if self.n_restarts > MAX_RESTARTS:
             raise ValueError(f"n_restarts must be at most {MAX_RESTARTS}, got {self.n_restarts!r}")
-        _check_int(self.max_optimize, "max_optimize", 2)
+        check_at_least(self.max_optimize, "max_optimize", 2)
         if self.max_cell_size is not None:
-            _check_int(self.max_cell_size, "max_cell_size", 1)
+            check_at_least(self.max_cell_size, "max_cell_size", 1)
         if self.kl_threshold is not None:
             check_real(self.kl_threshold, "kl_threshold", low=0.0, low_open=False)
         check_bool(self.optimizer, "optimizer")
+        check_probability(self.occupancy_threshold, "occupancy_threshold")
         return kernel, noise, (lo, hi)
 
     # ------------------------------------------------------------------- fit
@@ -341,7 +219,7 @@ default="clenshaw-curtis"
             On non-numeric input or a kernel that is not one of occgp.gp's.
         """
         kernel, noise, noise_bounds = self._check_params()
-        quadrature = _check_quadrature(self.quadrature)
+        quadrature = check_quadrature(self.quadrature)
         n_threads = threads(self.n_jobs)
         rng = generator(self.random_state)
         obs = make_observations(hits, segment_starts, segment_ends)
@@ -364,9 +242,9 @@ default="clenshaw-curtis"
             kernel, noise, lml = optimize_hyperparameters(
                 kernel, noise, noise_bounds, subset.starts, subset.ends, subset.y, quadrature,
                 n_restarts=self.n_restarts, rng=rng, n_threads=n_threads)
-        K_sub = _covariance(kernel, quadrature, subset.starts, subset.ends, n_threads=n_threads)
+        K_sub = covariance(kernel, quadrature, subset.starts, subset.ends, n_threads=n_threads)
         jitter = jitter_for(K_sub)
-        L = cholesky(_with_noise(K_sub, noise, jitter), kernel, noise,
+        L = cholesky(with_noise(K_sub, noise, jitter), kernel, noise,
                      "the optimisation subset")
         mu, var = loo_predictions(L, subset.y)
         scale = np.where(subset.lengths > 0, subset.lengths, 1.0)    # per unit length
@@ -407,17 +285,17 @@ default="clenshaw-curtis"
         """Factorised cells of `obs` split by `max_cell_size`; nothing is stored."""
         size = len(obs.y) if self.max_cell_size is None else self.max_cell_size
         cells = []
-        for idx in _spatial_groups(obs.anchors, max(size, 1)):
+        for idx in spatial_groups(obs.anchors, max(size, 1)):
             part = obs.take(idx)
-            K = _covariance(kernel, quadrature, part.starts, part.ends, n_threads=n_threads)
-            L = cholesky(_with_noise(K, noise, jitter), kernel, noise,
+            K = covariance(kernel, quadrature, part.starts, part.ends, n_threads=n_threads)
+            L = cholesky(with_noise(K, noise, jitter), kernel, noise,
                          f"a local model of {len(idx)} observations")
-            cells.append(_Cell(part, L, solve_lower(L, part.y)))
+            cells.append(Cell(part, L, solve_lower(L, part.y)))
         return cells
 
     # ---------------------------------------------------------------- update
     def _cross(self, obs_a, obs_b):
-        return _covariance(self.kernel_, self._quadrature, obs_a.starts, obs_a.ends,
+        return covariance(self.kernel_, self._quadrature, obs_a.starts, obs_a.ends,
                            obs_b.starts, obs_b.ends, n_threads=self._n_threads)
 
     def _extend(self, cell, new, K12=None, K22=None):
@@ -429,7 +307,7 @@ default="clenshaw-curtis"
         if K12 is None:
             K12 = self._cross(cell.obs, new)
         if K22 is None:
-            K22 = _covariance(self.kernel_, self._quadrature, new.starts, new.ends,
+            K22 = covariance(self.kernel_, self._quadrature, new.starts, new.ends,
                               n_threads=self._n_threads)
         m = len(K22)
         K22 = K22 + (self.noise_ + self.jitter_) * np.eye(m)
@@ -446,7 +324,7 @@ default="clenshaw-curtis"
         z_old = sl.solve_triangular(cell.L, cell.obs.y, lower=True, check_finite=False)
         z_new = sl.solve_triangular(S22, new.y - S12.T @ z_old, lower=True, check_finite=False)
         alpha = solve_lower(L, obs.y, np.r_[z_old, z_new])
-        return _Cell(obs, L, alpha)
+        return Cell(obs, L, alpha)
 
     def kl_divergence(self, hits=None, segment_starts=None, segment_ends=None):
         """KL divergence that adding each observation would bring to the map.
@@ -503,7 +381,7 @@ default="clenshaw-curtis"
     def _kl(self, new):
         """KL gains of `new`, and the newest cell's blocks K12 and K22 (no noise)."""
         noise = self.noise_ + self.jitter_
-        K22 = _covariance(self.kernel_, self._quadrature, new.starts, new.ends,
+        K22 = covariance(self.kernel_, self._quadrature, new.starts, new.ends,
                           n_threads=self._n_threads)
         prior = np.diag(K22)
         margin = 3.0 / self.kernel_.inverse_length_scales(self.n_dims_)
@@ -532,7 +410,7 @@ default="clenshaw-curtis"
                 mu, var = sub.y - d * z, d * d - noise
             else:
                 var = prior[take] - np.einsum("ij,ij->j", S12, S12)
-            kl[take] = np.minimum(kl[take], _kl_gain(np.maximum(var, 1e-300), mu, sub.y, noise))
+            kl[take] = np.minimum(kl[take], kl_gain(np.maximum(var, 1e-300), mu, sub.y, noise))
         return kl, K12_newest, K22
 
     def update(self, hits: ArrayLike | None = None, segment_starts: ArrayLike | None = None,
@@ -662,12 +540,12 @@ default="clenshaw-curtis"
         OSError
             If the file cannot be written.
         """
-        params = _gp_params(self)
+        params = gp_params(self)
         arrays = {}
         if hasattr(self, "cells_"):
             cells = self.cells_
             lml = float(self.log_marginal_likelihood_value_)
-            arrays["fitted"] = _gp_fitted({
+            arrays["fitted"] = gp_fitted({
                 "kernel_": self.kernel_, "quadrature_": self._quadrature,
                 "noise_": float(self.noise_), "jitter_": float(self.jitter_),
                 "plsc_": tuple(float(v) for v in self.plsc_),
@@ -682,7 +560,7 @@ default="clenshaw-curtis"
                 arrays[f] = np.concatenate([getattr(c.obs, f) for c in cells])
             arrays["alpha"] = np.concatenate([c.alpha for c in cells])
             arrays["L"] = np.concatenate([c.L[np.tril_indices(c.size)] for c in cells])
-        _npz_io.write_npz(path, _GP_FORMAT, _GP_VERSIONS[-1], type(self).__name__, params,
+        _npz_io.write_npz(path, GP_FORMAT, GP_VERSIONS[-1], type(self).__name__, params,
                           arrays)
         return self
 
@@ -713,59 +591,12 @@ default="clenshaw-curtis"
             that disagree, a factor with a diagonal entry <= 0, targets that
             do not match the labels and lengths).
         """
-        source, model, arrays, fitted = _read_gp(cls, path, cls._OBS_SPEC)
+        source, model, arrays, fitted = read_gp(cls, path, cls._OBS_SPEC)
         if fitted is None:
             return model
-        n_obs, n_dims = arrays["starts"].shape
-        fitted = _check_gp_fitted(fitted, cls._FITTED, n_dims, source, "GPOMIK")
-        bad = ""
-        sizes = arrays["cell_sizes"]
-        try:
-            quadrature = fitted["quadrature_"]
-            if not isinstance(quadrature, _Rule):
-                raise TypeError(f"quadrature_ must be a ClenshawCurtis or Simpson, got "
-                                f"{quadrature!r:.80}")
-            quadrature._checked()
-            check_real(fitted["jitter_"], "jitter_", low=0.0, low_open=False)
-            for key in ("n_accepted_", "n_rejected_"):
-                _check_int(fitted[key], key, 0)
-        except (TypeError, ValueError) as exc:
-            bad = str(exc)
-        labels, y, lengths = arrays["labels"], arrays["y"], arrays["lengths"]
-        hit = labels == 1
-        if bad:
-            pass
-        elif not 1 <= n_dims <= 3:
-            bad = f"the observations must have 1 to 3 dimensions, got {n_dims}"
-        elif len(sizes) == 0 or (sizes < 1).any() or int(sizes.sum()) != n_obs:
-            bad = f"'cell_sizes' must be positive and sum to {n_obs}"
-        elif fitted["n_accepted_"] != n_obs:
-            bad = f"n_accepted_ must be {n_obs} (the observations), got {fitted['n_accepted_']}"
-        elif sum(int(n) * (int(n) + 1) // 2 for n in sizes) != len(arrays["L"]):
-            bad = "'L' must hold the lower triangles of the cells' factors"
-        elif not (hit | (labels == -1)).all():
-            bad = "'labels' must be +1 (hit) or -1 (beam)"
-        elif not (np.array_equal(y[hit], np.ones(hit.sum())) and
-                  np.array_equal(arrays["starts"][hit], arrays["ends"][hit]) and
-                  not lengths[hit].any()):
-            bad = "the hits must be points with target 1 and length 0"
-        elif not (np.array_equal(y[~hit], np.where(lengths[~hit] > 0, -lengths[~hit], -1.0))
-                  and (lengths >= 0).all()):
-            bad = "the beams' targets must be minus their lengths (-1 for zero length)"
-        if bad:
-            raise ValueError(f"{source}: corrupt fitted state of a GPOMIK: {bad}")
-        cells, start, pos = [], 0, 0
-        for n, fortran in zip(sizes.tolist(), arrays["L_fortran"].tolist()):
-            L = np.zeros((n, n), order="F" if fortran else "C")
-            L[np.tril_indices(n)] = arrays["L"][pos:pos + n * (n + 1) // 2]
-            if not (np.diag(L) > 0).all():
-                raise ValueError(f"{source}: corrupt fitted state of a GPOMIK: the Cholesky "
-                                 f"factor of local model {len(cells)} has a diagonal entry "
-                                 f"<= 0")
-            obs = Observations(*(arrays[f][start:start + n].copy()
-                                 for f in Observations._fields))
-            cells.append(_Cell(obs, L, arrays["alpha"][start:start + n].copy()))
-            start, pos = start + n, pos + n * (n + 1) // 2
+        n_dims = arrays["starts"].shape[1]
+        fitted = check_gp_fitted(fitted, cls._FITTED, n_dims, source, "GPOMIK")
+        cells = gpomik_cells(arrays, fitted, source)
         model.kernel_, model.noise_ = fitted["kernel_"], float(fitted["noise_"])
         model.jitter_ = float(fitted["jitter_"])
         model.plsc_ = tuple(float(v) for v in fitted["plsc_"])
@@ -777,76 +608,43 @@ default="clenshaw-curtis"
         model.n_rejected_ = int(fitted["n_rejected_"])
         return model
 
+    # ---------------------------------------------------------- map protocol
+    def _fitted(self):
+        return hasattr(self, "cells_")
+
+    def _margin(self):
+        """How far beyond its observations' box a local model may differ from the prior."""
+        inv = self.kernel_.inverse_length_scales(self.n_dims_)
+        reach = float(np.sqrt(type(self.kernel_).cutoff2))
+        return (reach if len(self.cells_) == 1 else min(reach, 3.0)) / inv
+
+    def _known(self, X):
+        margin = self._margin()
+        known = np.zeros(len(X), dtype=bool)
+        for cell in self.cells_:
+            lo, hi = cell.bounds(margin)
+            known |= np.all((X >= lo) & (X <= hi), axis=1)
+        return known
+
+    def _known_bounds(self):
+        boxes = [cell.bounds(self._margin()) for cell in self.cells_]
+        return np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+
+    def _num_cells(self):
+        return sum(cell.size for cell in self.cells_)
+
+    def _nbytes(self):
+        return sum(cell.nbytes for cell in self.cells_)
+
     # --------------------------------------------------------------- predict
     def _check_X(self, X):
         check_is_fitted(self, "cells_")
         return as_points(X, "X", self.n_dims_)
 
     def _predict_cell(self, cell, X, return_var):
-        """Mean (and variance) of one cell at `X`, tile by tile.
+        """Mean (and variance) of one cell at `X` (see :func:`occgp.gp._cells.predict_cell`)."""
+        return predict_cell(cell, X, self.kernel_, self._quadrature, self._n_threads, return_var)
 
-        Queries beyond the kernel's reach (its cutoff) of the cell's box get
-        the prior, as the tiles would give them. The others are grouped into
-        square tiles of `_TILE` (4) length scales; a tile
-        only meets the observations that come within the kernel's cutoff of
-        it (the other entries of its cross-covariance are exactly 0), so each
-        tile solves a small dense problem: ``mean = k_S . alpha_S`` and
-        ``var = k(x, x) - k_S^T [K^-1]_SS k_S``. The blocks of many tiles are
-        computed in one parallel call, then the products run tile by tile.
-        """
-        kernel = self.kernel_
-        inv = kernel.inverse_length_scales(self.n_dims_)
-        reach = np.sqrt(type(kernel).cutoff2)
-        lo, hi = cell.bounds(reach / inv)
-        inside = np.all((X >= lo) & (X <= hi), axis=1)
-        if not inside.all():  # beyond the kernel's reach of every observation: the prior
-            mean = np.zeros(len(X))
-            var = np.full(len(X), float(kernel.variance)) if return_var else None
-            if inside.any():
-                m, v = self._predict_cell(cell, X[inside], return_var)
-                mean[inside] = m
-                if return_var:
-                    var[inside] = v
-            return mean, var
-        mean = np.empty(len(X))
-        var = np.empty(len(X)) if return_var else None
-        if not len(X):
-            return mean, var
-        kinv = cell.inverse() if return_var else None
-        Xs = np.ascontiguousarray(X * inv)
-        A = np.ascontiguousarray(cell.obs.starts * inv)
-        V = np.ascontiguousarray((cell.obs.ends - cell.obs.starts) * inv)
-        lengths = np.ascontiguousarray(cell.obs.lengths)
-        keys = np.floor(Xs / _TILE).astype(np.int64)
-        _, tile_of, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-        rows = np.argsort(tile_of.ravel(), kind="stable").astype(np.intp)
-        row_ptr = np.r_[0, np.cumsum(counts)].astype(np.intp)
-        half_diag = 0.5 * _TILE * np.sqrt(self.n_dims_)
-        near = [np.flatnonzero(_segment_distance((keys[rows[row_ptr[t]]] + 0.5) * _TILE, A, A + V)
-                               <= reach + half_diag) for t in range(len(counts))]
-        sizes = counts * np.array([len(n) for n in near])
-        nodes, weights, offsets, q_reach = self._quadrature.table(kernel)
-        prior, variance = float(kernel.variance), float(kernel.variance)
-        t0 = 0
-        while t0 < len(counts):  # chunks of tiles whose blocks fit in _BLOCK_ENTRIES
-            t1 = t0 + max(1, int(np.searchsorted(np.cumsum(sizes[t0:]), _BLOCK_ENTRIES)))
-            cols = np.concatenate(near[t0:t1]).astype(np.intp)
-            col_ptr = np.r_[0, np.cumsum([len(n) for n in near[t0:t1]])].astype(np.intp)
-            out_ptr = np.r_[0, np.cumsum(sizes[t0:t1])].astype(np.intp)
-            out = np.empty(int(out_ptr[-1]))
-            _integral.tile_covariance(
-                type(kernel).kind, float(type(kernel).cutoff2), Xs, A, V, lengths,
-                rows[row_ptr[t0]:row_ptr[t1]], row_ptr[t0:t1 + 1] - row_ptr[t0], cols, col_ptr,
-                out_ptr, nodes, weights, offsets, q_reach, out, self._n_threads)
-            for t in range(t0, t1):
-                q = rows[row_ptr[t]:row_ptr[t + 1]]
-                Ks = variance * out[out_ptr[t - t0]:out_ptr[t - t0 + 1]].reshape(len(q), -1)
-                mean[q] = Ks @ cell.alpha[near[t]]
-                if return_var:
-                    quad = np.einsum("ij,ij->i", Ks @ kinv[np.ix_(near[t], near[t])], Ks)
-                    var[q] = np.maximum(prior - quad, 0.0)
-            t0 = t1
-        return mean, var
 
     def predict(self, X: ArrayLike, return_var: bool = False):
         """Latent mean (and variance) of the occupancy function at points `X`.

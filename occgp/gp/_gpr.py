@@ -23,7 +23,7 @@ import numpy as np
 import scipy.linalg as sl
 from scipy import optimize
 
-from ._integral import _covariance
+from ._integral_kernel import covariance
 
 __all__ = ["JITTER", "jitter_for", "log_marginal_likelihood", "optimize_hyperparameters",
            "factorise", "cholesky", "unique_observations"]
@@ -39,7 +39,7 @@ def jitter_for(K):
     return JITTER * max(float(np.mean(np.diag(K))), 1e-300) if len(K) else 0.0
 
 
-def _with_noise(K, noise, jitter=None):
+def with_noise(K, noise, jitter=None):
     K[np.diag_indices_from(K)] += noise + (jitter_for(K) if jitter is None else jitter)
     return K
 
@@ -70,7 +70,7 @@ def factorise(kernel, quadrature, noise, starts, ends, y, n_threads=1, jitter=No
     `jitter` None means ``jitter_for(K)``. A matrix that cannot be factorised
     raises a LinAlgError naming `what`, the kernel and the noise.
     """
-    K = _with_noise(_covariance(kernel, quadrature, starts, ends, n_threads=n_threads),
+    K = with_noise(covariance(kernel, quadrature, starts, ends, n_threads=n_threads),
                     noise, jitter)
     L = cholesky(K, kernel, noise, what)
     return L, solve_lower(L, y)
@@ -109,9 +109,9 @@ def log_marginal_likelihood(theta, kernel, quadrature, starts, ends, y, n_thread
     """
     k = kernel.with_theta(theta[:-1])
     noise = float(np.exp(theta[-1]))
-    K, dK = _covariance(k, quadrature, starts, ends, eval_gradient=True, n_threads=n_threads)
+    K, dK = covariance(k, quadrature, starts, ends, eval_gradient=True, n_threads=n_threads)
     if counts is None:
-        _with_noise(K, noise)
+        with_noise(K, noise)
         share = 1.0
     else:
         counts = np.asarray(counts, dtype=np.float64)

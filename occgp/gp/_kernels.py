@@ -2,7 +2,7 @@
 
 Each kernel is ``k(x, x') = variance * f(s)`` with ``s`` the squared distance
 scaled by the length scales, ``s = sum_d ((x_d - x'_d) / l_d) ** 2``. The
-profile ``f`` is all the integral kernels (:mod:`occgp.gp._integral`) need;
+profile ``f`` is all the integral kernels (:mod:`occgp.gp._integral_kernel`) need;
 the compiled core evaluates the same profiles.
 
 Hyper-parameters live in log space, ``theta = log([variance, *length_scale])``
@@ -37,7 +37,7 @@ def _as_samples(x, name):
     return arr
 
 
-def _check_bounds(bounds, name):
+def check_bounds(bounds, name):
     try:
         lo, hi = (float(b) for b in bounds)
     except (TypeError, ValueError):
@@ -47,7 +47,7 @@ def _check_bounds(bounds, name):
     return lo, hi
 
 
-class _Stationary:
+class Stationary:
     """Base of the stationary kernels: ``variance * f(s)``.
 
     Subclasses set ``kind`` (the compiled core's id), ``name`` and implement
@@ -81,8 +81,8 @@ class _Stationary:
         if ls.ndim != 1 or not (np.isfinite(ls).all() and (ls > 0).all()):
             raise ValueError(
                 f"length_scale must be a positive number or a 1-D array of them, got {self.length_scale!r}")
-        _check_bounds(self.variance_bounds, "variance_bounds")
-        _check_bounds(self.length_scale_bounds, "length_scale_bounds")
+        check_bounds(self.variance_bounds, "variance_bounds")
+        check_bounds(self.length_scale_bounds, "length_scale_bounds")
         return variance, ls
 
     @property
@@ -105,8 +105,8 @@ class _Stationary:
     def bounds(self) -> NDArray[np.float64]:
         """Log-space bounds of :attr:`theta`, shape (n_theta, 2)."""
         self._checked()
-        rows = [_check_bounds(self.variance_bounds, "variance_bounds")]
-        rows += [_check_bounds(self.length_scale_bounds, "length_scale_bounds")] * (self.n_theta - 1)
+        rows = [check_bounds(self.variance_bounds, "variance_bounds")]
+        rows += [check_bounds(self.length_scale_bounds, "length_scale_bounds")] * (self.n_theta - 1)
         return np.log(np.array(rows, dtype=np.float64))
 
     @property
@@ -353,7 +353,7 @@ class _Stationary:
         return np.full(_as_samples(X, "X").shape[0], variance)
 
 
-class SquaredExponential(_Stationary):
+class SquaredExponential(Stationary):
     """Squared exponential kernel ``variance * exp(-s / 2)``, optionally ARD.
 
     ``s = sum_d ((x_d - x'_d) / l_d) ** 2``. Its line integral against a point
@@ -389,7 +389,7 @@ class SquaredExponential(_Stationary):
         return np.exp(-0.5 * s)
 
 
-class Matern32(_Stationary):
+class Matern32(Stationary):
     """Matérn kernel with smoothness 3/2: ``variance * (1 + sqrt(3) r) exp(-sqrt(3) r)``.
 
     ``r = sqrt(s)``, the scaled distance. Once differentiable: its integrals
@@ -419,7 +419,7 @@ class Matern32(_Stationary):
         return 3.0 * np.exp(-_SQRT3 * np.sqrt(s))
 
 
-class SparseKernel(_Stationary):
+class SparseKernel(Stationary):
     """The compactly supported kernel of Melkumyan & Ramos (2009).
 
     ``variance * ((2 + cos(2 pi r)) / 3 * (1 - r) + sin(2 pi r) / (2 pi))``

@@ -10,8 +10,9 @@ from scipy.spatial import cKDTree
 
 from .. import _linetrack
 from .._validation import check_real
-from ._clustering import (_best_per_row, _check_angle, _check_at_least, _Clustering, _components,
-                          _first_appearance, _group_starts, _scan_ids, _segment_distance)
+from ._checks import check_angle, check_at_least
+from ._clustering import (Clustering, best_per_row, components, first_appearance, group_starts,
+                          scan_ids, segment_distance)
 
 __all__ = ["LineTracking", "Lines"]
 
@@ -67,7 +68,7 @@ def _line_set(points, groups, k):
                                np.bincount(groups, q[:, 1] * q[:, 1], k)])
     direction = _direction(scatter)
     t = np.einsum("ij,ij->i", q, direction[groups])
-    order, starts = _group_starts(groups)
+    order, starts = group_starts(groups)
     return _LineSet(n, mean, scatter, direction, np.minimum.reduceat(t[order], starts),
                     np.maximum.reduceat(t[order], starts))
 
@@ -107,7 +108,7 @@ def _near_pairs(a_starts, a_ends, b_starts=None, b_ends=None, *, reach):
     return key // n, key % n
 
 
-class LineTracking(_Clustering):
+class LineTracking(Clustering):
     """Line tracking of planar laser scans (Kim & Kim's LT-clustering, Algorithm 1).
 
     1. **Tracking.** Within each scan (a run of hits with the same origin),
@@ -224,15 +225,15 @@ class LineTracking(_Clustering):
         return dict(
             distance=check_real(self.distance_threshold, "distance_threshold", low=0.0),
             gap=check_real(self.gap_threshold, "gap_threshold", low=0.0),
-            cos_angle=np.cos(np.radians(_check_angle(self.merge_angle, "merge_angle"))),
+            cos_angle=np.cos(np.radians(check_angle(self.merge_angle, "merge_angle"))),
             merge=check_real(self.merge_distance, "merge_distance", low=0.0),
-            min_points=_check_at_least(self.min_points, "min_points", 2))
+            min_points=check_at_least(self.min_points, "min_points", 2))
 
     # ------------------------------------------------------------- tracking
     @staticmethod
     def _track(hits, origins, params):
         """Line of every hit (in input order) and the number of lines."""
-        scan = _scan_ids(origins)
+        scan = scan_ids(origins)
         d = hits - origins
         angle = np.arctan2(d[:, 1], d[:, 0])
         order = np.lexsort((np.arange(len(hits)), angle, scan))
@@ -296,7 +297,7 @@ class LineTracking(_Clustering):
             lines = _line_set(points, cluster[groups], n_clusters)
             i, j = _near_pairs(lines.starts, lines.ends, reach=self._reach(params))
             ok, _ = self._match(lines, i, lines, j, params)
-            comp = _components(n_clusters, i[ok], j[ok])
+            comp = components(n_clusters, i[ok], j[ok])
             n_new = int(comp.max()) + 1
             if n_new == n_clusters:
                 break
@@ -308,9 +309,9 @@ class LineTracking(_Clustering):
         lines = _line_set(points, groups, k)
         reach = params["gap"]
         i, j = _near_pairs(lines.starts, lines.ends, reach=reach)
-        close = _segment_distance(lines.starts[i], lines.ends[i], lines.starts[j],
+        close = segment_distance(lines.starts[i], lines.ends[i], lines.starts[j],
                                   lines.ends[j]) <= reach
-        comp = _components(k, i[close], j[close])
+        comp = components(k, i[close], j[close])
         return comp, int(comp.max()) + 1 if k else 0
 
     def _attach(self, short, clusters, params):
@@ -321,7 +322,7 @@ class LineTracking(_Clustering):
         i, j = _near_pairs(short.starts, short.ends, clusters.starts, clusters.ends,
                            reach=self._reach(params))
         ok, score = self._match(short, i, clusters, j, params, angle=False)
-        rows, picks, _ = _best_per_row(i[ok], j[ok], score[ok])
+        rows, picks, _ = best_per_row(i[ok], j[ok], score[ok])
         best[rows] = picks
         return best
 
@@ -379,14 +380,14 @@ class LineTracking(_Clustering):
         i, j = _near_pairs(lines.starts, lines.ends, existing.starts, existing.ends,
                            reach=self._reach(params))
         ok, score = self._match(lines, i, existing, j, params)
-        rows, picks, _ = _best_per_row(i[ok], j[ok], score[ok])
+        rows, picks, _ = best_per_row(i[ok], j[ok], score[ok])
         best[rows] = picks
         return best
 
     def _fit(self, hits, origins, params):
         line, n_lines = self._track(hits, origins, params)
         cluster, k = self._cluster_new(hits, line, n_lines, params)
-        rank = _first_appearance(cluster, k)
+        rank = first_appearance(cluster, k)
         labels = rank[cluster]
         lines = _line_set(hits, labels, k)
         return dict(_lines=lines, lines_=_public_lines(lines), n_lines_=n_lines), labels
@@ -400,7 +401,7 @@ class LineTracking(_Clustering):
         rank = np.arange(m + n_new, dtype=np.int64)
         is_new = cluster >= m
         if n_new:
-            rank[m:] = m + _first_appearance(cluster[is_new] - m, n_new)
+            rank[m:] = m + first_appearance(cluster[is_new] - m, n_new)
         labels = rank[cluster]
         # refit: existing clusters that received hits, and the new clusters
         joined = labels[~is_new]

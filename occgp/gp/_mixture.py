@@ -20,17 +20,25 @@ from sklearn.base import BaseEstimator, clone
 from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
-from .._validation import as_points, check_bool, check_choice, check_int, check_n_jobs, check_real
-from ._beams import _row_index, assign_beams, merge_small_clusters
+from .. import _npz_io
+from .._validation import (as_points, check_bool, check_choice, check_int, check_n_jobs,
+                           check_probability, check_real)
+from ..maps import register
+from ._beams import assign_beams, merge_small_clusters
+from ._cells import spatial_groups
 from ._clustering import DirichletProcessClustering
-from ._lines import LineTracking
-from ._planes import PlaneClustering
 from ._committee import COMBINE_RULES, Committee
-from ._gpomik import GPOMIK, _spatial_groups
+from ._experts import (Reach, concat_observations, downdated, fit_expert, hit_origins,
+                       hits_first, order_positions, predict_expert, split_observations)
+from ._gpomik import GPOMIK
 from ._gpr import optimize_shared_hyperparameters
-from ._integral import _check_quadrature, _covariance
+from ._integral_kernel import check_quadrature
+from ._io import GP_FORMAT, GP_VERSIONS, gp_fitted, gp_params, read_gp
 from ._limits import generator, threads
+from ._lines import LineTracking
+from ._map_protocol import MapProtocol
 from ._observations import Observations, make_observations
+from ._planes import PlaneClustering
 from ._plsc import fit_plsc, plsc_proba
 
 __all__ = ["GPMixture"]
@@ -38,138 +46,14 @@ __all__ = ["GPMixture"]
 _CLUSTERINGS = ("line", "dp", "plane")
 _UPDATES = ("cholesky", "refit")
 _HYPERPARAMETERS = ("shared", "own")
-#: Spacing (in length scales) of the samples along an expert's beams that
-#: bound the distance from a query to its observations.
-_SAMPLE_STEP = 0.5
-#: Experts of at most this many observations are evaluated densely; queries
-#: go in blocks of `_BLOCK`.
-_DENSE_SIZE = 400
-_BLOCK = 4096
+#: The objects a GPMixture's parameters may hold (besides the kernels and rules).
+_CLASSES = {c.__name__: c for c in (GPOMIK, LineTracking, DirichletProcessClustering,
+                                    PlaneClustering)}
 
 
-def hit_origins(hits, segment_starts, segment_ends):
-    """The sensor position of each hit: the start of the first beam ending exactly on it.
-
-    A hit that ends no beam is its own origin (a scan of one hit).
-    """
-    origins = hits.copy()
-    beam = _row_index(hits, segment_ends)
-    origins[beam >= 0] = segment_starts[beam[beam >= 0]]
-    return origins
-
-
-class _Reach:
-    """Where one expert may differ from its prior by more than a tolerance.
-
-    With ``C = K + noise I`` the expert's covariance, a query's variance
-    reduction is ``k^T C^-1 k <= |k|^2 / noise`` and its mean
-    ``|k^T C^-1 y| <= sqrt(k^T C^-1 k * y^T C^-1 y)`` (Cauchy–Schwarz in the
-    ``C^-1`` inner product). Each entry of ``k`` is at most
-    ``variance * w_i * f(d^2)``, with ``w_i`` the observation's length (1
-    for a point), ``f`` the kernel's (decreasing) profile and ``d`` the
-    distance in length scales from the query to the nearest observation.
-    Beyond the radius where those bounds give a variance within
-    ``eps * prior`` of the prior and a mean within ``eps * sqrt(prior)`` of 0
-    the expert is at its prior up to the tolerance; beyond the kernel's
-    cutoff it is exactly there. Distances are bounded below through samples
-    every `_SAMPLE_STEP` length scales along the observations (a point of a
-    segment is within half a step of a sample).
-    """
-
-    def __init__(self, gp):
-        kernel = gp.kernel_
-        self.kernel = kernel
-        self.inv = kernel.inverse_length_scales(gp.n_dims_)
-        self.prior = float(kernel.variance)
-        cells = gp.cells_
-        self.w2 = sum(float(np.sum(np.where(c.obs.lengths > 0, c.obs.lengths, 1.0) ** 2))
-                      for c in cells)
-        self.energy = max(max(float(c.obs.y @ c.alpha) for c in cells), 1e-300)
-        self.noise = gp.noise_ + gp.jitter_
-        starts = np.vstack([c.obs.starts for c in cells]) * self.inv
-        ends = np.vstack([c.obs.ends for c in cells]) * self.inv
-        n = np.ceil(np.linalg.norm(ends - starts, axis=1) / _SAMPLE_STEP).astype(np.intp) + 1
-        owner = np.repeat(np.arange(len(n)), n)
-        t = (np.arange(len(owner)) - np.repeat(np.cumsum(n) - n, n)) / np.maximum(n - 1, 1)[owner]
-        samples = starts[owner] + t[:, None] * (ends - starts)[owner]
-        self.lo, self.hi = samples.min(axis=0), samples.max(axis=0)
-        self.tree = cKDTree(samples)
-        self._radius = {}
-
-    def radius(self, eps):
-        """Distance (length scales) beyond which the expert is within `eps` of its prior."""
-        if eps not in self._radius:
-            r_max = eps * self.prior * min(1.0, eps / self.energy)
-            bound = np.sqrt(r_max * self.noise / (self.w2 * self.prior ** 2)) if eps > 0 else 0.0
-            profile = self.kernel.profile
-            lo, hi = 0.0, float(type(self.kernel).cutoff2)
-            if profile(np.array([hi]))[0] <= bound:
-                for _ in range(60):  # smallest squared distance with f(s) <= bound
-                    mid = 0.5 * (lo + hi)
-                    lo, hi = (mid, hi) if profile(np.array([mid]))[0] > bound else (lo, mid)
-            self._radius[eps] = float(np.sqrt(hi))
-        return self._radius[eps]
-
-    def queries(self, X, eps):
-        """Indices of the queries `X` (world coordinates) within reach."""
-        Xs = X * self.inv
-        r = self.radius(eps) + _SAMPLE_STEP / 2
-        cand = np.flatnonzero(np.all((Xs >= self.lo - r) & (Xs <= self.hi + r), axis=1))
-        if not len(cand):
-            return cand
-        d, _ = self.tree.query(Xs[cand], distance_upper_bound=r)
-        return cand[np.isfinite(d)]
-
-
-def _fit_expert(template, obs, seed):
-    """A clone of `template` fitted on `obs`, with one BLAS thread (the same in any worker)."""
-    expert = clone(template).set_params(random_state=seed)
-    n_hits = int(np.count_nonzero(obs.labels > 0))
-    with threadpool_limits(1):
-        return expert.fit(obs.starts[:n_hits], obs.starts[n_hits:], obs.ends[n_hits:])
-
-
-def _predict_expert(expert, X):
-    """Latent mean and variance of `expert` at `X`.
-
-    A single-cell expert of at most `_DENSE_SIZE` observations is evaluated
-    densely (its cross-covariance in blocks of `_BLOCK` queries): the same
-    values as :meth:`GPOMIK.predict` up to rounding (1e-15), without its tiles'
-    bookkeeping. BLAS
-    runs on one thread, so the values do not depend on the joblib backend.
-    """
-    with threadpool_limits(1):
-        return _predict_dense(expert, X)
-
-
-def _predict_dense(expert, X):
-    if len(expert.cells_) > 1 or expert.cells_[0].size > _DENSE_SIZE:
-        return expert.predict(X, return_var=True)
-    cell = expert.cells_[0]
-    kinv = cell.inverse()
-    prior = float(expert.kernel_.variance)
-    mean, var = np.empty(len(X)), np.empty(len(X))
-    for i in range(0, len(X), _BLOCK):
-        x = X[i:i + _BLOCK]
-        k = _covariance(expert.kernel_, expert._quadrature, cell.obs.starts, cell.obs.ends, x, x,
-                        n_threads=expert._n_threads)
-        mean[i:i + _BLOCK] = k.T @ cell.alpha
-        var[i:i + _BLOCK] = np.maximum(prior - np.einsum("ij,ij->j", k, kinv @ k), 0.0)
-    return mean, var
-
-
-def _split(obs):
-    """`obs` as GPOMIK's (hits, segment_starts, segment_ends)."""
-    hit = obs.labels > 0
-    return obs.starts[hit], obs.starts[~hit], obs.ends[~hit]
-
-
-def _order(obs):
-    """`obs` with its hits first (the order GPOMIK keeps)."""
-    return obs.take(np.r_[np.flatnonzero(obs.labels > 0), np.flatnonzero(obs.labels < 0)])
-
-
-class GPMixture(BaseEstimator):
+@register("gp-mixture", dims=(2,), formats=(".npz",),
+          description="Mixture of GPOMIK experts merged by a committee (2D)")
+class GPMixture(MapProtocol, BaseEstimator):
     """Mixture of Gaussian-process experts merged by a committee (Kim & Kim).
 
     The observations (hits and beams, as for :class:`GPOMIK`) are split into
@@ -250,6 +134,9 @@ class GPMixture(BaseEstimator):
     random_state : int, Generator or None, default=None
         Seeds the clustering, every expert (one seed per expert, from its
         index) and the PLSC subset.
+    occupancy_threshold : float, default=0.5
+        :meth:`is_occupied`'s threshold: a point is occupied when its
+        probability is at least this; in (0, 1).
 
     Attributes
     ----------
@@ -274,6 +161,19 @@ class GPMixture(BaseEstimator):
         The experts the last :meth:`update` changed or created (all of them
         after :meth:`fit`).
 
+    Notes
+    -----
+    **As a map** (:class:`occgp.maps.OccupancyMap`, registered as
+    ``"gp-mixture"``): :meth:`insert_scan` turns a 2D scan into hits and
+    beams; the first scan is :meth:`fit`, each later one :meth:`update`, so
+    a sequence of scans gives the model of ``fit`` on the first and
+    ``update`` with each next. **Unknown space**: :meth:`occupancy` is NaN
+    where no expert is evaluated, i.e. where every expert is within
+    ``prior_tol / n_experts`` of its prior (see 4. above): there the
+    committee merges priors only. :attr:`bounds` is the box of the experts'
+    reach, :attr:`num_cells` the number of observations in the experts, and
+    :meth:`to_octree` evaluates the model on 0.1 m cells by default.
+
     References
     ----------
     S. Kim, J. Kim, "Efficient clustering for continuous occupancy mapping
@@ -291,7 +191,8 @@ class GPMixture(BaseEstimator):
 
     def __init__(self, expert=None, *, clustering="line", combine="gpoe",
                  hyperparameters="shared", min_hits=5, max_cluster_size=1000, prior_tol=1e-3,
-                 update_experts="cholesky", max_optimize=1000, n_jobs=None, random_state=None):
+                 update_experts="cholesky", max_optimize=1000, n_jobs=None, random_state=None,
+                 occupancy_threshold=0.5):
         self.expert = expert
         self.clustering = clustering
         self.combine = combine
@@ -303,6 +204,7 @@ class GPMixture(BaseEstimator):
         self.max_optimize = max_optimize
         self.n_jobs = n_jobs
         self.random_state = random_state
+        self.occupancy_threshold = occupancy_threshold
 
     # ------------------------------------------------------------ parameters
     def _check_params(self):
@@ -320,6 +222,7 @@ class GPMixture(BaseEstimator):
         check_int(self.max_optimize, "max_optimize", low=2)
         check_real(self.prior_tol, "prior_tol", low=0.0, high=1.0, low_open=False)
         check_n_jobs(self.n_jobs)
+        check_probability(self.occupancy_threshold, "occupancy_threshold")
         c = self.clustering
         if isinstance(c, str):
             check_choice(c, "clustering", _CLUSTERINGS)
@@ -403,10 +306,11 @@ class GPMixture(BaseEstimator):
         with threadpool_limits(1):  # one BLAS thread: the same values in every worker
             return self._fit(hits, segment_starts, segment_ends)
 
-    def _fit(self, hits, segment_starts, segment_ends):
+    def _fit(self, hits, segment_starts, segment_ends, seed=None):
+        """:meth:`fit`; `seed` (what `random_state` draws) is given when a file is read."""
         template = self._check_params()
-        rng = generator(self.random_state)
-        seed = int(rng.integers(2 ** 32))
+        if seed is None:
+            seed = int(generator(self.random_state).integers(2 ** 32))
         obs = make_observations(hits, segment_starts, segment_ends)
         n_hits = int(np.count_nonzero(obs.labels > 0))
         if not (n_hits and n_hits < len(obs.y)):
@@ -422,7 +326,7 @@ class GPMixture(BaseEstimator):
         groups, expert_of = [], np.empty(len(obs.y), dtype=np.int64)
         for g in np.unique(merged):
             idx = np.flatnonzero(merged == g)
-            for part in sorted(_spatial_groups(obs.anchors[idx], self.max_cluster_size),
+            for part in sorted(spatial_groups(obs.anchors[idx], self.max_cluster_size),
                                key=lambda p: int(p.min())):
                 expert_of[idx[part]] = len(groups)
                 groups.append(np.sort(idx[part]))
@@ -430,7 +334,7 @@ class GPMixture(BaseEstimator):
             template = self._shared_template(template, obs, groups, np.random.default_rng(seed))
         self._expert_template = template  # what update() fits new experts with
         experts = self._parallel()(
-            delayed(_fit_expert)(template, _order(obs.take(idx)), self._expert_seed(e))
+            delayed(fit_expert)(template, hits_first(obs.take(idx)), self._expert_seed(e))
             for e, idx in enumerate(groups))
         self.experts_ = list(experts)
         self.clustering_ = clustering
@@ -438,6 +342,7 @@ class GPMixture(BaseEstimator):
         self.labels_ = expert_of
         self.n_clusters_ = int(len(np.unique(clusters)))
         self._observations = obs
+        self._calls = [len(obs.y)]   # observations of each fit / update call, for save()
         self._hit_clusters = hit_labels
         # clustering label -> the experts that hold its observations
         self._cluster_experts = {}
@@ -463,7 +368,7 @@ class GPMixture(BaseEstimator):
             parts = [(o.starts, o.ends, o.y) for o in
                      (obs.take(groups[e]) for e in np.sort(order[:n_parts]))]
             kernel, noise, _ = optimize_shared_hyperparameters(
-                kernel, noise, noise_bounds, parts, _check_quadrature(template.quadrature),
+                kernel, noise, noise_bounds, parts, check_quadrature(template.quadrature),
                 n_restarts=template.n_restarts, rng=rng,
                 n_threads=threads(template.n_jobs))
         self.kernel_, self.noise_ = kernel, noise
@@ -475,11 +380,140 @@ class GPMixture(BaseEstimator):
         check_is_fitted(self, "experts_")
         return len(self.experts_)
 
+    # ---------------------------------------------------------- map protocol
+    def _fitted(self):
+        return hasattr(self, "experts_")
+
+    def _known(self, X):
+        eps = float(self.prior_tol) / len(self.experts_)
+        known = np.zeros(len(X), dtype=bool)
+        for reach in self._reaches():
+            known[reach.queries(X, eps)] = True
+        return known
+
+    def _known_bounds(self):
+        eps = float(self.prior_tol) / len(self.experts_)
+        boxes = [reach.box(eps) for reach in self._reaches()]
+        return np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+
+    def _num_cells(self):
+        return sum(gp._num_cells() for gp in self.experts_)
+
+    def _nbytes(self):
+        return sum(gp._nbytes() for gp in self.experts_) + self.labels_.nbytes + sum(
+            a.nbytes for a in self._observations)
+
+    # ----------------------------------------------------------------- files
+    _SPEC = {"starts": (np.float64, ("n_obs", "n_dims")), "ends": (np.float64, ("n_obs", "n_dims")),
+             "labels": (np.float64, ("n_obs",)), "call_sizes": (np.int64, ("n_calls",))}
+
+    def save(self, path) -> "GPMixture":
+        """Write the model (parameters and, once fitted, its evidence) to an ``.npz``.
+
+        The format of :meth:`GPOMIK.save <occgp.gp.GPOMIK.save>`
+        (``"occgp.gp_model"``, version 1, class ``"GPMixture"``, ``params``:
+        the `expert` and `clustering` objects as ``{"__object__": ...}``),
+        with, for a fitted model: ``fitted`` (0-d str, JSON: ``seed``, what
+        `random_state` drew at :meth:`fit`), ``starts``, ``ends``, ``labels``
+        (float64 (n_obs, D), (n_obs, D) and (n_obs,): the observations of
+        every :meth:`fit` and :meth:`update` call in turn, each call's hits
+        first) and ``call_sizes`` (int64 (n_calls,): the observations of each
+        call). :meth:`load` replays the calls with the seed, which gives the
+        same model (the experts are fitted again: loading takes the time of
+        those calls).
+
+        Parameters
+        ----------
+        path : str or path-like
+            Destination file (overwritten).
+
+        Returns
+        -------
+        self : GPMixture
+
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or path-like, or a parameter holds a value
+            that cannot be saved (e.g. a clustering object of another class
+            than occgp.gp's).
+        OSError
+            If the file cannot be written.
+        """
+        params = self.get_params(deep=False)
+        if isinstance(params["expert"], GPOMIK):
+            params["expert"] = {"__object__": "GPOMIK", "params": gp_params(params["expert"])}
+        params = gp_params(self, _CLASSES, params)
+        arrays = {}
+        if self._fitted():
+            obs = self._observations
+            arrays["fitted"] = gp_fitted({"seed": int(self._seed)})
+            arrays.update(starts=obs.starts, ends=obs.ends, labels=obs.labels,
+                          call_sizes=np.array(self._calls, dtype=np.int64))
+        _npz_io.write_npz(path, GP_FORMAT, GP_VERSIONS[-1], type(self).__name__, params, arrays)
+        return self
+
+    @classmethod
+    def load(cls, path) -> "GPMixture":
+        """Read a model written by :meth:`save` (its calls are replayed).
+
+        Parameters
+        ----------
+        path : str or path-like
+
+        Returns
+        -------
+        GPMixture
+            Fitted when the saved model was.
+
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or path-like.
+        OSError
+            If the file does not exist, is not a regular file or cannot be read.
+        ValueError
+            If it is not such an ``.npz`` archive, is corrupt or of another
+            class, its observations are not valid (labels other than +1 and
+            -1, call sizes that do not add up), or replaying them fails.
+        """
+        source, model, arrays, fitted = read_gp(cls, path, cls._SPEC, _CLASSES)
+        if fitted is None:
+            return model
+        labels, sizes = arrays["labels"], arrays["call_sizes"]
+        seed = fitted.get("seed")
+        bad = ""
+        if sorted(fitted) != ["seed"]:
+            bad = f"'fitted' must hold ['seed'], got {sorted(fitted)[:20]}"
+        elif isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 32:
+            bad = f"seed must be an int in [0, 2**32), got {seed!r:.40}"
+        elif not ((labels == 1) | (labels == -1)).all():
+            bad = "'labels' must be +1 (hit) or -1 (beam)"
+        elif len(sizes) == 0 or (sizes < 1).any() or int(sizes.sum()) != len(labels):
+            bad = f"'call_sizes' must be positive and sum to {len(labels)}"
+        if bad:
+            raise ValueError(f"{source}: corrupt fitted state of a GPMixture: {bad}")
+        ends = np.cumsum(sizes)
+        try:
+            for i, (lo, hi) in enumerate(zip(ends - sizes, ends)):
+                hit = labels[lo:hi] > 0
+                starts, stops = arrays["starts"][lo:hi], arrays["ends"][lo:hi]
+                data = (starts[hit], starts[~hit], stops[~hit])
+                if i == 0:
+                    with threadpool_limits(1):
+                        model._fit(*data, seed=seed)
+                else:
+                    model.update(*data)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{source}: cannot rebuild the GPMixture from its observations: "
+                             f"{exc}") from None
+        return model
+
     # -------------------------------------------------------------- predict
     def _reaches(self):
         for e, gp in enumerate(self.experts_):
             if self._reach[e] is None:
-                self._reach[e] = _Reach(gp)
+                self._reach[e] = Reach(gp)
         return self._reach
 
     def _committee(self, X, skip=None):
@@ -498,7 +532,7 @@ class GPMixture(BaseEstimator):
                 idx = idx[skip[idx] != e]
             if len(idx):
                 tasks.append((e, idx))
-        results = self._parallel()(delayed(_predict_expert)(self.experts_[e], X[idx])
+        results = self._parallel()(delayed(predict_expert)(self.experts_[e], X[idx])
                                    for e, idx in tasks)
         for (e, idx), (mean, var) in zip(tasks, results):
             committee.add(idx, mean, var, priors[e])
@@ -575,9 +609,9 @@ class GPMixture(BaseEstimator):
                 continue
             # the observation's place in its expert (hits first, as _order put them)
             idx = groups[e]
-            local = _order_positions(obs.labels[idx] > 0)
+            local = order_positions(obs.labels[idx] > 0)
             pos = local[np.searchsorted(idx, take[sel])]
-            mean, var = _downdated(gp, X[sel], pos)
+            mean, var = downdated(gp, X[sel], pos)
             committee.add(sel, mean, var, priors[e])
         mean, var = committee.result()
         a, b = fit_plsc(mean, var, obs.labels[take])
@@ -658,7 +692,7 @@ class GPMixture(BaseEstimator):
                 cluster_experts[int(c)] = {target}
                 continue
             cluster_experts[int(c)] = set()
-            for part in sorted(_spatial_groups(new.anchors[idx], self.max_cluster_size),
+            for part in sorted(spatial_groups(new.anchors[idx], self.max_cluster_size),
                                key=lambda p: int(p.min())):
                 expert_of[idx[part]] = next_id
                 cluster_experts[int(c)].add(next_id)
@@ -667,19 +701,19 @@ class GPMixture(BaseEstimator):
         changed = np.unique(expert_of)
         old_changed = changed[changed < len(self.experts_)]
         fresh = [int(e) for e in changed if e >= len(self.experts_)]
-        all_obs = _concat(self._observations, new)
+        all_obs = concat_observations(self._observations, new)
         all_labels = np.r_[self.labels_, expert_of]
 
         def grow(e):
             gp = self.experts_[e]
             if self.update_experts == "refit":
-                return _fit_expert(template, _order(all_obs.take(all_labels == e)),
+                return fit_expert(template, hits_first(all_obs.take(all_labels == e)),
                                    self._expert_seed(e))
-            return copy.deepcopy(gp).update(*_split(new.take(expert_of == e)))
+            return copy.deepcopy(gp).update(*split_observations(new.take(expert_of == e)))
 
         grown = self._parallel()(delayed(grow)(int(e)) for e in old_changed)
         made = self._parallel()(
-            delayed(_fit_expert)(template, _order(new.take(new_groups[e])),
+            delayed(fit_expert)(template, hits_first(new.take(new_groups[e])),
                                  self._expert_seed(e)) for e in fresh)
         # every step that can fail is done: now change the model
         for e, gp in zip(old_changed, grown):
@@ -692,38 +726,9 @@ class GPMixture(BaseEstimator):
         self._reach += [None] * len(made)
         self.labels_ = all_labels
         self._observations = all_obs
+        self._calls = self._calls + [len(new.y)]
         self._hit_clusters = np.r_[self._hit_clusters, hit_labels]
         self._cluster_experts = cluster_experts
         self.n_clusters_ = int(getattr(self.clustering_, "n_clusters_", self.n_clusters_))
         self.updated_experts_ = changed
         return self
-
-
-def _concat(a: Observations, b: Observations) -> Observations:
-    return Observations(*(np.concatenate([x, y]) for x, y in zip(a, b)))
-
-
-def _order_positions(is_hit):
-    """Position of each observation within :func:`_order` of them (hits first)."""
-    order = np.r_[np.flatnonzero(is_hit), np.flatnonzero(~is_hit)]
-    pos = np.empty(len(order), dtype=np.intp)
-    pos[order] = np.arange(len(order))
-    return pos
-
-
-def _downdated(gp, X, pos):
-    """Latent mean and variance of single-cell expert `gp` at X[j] without its observation pos[j].
-
-    With ``c = C^-1 k_x`` the removal of observation ``i`` is a rank-one
-    downdate: ``mean - c_i alpha_i / [C^-1]_ii`` and ``var + c_i^2 / [C^-1]_ii``.
-    """
-    cell = gp.cells_[0]
-    kinv = cell.inverse()
-    k = _covariance(gp.kernel_, gp._quadrature, cell.obs.starts, cell.obs.ends, X, X,
-                    n_threads=gp._n_threads)
-    c = kinv @ k
-    mean = k.T @ cell.alpha
-    var = float(gp.kernel_.variance) - np.einsum("ij,ij->j", k, c)
-    ci = c[pos, np.arange(len(pos))]
-    d = kinv[pos, pos]
-    return mean - ci * cell.alpha[pos] / d, np.maximum(var, 0.0) + ci * ci / d

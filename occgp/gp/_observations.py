@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import as_numeric, as_point, as_points
-from ._integral import as_segments
+from ._integral_kernel import as_segments
 
 __all__ = ["Observations", "observations_from_scans", "make_observations"]
 

@@ -9,9 +9,9 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from .._validation import check_int, check_n_jobs, check_real, n_threads
-from ._clustering import (DirichletProcessClustering, _best_per_row, _check_angle,
-                          _check_at_least, _Clustering, _components, _first_appearance,
-                          _group_starts)
+from ._checks import check_angle, check_at_least
+from ._clustering import (Clustering, DirichletProcessClustering, best_per_row, components,
+                          first_appearance, group_starts)
 
 __all__ = ["PlaneClustering", "Planes"]
 
@@ -67,7 +67,7 @@ def _plane_moments(points, groups, k):
     q = points - mean[groups]
     scatter = np.stack([np.stack([np.bincount(groups, q[:, a] * q[:, b], k) for b in range(3)],
                                  axis=1) for a in range(3)], axis=1)
-    order, starts = _group_starts(groups)
+    order, starts = group_starts(groups)
     lower = np.minimum.reduceat(points[order], starts, axis=0)
     upper = np.maximum.reduceat(points[order], starts, axis=0)
     return n, mean, scatter, lower, upper
@@ -78,7 +78,7 @@ def _normals(scatter):
     return np.linalg.eigh(scatter)[1][:, :, 0]
 
 
-class PlaneClustering(_Clustering):
+class PlaneClustering(Clustering):
     """Planes grown over the k-nearest-neighbour graph of 3D hits, with a DP fallback.
 
     The 3D counterpart of line tracking (Kim & Kim's future work):
@@ -198,11 +198,11 @@ class PlaneClustering(_Clustering):
         self.n_jobs = n_jobs
 
     def _check_params(self):
-        angle = np.radians(_check_angle(self.angle_threshold, "angle_threshold"))
+        angle = np.radians(check_angle(self.angle_threshold, "angle_threshold"))
         params = dict(
             distance=check_real(self.distance_threshold, "distance_threshold", low=0.0),
             cos=np.cos(angle), sin=np.sin(angle), tan=np.tan(angle),
-            k=_check_at_least(self.n_neighbors, "n_neighbors", 2, _MAX_NEIGHBORS),
+            k=check_at_least(self.n_neighbors, "n_neighbors", 2, _MAX_NEIGHBORS),
             min_size=check_int(self.min_region_size, "min_region_size", low=1),
             n_jobs=check_n_jobs(self.n_jobs))
         params["dp"] = DirichletProcessClustering(concentration=self.concentration,
@@ -283,7 +283,7 @@ class PlaneClustering(_Clustering):
             overlap = np.all((lower[i] - margin <= upper[j] + margin)
                              & (lower[j] - margin <= upper[i] + margin), axis=1)
             ok = (cos >= params["cos"]) & (off <= params["distance"]) & overlap
-            comp = _components(n_planes, i[ok], j[ok])
+            comp = components(n_planes, i[ok], j[ok])
             plane = np.where(plane >= 0, comp[np.maximum(plane, 0)], -1)
             n_planes = int(comp.max()) + 1
         cluster = plane.copy()
@@ -292,7 +292,7 @@ class PlaneClustering(_Clustering):
             dp = params["dp"]
             cluster[rest] = n_planes + dp.fit_predict(points[rest], np.zeros_like(points[rest]))
         k = int(cluster.max()) + 1
-        rank = _first_appearance(cluster, k)
+        rank = first_appearance(cluster, k)
         labels = rank[cluster]
         is_plane = np.zeros(k, dtype=bool)
         is_plane[rank[:n_planes]] = True
@@ -343,7 +343,7 @@ class PlaneClustering(_Clustering):
                 kind[q], normal[q], direction[q], old["normal"][p], params)
             if not ok.any():
                 break
-            q, p, _ = _best_per_row(q[ok], p[ok], dist[ok])
+            q, p, _ = best_per_row(q[ok], p[ok], dist[ok])
             owner[n_old + q] = p
         labels = owner[n_old:].copy()
         joined = labels >= 0

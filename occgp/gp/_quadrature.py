@@ -125,14 +125,14 @@ def _check_order(n, low, name, high):
 
 
 def _check_kernel_class(kernel):
-    from ._kernels import _Stationary
-    if not isinstance(kernel, _Stationary):
+    from ._kernels import Stationary
+    if not isinstance(kernel, Stationary):
         raise TypeError("kernel must be one of occgp.gp's kernels (SquaredExponential, "
                         f"Matern32, SparseKernel), got {type(kernel).__name__}")
     return kernel
 
 
-class _Rule:
+class Rule:
     """Orders 3, 5, 9, ... up to `max_order`, each with its calibrated reach."""
 
     _family = None
@@ -287,7 +287,7 @@ class _Rule:
         return f"{type(self).__name__}(tol={self.tol!r}, max_order={self.max_order!r})"
 
 
-class ClenshawCurtis(_Rule):
+class ClenshawCurtis(Rule):
     """Adaptive-order Clenshaw–Curtis quadrature (the GPOMIK paper's choice).
 
     Parameters
@@ -307,7 +307,7 @@ class ClenshawCurtis(_Rule):
     _family = staticmethod(clenshaw_curtis)
 
 
-class Simpson(_Rule):
+class Simpson(Rule):
     """Composite Simpson quadrature with an adaptive number of nodes (Kim & Kim's choice).
 
     Parameters

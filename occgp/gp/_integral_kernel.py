@@ -15,26 +15,26 @@ from numpy.typing import ArrayLike
 
 from .. import _integral
 from .._validation import as_numeric, as_points, check_bool
-from ._kernels import _Stationary
+from ._kernels import Stationary
 from ._limits import check_coordinates, check_dense, check_segments, threads
-from ._quadrature import ClenshawCurtis, Simpson, _Rule
+from ._quadrature import ClenshawCurtis, Simpson, Rule
 
 __all__ = ["integral_kernel"]
 
 
-def _check_kernel(kernel):
-    if not isinstance(kernel, _Stationary):
+def check_kernel(kernel):
+    if not isinstance(kernel, Stationary):
         raise TypeError("kernel must be one of occgp.gp's kernels (SquaredExponential, "
                         f"Matern32, SparseKernel), got {type(kernel).__name__}")
     return kernel
 
 
-def _check_quadrature(quadrature):
+def check_quadrature(quadrature):
     if quadrature is None or quadrature == "clenshaw-curtis":
         return ClenshawCurtis()
     if quadrature == "simpson":
         return Simpson()
-    if isinstance(quadrature, _Rule):
+    if isinstance(quadrature, Rule):
         quadrature._checked()
         return quadrature
     raise ValueError("quadrature must be 'clenshaw-curtis', 'simpson', a ClenshawCurtis or "
@@ -69,7 +69,7 @@ class _Prepared:
         self.length = np.ascontiguousarray(np.linalg.norm(ends - starts, axis=1))
 
 
-def _covariance(kernel, quadrature, starts1, ends1, starts2=None, ends2=None, *,
+def covariance(kernel, quadrature, starts1, ends1, starts2=None, ends2=None, *,
                 eval_gradient=False, n_threads=1):
     """Kernel matrix (with the variance) and, optionally, its gradient (n_theta, n1, n2)."""
     variance = float(kernel.variance)
@@ -158,8 +158,8 @@ def integral_kernel(kernel, starts: ArrayLike, ends: ArrayLike, starts2: ArrayLi
     >>> bool(np.allclose(K, K.T))
     True
     """
-    kernel = _check_kernel(kernel)
-    quadrature = _check_quadrature(quadrature)
+    kernel = check_kernel(kernel)
+    quadrature = check_quadrature(quadrature)
     n_threads = threads(n_jobs)
     eval_gradient = check_bool(eval_gradient, "eval_gradient")
     starts, ends = as_segments(starts, ends, "observation")
@@ -180,7 +180,7 @@ def integral_kernel(kernel, starts: ArrayLike, ends: ArrayLike, starts2: ArrayLi
     n2 = len(starts) if starts2 is None else len(starts2)
     check_dense(len(starts), n2, 1 + (kernel.n_theta + 1 if eval_gradient else 0),
                 "the kernel matrix", "pass fewer observations at a time")
-    out = _covariance(kernel, quadrature, starts, ends, starts2, ends2,
+    out = covariance(kernel, quadrature, starts, ends, starts2, ends2,
                       eval_gradient=eval_gradient, n_threads=n_threads)
     if eval_gradient:
         return out[0], np.moveaxis(out[1], 0, -1)

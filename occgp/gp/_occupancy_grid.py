@@ -1,14 +1,14 @@
-"""The log-odds occupancy grid baseline in 2D or 3D, and evaluation of maps on grids.
+"""The log-odds occupancy grid baseline in 2D or 3D.
 
 :class:`OccupancyGrid` takes the data of the Gaussian-process maps (laser hits
 and free beam segments) and integrates it with OctoMap's sensor model, so that
-both can be scored on the same test points. :func:`grid_points` and
-:func:`predict_grid` evaluate any fitted map on the cell centres of a box.
+both can be scored on the same test points.
 """
 
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -16,9 +16,13 @@ from scipy.special import expit, logit
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from .._validation import as_point, as_points, check_real
+from .. import _npz_io
+from .._validation import as_points, check_probability, check_real
+from ._io import GP_FORMAT, GP_VERSIONS, gp_fitted, gp_params, read_gp
+from ..maps import register
+from ._map_protocol import MapProtocol
 
-__all__ = ["OccupancyGrid", "grid_points", "predict_grid"]
+__all__ = ["OccupancyGrid", "shape_of"]
 
 #: Crossing intervals shorter than this (in cells along the segment's longest axis) are skipped,
 #: so a segment through a grid corner or edge marks no cell it only touches.
@@ -29,9 +33,6 @@ MAX_CELL_INDEX = 1e15
 #: Most cells one segment may cross; segments are also traversed in chunks of about this many
 #: crossings, so memory stays bounded (about 130 bytes a crossing).
 MAX_SEGMENT_CELLS = 4_000_000
-#: Default most cells of :func:`grid_points` and :func:`predict_grid` (points of 24 bytes each
-#: in 3D, 16 in 2D).
-MAX_GRID_POINTS = 20_000_000
 
 
 def _unique_rows(keys: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -176,7 +177,7 @@ def _check_extent(arrays, resolution):
                 f"towards the origin or use a coarser resolution")
 
 
-def _shape(x) -> tuple[int, ...] | None:
+def shape_of(x) -> tuple[int, ...] | None:
     """Shape of `x` if it converts to a numeric array, else None (as_points says why)."""
     try:
         arr = np.asarray(x)
@@ -201,7 +202,7 @@ def _check_data(hits, segment_starts, segment_ends, dim=None, resolution=None):
     if dim is None:
         found = {}
         for name, x in given:
-            shape = _shape(x)
+            shape = shape_of(x)
             if shape is not None and (len(shape) != 2 or shape[1] not in (2, 3)):
                 raise ValueError(
                     f"{name} must have shape (n_points, 2) or (n_points, 3), got {shape}")
@@ -226,7 +227,9 @@ def _check_data(hits, segment_starts, segment_ends, dim=None, resolution=None):
     return hits, starts, ends
 
 
-class OccupancyGrid(BaseEstimator):
+@register("gp-grid", dims=(2, 3), formats=(".npz",),
+          description="Log-odds occupancy grid of hits and beams, the GP maps' baseline")
+class OccupancyGrid(MapProtocol, BaseEstimator):
     """Log-odds occupancy grid in 2D or 3D, the classic baseline of GP maps.
 
     The plane (or space) is cut into square (cubic) cells of edge `resolution`;
@@ -264,6 +267,9 @@ class OccupancyGrid(BaseEstimator):
         Lower clamping bound (probability); in (0, 0.5).
     clamping_max : float, default=0.971
         Upper clamping bound (probability); in (0.5, 1).
+    occupancy_threshold : float, default=0.5
+        :meth:`is_occupied`'s threshold: a cell is occupied when its
+        probability is at least this; in (0, 1).
 
     Attributes
     ----------
@@ -275,6 +281,17 @@ class OccupancyGrid(BaseEstimator):
         Dimension of the map (2 or 3), taken from the data at :meth:`fit`.
     n_updates_ : int
         Number of calls to :meth:`fit` and :meth:`update` since the last fit.
+
+    Notes
+    -----
+    **As a map** (:class:`occgp.maps.OccupancyMap`, registered as
+    ``"gp-grid"``, 2D or 3D): :meth:`insert_scan` turns a scan into hits and
+    beams; the first scan is :meth:`fit`, each later one :meth:`update`
+    (clamped once per scan, as OctoMap clamps once per scan in ray mode).
+    :meth:`occupancy` is NaN in the cells never observed (where
+    :meth:`predict_proba` gives the prior 0.5), :attr:`num_cells` the number
+    of observed cells, and :meth:`to_octree` copies the cells at the grid's
+    resolution.
 
     See Also
     --------
@@ -303,12 +320,25 @@ class OccupancyGrid(BaseEstimator):
 
     def __init__(self, resolution: float = 0.1, prob_hit: float = 0.7,
                  prob_miss: float = 0.4, clamping_min: float = 0.1192,
-                 clamping_max: float = 0.971):
+                 clamping_max: float = 0.971, occupancy_threshold: float = 0.5):
         self.resolution = resolution
         self.prob_hit = prob_hit
         self.prob_miss = prob_miss
         self.clamping_min = clamping_min
         self.clamping_max = clamping_max
+        self.occupancy_threshold = occupancy_threshold
+
+    def _check_params(self) -> dict:
+        """The checked parameters of the sensor model."""
+        params = {
+            "resolution": check_real(self.resolution, "resolution", low=0.0),
+            "prob_hit": check_real(self.prob_hit, "prob_hit", low=0.5, high=1.0),
+            "prob_miss": check_real(self.prob_miss, "prob_miss", low=0.0, high=0.5),
+            "clamping_min": check_real(self.clamping_min, "clamping_min", low=0.0, high=0.5),
+            "clamping_max": check_real(self.clamping_max, "clamping_max", low=0.5, high=1.0),
+        }
+        check_probability(self.occupancy_threshold, "occupancy_threshold")
+        return params
 
     def fit(self, hits: ArrayLike | None, segment_starts: ArrayLike | None,
             segment_ends: ArrayLike | None) -> "OccupancyGrid":
@@ -348,13 +378,7 @@ class OccupancyGrid(BaseEstimator):
         >>> grid.n_dims_, grid.keys_.tolist()
         (3, [[2, 0, 0]])
         """
-        params = {
-            "resolution": check_real(self.resolution, "resolution", low=0.0),
-            "prob_hit": check_real(self.prob_hit, "prob_hit", low=0.5, high=1.0),
-            "prob_miss": check_real(self.prob_miss, "prob_miss", low=0.0, high=0.5),
-            "clamping_min": check_real(self.clamping_min, "clamping_min", low=0.0, high=0.5),
-            "clamping_max": check_real(self.clamping_max, "clamping_max", low=0.5, high=1.0),
-        }
+        params = self._check_params()
         data = _check_data(hits, segment_starts, segment_ends, resolution=params["resolution"])
         free = _free_cell_counts(data[1], data[2], params["resolution"])
         self._params = params
@@ -549,164 +573,125 @@ class OccupancyGrid(BaseEstimator):
         check_is_fitted(self)
         return (self.keys_ + 0.5) * self._params["resolution"], expit(self.log_odds_)
 
+    # ---------------------------------------------------------- map protocol
+    _scan_dims = (2, 3)
 
-def _check_count(value, name):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
-    if value < 1:
-        raise ValueError(f"{name} must be a positive integer, got {value}")
-    return int(value)
+    def _fitted(self):
+        return hasattr(self, "keys_")
 
+    def _known(self, X):
+        return self.is_known(X)
 
-def _grid_shape(lower, upper, resolution, max_points):
-    """Validated lower corner and the number of cells per axis of a grid."""
-    lower_shape = _shape(lower)
-    if lower_shape is not None and lower_shape not in ((2,), (3,)):
-        raise ValueError(f"lower must have shape (2,) or (3,), got {lower_shape}")
-    dim = 3 if lower_shape is None else lower_shape[0]  # else as_point says what is wrong
-    lower = as_point(lower, "lower", dim)
-    upper = as_point(upper, "upper", dim)
-    resolution = check_real(resolution, "resolution", low=0.0)
-    max_points = _check_count(max_points, "max_points")
-    if not (lower < upper).all():
-        raise ValueError(f"lower must be below upper on every axis, got lower={lower.tolist()} "
-                         f"and upper={upper.tolist()}")
-    with np.errstate(over="ignore"):
-        cells = np.maximum(np.ceil((upper - lower) / resolution - 1e-9), 1.0)   # may be inf
-        total = float(np.prod(cells))
-    if not total <= max_points:
-        raise ValueError(
-            f"the grid from lower={lower.tolist()} to upper={upper.tolist()} at resolution "
-            f"{resolution!r} has {total:.4g} cells, more than max_points={max_points}; use a "
-            f"coarser resolution, a smaller box, or raise max_points")
-    shape = tuple(int(n) for n in cells)
-    return lower, shape
+    def _known_bounds(self):
+        if not len(self.keys_):
+            return np.full(self.n_dims_, np.nan), np.full(self.n_dims_, np.nan)
+        res = self._params["resolution"]
+        return self.keys_.min(axis=0) * res, (self.keys_.max(axis=0) + 1) * res
 
+    def _num_cells(self):
+        return len(self.keys_)
 
-def grid_points(lower: ArrayLike, upper: ArrayLike, resolution: float, *,
-                max_points: int = MAX_GRID_POINTS) -> tuple[NDArray[np.float64], tuple[int, ...]]:
-    """Centres of a regular grid of cells covering the box [lower, upper).
+    def _nbytes(self):
+        return self.keys_.nbytes + self.log_odds_.nbytes
 
-    Cell ``i`` along axis ``d`` has its centre at
-    ``lower[d] + (i + 0.5) * resolution``; there are
-    ``ceil((upper[d] - lower[d]) / resolution)`` cells along axis ``d`` (up to
-    a 1e-9 tolerance), so the last cell may stick out of the box.
+    def _octree_resolution(self, resolution):
+        return self.resolution if resolution is None else resolution
 
-    Parameters
-    ----------
-    lower : array-like of shape (n_dims,)
-        Lower corner of the box, in metres; ``n_dims`` is 2 or 3.
-    upper : array-like of shape (n_dims,)
-        Upper corner of the box, in metres; above `lower` on every axis.
-    resolution : float
-        Edge length of the cells, in metres. Must be positive.
-    max_points : int, default=20_000_000
-        Most cells the grid may have (``prod(shape)``); a larger box raises
-        before anything is allocated. The points take ``8 * n_dims`` bytes
-        each (480 MB in 3D at the default).
+    def _octree_cells(self, res):
+        if res != self._params["resolution"]:
+            return super()._octree_cells(res)
+        return (self.keys_ + 0.5) * res, self.log_odds_   # the cells as they are
 
-    Returns
-    -------
-    points : ndarray of shape (n_points, n_dims)
-        The cell centres, ordered so that ``values.reshape(shape)`` is indexed
-        ``[i_0, i_1(, i_2)]`` (the first axis is x).
-    shape : tuple of int
-        Number of cells along each axis.
+    # ----------------------------------------------------------------- files
+    _SPEC = {"keys": (np.int64, ("n_cells", "n_dims")), "log_odds": (np.float64, ("n_cells",))}
+    _FITTED = ("n_dims_", "n_updates_")
 
-    Raises
-    ------
-    ValueError
-        If `lower` and `upper` are not finite of equal length 2 or 3, if
-        ``lower >= upper`` on some axis, if `resolution` is not positive, or
-        if the grid would have more than `max_points` cells.
-    TypeError
-        If an argument has the wrong type.
+    def save(self, path: str | os.PathLike) -> "OccupancyGrid":
+        """Write the grid (parameters and, once fitted, its cells) to an ``.npz``.
 
-    Examples
-    --------
-    >>> points, shape = grid_points([0.0, 0.0], [1.0, 0.5], 0.5)
-    >>> shape
-    (2, 1)
-    >>> points
-    array([[0.25, 0.25],
-           [0.75, 0.25]])
-    """
-    lower, shape = _grid_shape(lower, upper, resolution, max_points)
-    axes = [lo + (np.arange(n) + 0.5) * resolution for lo, n in zip(lower, shape)]
-    mesh = np.meshgrid(*axes, indexing="ij")
-    return np.column_stack([m.reshape(-1) for m in mesh]), shape
+        The format of :meth:`GPOMIK.save <occgp.gp.GPOMIK.save>`
+        (``"occgp.gp_model"``, version 1, class ``"OccupancyGrid"``,
+        ``params``), with, for a fitted grid: ``fitted`` (0-d str, JSON:
+        ``n_dims_``, ``n_updates_``), ``keys`` (int64 (n_cells, n_dims):
+        ``keys_``) and ``log_odds`` (float64 (n_cells,): ``log_odds_``).
+        :meth:`load` reads it back into a grid that answers, and goes on
+        updating, exactly as this one.
 
+        Parameters
+        ----------
+        path : str or path-like
+            Destination file (overwritten).
 
-_OUTPUTS = ("proba", "mean", "var")
+        Returns
+        -------
+        self : OccupancyGrid
 
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or path-like, or a parameter holds a value
+            that cannot be saved.
+        OSError
+            If the file cannot be written.
+        """
+        params = gp_params(self)
+        arrays = {}
+        if self._fitted():
+            arrays["fitted"] = gp_fitted({"n_dims_": int(self.n_dims_),
+                                          "n_updates_": int(self.n_updates_)})
+            arrays["keys"], arrays["log_odds"] = self.keys_, self.log_odds_
+        _npz_io.write_npz(path, GP_FORMAT, GP_VERSIONS[-1], type(self).__name__, params, arrays)
+        return self
 
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "OccupancyGrid":
+        """Read a grid written by :meth:`save`.
 
+        Parameters
+        ----------
+        path : str or path-like
 
-def predict_grid(model, lower: ArrayLike, upper: ArrayLike, resolution: float, *,
-                 output: str = "proba", batch_size: int = 50_000,
-                 max_points: int = MAX_GRID_POINTS) -> NDArray[np.float64]:
-    """Evaluate a fitted map on the cell centres of a regular grid.
+        Returns
+        -------
+        OccupancyGrid
+            Fitted when the saved grid was.
 
-    Parameters
-    ----------
-    model : object
-        A fitted map: with ``predict_proba(points)`` for ``output="proba"``,
-        with ``predict(points, return_var=True)`` returning ``(mean, var)``
-        otherwise.
-    lower, upper, resolution
-        The grid, as for :func:`grid_points`.
-    output : {"proba", "mean", "var"}, default="proba"
-        What to evaluate: the occupancy probability, or the predictive mean or
-        variance of a Gaussian-process model.
-    batch_size : int, default=50_000
-        Number of points passed to the model at once.
-    max_points : int, default=20_000_000
-        Most cells of the grid, as for :func:`grid_points`; the values take
-        8 bytes a cell, and only one batch of points exists at a time.
-
-    Returns
-    -------
-    values : ndarray of shape ``shape``
-        The values at the cell centres, indexed ``[i_0, i_1(, i_2)]``, where
-        ``shape`` is that of :func:`grid_points`.
-
-    Raises
-    ------
-    ValueError
-        If `output` is unknown, `batch_size` is not a positive integer, or the
-        grid is invalid or larger than `max_points` (see :func:`grid_points`).
-    TypeError
-        If `output` is not a string or `batch_size` not an integer.
-
-    Examples
-    --------
-    >>> grid = OccupancyGrid(resolution=1.0).fit([[0.5, 0.5]], None, None)
-    >>> predict_grid(grid, [0.0, 0.0], [2.0, 1.0], 1.0)
-    array([[0.7],
-           [0.5]])
-    """
-    if not isinstance(output, str):
-        raise TypeError(f"output must be one of {_OUTPUTS}, got {type(output).__name__}")
-    if output not in _OUTPUTS:
-        raise ValueError(f"output must be one of {_OUTPUTS}, got {output!r}")
-    batch_size = _check_count(batch_size, "batch_size")
-    method = "predict_proba" if output == "proba" else "predict"
-    if not callable(getattr(model, method, None)):
-        raise TypeError(f"model must have a {method}() method for output={output!r}, got "
-                        f"{type(model).__name__}")
-    # points are made batch by batch, never all at once
-    lower_arr, shape = _grid_shape(lower, upper, resolution, max_points)
-    n = math.prod(shape)
-    strides = np.cumprod((shape[1:] + (1,))[::-1])[::-1]
-    batch_size = min(batch_size, n)
-    values = np.empty(n)
-    for start in range(0, n, batch_size):
-        index = np.arange(start, min(start + batch_size, n))
-        cell = (index[:, None] // strides) % np.asarray(shape)
-        batch = lower_arr + (cell + 0.5) * float(resolution)
-        if output == "proba":
-            values[start:start + batch_size] = model.predict_proba(batch)
-        else:
-            mean, var = model.predict(batch, return_var=True)
-            values[start:start + batch_size] = mean if output == "mean" else var
-    return values.reshape(shape)
+        Raises
+        ------
+        TypeError
+            If `path` is not a str or path-like.
+        OSError
+            If the file does not exist, is not a regular file or cannot be read.
+        ValueError
+            If it is not such an ``.npz`` archive, is corrupt or of another
+            class, or its cells are not valid (keys not sorted and distinct,
+            log-odds outside the clamping bounds, a dimension other than 2
+            or 3).
+        """
+        source, model, arrays, fitted = read_gp(cls, path, cls._SPEC)
+        if fitted is None:
+            return model
+        keys, log_odds = arrays["keys"], arrays["log_odds"]
+        params = model._check_params()
+        lo, hi = logit(params["clamping_min"]), logit(params["clamping_max"])
+        bad = ""
+        if sorted(fitted) != sorted(cls._FITTED):
+            bad = f"'fitted' must hold {sorted(cls._FITTED)}, got {sorted(fitted)[:20]}"
+        elif keys.shape[1] not in (2, 3) or fitted["n_dims_"] != keys.shape[1]:
+            bad = f"n_dims_ must be the keys' width, 2 or 3, got {fitted['n_dims_']!r:.40}"
+        elif isinstance(fitted["n_updates_"], bool) or not isinstance(fitted["n_updates_"], int) \
+                or fitted["n_updates_"] < 1:
+            bad = f"n_updates_ must be a positive int, got {fitted['n_updates_']!r:.40}"
+        elif len(keys) and not np.array_equal(_unique_rows(keys)[0], keys):
+            bad = "'keys' must be sorted lexicographically without repeats"
+        elif (np.abs(keys) > MAX_CELL_INDEX).any():
+            bad = f"'keys' must lie within {MAX_CELL_INDEX:g} cells of the origin"
+        elif not ((log_odds >= lo - 1e-9) & (log_odds <= hi + 1e-9)).all():
+            bad = "'log_odds' must lie within the clamping bounds"
+        if bad:
+            raise ValueError(f"{source}: corrupt fitted state of an OccupancyGrid: {bad}")
+        model._params = params
+        model.n_dims_ = keys.shape[1]
+        model.keys_, model.log_odds_ = keys, log_odds
+        model.n_updates_ = int(fitted["n_updates_"])
+        return model

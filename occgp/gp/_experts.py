@@ -1,0 +1,182 @@
+"""The experts of :class:`~occgp.gp.GPMixture`: fitting, dense prediction, reach, and
+the leave-one-out downdate of the committee's classifier."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+from sklearn.base import clone
+from threadpoolctl import threadpool_limits
+
+from ._beams import row_index
+from ._integral_kernel import covariance
+from ._observations import Observations
+
+__all__ = ["Reach", "hit_origins", "fit_expert", "predict_expert", "predict_dense",
+           "split_observations", "hits_first", "concat_observations", "order_positions",
+           "downdated"]
+
+#: Spacing (in length scales) of the samples along an expert's beams that
+#: bound the distance from a query to its observations.
+_SAMPLE_STEP = 0.5
+#: Experts of at most this many observations are evaluated densely; queries
+#: go in blocks of `_BLOCK`.
+_DENSE_SIZE = 400
+_BLOCK = 4096
+
+
+def hit_origins(hits, segment_starts, segment_ends):
+    """The sensor position of each hit: the start of the first beam ending exactly on it.
+
+    A hit that ends no beam is its own origin (a scan of one hit).
+    """
+    origins = hits.copy()
+    beam = row_index(hits, segment_ends)
+    origins[beam >= 0] = segment_starts[beam[beam >= 0]]
+    return origins
+
+
+class Reach:
+    """Where one expert may differ from its prior by more than a tolerance.
+
+    With ``C = K + noise I`` the expert's covariance, a query's variance
+    reduction is ``k^T C^-1 k <= |k|^2 / noise`` and its mean
+    ``|k^T C^-1 y| <= sqrt(k^T C^-1 k * y^T C^-1 y)`` (Cauchy–Schwarz in the
+    ``C^-1`` inner product). Each entry of ``k`` is at most
+    ``variance * w_i * f(d^2)``, with ``w_i`` the observation's length (1
+    for a point), ``f`` the kernel's (decreasing) profile and ``d`` the
+    distance in length scales from the query to the nearest observation.
+    Beyond the radius where those bounds give a variance within
+    ``eps * prior`` of the prior and a mean within ``eps * sqrt(prior)`` of 0
+    the expert is at its prior up to the tolerance; beyond the kernel's
+    cutoff it is exactly there. Distances are bounded below through samples
+    every `_SAMPLE_STEP` length scales along the observations (a point of a
+    segment is within half a step of a sample).
+    """
+
+    def __init__(self, gp):
+        kernel = gp.kernel_
+        self.kernel = kernel
+        self.inv = kernel.inverse_length_scales(gp.n_dims_)
+        self.prior = float(kernel.variance)
+        cells = gp.cells_
+        self.w2 = sum(float(np.sum(np.where(c.obs.lengths > 0, c.obs.lengths, 1.0) ** 2))
+                      for c in cells)
+        self.energy = max(max(float(c.obs.y @ c.alpha) for c in cells), 1e-300)
+        self.noise = gp.noise_ + gp.jitter_
+        starts = np.vstack([c.obs.starts for c in cells]) * self.inv
+        ends = np.vstack([c.obs.ends for c in cells]) * self.inv
+        n = np.ceil(np.linalg.norm(ends - starts, axis=1) / _SAMPLE_STEP).astype(np.intp) + 1
+        owner = np.repeat(np.arange(len(n)), n)
+        t = (np.arange(len(owner)) - np.repeat(np.cumsum(n) - n, n)) / np.maximum(n - 1, 1)[owner]
+        samples = starts[owner] + t[:, None] * (ends - starts)[owner]
+        self.lo, self.hi = samples.min(axis=0), samples.max(axis=0)
+        self.tree = cKDTree(samples)
+        self._radius = {}
+
+    def radius(self, eps):
+        """Distance (length scales) beyond which the expert is within `eps` of its prior."""
+        if eps not in self._radius:
+            r_max = eps * self.prior * min(1.0, eps / self.energy)
+            bound = np.sqrt(r_max * self.noise / (self.w2 * self.prior ** 2)) if eps > 0 else 0.0
+            profile = self.kernel.profile
+            lo, hi = 0.0, float(type(self.kernel).cutoff2)
+            if profile(np.array([hi]))[0] <= bound:
+                for _ in range(60):  # smallest squared distance with f(s) <= bound
+                    mid = 0.5 * (lo + hi)
+                    lo, hi = (mid, hi) if profile(np.array([mid]))[0] > bound else (lo, mid)
+            self._radius[eps] = float(np.sqrt(hi))
+        return self._radius[eps]
+
+    def box(self, eps):
+        """(low, high) corners, in world coordinates, of the candidates of :meth:`queries`."""
+        r = self.radius(eps) + _SAMPLE_STEP / 2
+        return (self.lo - r) / self.inv, (self.hi + r) / self.inv
+
+    def queries(self, X, eps):
+        """Indices of the queries `X` (world coordinates) within reach."""
+        Xs = X * self.inv
+        r = self.radius(eps) + _SAMPLE_STEP / 2
+        cand = np.flatnonzero(np.all((Xs >= self.lo - r) & (Xs <= self.hi + r), axis=1))
+        if not len(cand):
+            return cand
+        d, _ = self.tree.query(Xs[cand], distance_upper_bound=r)
+        return cand[np.isfinite(d)]
+
+
+def fit_expert(template, obs, seed):
+    """A clone of `template` fitted on `obs`, with one BLAS thread (the same in any worker)."""
+    expert = clone(template).set_params(random_state=seed)
+    n_hits = int(np.count_nonzero(obs.labels > 0))
+    with threadpool_limits(1):
+        return expert.fit(obs.starts[:n_hits], obs.starts[n_hits:], obs.ends[n_hits:])
+
+
+def predict_expert(expert, X):
+    """Latent mean and variance of `expert` at `X`.
+
+    A single-cell expert of at most `_DENSE_SIZE` observations is evaluated
+    densely (its cross-covariance in blocks of `_BLOCK` queries): the same
+    values as :meth:`GPOMIK.predict` up to rounding (1e-15), without its tiles'
+    bookkeeping. BLAS
+    runs on one thread, so the values do not depend on the joblib backend.
+    """
+    with threadpool_limits(1):
+        return predict_dense(expert, X)
+
+
+def predict_dense(expert, X):
+    if len(expert.cells_) > 1 or expert.cells_[0].size > _DENSE_SIZE:
+        return expert.predict(X, return_var=True)
+    cell = expert.cells_[0]
+    kinv = cell.inverse()
+    prior = float(expert.kernel_.variance)
+    mean, var = np.empty(len(X)), np.empty(len(X))
+    for i in range(0, len(X), _BLOCK):
+        x = X[i:i + _BLOCK]
+        k = covariance(expert.kernel_, expert._quadrature, cell.obs.starts, cell.obs.ends, x, x,
+                        n_threads=expert._n_threads)
+        mean[i:i + _BLOCK] = k.T @ cell.alpha
+        var[i:i + _BLOCK] = np.maximum(prior - np.einsum("ij,ij->j", k, kinv @ k), 0.0)
+    return mean, var
+
+
+def split_observations(obs):
+    """`obs` as GPOMIK's (hits, segment_starts, segment_ends)."""
+    hit = obs.labels > 0
+    return obs.starts[hit], obs.starts[~hit], obs.ends[~hit]
+
+
+def hits_first(obs):
+    """`obs` with its hits first (the order GPOMIK keeps)."""
+    return obs.take(np.r_[np.flatnonzero(obs.labels > 0), np.flatnonzero(obs.labels < 0)])
+
+
+def concat_observations(a: Observations, b: Observations) -> Observations:
+    return Observations(*(np.concatenate([x, y]) for x, y in zip(a, b)))
+
+
+def order_positions(is_hit):
+    """Position of each observation within :func:`_order` of them (hits first)."""
+    order = np.r_[np.flatnonzero(is_hit), np.flatnonzero(~is_hit)]
+    pos = np.empty(len(order), dtype=np.intp)
+    pos[order] = np.arange(len(order))
+    return pos
+
+
+def downdated(gp, X, pos):
+    """Latent mean and variance of single-cell expert `gp` at X[j] without its observation pos[j].
+
+    With ``c = C^-1 k_x`` the removal of observation ``i`` is a rank-one
+    downdate: ``mean - c_i alpha_i / [C^-1]_ii`` and ``var + c_i^2 / [C^-1]_ii``.
+    """
+    cell = gp.cells_[0]
+    kinv = cell.inverse()
+    k = covariance(gp.kernel_, gp._quadrature, cell.obs.starts, cell.obs.ends, X, X,
+                    n_threads=gp._n_threads)
+    c = kinv @ k
+    mean = k.T @ cell.alpha
+    var = float(gp.kernel_.variance) - np.einsum("ij,ij->j", k, c)
+    ci = c[pos, np.arange(len(pos))]
+    d = kinv[pos, pos]
+    return mean - ci * cell.alpha[pos] / d, np.maximum(var, 0.0) + ci * ci / d
