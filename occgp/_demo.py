@@ -159,7 +159,9 @@ def gp_mapping_methods(resolution: float) -> dict:
     -------
     methods : dict of str to callable
         Each factory returns a new, unfitted model with
-        ``fit(hits, segment_starts, segment_ends)`` and ``predict_proba(X)``.
+        ``fit(hits, segment_starts, segment_ends)`` that answers the map protocol
+        (:class:`occgp.maps.OccupancyMap`: ``occupancy`` is NaN where it has no
+        evidence).
     """
     from .gp import GPOM, GPOMIK, GPMixture, OccupancyGrid, SquaredExponential
 
@@ -173,22 +175,6 @@ def gp_mapping_methods(resolution: float) -> dict:
     }
 
 
-class _Proba:
-    """A fitted 2D model seen as a map: ``occupancy`` is its ``predict_proba``, NaN
-    where a log-odds grid has no evidence; `test_proba` keeps its answer on the test
-    points (for the ROC curves)."""
-
-    def __init__(self, model):
-        self.model = model
-        self.test_proba = None
-
-    def occupancy(self, points):
-        p = self.model.predict_proba(points)
-        if hasattr(self.model, "is_known"):
-            p = np.where(self.model.is_known(points), p, np.nan)
-        return p
-
-
 def _run_gp(name, factory, observations, n_scans, test):
     """Fit one 2D model on all observations at once (timed) and score it (a MapResult)."""
     from .evaluation import MapResult
@@ -199,12 +185,10 @@ def _run_gp(name, factory, observations, n_scans, test):
     t0 = time.perf_counter()
     model.fit(hits, starts, ends)
     seconds = time.perf_counter() - t0
-    answer = _Proba(model)
-    answer.test_proba = answer.occupancy(test.points)
-    sc = score_all(test.labels, answer.test_proba)
+    sc = score_all(test.labels, model.occupancy(test.points))
     return MapResult(name, sc["auc"], sc["mse"], sc["acc_occupied"], sc["acc_free"],
                      sc["tpr_fdr_auc"], seconds, n_scans, len(hits) + len(starts),
-                     sc["n_test"], sc["unknown_fraction"], 1.0, answer)
+                     sc["n_test"], sc["unknown_fraction"], 1.0, model)
 
 
 # the demo's tables: no "data" column (every method gets all of it), "unknown" added
@@ -397,8 +381,7 @@ def _roc_axes(ax, rows, test, title):
     from .metrics import roc_curve
 
     for r in rows:
-        proba = getattr(r.map, "test_proba", None)
-        proba = r.map.occupancy(test.points) if proba is None else proba
+        proba = r.map.occupancy(test.points)
         fpr, tpr, _ = roc_curve(test.labels, proba)
         ax.plot(fpr, tpr, label=f"{r.method} (AUC {r.auc:.3f})")
     ax.plot([0, 1], [0, 1], "k:", lw=0.8)

@@ -529,8 +529,8 @@ def test_map_help_shows_every_default():
 @pytest.mark.parametrize("args, message", [
     (["-o", "m.png"], r"argument -o/--output: output must end in .bt, .ot, .ply or .pcd for "
      r"method='octree', got 'm.png'"),
-    (["-o", "m.npz"], r"argument -o/--output: .* \(.npz: grid, bgk and akimap only\), got "
-     r"'m.npz'"),
+    (["-o", "m.npz"], r"argument -o/--output: .* \(.npz: grid, bgk, akimap and gp-grid "
+     r"only\), got 'm.npz'"),
     (["-o", "m.npz", "--method", "knn"], r"argument -o/--output: .*method='knn'"),
     (["-o", "m.bt", "--method", "bgk", "--mode", "ray"],
      r"argument --mode: mode applies to method='octree' or 'grid' only"),
