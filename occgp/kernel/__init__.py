@@ -15,7 +15,10 @@ from ._akimap import AKIMap
 from ._base import KernelMapBase
 from ._bgk import BGKMap
 from ._io import restore_kernel_map
-from ._samples import MAX_CELLS_PER_UPDATE, MAX_FREE_SAMPLES, MAX_WEIGHT, voxel_first
+# the update limits (MAX_FREE_SAMPLES is documented) and voxel_first, importable here as before
+from ._samples import (  # noqa: F401
+    MAX_CELLS_PER_UPDATE, MAX_FREE_SAMPLES, MAX_WEIGHT, voxel_first,
+)
 from ._utils import Bandwidths, KernelCells, sparse_kernel, voxel_centroids
 
 __all__ = ["AKIMap", "BGKMap", "KernelCells", "Bandwidths", "sparse_kernel",

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import inspect
 import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,6 +33,13 @@ class KernelMapFiles:
     extend ``_EXTRA_SPEC`` / ``_EXTRA_OPTIONAL`` (its further file entries),
     ``_io_params``, ``_io_arrays``, ``_io_extra`` and ``_extra_state``.
     """
+
+    if TYPE_CHECKING:  # provided by the class this is mixed into
+        def get_params(self, deep: bool = True) -> dict: ...
+        def _validated_params(self, params: dict | None = None) -> Any: ...
+        def _cells_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+        def _set_cells(self, keys: np.ndarray, alpha: np.ndarray,
+                       beta: np.ndarray) -> None: ...
 
     _EXTRA_SPEC: dict = {}
     _EXTRA_OPTIONAL: tuple = ()
