@@ -11,9 +11,10 @@ Both answer :class:`occgp.maps.OccupancyMap`.
 
 from __future__ import annotations
 
-from ._akimap import AKIMap
+# BGKMap first: the map registry lists the map types in the order they register
+from ._bgk import BGKMap  # isort: skip
+from ._akimap import AKIMap  # isort: skip
 from ._base import KernelMapBase
-from ._bgk import BGKMap
 from ._io import restore_kernel_map
 # the update limits (MAX_FREE_SAMPLES is documented) and voxel_first, importable here as before
 from ._samples import (  # noqa: F401
