@@ -428,7 +428,7 @@ def test_extreme_search_parameters_give_the_right_bandwidths():
 
 
 def test_free_samples_in_chunks_equal_all_at_once(monkeypatch):
-    import occgp.kernel._samples as _kernel_samples
+    import occgp.kernel._kernel_samples as _kernel_samples
     points, origin = wall_scan(11, 5)
     whole = AKIMap(0.05, free_sample_distance=0.1, random_state=2).training_data(points, origin)
     assert len(whole[0]) > 500

@@ -331,7 +331,7 @@ def test_resolution_is_fixed():
 
 
 def test_free_samples_in_chunks_equal_all_at_once(monkeypatch):
-    import occgp.kernel._samples as _kernel_samples
+    import occgp.kernel._kernel_samples as _kernel_samples
     wall, origin = wall60()
     m = BGKMap(0.05, free_resolution=0.1, max_range=None)
     whole = m.training_data(wall, origin)

@@ -14,13 +14,13 @@ from __future__ import annotations
 # BGKMap first: the map registry lists the map types in the order they register
 from ._bgk import BGKMap  # isort: skip
 from ._akimap import AKIMap  # isort: skip
-from ._base import KernelMapBase
-from ._io import restore_kernel_map
+from ._kernel_map import KernelMapBase
+from ._kernel_io import restore_kernel_map
 # the update limits (MAX_FREE_SAMPLES is documented) and voxel_first, importable here as before
-from ._samples import (  # noqa: F401
+from ._kernel_samples import (  # noqa: F401
     MAX_CELLS_PER_UPDATE, MAX_FREE_SAMPLES, MAX_WEIGHT, voxel_first,
 )
-from ._utils import Bandwidths, KernelCells, sparse_kernel, voxel_centroids
+from ._kernel_utils import Bandwidths, KernelCells, sparse_kernel, voxel_centroids
 
 __all__ = ["AKIMap", "BGKMap", "KernelCells", "Bandwidths", "sparse_kernel",
            "voxel_centroids"]

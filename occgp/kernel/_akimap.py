@@ -11,10 +11,10 @@ from .. import _npz_io
 from .._kernel import _akimap_bandwidths
 from .._validation import as_point, as_points, check_real, n_threads
 from ..maps import register
-from ._base import KernelMapBase
-from ._samples import (MAX_CELLS_PER_UPDATE, beam_chunks, candidate_pairs, check_free_count,
-                       packed_keys, search_cell, voxel_first)
-from ._utils import Bandwidths
+from ._kernel_map import KernelMapBase
+from ._kernel_samples import (MAX_CELLS_PER_UPDATE, beam_chunks, candidate_pairs,
+                              check_free_count, packed_keys, search_cell, voxel_first)
+from ._kernel_utils import Bandwidths
 
 _RANDOM_STATE = "random_state must be None, a non-negative int or a numpy.random.Generator"
 

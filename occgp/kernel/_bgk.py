@@ -7,9 +7,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._validation import check_real
 from ..maps import register
-from ._base import KernelMapBase
-from ._samples import (MAX_CELLS_PER_UPDATE, beam_chunks, check_free_count, cube_sums,
-                       merge_cube_sums, packed_keys)
+from ._kernel_map import KernelMapBase
+from ._kernel_samples import (MAX_CELLS_PER_UPDATE, beam_chunks, check_free_count,
+                              cube_sums, merge_cube_sums, packed_keys)
 
 
 @register("bgk", formats=(".npz",),

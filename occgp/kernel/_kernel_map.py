@@ -22,9 +22,9 @@ from .._kernel import _KernelCells
 from .._validation import (as_point, as_points, check_bool, check_n_jobs, check_probability,
                            check_real, n_threads)
 from ..octree import OccupancyOctree
-from ._io import KernelMapFiles
-from ._samples import MAX_VAL, MAX_WEIGHT, check_max_cells, support_cells
-from ._utils import KernelCells
+from ._kernel_io import KernelMapFiles
+from ._kernel_samples import MAX_VAL, MAX_WEIGHT, check_max_cells, support_cells
+from ._kernel_utils import KernelCells
 
 
 class KernelMapBase(KernelMapFiles, _KernelCells):

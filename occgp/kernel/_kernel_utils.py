@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._kernel import sparse_kernel as _compiled_sparse_kernel
 from .._validation import as_points, check_real
-from ._samples import cube_sums
+from ._kernel_samples import cube_sums
 
 
 class KernelCells(NamedTuple):
