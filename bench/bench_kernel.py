@@ -66,8 +66,8 @@ def methods(seed, threads):
 
 def record(row):
     m = row.map
-    per_cell = (m.memory_bytes / m.num_cells if hasattr(m, "memory_bytes") and m.num_cells
-                else float("nan"))
+    per_cell = (m.memory_usage() / m.num_cells if isinstance(m, (AKIMap, BGKMap))
+                and m.num_cells else float("nan"))
     return dict(method=row.method, data_fraction=row.data_fraction, auc=row.auc, mse=row.mse,
                 acc_occupied=row.acc_occupied, acc_free=row.acc_free, seconds=row.seconds,
                 bytes_per_cell=per_cell)

@@ -55,7 +55,7 @@ def make_map(kind: str):
 
     if kind == "bgk":
         m = BGKMap(0.05)
-        return m, m.insert_scan, lambda: m.memory_bytes
+        return m, m.insert_scan, m.memory_usage
     m = GridMap(0.05) if kind == "grid" else OccupancyOctree(0.05)
     method = "plain" if kind == "plain" else "auto"
     return m, lambda p, o: m.insert_scan(p, o, method=method), m.memory_usage

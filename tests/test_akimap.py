@@ -283,7 +283,7 @@ def test_wall_is_occupied_and_the_space_before_it_free():
         assert np.mean(m.occupancy(points) > 0.5) > 0.9
         assert m.occupancy([[1.0, 0.0, 0.0]])[0] < 0.5
         assert np.isnan(m.occupancy([[5.0, 5.0, 5.0]])[0])
-        assert m.memory_bytes / m.num_cells < 64
+        assert m.memory_usage() / m.num_cells < 64
 
 
 def test_bandwidth_floor_keeps_a_flat_wall_between_cell_centres():
@@ -428,11 +428,11 @@ def test_extreme_search_parameters_give_the_right_bandwidths():
 
 
 def test_free_samples_in_chunks_equal_all_at_once(monkeypatch):
-    import occgp._kernel_samples as _kernel_samples
+    import occgp.kernel._kernel_samples as _kernel_samples
     points, origin = wall_scan(11, 5)
     whole = AKIMap(0.05, free_sample_distance=0.1, random_state=2).training_data(points, origin)
     assert len(whole[0]) > 500
-    monkeypatch.setattr(_kernel_samples, "_FREE_CHUNK", 64)
+    monkeypatch.setattr(_kernel_samples, "FREE_CHUNK", 64)
     chunked = AKIMap(0.05, free_sample_distance=0.1, random_state=2).training_data(points,
                                                                                   origin)
     assert_array_equal(whole[0], chunked[0])

@@ -331,11 +331,11 @@ def test_resolution_is_fixed():
 
 
 def test_free_samples_in_chunks_equal_all_at_once(monkeypatch):
-    import occgp._kernel_samples as _kernel_samples
+    import occgp.kernel._kernel_samples as _kernel_samples
     wall, origin = wall60()
     m = BGKMap(0.05, free_resolution=0.1, max_range=None)
     whole = m.training_data(wall, origin)
-    monkeypatch.setattr(_kernel_samples, "_FREE_CHUNK", 7)
+    monkeypatch.setattr(_kernel_samples, "FREE_CHUNK", 7)
     chunked = m.training_data(wall, origin)
     assert_array_equal(whole[1], chunked[1])
     assert_allclose(whole[0], chunked[0], rtol=0, atol=1e-12)

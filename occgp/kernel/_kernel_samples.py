@@ -1,4 +1,4 @@
-"""Samples, sizes and limits of the kernel maps' updates (:mod:`occgp.kernel`).
+"""Samples, sizes and limits of the kernel maps' updates.
 
 Key packing and cube sums for voxel down-sampling, free samples made in chunks,
 and the up-front counts that guard an update's work (cells in the samples'
@@ -13,16 +13,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 #: Half the number of keys per axis (liboctomap's tree_max_val).
-_MAX_VAL = 32768
+MAX_VAL = 32768
 
+#: Most free samples one update draws along its beams before down-sampling; they are
+#: made and reduced in chunks of FREE_CHUNK, so memory stays bounded.
 MAX_FREE_SAMPLES = 1 << 26
-_FREE_CHUNK = 1 << 22
+FREE_CHUNK = 1 << 22
 #: Default of `max_cells_per_update`: about 3 s of accumulation on one thread.
 MAX_CELLS_PER_UPDATE = 1 << 30
 
 
-def _packed_keys(points: NDArray[np.float64], size: float, name: str = "size",
-                 low: NDArray[np.float64] | None = None) -> NDArray[np.int64]:
+def packed_keys(points: NDArray[np.float64], size: float, name: str = "size",
+                low: NDArray[np.float64] | None = None) -> NDArray[np.int64]:
     """One int64 per cube of edge `size` (21 bits per axis, z major), counted from the
     cube of `low` (default: the points' lowest corner)."""
     q = np.floor(points / size)
@@ -36,9 +38,9 @@ def _packed_keys(points: NDArray[np.float64], size: float, name: str = "size",
     return (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
 
 
-def _cube_sums(points, size, name="size", low=None):
+def cube_sums(points, size, name="size", low=None):
     """(cube keys, coordinate sums (n, 3), counts) of the points in each cube."""
-    keys, inverse, counts = np.unique(_packed_keys(points, size, name, low),
+    keys, inverse, counts = np.unique(packed_keys(points, size, name, low),
                                       return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
     sums = np.zeros((len(counts), 3))
@@ -47,7 +49,7 @@ def _cube_sums(points, size, name="size", low=None):
     return keys, sums, counts
 
 
-def _merge_cube_sums(parts):
+def merge_cube_sums(parts):
     """The (keys, sums, counts) of the union of several (keys, sums, counts)."""
     if len(parts) == 1:
         return parts[0]
@@ -62,19 +64,19 @@ def _merge_cube_sums(parts):
     return ukeys, out, np.bincount(inverse, weights=counts, minlength=len(ukeys))
 
 
-def _beam_chunks(counts):
+def beam_chunks(counts):
     """(beam index, index along the beam from 0) of every sample of beams holding
-    `counts` samples each, in chunks of at most _FREE_CHUNK samples."""
+    `counts` samples each, in chunks of at most FREE_CHUNK samples."""
     ends = np.cumsum(counts)
     starts = ends - counts
     total = int(ends[-1]) if len(ends) else 0
-    for a in range(0, total, _FREE_CHUNK):
-        idx = np.arange(a, min(a + _FREE_CHUNK, total), dtype=np.int64)
+    for a in range(0, total, FREE_CHUNK):
+        idx = np.arange(a, min(a + FREE_CHUNK, total), dtype=np.int64)
         beam = np.searchsorted(ends, idx, side="right")
         yield beam, idx - starts[beam]
 
 
-def _check_free_count(total, name, value):
+def check_free_count(total, name, value):
     if total > MAX_FREE_SAMPLES:
         raise ValueError(
             f"{name}={value:g} would make {float(total):.3g} free samples along this "
@@ -87,11 +89,11 @@ def voxel_first(points: NDArray[np.float64], size: float) -> NDArray[np.int64]:
     in increasing order."""
     if len(points) == 0:
         return np.empty(0, dtype=np.int64)
-    _, first = np.unique(_packed_keys(points, size), return_index=True)
+    _, first = np.unique(packed_keys(points, size), return_index=True)
     return np.sort(first)
 
 
-def _check_max_cells(value) -> int:
+def check_max_cells(value) -> int:
     if isinstance(value, bool) or not isinstance(value, Integral):
         raise TypeError(f"max_cells_per_update must be a positive int, got "
                         f"{type(value).__name__}")
@@ -100,17 +102,17 @@ def _check_max_cells(value) -> int:
     return int(value)
 
 
-def _support_cells(samples, extent, res) -> float:
+def support_cells(samples, extent, res) -> float:
     """Cells in the support boxes of the samples (as the accumulation visits them:
     cell centres within `extent` of each sample, keys clamped to the key range)."""
     with np.errstate(over="ignore", invalid="ignore"):
-        lo = np.maximum(np.ceil((samples - extent) / res - 0.5) + _MAX_VAL, 0)
-        hi = np.minimum(np.floor((samples + extent) / res - 0.5) + _MAX_VAL,
-                        2 * _MAX_VAL - 1)
+        lo = np.maximum(np.ceil((samples - extent) / res - 0.5) + MAX_VAL, 0)
+        hi = np.minimum(np.floor((samples + extent) / res - 0.5) + MAX_VAL,
+                        2 * MAX_VAL - 1)
     return float(np.sum(np.prod(np.clip(hi - lo + 1, 0, None), axis=1)))
 
 
-def _search_cell(xs, radius) -> float:
+def search_cell(xs, radius) -> float:
     """Edge of the cubes AKIMap's neighbour search buckets the samples in: the largest
     search radius, widened where the samples would span more than 2^20 cubes."""
     if len(xs) == 0:
@@ -119,7 +121,7 @@ def _search_cell(xs, radius) -> float:
     return max(radius, span / (1 << 20), float(np.max(np.abs(xs))) / (1 << 52))
 
 
-def _candidate_pairs(xs, cell) -> float:
+def candidate_pairs(xs, cell) -> float:
     """(sample, candidate) pairs AKIMap's neighbour search examines: for each sample,
     the samples in the 3 x 3 x 3 cubes of edge `cell` around its own."""
     if len(xs) == 0:
