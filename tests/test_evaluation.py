@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from occgp import evaluation
+from occgp.evaluation import _protocols
 from occgp.evaluation import (
     MapResult,
     TestSet,
@@ -326,7 +326,7 @@ def test_compare_methods_keeps_order(room):
 @pytest.fixture
 def clock(monkeypatch):
     clock = FakeClock()
-    monkeypatch.setattr(evaluation, "_clock", clock)
+    monkeypatch.setattr(_protocols, "_clock", clock)
     return clock
 
 

@@ -1,16 +1,10 @@
-"""Evaluation harness: test sets, timed map building, comparison tables.
+"""The evaluation protocols: test sets, timed map building and comparisons.
 
-A *map* is any object with ``insert_scan(points, origin)`` and
-``occupancy(points)`` (probabilities, NaN where unknown). A *scan* is any
-``(points, origin)`` pair, e.g. :class:`occgp.datasets.Scan`. Test sets come
-from the ground truth of a synthetic scene (:func:`grid_test_set` over a box;
-:func:`exact_test_set` over the cells the scans could see, see
-:func:`cells_in_view`) or, for real scans, from the held-out protocol
-(:func:`held_out_split`), which scores only where the sensor looked and so
-rates every method near perfect on a synthetic scene. Every method is then
-built and scored the same way (:func:`run_method`, :func:`compare_methods`,
-:func:`equal_time_comparison`) and the rows print as a table
-(:func:`format_table`).
+:func:`held_out_split` and :func:`grid_test_set` make test sets;
+:func:`evaluate_map` scores a built map on one; :func:`run_method`,
+:func:`compare_methods` and :func:`equal_time_comparison` build maps from
+scans (from factories or from registered map names, see :mod:`occgp.maps`),
+time their updates and score them, one :class:`MapResult` per method.
 """
 
 from __future__ import annotations
@@ -25,20 +19,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from tqdm.auto import tqdm
 
-from ._ground_truth import cells_in_view, exact_test_set
-from ._nca import NCAResult, nca_feature_weights
-from ._search import (
-    KNN_GRID, KNN_WEIGHT_GRID, OCTOMAP_GRID, THRESHOLDS, GridSearchResult, cell_labels, grid_search,
-)
-from ._validation import as_point, as_points, check_real, check_seed
+from .._validation import as_point, as_points, check_real, check_seed
 from .metrics import score_all
 
-__all__ = ["TestSet", "MapResult", "held_out_split", "grid_test_set", "exact_test_set",
-           "cells_in_view", "evaluate_map",
-           "run_method", "compare_methods", "equal_time_comparison", "format_table",
-           "rows_to_records", "nca_feature_weights", "NCAResult", "grid_search",
-           "GridSearchResult", "cell_labels", "KNN_GRID", "OCTOMAP_GRID", "KNN_WEIGHT_GRID",
-           "THRESHOLDS"]
+__all__ = ["TestSet", "MapResult", "held_out_split", "grid_test_set", "evaluate_map",
+           "run_method", "compare_methods", "equal_time_comparison"]
 
 _logger = logging.getLogger("occgp")
 _clock = time.perf_counter  # the timer of `run_method` (tests replace it)
@@ -562,114 +547,3 @@ def equal_time_comparison(methods: Mapping[str, Callable[[], Any]],
                             "of %.3f s", name, row.seconds, 100 * row.data_fraction, budget)
         rows.append(row)
     return rows
-
-
-# -------------------------------------------------------------------- tables
-_LABELS = {
-    "method": "method", "data_fraction": "data", "auc": "AUC", "mse": "MSE",
-    "acc_occupied": "acc occ", "acc_free": "acc free", "tpr_fdr_auc": "TPR-FDR AUC",
-    "seconds": "time [s]", "n_scans": "scans", "n_points": "points",
-    "n_test": "test points", "unknown_fraction": "unknown",
-}
-_DEFAULT_COLUMNS = ("method", "data_fraction", "auc", "mse", "acc_occupied",
-                    "acc_free", "tpr_fdr_auc", "seconds")
-
-
-def rows_to_records(rows: Iterable[MapResult | Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Rows as plain dicts, without the built maps.
-
-    Parameters
-    ----------
-    rows : iterable of MapResult or dict
-        Rows from :func:`compare_methods` or :func:`equal_time_comparison`.
-
-    Returns
-    -------
-    records : list of dict
-        One dict per row, ready for ``pandas.DataFrame`` or
-        :class:`csv.DictWriter`.
-
-    Raises
-    ------
-    TypeError
-        If a row is neither a MapResult nor a mapping.
-
-    Examples
-    --------
-    >>> row = MapResult("m", 0.9, 0.1, 0.8, 0.95, 0.85, 1.5, 2, 100, 40, 0.0)
-    >>> list(rows_to_records([row])[0])[:4]
-    ['method', 'auc', 'mse', 'acc_occupied']
-    """
-    records = []
-    for i, row in enumerate(rows):
-        if not isinstance(row, (MapResult, Mapping)):
-            raise TypeError(f"rows[{i}] must be a MapResult or a dict, "
-                            f"got {type(row).__name__}")
-        rec = row._asdict() if isinstance(row, MapResult) else dict(row)
-        rec.pop("map", None)
-        records.append(rec)
-    return records
-
-
-def _format_cell(column, value, floatfmt):
-    if isinstance(value, (float, np.floating)):
-        return f"{value:.0%}" if column == "data_fraction" else format(value, floatfmt)
-    return str(value)
-
-
-def format_table(rows: Iterable[MapResult | Mapping[str, Any]],
-                 columns: Sequence[str] | None = None, floatfmt: str = ".3f") -> str:
-    """Format rows as a plain-text table with aligned columns.
-
-    Text columns are left-aligned and numeric ones right-aligned;
-    ``data_fraction`` prints as a percentage. Built maps are never printed.
-
-    Parameters
-    ----------
-    rows : iterable of MapResult or dict
-        Rows from :func:`compare_methods` or :func:`equal_time_comparison`.
-    columns : sequence of str, optional
-        Fields to show, in order. Default: method, data_fraction, auc, mse,
-        acc_occupied, acc_free, tpr_fdr_auc, seconds.
-    floatfmt : str, default=".3f"
-        Format specification of floats.
-
-    Returns
-    -------
-    table : str
-        A header, a rule of dashes and one line per row, all of one width.
-
-    Raises
-    ------
-    ValueError
-        If a column is missing from a row.
-    TypeError
-        If a row is neither a MapResult nor a mapping.
-
-    Examples
-    --------
-    >>> row = MapResult("BGK", 0.881, 0.119, 0.378, 0.979, 0.7, 3.06, 12, 42000, 1000, 0.1)
-    >>> print(format_table([row], columns=["method", "auc", "seconds"]))
-    method    AUC  time [s]
-    ------  -----  --------
-    BGK     0.881     3.060
-    """
-    records = rows_to_records(rows)
-    columns = list(_DEFAULT_COLUMNS if columns is None else columns)
-    for i, rec in enumerate(records):
-        missing = [c for c in columns if c not in rec]
-        if missing:
-            raise ValueError(f"columns {missing} are not in rows[{i}], "
-                             f"which holds {list(rec)}")
-    header = [_LABELS.get(c, str(c)) for c in columns]
-    cells = [[_format_cell(c, rec[c], floatfmt) for c in columns] for rec in records]
-    numeric = [all(isinstance(rec[c], (int, float, np.number)) for rec in records)
-               for c in columns]
-    widths = [max([len(h)] + [len(r[j]) for r in cells]) for j, h in enumerate(header)]
-
-    def line(items):
-        return "  ".join(s.rjust(w) if num else s.ljust(w)
-                         for s, w, num in zip(items, widths, numeric))
-
-    return "\n".join([line(header), "  ".join("-" * w for w in widths)]
-                     + [line(r) for r in cells])
