@@ -285,17 +285,17 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
         ks = sorted({c["k"] for c in kept}) if method == "knn" else [1]
         replay = ScanReplay(scans, resolution, sensor_range=sensor_range, ks=ks, n_jobs=n_jobs)
     if hasattr(truth, "occupancy"):
-        labels = cell_labels(truth, replay.centres, replay.resolution)
+        labels = cell_labels(truth, replay.centers, replay.resolution)
     else:
         labels = np.asarray(truth)
         if labels.dtype.kind not in "biu":
             raise TypeError(f"truth must be booleans or a scene, got dtype {labels.dtype}")
-        if labels.shape != (replay.n_cells,):
-            raise ValueError(f"truth must have shape ({replay.n_cells},) (the replay's "
+        if labels.shape != (replay.num_cells,):
+            raise ValueError(f"truth must have shape ({replay.num_cells},) (the replay's "
                              f"cells), got {labels.shape}")
         labels = labels.astype(bool)
     if not labels.any():
-        raise ValueError(f"truth holds no occupied cell among the {replay.n_cells} cells "
+        raise ValueError(f"truth holds no occupied cell among the {replay.num_cells} cells "
                          "the scans reach: the TPR is undefined")
     workers = n_threads(n_jobs)
     n_chunks = min(2 * workers, len(kept)) if workers > 1 else 1
