@@ -318,8 +318,7 @@ def _lattice(lo, hi, res):
 
 def _truth_panel(scene, centres, res, scans):
     """The cells' exact labels (closed-cell rule), NaN where no scan could see them."""
-    from ._ground_truth import exact_labels
-    from .evaluation import cells_in_view
+    from .evaluation import cells_in_view, exact_labels
 
     truth = exact_labels(scene, centres, res).astype(float)
     truth[~cells_in_view(scene, centres, res, scans, max_range=_DEMO_RANGE)] = np.nan

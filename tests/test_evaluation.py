@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from occgp import evaluation
+import occgp.maps
+from occgp import BGKMap, KNNMap
+from occgp.evaluation import _protocols
 from occgp.evaluation import (
     MapResult,
     TestSet,
@@ -19,6 +21,7 @@ from occgp.evaluation import (
     rows_to_records,
     run_method,
 )
+from occgp.maps import available_maps, make_map
 
 
 class FakeGridMap:
@@ -326,7 +329,7 @@ def test_compare_methods_keeps_order(room):
 @pytest.fixture
 def clock(monkeypatch):
     clock = FakeClock()
-    monkeypatch.setattr(evaluation, "_clock", clock)
+    monkeypatch.setattr(_protocols, "_clock", clock)
     return clock
 
 
@@ -458,3 +461,128 @@ def test_rows_to_records_drops_maps():
     assert all("map" not in r for r in records)
     assert records[0]["method"] == "AKIMap" and records[1]["data_fraction"] == 1.0
     assert set(records[0]) == set(MapResult._fields) - {"map"}
+
+
+# ------------------------------------------------- methods from the map registry
+@pytest.fixture
+def registry(monkeypatch):
+    """occgp.maps with a copy of its registry: map types registered in a test leave
+    with it."""
+    occgp.maps.available_maps()               # the built-in types, registered once
+    monkeypatch.setattr(occgp.maps, "_REGISTRY", dict(occgp.maps._REGISTRY))
+    return occgp.maps
+
+
+def same_scores(a, b):
+    keys = ("auc", "mse", "acc_occupied", "acc_free", "tpr_fdr_auc", "n_points", "n_test",
+            "unknown_fraction")
+    return all(getattr(a, k) == getattr(b, k) for k in keys)
+
+
+def test_compare_methods_takes_registered_names(room):
+    train, test = room
+    rows = compare_methods(["knn", "bgk"], train, test, progress=False)
+    assert [r.method for r in rows] == ["knn", "bgk"]
+    assert isinstance(rows[0].map, KNNMap) and isinstance(rows[1].map, BGKMap)
+    by_factory = compare_methods({"knn": lambda: make_map("knn"),
+                                  "bgk": lambda: make_map("bgk")}, train, test,
+                                 progress=False)
+    assert all(same_scores(a, b) for a, b in zip(rows, by_factory))
+    row = run_method("k", "knn", train, test, progress=False)
+    assert row.method == "k" and same_scores(row, rows[0])
+
+
+def test_compare_methods_takes_map_dicts_and_factories(room):
+    train, test = room
+    spec = {"map": "bgk", "resolution": 0.2}
+    rows = compare_methods({"dict": spec, "factory": lambda: BGKMap(resolution=0.2),
+                            "fake": FakeGridMap, "name": "knn"}, train, test, progress=False)
+    assert [r.method for r in rows] == ["dict", "factory", "fake", "name"]
+    assert isinstance(rows[0].map, BGKMap) and rows[0].map.resolution == 0.2
+    assert same_scores(rows[0], rows[1])
+    assert isinstance(rows[2].map, FakeGridMap) and isinstance(rows[3].map, KNNMap)
+    assert spec == {"map": "bgk", "resolution": 0.2}          # left as given
+    row = run_method("r", {"map": "knn", "resolution": 0.2, "k": 3}, train, test,
+                     progress=False)
+    assert (row.map.resolution, row.map.k) == (0.2, 3)
+
+
+@pytest.mark.parametrize("call", [
+    lambda room: compare_methods({"x": "nope"}, *room),
+    lambda room: compare_methods({"x": {"map": "nope", "resolution": 0.1}}, *room),
+    lambda room: compare_methods(["knn", "nope"], *room),
+    lambda room: run_method("x", "nope", *room),
+    lambda room: equal_time_comparison(["nope"], *room),
+])
+def test_unknown_map_names_list_the_registered_ones(room, call):
+    with pytest.raises(ValueError, match="unknown map type 'nope'; available: ") as err:
+        call(room)
+    assert all(name in str(err.value) for name in available_maps())
+
+
+@pytest.mark.parametrize("methods, error, match", [
+    ({"x": {"resolution": 0.2}}, ValueError, "the dict of method 'x' must hold the key 'map'"),
+    ({"x": {"map": 3}}, TypeError, "the 'map' of method 'x' must be a registered map name"),
+    ({"x": {"map": "knn", "bogus": 1}}, ValueError,
+     "method 'x': the 'knn' map takes no parameter 'bogus'; it takes .*resolution"),
+    ({"x": 3}, TypeError, "factory of method 'x' must be callable, got int"),
+    (["knn", "bgk", "knn"], ValueError, r"must name each map type once, got \['knn'\]"),
+    ("knn", TypeError, "methods must be a mapping .* got str"),
+    (["knn", FakeGridMap], TypeError, "methods must be a mapping .* got list holding type"),
+    (iter(["knn"]), TypeError, "methods must be a mapping"),
+    ([], ValueError, "methods must hold at least one method"),
+])
+def test_compare_methods_rejects_bad_specs(room, methods, error, match):
+    with pytest.raises(error, match=match):
+        compare_methods(methods, *room)
+
+
+def test_specs_are_checked_before_any_map_is_built(room):
+    built = []
+
+    def factory():
+        built.append(1)
+        return FakeGridMap()
+
+    for bad in ({"map": "knn", "bogus": 1}, "nope", {"map": 3}):
+        with pytest.raises((ValueError, TypeError)):
+            compare_methods({"first": factory, "second": bad}, *room)
+        with pytest.raises((ValueError, TypeError)):
+            equal_time_comparison({"first": factory, "second": bad}, *room)
+    assert not built
+
+
+class Sized(FakeGridMap):
+    """A fake map whose constructor needs a parameter."""
+
+    def __init__(self, size, scale=1.0):
+        super().__init__()
+        self.size = size
+
+
+def test_registered_names_need_3d_maps_and_their_parameters(room, registry):
+    registry.register("test-flat", dims=2, description="A 2D map")(FakeGridMap)
+    registry.register("test-sized")(Sized)
+    with pytest.raises(ValueError, match="method 'test-flat': the 'test-flat' map takes "
+                                         "points of 2 dimensions, the scans here are 3D; "
+                                         "3D maps: ") as err:
+        compare_methods(["test-flat"], *room)
+    assert all(name in str(err.value) for name in available_maps(dims=3))
+    with pytest.raises(ValueError, match=r"the 'test-sized' map needs the parameters "
+                                         r"\['size'\]"):
+        compare_methods(["test-sized"], *room)
+    row = run_method("s", {"map": "test-sized", "size": 4}, *room, progress=False)
+    assert isinstance(row.map, Sized) and row.map.size == 4
+
+
+def test_equal_time_takes_registered_maps(room, clock, registry):
+    registry.register("test-costly", description="A fake map on a fake clock")(CostlyMap)
+    train, test = room
+    rows = equal_time_comparison(
+        {"fast": {"map": "test-costly", "clock": clock, "cost": 1.0},
+         "slow": {"map": "test-costly", "clock": clock, "cost": 2.0}},
+        train, test, progress=False)
+    assert [(r.method, r.data_fraction) for r in rows] == [("fast", 1.0), ("slow", 0.5)]
+    assert all(isinstance(r.map, CostlyMap) for r in rows)
+    rows = equal_time_comparison(["knn"], train, test, max_rounds=1, progress=False)
+    assert [(r.method, r.data_fraction) for r in rows] == [("knn", 1.0)]

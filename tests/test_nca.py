@@ -1,11 +1,11 @@
-"""Tests of the NCA feature weights (occgp._nca)."""
+"""Tests of the NCA feature weights (occgp.evaluation.nca_feature_weights)."""
 
 import numpy as np
 import pytest
 from scipy.optimize import approx_fprime
 
-from occgp._nca import MAX_NCA_BYTES, NCAResult, _loss_matrix, _objective, \
-    nca_feature_weights
+from occgp.evaluation import MAX_NCA_BYTES, NCAResult, nca_feature_weights
+from occgp.evaluation._nca import _loss_matrix, _objective
 
 
 def _regression(n=150, seed=0):

@@ -1,5 +1,7 @@
 """grid_search: replayed parameter grids scored by the TPR–FDR AUC."""
 
+import warnings
+
 import joblib
 import numpy as np
 import pytest
@@ -116,6 +118,16 @@ def test_scans_are_replayed_on_the_fly(replay):
     a = grid_search(scans, Wall(), grid, resolution=0.2, sensor_range=3.0)
     b = grid_search(rep, labels, grid)
     assert [r["auc"] for r in a.results] == [r["auc"] for r in b.results]
+
+
+def test_the_search_uses_no_deprecated_name(replay):
+    scans, rep = replay
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)
+        grid_search(scans, Wall(), {"p_u": [0.9]}, resolution=0.2, sensor_range=3.0)
+        grid_search(rep, Wall(), {"p_u": [0.9]})
+        with pytest.raises(ValueError, match="truth must have shape"):
+            grid_search(rep, [True], {"p_u": [0.9]})
 
 
 def test_cell_labels_mark_cells_a_surface_crosses():

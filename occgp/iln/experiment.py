@@ -68,8 +68,7 @@ def _check_scene(scene, poses, n_scans):
 def _test_cells(scene, truth_scans, lidar, resolution, n_cells, test_range, rng):
     """A seeded uniform sample of the map's lattice cells near the trajectory that the true
     scans could see, and their exact labels."""
-    from .._ground_truth import exact_labels
-    from ..evaluation import TestSet, cells_in_view
+    from ..evaluation import TestSet, cells_in_view, exact_labels
 
     origins = np.array([o for _, o in truth_scans])
     lo_b, hi_b = (np.asarray(b, dtype=np.float64) for b in scene.bounds)

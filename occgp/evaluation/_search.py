@@ -19,14 +19,20 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from joblib import Parallel, delayed
-from numpy.typing import ArrayLike, NDArray
 
-from ._validation import check_choice, check_int, check_n_jobs, check_real, n_threads
-from .knn import KNNMap, ScanReplay, _log_odds, check_knn_params, check_octomap_params
-from .metrics import _tpr_fdr_area, _tpr_fdr_auc
+from .._validation import check_choice, check_int, check_n_jobs, check_real, n_threads
+from ..knn import KNNMap, ScanReplay, check_knn_params, check_octomap_params
+from ._ground_truth import cell_labels
+from ._tpr_fdr import tpr_fdr_area, tpr_fdr_auc_unchecked
 
-__all__ = ["grid_search", "GridSearchResult", "cell_labels", "KNN_GRID", "OCTOMAP_GRID",
-           "KNN_WEIGHT_GRID", "THRESHOLDS"]
+__all__ = ["grid_search", "GridSearchResult", "KNN_GRID", "OCTOMAP_GRID", "KNN_WEIGHT_GRID",
+           "THRESHOLDS"]
+
+
+def _threshold_log_odds(p: float) -> float:
+    """liboctomap's ``logodds``, ``(float) log(p / (1 - p))``: the log-odds the maps'
+    cells are compared with (libm's log, rounded to float32)."""
+    return float(np.float32(math.log(p / (1.0 - p))))
 
 
 def _steps(low: float, high: float, step: float) -> tuple[float, ...]:
@@ -102,69 +108,6 @@ class GridSearchResult(NamedTuple):
         return rows
 
 
-def cell_labels(scene: Any, centres: ArrayLike, resolution: float, *,
-                samples: int = 5) -> NDArray[np.bool_]:
-    """Ground truth of octree cells: whether a solid of `scene` reaches into each cell.
-
-    A cell (edge `resolution`, centred at a row of `centres`) is occupied when
-    ``scene.occupancy`` holds at one of ``samples**3`` points of the closed
-    cell: a grid over it that includes its faces, widened by a millionth of
-    the cell. A cell that a surface crosses counts as occupied whichever
-    side of the surface its centre lies on, and a surface lying on a cell
-    border (a ground plane at z = 0) makes both cells beside it occupied: a
-    measured point on it may fall in either. Cells whose centre is farther
-    than half a cell diagonal from every surface (``scene.signed_distance``,
-    when the scene has it) take the centre's label without sampling.
-
-    Parameters
-    ----------
-    scene : object
-        With ``occupancy(points) -> bool array`` (closed solids); optionally
-        ``signed_distance(points)``.
-    centres : array-like of shape (n_cells, 3)
-    resolution : float
-        Cell edge, metres, > 0.
-    samples : int, default=5
-        Sample points per axis, in [1, 16]; 1 tests the centre alone.
-
-    Returns
-    -------
-    labels : ndarray of bool, shape (n_cells,)
-
-    Examples
-    --------
-    >>> class Ground:
-    ...     def occupancy(self, points):
-    ...         return points[:, 2] <= 0.0
-    >>> cell_labels(Ground(), [[0.05, 0.05, -0.05], [0.05, 0.05, 0.05],
-    ...                        [0.05, 0.05, 0.15]], 0.1).tolist()
-    [True, True, False]
-    """
-    from ._validation import as_points
-    centres = as_points(centres, "centres")
-    resolution = check_real(resolution, "resolution", low=0.0)
-    samples = check_int(samples, "samples", low=1, high=16)
-    labels = np.asarray(scene.occupancy(centres), dtype=bool)
-    if labels.shape != (len(centres),):
-        raise ValueError(f"scene.occupancy(points) must return shape ({len(centres)},), "
-                         f"got {labels.shape}")
-    if samples == 1:
-        return labels
-    near = np.arange(len(centres))
-    widen = 1.0 + 1e-6
-    if hasattr(scene, "signed_distance"):
-        sd = np.asarray(scene.signed_distance(centres), dtype=np.float64)
-        near = np.flatnonzero(np.abs(sd) <= 0.5 * math.sqrt(3) * resolution * widen)
-    offsets = np.linspace(-0.5, 0.5, samples) * widen
-    grid = np.stack(np.meshgrid(offsets, offsets, offsets, indexing="ij"), -1).reshape(-1, 3)
-    for start in range(0, len(near), 20_000):
-        rows = near[start:start + 20_000]
-        pts = (centres[rows, None, :] + resolution * grid[None]).reshape(-1, 3)
-        hit = np.asarray(scene.occupancy(pts), dtype=bool).reshape(len(rows), -1)
-        labels[rows] |= hit.any(axis=1)
-    return labels
-
-
 def _combinations(param_grid, keys, defaults):
     grids = [param_grid] if isinstance(param_grid, Mapping) else list(param_grid)
     if not grids:
@@ -221,13 +164,13 @@ def _score_chunk(replay, labels, method, combos, thresholds, batch_size):
             lo, hi = bounds[b]
             if thresholds is None:
                 prob = 1.0 - 1.0 / (1.0 + np.exp(values[b].astype(np.float64)))
-                rows.append({**params, "auc": _tpr_fdr_auc(labels, prob), "thresholds": (),
-                             "tpr": (), "fdr": ()})
+                rows.append({**params, "auc": tpr_fdr_auc_unchecked(labels, prob),
+                             "thresholds": (), "tpr": (), "fdr": ()})
                 continue
-            ts = [(t, np.float32(_log_odds(t))) for t in sorted(thresholds, reverse=True)
-                  if lo - 1e-12 <= t <= hi + 1e-12]
+            ts = [(t, np.float32(_threshold_log_odds(t)))
+                  for t in sorted(thresholds, reverse=True) if lo - 1e-12 <= t <= hi + 1e-12]
             kept, tpr, fdr = _curve(values[b], labels, ts)
-            rows.append({**params, "auc": _tpr_fdr_area(fdr, tpr), "thresholds": tuple(kept),
+            rows.append({**params, "auc": tpr_fdr_area(fdr, tpr), "thresholds": tuple(kept),
                          "tpr": tuple(tpr), "fdr": tuple(fdr)})
     return rows
 
@@ -342,17 +285,17 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
         ks = sorted({c["k"] for c in kept}) if method == "knn" else [1]
         replay = ScanReplay(scans, resolution, sensor_range=sensor_range, ks=ks, n_jobs=n_jobs)
     if hasattr(truth, "occupancy"):
-        labels = cell_labels(truth, replay.centres, replay.resolution)
+        labels = cell_labels(truth, replay.centers, replay.resolution)
     else:
         labels = np.asarray(truth)
         if labels.dtype.kind not in "biu":
             raise TypeError(f"truth must be booleans or a scene, got dtype {labels.dtype}")
-        if labels.shape != (replay.n_cells,):
-            raise ValueError(f"truth must have shape ({replay.n_cells},) (the replay's "
+        if labels.shape != (replay.num_cells,):
+            raise ValueError(f"truth must have shape ({replay.num_cells},) (the replay's "
                              f"cells), got {labels.shape}")
         labels = labels.astype(bool)
     if not labels.any():
-        raise ValueError(f"truth holds no occupied cell among the {replay.n_cells} cells "
+        raise ValueError(f"truth holds no occupied cell among the {replay.num_cells} cells "
                          "the scans reach: the TPR is undefined")
     workers = n_threads(n_jobs)
     n_chunks = min(2 * workers, len(kept)) if workers > 1 else 1

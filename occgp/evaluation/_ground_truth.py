@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._search import cell_labels
-from ._validation import as_point, as_points, check_real, check_seed
+from .._validation import as_point, as_points, check_int, check_real, check_seed
+from ._protocols import TestSet, grid_test_set
 
 
 # cells whose corner points are tested at once in _visible (27 points of 3 floats each)
@@ -157,8 +157,7 @@ def cells_in_view(scene: Any, centres: ArrayLike, resolution: float, scans: Iter
     with the world origin), or when its centre lies within `max_range` of the
     scan's origin, in the scan's angular sector (read from its rays; the
     centre, or one of a 3**dim grid of points just inside the cell) and in
-    line of sight (see
-    :func:`exact_test_set`).
+    line of sight (see the Notes of :func:`exact_test_set`).
 
     Parameters
     ----------
@@ -216,25 +215,8 @@ def exact_test_set(scene: Any, resolution: float, scans: Iterable[Any], *, max_r
     integer) of the lattice aligned with the world origin inside
     ``scene.bounds`` (or `bbox`), i.e. the cells of an octree or grid map of
     that resolution (see :func:`~occgp.evaluation.grid_test_set`). A cell is
-    kept when at least one scan could see it (:func:`cells_in_view`): when
-    it holds one of the scan's returns, or when all of these hold:
-
-    * its centre lies within `max_range` of the scan's origin;
-    * the direction from the origin to its centre, or to one of a 3**dim
-      grid of points just inside its faces, lies in the scan's angular
-      sector: the azimuth span of the scan's rays about their mean azimuth
-      and, in 3D, their elevation span (the sector is read from the rays
-      themselves, so a 117-degree, 0-42-degree la3dm scan sees only that
-      wedge; the layer of cells below a level scanner is out of it);
-    * it is in line of sight: the exact ray from the origin towards the
-      centre (``scene.ray_cast``) reaches within half a cell diagonal of the
-      centre before it meets a solid.
-
-    Cells no scan could see (inside solids, behind walls, out of range or out
-    of every field of view) are left out: no map can know them, they would
-    score every method alike. Cells in view but between the rays are kept:
-    there the methods differ (a map that leaves them unknown scores p = 0.5
-    on them). Labels follow the closed-cell rule of
+    kept when at least one scan could see it (:func:`cells_in_view`, see
+    Notes). Labels follow the closed-cell rule of
     :func:`~occgp.evaluation.cell_labels`: a cell is occupied when a solid
     reaches into it. With `balance` the larger class is subsampled (seeded)
     to the size of the smaller, so that MSE and the TPR-FDR area weigh both
@@ -282,6 +264,28 @@ def exact_test_set(scene: Any, resolution: float, scans: Iterable[Any], *, max_r
         `balance` is not a bool, or `scene` lacks ``occupancy``,
         ``ray_cast`` or ``bounds``.
 
+    Notes
+    -----
+    A scan could see a cell when the cell holds one of the scan's returns,
+    or when all of these hold:
+
+    * its centre lies within `max_range` of the scan's origin;
+    * the direction from the origin to its centre, or to one of a 3**dim
+      grid of points just inside its faces, lies in the scan's angular
+      sector: the azimuth span of the scan's rays about their mean azimuth
+      and, in 3D, their elevation span (the sector is read from the rays
+      themselves, so a 117-degree, 0-42-degree la3dm scan sees only that
+      wedge; the layer of cells below a level scanner is out of it);
+    * it is in line of sight: the exact ray from the origin towards the
+      centre (``scene.ray_cast``) reaches within half a cell diagonal of the
+      centre before it meets a solid.
+
+    Cells no scan could see (inside solids, behind walls, out of range or out
+    of every field of view) are left out: no map can know them, they would
+    score every method alike. Cells in view but between the rays are kept:
+    there the methods differ (a map that leaves them unknown scores p = 0.5
+    on them).
+
     Examples
     --------
     >>> from occgp.datasets import room_2d
@@ -290,8 +294,6 @@ def exact_test_set(scene: Any, resolution: float, scans: Iterable[Any], *, max_r
     >>> test.points.shape[1], bool(test.labels.mean() == 0.5)
     (2, True)
     """
-    from .evaluation import TestSet, grid_test_set
-
     resolution = check_real(resolution, "resolution", low=0.0)
     max_range = check_real(max_range, "max_range", low=0.0)
     if not isinstance(balance, (bool, np.bool_)):
@@ -370,9 +372,120 @@ class _Indexed:
         return out
 
 
-def exact_labels(scene, centres, resolution, samples=5):
-    """:func:`~occgp.evaluation.cell_labels` of 2D or 3D cell centres (a 2D scene is
-    lifted to 3D, z ignored; a scene of solids with bounding boxes is indexed)."""
+def cell_labels(scene: Any, centres: ArrayLike, resolution: float, *,
+                samples: int = 5) -> NDArray[np.bool_]:
+    """Ground truth of octree cells: whether a solid of `scene` reaches into each cell.
+
+    A cell (edge `resolution`, centred at a row of `centres`) is occupied when
+    ``scene.occupancy`` holds at one of ``samples**3`` points of the closed
+    cell: a grid over it that includes its faces, widened by a millionth of
+    the cell. A cell that a surface crosses counts as occupied whichever
+    side of the surface its centre lies on, and a surface lying on a cell
+    border (a ground plane at z = 0) makes both cells beside it occupied: a
+    measured point on it may fall in either. Cells whose centre is farther
+    than half a cell diagonal from every surface (``scene.signed_distance``,
+    when the scene has it) take the centre's label without sampling.
+
+    Parameters
+    ----------
+    scene : object
+        With ``occupancy(points) -> bool array`` (closed solids); optionally
+        ``signed_distance(points)``.
+    centres : array-like of shape (n_cells, 3)
+        Cell centres, metres.
+    resolution : float
+        Cell edge, metres, > 0.
+    samples : int, default=5
+        Sample points per axis, in [1, 16]; 1 tests the centre alone.
+
+    Returns
+    -------
+    labels : ndarray of bool, shape (n_cells,)
+
+    Raises
+    ------
+    ValueError
+        If `centres` is not of shape (n_cells, 3) or not finite, `resolution`
+        is not positive, `samples` is out of range, or ``scene.occupancy``
+        answers with the wrong shape.
+    TypeError
+        If `samples` is not an integer.
+
+    Examples
+    --------
+    >>> class Ground:
+    ...     def occupancy(self, points):
+    ...         return points[:, 2] <= 0.0
+    >>> cell_labels(Ground(), [[0.05, 0.05, -0.05], [0.05, 0.05, 0.05],
+    ...                        [0.05, 0.05, 0.15]], 0.1).tolist()
+    [True, True, False]
+    """
+    centres = as_points(centres, "centres")
+    resolution = check_real(resolution, "resolution", low=0.0)
+    samples = check_int(samples, "samples", low=1, high=16)
+    labels = np.asarray(scene.occupancy(centres), dtype=bool)
+    if labels.shape != (len(centres),):
+        raise ValueError(f"scene.occupancy(points) must return shape ({len(centres)},), "
+                         f"got {labels.shape}")
+    if samples == 1:
+        return labels
+    near = np.arange(len(centres))
+    widen = 1.0 + 1e-6
+    if hasattr(scene, "signed_distance"):
+        sd = np.asarray(scene.signed_distance(centres), dtype=np.float64)
+        near = np.flatnonzero(np.abs(sd) <= 0.5 * math.sqrt(3) * resolution * widen)
+    offsets = np.linspace(-0.5, 0.5, samples) * widen
+    grid = np.stack(np.meshgrid(offsets, offsets, offsets, indexing="ij"), -1).reshape(-1, 3)
+    for start in range(0, len(near), 20_000):
+        rows = near[start:start + 20_000]
+        pts = (centres[rows, None, :] + resolution * grid[None]).reshape(-1, 3)
+        hit = np.asarray(scene.occupancy(pts), dtype=bool).reshape(len(rows), -1)
+        labels[rows] |= hit.any(axis=1)
+    return labels
+
+
+def exact_labels(scene: Any, centres: ArrayLike, resolution: float, samples: int = 5,
+                 ) -> NDArray[np.bool_]:
+    """Exact labels of 2D or 3D cells: :func:`cell_labels` for any scene of occgp.
+
+    The labels of :func:`cell_labels` (a cell is occupied when a solid
+    reaches into it), for the cells of a 3D scene or of a 2D one (lifted to
+    3D, z ignored). A scene of solids with bounding boxes
+    (:class:`occgp.datasets.Scene`) is tested solid by solid on the points
+    in each box: the same labels, faster.
+
+    Parameters
+    ----------
+    scene : object
+        With ``occupancy(points) -> bool array`` (closed solids), optionally
+        ``signed_distance(points)``: a :class:`occgp.datasets.Scene` or
+        :class:`occgp.datasets.Scene2D`.
+    centres : array-like of shape (n_cells, 3) or (n_cells, 2)
+        Cell centres, of the scene's dimension.
+    resolution : float
+        Cell edge, metres, > 0.
+    samples : int, default=5
+        Sample points per axis, in [1, 16] (see :func:`cell_labels`).
+
+    Returns
+    -------
+    labels : ndarray of bool, shape (n_cells,)
+
+    Raises
+    ------
+    ValueError
+        If `centres` is not of shape (n_cells, 3) or (n_cells, 2) or not
+        finite, `resolution` is not positive, `samples` is out of range, or
+        ``scene.occupancy`` answers with the wrong shape.
+
+    Examples
+    --------
+    >>> from occgp.datasets import room_2d
+    >>> room = room_2d()
+    >>> corner = room.bounds[0] + 0.05          # a cell in the outer wall
+    >>> exact_labels(room, [[0.0, 0.0], corner], 0.1).tolist()
+    [False, True]
+    """
     centres = np.asarray(centres, dtype=np.float64)
     if centres.ndim == 2 and centres.shape[1] == 2:
         lifted = np.column_stack([centres, np.zeros(len(centres))])

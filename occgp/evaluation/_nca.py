@@ -2,28 +2,7 @@
 
 The diagonal, regularised neighbourhood component analysis of Yang, Wang and
 Zuo (2012), as MATLAB's ``fsrnca`` (regression) and ``fscnca`` (classification)
-implement it. Each feature gets a weight :math:`w_l`; samples are compared by
-the weighted city-block distance
-
-.. math:: D_w(x_i, x_j) = \\sum_l w_l^2 \\, |x_{il} - x_{jl}|,
-
-and each sample picks a reference point among the others with probability
-
-.. math:: p_{ij} = \\frac{\\exp(-D_w(x_i, x_j) / \\sigma)}
-          {\\sum_{k \\ne i} \\exp(-D_w(x_i, x_k) / \\sigma)}, \\qquad p_{ii} = 0.
-
-The weights minimise the expected leave-one-out loss plus a ridge penalty,
-
-.. math:: f(w) = \\frac{1}{n} \\sum_i \\sum_{j \\ne i} p_{ij} \\, \\ell(y_i, y_j)
-          + \\lambda \\sum_l w_l^2,
-
-with :math:`\\ell(y_i, y_j) = (y_i - y_j)^2` or :math:`|y_i - y_j|` for
-regression and :math:`\\ell = [y_i \\ne y_j]` for classification, where
-:math:`f(w) = 1 - \\frac{1}{n} \\sum_i p_i + \\lambda \\|w\\|^2` with
-:math:`p_i = \\sum_{j: y_j = y_i} p_{ij}`: Yang et al.'s objective (maximise
-:math:`\\sum_i p_i - \\lambda' \\|w\\|^2`, :math:`\\lambda' = n\\lambda`). Features
-that do not help predict `y` are driven to weight ~0 by the penalty.
-
+implement it: :func:`nca_feature_weights` (its Notes give the objective).
 scikit-learn's :class:`~sklearn.neighbors.NeighborhoodComponentsAnalysis` learns
 a full linear map instead, which gives no per-feature weight.
 """
@@ -37,7 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize
 
-from ._validation import as_numeric, check_bool, check_choice, check_int, check_n_jobs, \
+from .._validation import as_numeric, check_bool, check_choice, check_int, check_n_jobs, \
     check_real, n_threads
 
 __all__ = ["NCAResult", "nca_feature_weights", "MAX_NCA_BYTES"]
@@ -154,8 +133,8 @@ def nca_feature_weights(X: ArrayLike, y: ArrayLike, *, task: str = "regression",
     """Learn a weight per feature by neighbourhood component feature selection.
 
     Minimises the regularised NCA objective of Yang, Wang and Zuo (2012)
-    (see :mod:`occgp._nca`) over the weights :math:`w` with L-BFGS-B and the
-    analytic gradient, starting from all weights 1 (MATLAB's default). Features
+    (see Notes) over the weights :math:`w` with L-BFGS-B and the analytic
+    gradient, starting from all weights 1 (MATLAB's default). Features
     irrelevant to `y` end with weight ~0; the normalised weights rank the
     features (e.g. the parameters of a mapping method by their effect on TPR or
     FDR over a parameter grid).
@@ -215,6 +194,29 @@ def nca_feature_weights(X: ArrayLike, y: ArrayLike, *, task: str = "regression",
 
     Notes
     -----
+    Each feature gets a weight :math:`w_l`; samples are compared by the
+    weighted city-block distance
+
+    .. math:: D_w(x_i, x_j) = \\sum_l w_l^2 \\, |x_{il} - x_{jl}|,
+
+    and each sample picks a reference point among the others with probability
+
+    .. math:: p_{ij} = \\frac{\\exp(-D_w(x_i, x_j) / \\sigma)}
+              {\\sum_{k \\ne i} \\exp(-D_w(x_i, x_k) / \\sigma)}, \\qquad p_{ii} = 0.
+
+    The weights minimise the expected leave-one-out loss plus a ridge penalty,
+
+    .. math:: f(w) = \\frac{1}{n} \\sum_i \\sum_{j \\ne i} p_{ij} \\, \\ell(y_i, y_j)
+              + \\lambda \\sum_l w_l^2,
+
+    with :math:`\\ell(y_i, y_j) = (y_i - y_j)^2` or :math:`|y_i - y_j|` for
+    regression and :math:`\\ell = [y_i \\ne y_j]` for classification, where
+    :math:`f(w) = 1 - \\frac{1}{n} \\sum_i p_i + \\lambda \\|w\\|^2` with
+    :math:`p_i = \\sum_{j: y_j = y_i} p_{ij}`: Yang et al.'s objective
+    (maximise :math:`\\sum_i p_i - \\lambda' \\|w\\|^2`,
+    :math:`\\lambda' = n\\lambda`). Features that do not help predict `y` are
+    driven to weight ~0 by the penalty.
+
     Memory and time per iteration are O(n_samples**2 * n_features): the
     pairwise differences are stored once. 4,050 samples with 9 features take
     1.2 GB of differences and about 2 GB at the peak.
@@ -227,7 +229,7 @@ def nca_feature_weights(X: ArrayLike, y: ArrayLike, *, task: str = "regression",
     Examples
     --------
     >>> import numpy as np
-    >>> from occgp._nca import nca_feature_weights
+    >>> from occgp.evaluation import nca_feature_weights
     >>> rng = np.random.default_rng(0)
     >>> X = rng.uniform(-1, 1, size=(150, 4))
     >>> y = 2 * X[:, 0] - X[:, 1] + 0.05 * rng.normal(size=150)

@@ -1,44 +1,36 @@
-"""Evaluation harness: test sets, timed map building, comparison tables.
+"""The evaluation protocols: test sets, timed map building and comparisons.
 
-A *map* is any object with ``insert_scan(points, origin)`` and
-``occupancy(points)`` (probabilities, NaN where unknown). A *scan* is any
-``(points, origin)`` pair, e.g. :class:`occgp.datasets.Scan`. Test sets come
-from the ground truth of a synthetic scene (:func:`grid_test_set` over a box;
-:func:`exact_test_set` over the cells the scans could see, see
-:func:`cells_in_view`) or, for real scans, from the held-out protocol
-(:func:`held_out_split`), which scores only where the sensor looked and so
-rates every method near perfect on a synthetic scene. Every method is then
-built and scored the same way (:func:`run_method`, :func:`compare_methods`,
-:func:`equal_time_comparison`) and the rows print as a table
-(:func:`format_table`).
+:func:`held_out_split` and :func:`grid_test_set` make test sets;
+:func:`evaluate_map` scores a built map on one; :func:`run_method`,
+:func:`compare_methods` and :func:`equal_time_comparison` build maps from
+scans (from factories or from registered map names, see :mod:`occgp.maps`),
+time their updates and score them, one :class:`MapResult` per method.
 """
 
 from __future__ import annotations
 
+import functools
+import inspect
 import logging
 import math
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from tqdm.auto import tqdm
 
-from ._ground_truth import cells_in_view, exact_test_set
-from ._nca import NCAResult, nca_feature_weights
-from ._search import (
-    KNN_GRID, KNN_WEIGHT_GRID, OCTOMAP_GRID, THRESHOLDS, GridSearchResult, cell_labels, grid_search,
-)
-from ._validation import as_point, as_points, check_real, check_seed
+from .._validation import as_point, as_points, check_real, check_seed
+from ..maps import available_maps, make_map, map_type
 from .metrics import score_all
 
-__all__ = ["TestSet", "MapResult", "held_out_split", "grid_test_set", "exact_test_set",
-           "cells_in_view", "evaluate_map",
-           "run_method", "compare_methods", "equal_time_comparison", "format_table",
-           "rows_to_records", "nca_feature_weights", "NCAResult", "grid_search",
-           "GridSearchResult", "cell_labels", "KNN_GRID", "OCTOMAP_GRID", "KNN_WEIGHT_GRID",
-           "THRESHOLDS"]
+__all__ = ["TestSet", "MapResult", "held_out_split", "grid_test_set", "evaluate_map",
+           "run_method", "compare_methods", "equal_time_comparison"]
+
+#: What a method may be given as: a factory of empty maps, a registered map name or
+#: ``{"map": name, **params}``.
+MethodSpec = Union[Callable[[], Any], str, Mapping[str, Any]]
 
 _logger = logging.getLogger("occgp")
 _clock = time.perf_counter  # the timer of `run_method` (tests replace it)
@@ -368,34 +360,106 @@ def _run(name, factory, checked, test_set, progress, data_fraction=1.0):
                      sc["unknown_fraction"], data_fraction, map_)
 
 
+def _map_factory(name, spec):
+    """``make_map`` bound to a registered map name, or ``{"map": name, **params}``;
+    the name, the points' dimension and the parameter names checked now."""
+    if isinstance(spec, str):
+        map_name, params = spec, {}
+    else:
+        params = dict(spec)
+        if "map" not in params:
+            raise ValueError(f"the dict of method {name!r} must hold the key 'map' (a "
+                             f"registered map name), got keys {list(params)}")
+        map_name = params.pop("map")
+        if not isinstance(map_name, str):
+            raise TypeError(f"the 'map' of method {name!r} must be a registered map name "
+                            f"(str), got {type(map_name).__name__}")
+    try:
+        entry = map_type(map_name)
+    except ValueError:
+        raise ValueError(f"method {name!r}: unknown map type {map_name!r}; available: "
+                         f"{', '.join(available_maps())}") from None
+    if 3 not in entry.dims:
+        raise ValueError(f"method {name!r}: the {map_name!r} map takes points of "
+                         f"{' or '.join(map(str, entry.dims))} dimensions, the scans here "
+                         f"are 3D; 3D maps: {', '.join(available_maps(dims=3))}")
+    known = entry.parameters()
+    unknown = [p for p in params if p not in known]
+    if unknown and "**" not in known:
+        raise ValueError(f"method {name!r}: the {map_name!r} map takes no parameter "
+                         f"{unknown[0]!r}; it takes "
+                         f"{', '.join(k for k in known if k != '**') or 'none'}")
+    try:
+        inspect.signature(entry.cls).bind(**{**entry.defaults, **params})
+    except TypeError:
+        missing = [p.name for p in inspect.signature(entry.cls).parameters.values()
+                   if p.default is p.empty and p.kind in (p.POSITIONAL_OR_KEYWORD,
+                                                          p.KEYWORD_ONLY)
+                   and p.name not in params and p.name not in entry.defaults]
+        raise ValueError(f"method {name!r}: the {map_name!r} map needs the parameters "
+                         f"{missing}; give them as {{'map': {map_name!r}, "
+                         f"{missing[0] if missing else 'name'!r}: ...}}") from None
+    except ValueError:          # no signature to check: make_map will tell
+        pass
+    return functools.partial(make_map, map_name, **params)
+
+
 def _check_methods(methods):
-    if not isinstance(methods, Mapping):
-        raise TypeError(f"methods must be a mapping of name -> factory, "
-                        f"got {type(methods).__name__}")
-    if not methods:
+    """The methods as ``{name: factory}``, in order; every spec checked before any
+    map is built."""
+    if isinstance(methods, Mapping):
+        items = list(methods.items())
+    elif (isinstance(methods, Sequence) and not isinstance(methods, (str, bytes))
+          and all(isinstance(m, str) for m in methods)):
+        items = [(m, m) for m in methods]
+        twice = sorted({m for m in methods if methods.count(m) > 1})
+        if twice:
+            raise ValueError(f"methods must name each map type once, got {twice} "
+                             "more than once (give a mapping of name -> spec to compare "
+                             "one type with several parameters)")
+    else:
+        held = ""
+        if isinstance(methods, Sequence) and not isinstance(methods, (str, bytes)):
+            held = next(f" holding {type(m).__name__}" for m in methods
+                        if not isinstance(m, str))
+        raise TypeError(f"methods must be a mapping of name -> factory, map name or "
+                        f"{{'map': name, ...}} dict, or a sequence of registered map "
+                        f"names, got {type(methods).__name__}{held}")
+    if not items:
         raise ValueError("methods must hold at least one method, got none")
-    for name, factory in methods.items():
-        if not callable(factory):
-            raise TypeError(f"the factory of method {name!r} must be callable, "
-                            f"got {type(factory).__name__}")
+    factories = {}
+    for name, spec in items:
+        if callable(spec):
+            factories[name] = spec
+        elif isinstance(spec, (str, Mapping)):
+            factories[name] = _map_factory(name, spec)
+        else:
+            raise TypeError(f"the factory of method {name!r} must be callable, got "
+                            f"{type(spec).__name__} (or give a registered map name or a "
+                            "{'map': name, ...} dict)")
+    return factories
 
 
-def run_method(name: str, factory: Callable[[], Any], scans: Iterable[Sequence[Any]],
+def run_method(name: str, factory: MethodSpec, scans: Iterable[Sequence[Any]],
                test_set: TestSet | Sequence[Any], *, progress: bool | None = None,
                ) -> MapResult:
     """Build one map from the scans, timing its updates, and score it.
 
-    ``factory()`` is called once for a fresh empty map; every scan is
-    inserted in order and only the ``insert_scan`` calls are timed
-    (:func:`time.perf_counter`). Scans are validated and converted to
-    float64 before the clock runs.
+    ``factory()`` is called once for a fresh empty map (a registered map
+    name, or a ``{"map": name, **params}`` dict, is built with
+    :func:`occgp.maps.make_map`); every scan is inserted in order and only
+    the ``insert_scan`` calls are timed (:func:`time.perf_counter`). Scans
+    are validated and converted to float64 before the clock runs.
 
     Parameters
     ----------
     name : str
         Name of the method, for the row and the progress bar.
-    factory : callable
-        ``factory() -> map``, a new empty map.
+    factory : callable, str or dict
+        ``factory() -> map``, a new empty map; or a registered map name
+        (:func:`occgp.maps.available_maps`), built with its default
+        parameters; or a dict ``{"map": name, **params}``, built by
+        ``make_map(name, **params)``.
     scans : iterable of (points, origin)
         The scans to insert.
     test_set : TestSet or (points, labels)
@@ -411,9 +475,13 @@ def run_method(name: str, factory: Callable[[], Any], scans: Iterable[Sequence[A
     Raises
     ------
     ValueError
-        If a scan or the test set is malformed.
+        If a scan or the test set is malformed, or `factory` names a map type
+        that is not registered (the message lists
+        :func:`occgp.maps.available_maps`), does not take 3D points, or does
+        not take a parameter given or needs one not given.
     TypeError
-        If `factory` is not callable.
+        If `factory` is neither callable, a str nor a dict, or a dict's
+        ``"map"`` is not a str.
 
     Examples
     --------
@@ -427,20 +495,30 @@ def run_method(name: str, factory: Callable[[], Any], scans: Iterable[Sequence[A
     >>> row = run_method("constant", Constant, scans, test, progress=False)
     >>> row.method, row.auc, row.n_points
     ('constant', 0.5, 10)
+    >>> row = run_method("knn", {"map": "knn", "resolution": 0.5}, scans, test,
+    ...                  progress=False)
+    >>> type(row.map).__name__, row.map.resolution
+    ('KNNMap', 0.5)
     """
-    _check_methods({name: factory})
+    factory = _check_methods({name: factory})[name]
     return _run(name, factory, _check_scans(scans), _as_test_set(test_set), progress)
 
 
-def compare_methods(methods: Mapping[str, Callable[[], Any]],
+def compare_methods(methods: Mapping[str, MethodSpec] | Sequence[str],
                     scans: Iterable[Sequence[Any]], test_set: TestSet | Sequence[Any],
                     *, progress: bool | None = None) -> list[MapResult]:
     """Build and score every method on the same scans and test set.
 
     Parameters
     ----------
-    methods : mapping of str to callable
-        Method name to map factory (see :func:`run_method`).
+    methods : mapping of str to (callable, str or dict), or sequence of str
+        Method name (the rows' ``method``) to its map: a factory
+        ``factory() -> map`` (see :func:`run_method`), a registered map name
+        (:func:`occgp.maps.available_maps`), built with its default
+        parameters, or a dict ``{"map": name, **params}``, built by
+        :func:`occgp.maps.make_map`. A sequence of registered map names
+        stands for ``{name: name, ...}``. Every entry is checked before any
+        map is built.
     scans : iterable of (points, origin)
         The scans to insert.
     test_set : TestSet or (points, labels)
@@ -456,21 +534,40 @@ def compare_methods(methods: Mapping[str, Callable[[], Any]],
     Raises
     ------
     ValueError
-        If `methods` is empty or a scan or the test set is malformed.
+        If `methods` is empty or names a map type twice, a map type is not
+        registered (the message lists :func:`occgp.maps.available_maps`),
+        does not take 3D points, or does not take a parameter given or needs
+        one not given, or a scan or the test set is malformed.
     TypeError
-        If `methods` is not a mapping or a factory is not callable.
+        If `methods` is neither a mapping nor a sequence of str, or one of
+        its values is neither callable, a str nor a dict.
 
     See Also
     --------
     equal_time_comparison : The same under one time budget.
     format_table : Print the rows.
+    occgp.maps.make_map : Build a registered map.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> wall = np.column_stack([np.full(300, 2.0), rng.uniform(-1, 1, (300, 2))])
+    >>> train, test = held_out_split([(wall, np.zeros(3))], seed=0)
+    >>> rows = compare_methods(["bgk", "knn"], train, test, progress=False)
+    >>> [r.method for r in rows]
+    ['bgk', 'knn']
+    >>> rows = compare_methods({"fine": {"map": "bgk", "resolution": 0.1},
+    ...                         "coarse": {"map": "bgk", "resolution": 0.4}},
+    ...                        train, test, progress=False)
+    >>> [(r.method, r.map.resolution) for r in rows]
+    [('fine', 0.1), ('coarse', 0.4)]
     """
-    _check_methods(methods)
+    methods = _check_methods(methods)
     checked, test_set = _check_scans(scans), _as_test_set(test_set)
     return [_run(name, f, checked, test_set, progress) for name, f in methods.items()]
 
 
-def equal_time_comparison(methods: Mapping[str, Callable[[], Any]],
+def equal_time_comparison(methods: Mapping[str, MethodSpec] | Sequence[str],
                           scans: Iterable[Sequence[Any]],
                           test_set: TestSet | Sequence[Any], *, step: float = 0.05,
                           seed: int | np.random.Generator | None = 0,
@@ -489,8 +586,14 @@ def equal_time_comparison(methods: Mapping[str, Callable[[], Any]],
 
     Parameters
     ----------
-    methods : mapping of str to callable
-        Method name to map factory (see :func:`run_method`).
+    methods : mapping of str to (callable, str or dict), or sequence of str
+        Method name (the rows' ``method``) to its map: a factory
+        ``factory() -> map`` (see :func:`run_method`), a registered map name
+        (:func:`occgp.maps.available_maps`), built with its default
+        parameters, or a dict ``{"map": name, **params}``, built by
+        :func:`occgp.maps.make_map`. A sequence of registered map names
+        stands for ``{name: name, ...}``. Every entry is checked before any
+        map is built.
     scans : iterable of (points, origin)
         The scans to insert.
     test_set : TestSet or (points, labels)
@@ -519,16 +622,18 @@ def equal_time_comparison(methods: Mapping[str, Callable[[], Any]],
     ------
     ValueError
         If `step` is not in (0, 1), `max_rounds` is negative, `full_rows`
-        misses a method, or the input is malformed.
+        misses a method, a map name or its parameters are rejected (see
+        :func:`compare_methods`), or the input is malformed.
     TypeError
-        If `methods` is not a mapping or a factory is not callable.
+        If `methods` is neither a mapping nor a sequence of str, or one of
+        its values is neither callable, a str nor a dict.
 
     Notes
     -----
     Each fraction is timed once, so with noisy clocks a method close to the
     budget may stop one step early or late.
     """
-    _check_methods(methods)
+    methods = _check_methods(methods)
     step = check_real(step, "step", low=0.0, high=1.0)
     if max_rounds is not None and (isinstance(max_rounds, bool) or not isinstance(
             max_rounds, (int, np.integer)) or max_rounds < 0):
@@ -562,114 +667,3 @@ def equal_time_comparison(methods: Mapping[str, Callable[[], Any]],
                             "of %.3f s", name, row.seconds, 100 * row.data_fraction, budget)
         rows.append(row)
     return rows
-
-
-# -------------------------------------------------------------------- tables
-_LABELS = {
-    "method": "method", "data_fraction": "data", "auc": "AUC", "mse": "MSE",
-    "acc_occupied": "acc occ", "acc_free": "acc free", "tpr_fdr_auc": "TPR-FDR AUC",
-    "seconds": "time [s]", "n_scans": "scans", "n_points": "points",
-    "n_test": "test points", "unknown_fraction": "unknown",
-}
-_DEFAULT_COLUMNS = ("method", "data_fraction", "auc", "mse", "acc_occupied",
-                    "acc_free", "tpr_fdr_auc", "seconds")
-
-
-def rows_to_records(rows: Iterable[MapResult | Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Rows as plain dicts, without the built maps.
-
-    Parameters
-    ----------
-    rows : iterable of MapResult or dict
-        Rows from :func:`compare_methods` or :func:`equal_time_comparison`.
-
-    Returns
-    -------
-    records : list of dict
-        One dict per row, ready for ``pandas.DataFrame`` or
-        :class:`csv.DictWriter`.
-
-    Raises
-    ------
-    TypeError
-        If a row is neither a MapResult nor a mapping.
-
-    Examples
-    --------
-    >>> row = MapResult("m", 0.9, 0.1, 0.8, 0.95, 0.85, 1.5, 2, 100, 40, 0.0)
-    >>> list(rows_to_records([row])[0])[:4]
-    ['method', 'auc', 'mse', 'acc_occupied']
-    """
-    records = []
-    for i, row in enumerate(rows):
-        if not isinstance(row, (MapResult, Mapping)):
-            raise TypeError(f"rows[{i}] must be a MapResult or a dict, "
-                            f"got {type(row).__name__}")
-        rec = row._asdict() if isinstance(row, MapResult) else dict(row)
-        rec.pop("map", None)
-        records.append(rec)
-    return records
-
-
-def _format_cell(column, value, floatfmt):
-    if isinstance(value, (float, np.floating)):
-        return f"{value:.0%}" if column == "data_fraction" else format(value, floatfmt)
-    return str(value)
-
-
-def format_table(rows: Iterable[MapResult | Mapping[str, Any]],
-                 columns: Sequence[str] | None = None, floatfmt: str = ".3f") -> str:
-    """Format rows as a plain-text table with aligned columns.
-
-    Text columns are left-aligned and numeric ones right-aligned;
-    ``data_fraction`` prints as a percentage. Built maps are never printed.
-
-    Parameters
-    ----------
-    rows : iterable of MapResult or dict
-        Rows from :func:`compare_methods` or :func:`equal_time_comparison`.
-    columns : sequence of str, optional
-        Fields to show, in order. Default: method, data_fraction, auc, mse,
-        acc_occupied, acc_free, tpr_fdr_auc, seconds.
-    floatfmt : str, default=".3f"
-        Format specification of floats.
-
-    Returns
-    -------
-    table : str
-        A header, a rule of dashes and one line per row, all of one width.
-
-    Raises
-    ------
-    ValueError
-        If a column is missing from a row.
-    TypeError
-        If a row is neither a MapResult nor a mapping.
-
-    Examples
-    --------
-    >>> row = MapResult("BGK", 0.881, 0.119, 0.378, 0.979, 0.7, 3.06, 12, 42000, 1000, 0.1)
-    >>> print(format_table([row], columns=["method", "auc", "seconds"]))
-    method    AUC  time [s]
-    ------  -----  --------
-    BGK     0.881     3.060
-    """
-    records = rows_to_records(rows)
-    columns = list(_DEFAULT_COLUMNS if columns is None else columns)
-    for i, rec in enumerate(records):
-        missing = [c for c in columns if c not in rec]
-        if missing:
-            raise ValueError(f"columns {missing} are not in rows[{i}], "
-                             f"which holds {list(rec)}")
-    header = [_LABELS.get(c, str(c)) for c in columns]
-    cells = [[_format_cell(c, rec[c], floatfmt) for c in columns] for rec in records]
-    numeric = [all(isinstance(rec[c], (int, float, np.number)) for rec in records)
-               for c in columns]
-    widths = [max([len(h)] + [len(r[j]) for r in cells]) for j, h in enumerate(header)]
-
-    def line(items):
-        return "  ".join(s.rjust(w) if num else s.ljust(w)
-                         for s, w, num in zip(items, widths, numeric))
-
-    return "\n".join([line(header), "  ".join("-" * w for w in widths)]
-                     + [line(r) for r in cells])

@@ -1,0 +1,77 @@
+"""The TPR–FDR curve and its area on checked arrays (shared by the metrics and the
+grid search).
+
+The functions here take labels and probabilities already validated by
+:mod:`occgp.evaluation.metrics` (bool and float64 arrays of one length, no NaN);
+the public, checking versions are :func:`~occgp.evaluation.metrics.tpr_fdr_curve`
+and :func:`~occgp.evaluation.metrics.tpr_fdr_auc`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["tpr_fdr_points", "tpr_fdr_area", "tpr_fdr_auc_unchecked"]
+
+
+def tpr_fdr_points(labels: NDArray[np.bool_], probs: NDArray[np.float64],
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Counts at every distinct threshold, highest first, after (0, 0).
+
+    Parameters
+    ----------
+    labels : ndarray of bool, shape (n_points,)
+        True labels, at least one occupied.
+    probs : ndarray of float64, shape (n_points,)
+        Probabilities in [0, 1], no NaN.
+
+    Returns
+    -------
+    fdr, tpr, thresholds : ndarray of shape (n_thresholds + 1,)
+        The curve of :func:`~occgp.evaluation.metrics.tpr_fdr_curve`.
+    """
+    order = np.argsort(-probs, kind="mergesort")
+    p_sorted = probs[order]
+    y_sorted = labels[order]
+    last = np.r_[np.flatnonzero(np.diff(p_sorted)), p_sorted.shape[0] - 1]
+    tps = np.cumsum(y_sorted)[last].astype(np.float64)
+    fps = (last + 1) - tps
+    tpr = np.r_[0.0, tps / tps[-1]]
+    fdr = np.r_[0.0, fps / (tps + fps)]
+    thresholds = np.r_[np.inf, p_sorted[last]]
+    return fdr, tpr, thresholds
+
+
+def tpr_fdr_area(fdr: ArrayLike, tpr: ArrayLike) -> float:
+    """Trapezoid area of a TPR-FDR path from (0, 0) through the operating points
+    (by decreasing threshold), closed with a flat segment to (1, 1).
+
+    Parameters
+    ----------
+    fdr, tpr : array-like of shape (n_thresholds,)
+        The operating points, by decreasing threshold, without (0, 0).
+
+    Returns
+    -------
+    area : float
+    """
+    return float(np.trapezoid(np.r_[0.0, tpr, 1.0], np.r_[0.0, fdr, 1.0]))
+
+
+def tpr_fdr_auc_unchecked(labels: NDArray[np.bool_], probs: NDArray[np.float64]) -> float:
+    """:func:`~occgp.evaluation.metrics.tpr_fdr_auc` of checked arrays.
+
+    Parameters
+    ----------
+    labels : ndarray of bool, shape (n_points,)
+        True labels, at least one occupied.
+    probs : ndarray of float64, shape (n_points,)
+        Probabilities in [0, 1], no NaN.
+
+    Returns
+    -------
+    auc : float
+    """
+    fdr, tpr, _ = tpr_fdr_points(labels, probs)
+    return tpr_fdr_area(fdr[1:], tpr[1:])
