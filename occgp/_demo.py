@@ -16,10 +16,6 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .grid import GridMap
-from .kernel import AKIMap, BGKMap
-from .knn import KNNMap
-from .octree import OccupancyOctree
 
 __all__ = ["demo", "mapping_methods", "noisy_mapping_methods", "gp_mapping_methods"]
 
@@ -28,33 +24,8 @@ __all__ = ["demo", "mapping_methods", "noisy_mapping_methods", "gp_mapping_metho
 _DEMO_RANGE = 8.0
 
 
-class _RayModeOctree(OccupancyOctree):
-    """An octree whose scans go in with per-ray counting (``mode="ray"``)."""
-
-    def insert_scan(self, points, origin, **kwargs):
-        return super().insert_scan(points, origin, mode="ray", **kwargs)
-
-
-class _RayModeGrid(GridMap):
-    """A grid whose scans go in with per-ray counting (``mode="ray"``)."""
-
-    def insert_scan(self, points, origin, **kwargs):
-        return super().insert_scan(points, origin, mode="ray", **kwargs)
-
-
-class _RangedOctree(OccupancyOctree):
-    """An octree whose scans go in with a range limit (``max_range=``), in scan mode."""
-
-    def __init__(self, resolution, max_range):
-        super().__init__(resolution)
-        self._max_range = max_range
-
-    def insert_scan(self, points, origin, **kwargs):
-        return super().insert_scan(points, origin, max_range=self._max_range, **kwargs)
-
-
 def mapping_methods(resolution: float) -> dict:
-    """Every mapping method of ``occgp demo``, as name → factory of an empty map.
+    """Every mapping method of ``occgp demo``, as name → registered map and parameters.
 
     The octree and the grid in scan and ray mode, :class:`~occgp.BGKMap`
     ("BGK"), :class:`~occgp.AKIMap` in its two variants ("AKIMap",
@@ -70,25 +41,28 @@ def mapping_methods(resolution: float) -> dict:
 
     Returns
     -------
-    methods : dict of str to callable
-        Each factory returns a new, empty map with ``insert_scan(points, origin)``
-        and ``occupancy(points)``.
+    methods : dict of str to dict
+        Each method as :func:`occgp.evaluation.compare_methods` reads it:
+        ``{"map": registered name, **parameters}``, with the options of every
+        ``insert_scan`` under ``"insert"`` (ray mode).
     """
+    res = {"resolution": resolution}
     return {
-        "octree (scan)": lambda: OccupancyOctree(resolution),
-        "octree (ray)": lambda: _RayModeOctree(resolution),
-        "grid (scan)": lambda: GridMap(resolution),
-        "grid (ray)": lambda: _RayModeGrid(resolution),
-        "BGK": lambda: BGKMap(resolution, n_jobs=-1),
-        "AKIMap": lambda: AKIMap(resolution, random_state=0, n_jobs=-1),
-        "AKIMap (published)": lambda: AKIMap(resolution, variant="published", random_state=0,
-                                             n_jobs=-1),
-        "k-NN": lambda: KNNMap(resolution, sensor_range=_DEMO_RANGE),
+        "octree (scan)": {"map": "octree", **res},
+        "octree (ray)": {"map": "octree", **res, "insert": {"mode": "ray"}},
+        "grid (scan)": {"map": "grid", **res},
+        "grid (ray)": {"map": "grid", **res, "insert": {"mode": "ray"}},
+        "BGK": {"map": "bgk", **res, "n_jobs": -1},
+        "AKIMap": {"map": "akimap", **res, "random_state": 0, "n_jobs": -1},
+        "AKIMap (published)": {"map": "akimap", **res, "variant": "published",
+                               "random_state": 0, "n_jobs": -1},
+        "k-NN": {"map": "knn", **res, "sensor_range": _DEMO_RANGE},
     }
 
 
 def noisy_mapping_methods(resolution: float) -> dict:
-    """The methods of ``occgp demo``'s noisy-scan table, as name → factory of an empty map.
+    """The methods of ``occgp demo``'s noisy-scan table, as name → registered map and
+    parameters.
 
     "octree (scan), noisy": :class:`~occgp.OccupancyOctree` in scan mode with
     ``max_range`` 8 m, and "k-NN, noisy": :class:`~occgp.KNNMap` (its default
@@ -103,12 +77,13 @@ def noisy_mapping_methods(resolution: float) -> dict:
 
     Returns
     -------
-    methods : dict of str to callable
-        Each factory returns a new, empty map.
+    methods : dict of str to dict
+        Each method as :func:`mapping_methods` gives them.
     """
     return {
-        "octree (scan), noisy": lambda: _RangedOctree(resolution, _DEMO_RANGE),
-        "k-NN, noisy": lambda: KNNMap(resolution, sensor_range=_DEMO_RANGE),
+        "octree (scan), noisy": {"map": "octree", "resolution": resolution,
+                                 "insert": {"max_range": _DEMO_RANGE}},
+        "k-NN, noisy": {"map": "knn", "resolution": resolution, "sensor_range": _DEMO_RANGE},
     }
 
 

@@ -42,7 +42,8 @@ class ColorLeaves(NamedTuple):
     colors: NDArray[np.uint8]
 
 
-@register("color-octree", formats=(".ot",), description="OctoMap's octree with a colour per cell")
+@register("color-octree", formats=(".ot",),
+          description="OctoMap's octree with a colour per cell", resolution=0.1)
 class ColorOctree(OctreeFace, _ColorOcTree):
     """Probabilistic 3D occupancy map whose cells also hold a colour (OctoMap's ColorOcTree).
 

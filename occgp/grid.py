@@ -26,7 +26,8 @@ _CELL_BYTES = 3 * _KEY_DTYPE.itemsize + _VALUE_DTYPE.itemsize
 _FORMAT, _VERSIONS = "occgp.grid_map", (1,)
 
 
-@register("grid", formats=(".npz",), description="A uniform 3D log-odds grid (OctoMap's update, 3D-DDA)")
+@register("grid", formats=(".npz",),
+          description="A uniform 3D log-odds grid (OctoMap's update, 3D-DDA)", resolution=0.1)
 class GridMap(LogOddsMap, _Grid):
     """Probabilistic 3D occupancy map on a uniform grid (hashed cells).
 

@@ -154,7 +154,8 @@ def point_log_odds(s: NDArray[np.float64], count: int, mean: float, m2: float, p
     return np.log(p / (1.0 - p))
 
 
-@register("knn", formats=(".bt", ".ot"), description="The k-NN inverse sensor model on an octree (Miao et al.)")
+@register("knn", formats=(".bt", ".ot"),
+          description="The k-NN inverse sensor model on an octree (Miao et al.)")
 class KNNMap(OccupancyOctree):
     """Occupancy octree updated by the k-NN inverse sensor model (Miao et al.).
 

@@ -37,7 +37,8 @@ class Changes(NamedTuple):
         return self.centers
 
 
-@register("octree", formats=(".bt", ".ot"), description="OctoMap's log-odds octree")
+@register("octree", formats=(".bt", ".ot"), description="OctoMap's log-odds octree",
+          resolution=0.1)
 class OccupancyOctree(OctreeFiles, OctreeQueries, _OcTree):
     """Probabilistic 3D occupancy map on an octree (OctoMap).
 

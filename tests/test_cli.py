@@ -9,6 +9,7 @@ import pytest
 
 from occgp import AKIMap, BGKMap, KNNMap, OccupancyOctree
 from occgp._demo import noisy_scans
+from occgp.maps import make_map
 from occgp.cli import main, map_scans, mapping_methods, noisy_mapping_methods
 from occgp.datasets import Scan, read_scans, structured_room, write_pcd
 
@@ -16,30 +17,39 @@ KERNEL_METHODS = {"BGK", "AKIMap", "AKIMap (published)"}
 NOISY_METHODS = {"octree (scan), noisy", "k-NN, noisy"}
 
 
+def _build(spec):
+    """The map of a demo method spec and the options of its insert_scan."""
+    params = {k: v for k, v in spec.items() if k not in ("map", "insert")}
+    return make_map(spec["map"], **params), spec.get("insert", {})
+
+
 def test_mapping_methods_include_the_kernel_maps():
     methods = mapping_methods(0.2)
     assert KERNEL_METHODS | {"k-NN"} <= set(methods)
     assert {"octree (scan)", "octree (ray)", "grid (scan)", "grid (ray)"} <= set(methods)
-    for name, factory in methods.items():
-        first, second = factory(), factory()
+    for name, spec in methods.items():
+        (first, options), (second, _) = _build(spec), _build(spec)
         assert first is not second and callable(first.insert_scan), name
         assert first.resolution == 0.2, name
-    assert isinstance(methods["BGK"](), BGKMap)
-    assert methods["AKIMap"]().variant == "occgp"
-    assert methods["AKIMap (published)"]().variant == "published"
-    assert isinstance(methods["k-NN"](), KNNMap) and methods["k-NN"]().sensor_range == 8.0
+        assert options == ({"mode": "ray"} if "(ray)" in name else {}), name
+    assert isinstance(_build(methods["BGK"])[0], BGKMap)
+    assert _build(methods["AKIMap"])[0].variant == "occgp"
+    assert _build(methods["AKIMap (published)"])[0].variant == "published"
+    knn = _build(methods["k-NN"])[0]
+    assert isinstance(knn, KNNMap) and knn.sensor_range == 8.0
 
 
 def test_noisy_methods_cut_rays_alike():
     """The noisy table's octree and k-NN map both cut rays at the scanner's 8 m."""
     methods = noisy_mapping_methods(0.2)
     assert set(methods) == NOISY_METHODS
-    octree, knn = methods["octree (scan), noisy"](), methods["k-NN, noisy"]()
+    (octree, options), (knn, _) = _build(methods["octree (scan), noisy"]), \
+        _build(methods["k-NN, noisy"])
     assert isinstance(knn, KNNMap) and knn.sensor_range == 8.0 and knn.resolution == 0.2
     assert type(octree) is not KNNMap and octree.resolution == 0.2
     far = np.array([[12.0, 0.05, 0.05]])        # a return 12 m away: free up to 8 m only
     expected = OccupancyOctree(0.2).insert_scan(far, [0.05, 0.05, 0.05], max_range=8.0)
-    octree.insert_scan(far, [0.05, 0.05, 0.05])
+    octree.insert_scan(far, [0.05, 0.05, 0.05], **options)
     assert octree.num_leaves == expected.num_leaves > 0
     assert np.isnan(octree.occupancy([[10.0, 0.05, 0.05]]))[0]
     knn.insert_scan(far, [0.05, 0.05, 0.05])

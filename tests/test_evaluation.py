@@ -507,6 +507,24 @@ def test_compare_methods_takes_map_dicts_and_factories(room):
     assert (row.map.resolution, row.map.k) == (0.2, 3)
 
 
+def test_map_dicts_pass_insert_options(room):
+    train, test = room
+    spec = {"map": "octree", "resolution": 0.2, "insert": {"mode": "ray"}}
+    row, = compare_methods({"ray": spec}, train, test, progress=False)
+    expected = make_map("octree", resolution=0.2)
+    for points, origin in train:
+        expected.insert_scan(points, origin, mode="ray")
+    probe = np.asarray(test[0] if isinstance(test, tuple) else test.points)
+    np.testing.assert_array_equal(row.map.log_odds(probe), expected.log_odds(probe))
+    scan_mode, = compare_methods({"scan": {"map": "octree", "resolution": 0.2}}, train, test,
+                                 progress=False)
+    assert not np.array_equal(scan_mode.map.log_odds(probe), expected.log_odds(probe),
+                              equal_nan=True)
+    with pytest.raises(TypeError, match="the 'insert' of method 'x' must be a mapping"):
+        compare_methods({"x": {"map": "octree", "insert": "ray"}}, train, test)
+    assert spec["insert"] == {"mode": "ray"}                  # left as given
+
+
 @pytest.mark.parametrize("call", [
     lambda room: compare_methods({"x": "nope"}, *room),
     lambda room: compare_methods({"x": {"map": "nope", "resolution": 0.1}}, *room),

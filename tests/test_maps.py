@@ -99,6 +99,7 @@ def test_registry_lists_builds_and_rejects():
     assert set(available_maps(dims=3)) <= set(names)
     assert map_type("octree").cls is occgp.OccupancyOctree
     assert map_type("akimap").defaults == {"random_state": 0}
+    assert make_map("octree").resolution == 0.1         # the registered default
     assert make_map("akimap").random_state == 0
     assert make_map("akimap", random_state=3).random_state == 3
     with pytest.raises(ValueError, match=r"unknown map type 'nope'; available: octree"):
@@ -140,11 +141,10 @@ def test_a_new_map_type_is_one_module_and_one_line(toy, tmp_path, capsys):
     # the evaluation harness builds and scores it by name, beside the octree
     test = occgp.evaluation.TestSet(np.vstack([points, [[1.0, 0.0, 0.0]]]),
                                     np.r_[np.ones(len(points), bool), False])
-    rows = occgp.evaluation.compare_methods(
-        {"toy": lambda: make_map("toy", resolution=0.2),
-         "octree": lambda: make_map("octree", resolution=0.2)},
-        [(points, origin)], test, progress=False)
+    rows = occgp.evaluation.compare_methods(["toy", "octree"], [(points, origin)], test,
+                                            progress=False)
     assert [r.method for r in rows] == ["toy", "octree"]
+    assert isinstance(rows[0].map, toy) and rows[0].map.resolution == 0.1
     assert rows[0].auc == pytest.approx(rows[0].auc) and 0.0 <= rows[0].mse <= 1.0
 
 

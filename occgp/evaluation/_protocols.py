@@ -343,13 +343,14 @@ def evaluate_map(map: Any, test_set: TestSet | Sequence[Any]) -> dict[str, float
     return _evaluate(map, _as_test_set(test_set))
 
 
-def _run(name, factory, checked, test_set, progress, data_fraction=1.0):
+def _run(name, method, checked, test_set, progress, data_fraction=1.0):
+    factory, options = method
     map_ = factory()
     seconds, n_points = 0.0, 0
     for points, origin, _ in tqdm(checked, desc=str(name), unit="scan",
                                   disable=_disable(progress), leave=False):
         t0 = _clock()
-        map_.insert_scan(points, origin)
+        map_.insert_scan(points, origin, **options)
         seconds += _clock() - t0
         n_points += len(points)
     sc = _evaluate(map_, test_set)
@@ -361,8 +362,10 @@ def _run(name, factory, checked, test_set, progress, data_fraction=1.0):
 
 
 def _map_factory(name, spec):
-    """``make_map`` bound to a registered map name, or ``{"map": name, **params}``;
-    the name, the points' dimension and the parameter names checked now."""
+    """(``make_map`` bound to a registered map name, or to ``{"map": name, "insert":
+    options, **params}``, and the options of its ``insert_scan``); the name, the
+    points' dimension and the parameter names checked now."""
+    options: dict = {}
     if isinstance(spec, str):
         map_name, params = spec, {}
     else:
@@ -371,6 +374,11 @@ def _map_factory(name, spec):
             raise ValueError(f"the dict of method {name!r} must hold the key 'map' (a "
                              f"registered map name), got keys {list(params)}")
         map_name = params.pop("map")
+        options = params.pop("insert", {})
+        if not isinstance(options, Mapping) or not all(isinstance(k, str) for k in options):
+            raise TypeError(f"the 'insert' of method {name!r} must be a mapping of "
+                            f"insert_scan options by name, got {type(options).__name__}")
+        options = dict(options)
         if not isinstance(map_name, str):
             raise TypeError(f"the 'map' of method {name!r} must be a registered map name "
                             f"(str), got {type(map_name).__name__}")
@@ -401,7 +409,7 @@ def _map_factory(name, spec):
                          f"{missing[0] if missing else 'name'!r}: ...}}") from None
     except ValueError:          # no signature to check: make_map will tell
         pass
-    return functools.partial(make_map, map_name, **params)
+    return functools.partial(make_map, map_name, **params), options
 
 
 def _check_methods(methods):
@@ -430,7 +438,7 @@ def _check_methods(methods):
     factories = {}
     for name, spec in items:
         if callable(spec):
-            factories[name] = spec
+            factories[name] = (spec, {})
         elif isinstance(spec, (str, Mapping)):
             factories[name] = _map_factory(name, spec)
         else:
@@ -516,7 +524,10 @@ def compare_methods(methods: Mapping[str, MethodSpec] | Sequence[str],
         ``factory() -> map`` (see :func:`run_method`), a registered map name
         (:func:`occgp.maps.available_maps`), built with its default
         parameters, or a dict ``{"map": name, **params}``, built by
-        :func:`occgp.maps.make_map`. A sequence of registered map names
+        :func:`occgp.maps.make_map` (an optional key ``"insert"`` holds
+        options every ``insert_scan`` call gets, e.g. ``{"map": "octree",
+        "resolution": 0.1, "insert": {"mode": "ray"}}``). A sequence of
+        registered map names
         stands for ``{name: name, ...}``. Every entry is checked before any
         map is built.
     scans : iterable of (points, origin)
@@ -591,7 +602,10 @@ def equal_time_comparison(methods: Mapping[str, MethodSpec] | Sequence[str],
         ``factory() -> map`` (see :func:`run_method`), a registered map name
         (:func:`occgp.maps.available_maps`), built with its default
         parameters, or a dict ``{"map": name, **params}``, built by
-        :func:`occgp.maps.make_map`. A sequence of registered map names
+        :func:`occgp.maps.make_map` (an optional key ``"insert"`` holds
+        options every ``insert_scan`` call gets, e.g. ``{"map": "octree",
+        "resolution": 0.1, "insert": {"mode": "ray"}}``). A sequence of
+        registered map names
         stands for ``{name: name, ...}``. Every entry is checked before any
         map is built.
     scans : iterable of (points, origin)
