@@ -71,6 +71,10 @@ class LogOddsMap:
         def _check_rays(self, points: NDArray[np.float32], origin: NDArray[np.float32],
                         max_range: float) -> tuple[NDArray[np.uint8], NDArray[np.int64]]: ...
         def _query(self, points: NDArray[np.float32], what: int) -> Any: ...
+        def _num_cells(self) -> int: ...
+        def _bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+        def _memory_usage(self) -> int: ...
+        def _clear(self) -> None: ...
 
     def __init__(
         self,
@@ -149,6 +153,40 @@ class LogOddsMap:
         """The interval ``[low, high)`` of coordinates (metres, every axis) the map can hold."""
         r = self.resolution
         return -TREE_MAX_VAL * r, TREE_MAX_VAL * r
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def num_cells(self) -> int:
+        """Number of cells holding evidence (an octree's pruned leaf counts once)."""
+        return self._num_cells()
+
+    @property
+    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(min corner, max corner) of the known space, in metres; NaN when empty."""
+        if self.num_cells == 0:
+            return np.full(3, np.nan), np.full(3, np.nan)
+        return self._bounds()
+
+    def memory_usage(self) -> int:
+        """Bytes used by the map's cells: the octree's nodes (liboctomap's
+        ``memoryUsage``), the grid's hash map (an estimate of its nodes and buckets).
+
+        Returns
+        -------
+        nbytes : int
+        """
+        return self._memory_usage()
+
+    def clear(self):
+        """Remove every cell (the parameters stay).
+
+        Returns
+        -------
+        self
+            The map.
+        """
+        self._clear()
+        return self
 
     # ------------------------------------------------------------------ queries
     def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
@@ -638,15 +676,12 @@ class LogOddsMap:
 
 class OctreeFace(LogOddsMap):
     """What the octrees (:class:`occgp.OccupancyOctree`, :class:`occgp.ColorOctree`) add to
-    the log-odds face: the tree's size and extent, from their compiled cores'
-    ``_num_leaves``, ``_num_nodes``, ``_bounds``, ``_memory_usage`` and ``_clear``."""
+    the log-odds face: the tree's leaves and nodes, from their compiled cores'
+    ``_num_leaves`` and ``_num_nodes``."""
 
     if TYPE_CHECKING:  # provided by the compiled core the subclass also derives from
         def _num_leaves(self) -> int: ...
         def _num_nodes(self) -> int: ...
-        def _bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
-        def _memory_usage(self) -> int: ...
-        def _clear(self) -> None: ...
 
     @property
     def num_leaves(self) -> int:
@@ -658,38 +693,8 @@ class OctreeFace(LogOddsMap):
         """Number of nodes in the tree, inner nodes included."""
         return self._num_nodes()
 
-    @property
-    def num_cells(self) -> int:
-        """Number of cells holding evidence: the leaves (a pruned leaf counts once)."""
+    def _num_cells(self) -> int:
         return self._num_leaves()
-
-    @property
-    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """(min corner, max corner) of the known space, in metres; NaN when empty."""
-        if self.num_nodes == 0:
-            return np.full(3, np.nan), np.full(3, np.nan)
-        return self._bounds()
-
-    def memory_usage(self) -> int:
-        """Bytes used by the tree's nodes.
-
-        Returns
-        -------
-        nbytes : int
-            liboctomap's ``memoryUsage`` estimate.
-        """
-        return self._memory_usage()
-
-    def clear(self):
-        """Remove every cell (the parameters stay).
-
-        Returns
-        -------
-        self
-            The map.
-        """
-        self._clear()
-        return self
 
 
 def check_params(params: dict) -> dict:

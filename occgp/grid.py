@@ -6,7 +6,7 @@ import os
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from . import _npz_io
 from ._grid import _Grid
@@ -221,40 +221,6 @@ default="auto"
         """
         _, centers, values = self._cells_sorted(check_bool(occupied_only, "occupied_only"))
         return Leaves(centers, np.full(len(values), self.resolution), values)
-
-    # ------------------------------------------------------------------ structure
-    @property
-    def num_cells(self) -> int:
-        """Number of known cells."""
-        return self._num_cells()
-
-    @property
-    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """(min corner, max corner) of the known space, in metres; NaN when empty."""
-        if self.num_cells == 0:
-            return np.full(3, np.nan), np.full(3, np.nan)
-        return self._bounds()
-
-    def memory_usage(self) -> int:
-        """Bytes used by the cells' hash map.
-
-        Returns
-        -------
-        nbytes : int
-            An estimate of its nodes and buckets.
-        """
-        return self._memory_usage()
-
-    def clear(self) -> "GridMap":
-        """Remove every cell (the parameters stay).
-
-        Returns
-        -------
-        self
-            The map.
-        """
-        self._clear()
-        return self
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike) -> "GridMap":
