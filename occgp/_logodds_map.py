@@ -683,6 +683,10 @@ class OctreeFace(LogOddsMap):
         def _num_leaves(self) -> int: ...
         def _num_nodes(self) -> int: ...
 
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(resolution={self.resolution!r}, "
+                f"num_leaves={self.num_leaves})")
+
     @property
     def num_leaves(self) -> int:
         """Number of leaves (known cells, after pruning)."""

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._docs import OCTREE_ATTRIBUTES, SENSOR_MODEL, fill_doc
 from . import _octomap_format as fmt
 from ._color import FUSE_AVERAGE, FUSE_MEAN, _ColorOcTree
 from ._logodds_map import OctreeFace
@@ -44,6 +45,7 @@ class ColorLeaves(NamedTuple):
 
 @register("color-octree", formats=(".ot",),
           description="OctoMap's octree with a colour per cell", resolution=0.1)
+@fill_doc(sensor_model=SENSOR_MODEL, octree_attributes=OCTREE_ATTRIBUTES)
 class ColorOctree(OctreeFace, _ColorOcTree):
     """Probabilistic 3D occupancy map whose cells also hold a colour (OctoMap's ColorOcTree).
 
@@ -67,27 +69,11 @@ class ColorOctree(OctreeFace, _ColorOcTree):
     ----------
     resolution : float
         Edge length of the smallest cells, in metres; in ``[1e-15, 1e14]``.
-    prob_hit : float, default=0.7
-        Probability that a cell is occupied given a ray ends in it; in (0.5, 1).
-    prob_miss : float, default=0.4
-        Probability that a cell is occupied given a ray crosses it; in (0, 0.5).
-    clamping_min : float, default=0.1192
-        Lower clamping bound (probability); in (0, 0.5).
-    clamping_max : float, default=0.971
-        Upper clamping bound (probability); in (0.5, 1).
-    occupancy_threshold : float, default=0.5
-        Cells at or above this probability count as occupied; in (0, 1).
+    {sensor_model}
 
     Attributes
     ----------
-    resolution : float
-        Edge length of the smallest cells.
-    num_leaves : int
-        Number of leaves (known cells after pruning).
-    num_nodes : int
-        Number of nodes, inner ones included.
-    bounds : tuple of ndarray of shape (3,)
-        Minimum and maximum corner of the known space (NaN when empty).
+    {octree_attributes}
 
     See Also
     --------
@@ -107,10 +93,6 @@ class ColorOctree(OctreeFace, _ColorOcTree):
     """
 
     _kind = "octree"
-
-    def __repr__(self) -> str:
-        return (f"{type(self).__name__}(resolution={self.resolution!r}, "
-                f"num_leaves={self.num_leaves})")
 
     # ------------------------------------------------------------------ updates
     def insert_scan(

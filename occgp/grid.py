@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._docs import SENSOR_MODEL, fill_doc
 from . import _npz_io
 from ._grid import _Grid
 from ._logodds_map import Leaves, LogOddsMap
@@ -28,6 +29,7 @@ _FORMAT, _VERSIONS = "occgp.grid_map", (1,)
 
 @register("grid", formats=(".npz",),
           description="A uniform 3D log-odds grid (OctoMap's update, 3D-DDA)", resolution=0.1)
+@fill_doc(sensor_model=SENSOR_MODEL)
 class GridMap(LogOddsMap, _Grid):
     """Probabilistic 3D occupancy map on a uniform grid (hashed cells).
 
@@ -50,16 +52,7 @@ class GridMap(LogOddsMap, _Grid):
         Edge length of the cells, in metres. Must lie in ``[1e-15, 1e14]``:
         the range where liboctomap's single-precision ray traversal is sound
         (see the user guide's notes on single precision).
-    prob_hit : float, default=0.7
-        Probability that a cell is occupied given a ray ends in it; in (0.5, 1).
-    prob_miss : float, default=0.4
-        Probability that a cell is occupied given a ray crosses it; in (0, 0.5).
-    clamping_min : float, default=0.1192
-        Lower clamping bound (probability); in (0, 0.5).
-    clamping_max : float, default=0.971
-        Upper clamping bound (probability); in (0.5, 1).
-    occupancy_threshold : float, default=0.5
-        Cells at or above this probability count as occupied; in (0, 1).
+    {sensor_model}
 
     Attributes
     ----------

@@ -8,6 +8,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._docs import OCTREE_ATTRIBUTES, SENSOR_MODEL, fill_doc
 from ._logodds_map import MODES, Leaves
 from ._octree import KEYRAY_CELLS, _OcTree
 from ._octree_files import OctreeFiles
@@ -39,6 +40,7 @@ class Changes(NamedTuple):
 
 @register("octree", formats=(".bt", ".ot"), description="OctoMap's log-odds octree",
           resolution=0.1)
+@fill_doc(sensor_model=SENSOR_MODEL, octree_attributes=OCTREE_ATTRIBUTES)
 class OccupancyOctree(OctreeFiles, OctreeQueries, _OcTree):
     """Probabilistic 3D occupancy map on an octree (OctoMap).
 
@@ -59,27 +61,11 @@ class OccupancyOctree(OctreeFiles, OctreeQueries, _OcTree):
         Edge length of the smallest cells, in metres. Must lie in ``[1e-15, 1e14]``:
         the range where liboctomap's single-precision ray traversal is sound
         (see the user guide's notes on single precision).
-    prob_hit : float, default=0.7
-        Probability that a cell is occupied given a ray ends in it; in (0.5, 1).
-    prob_miss : float, default=0.4
-        Probability that a cell is occupied given a ray crosses it; in (0, 0.5).
-    clamping_min : float, default=0.1192
-        Lower clamping bound (probability); in (0, 0.5).
-    clamping_max : float, default=0.971
-        Upper clamping bound (probability); in (0.5, 1).
-    occupancy_threshold : float, default=0.5
-        Cells at or above this probability count as occupied; in (0, 1).
+    {sensor_model}
 
     Attributes
     ----------
-    resolution : float
-        Edge length of the smallest cells.
-    num_leaves : int
-        Number of leaves (known cells after pruning).
-    num_nodes : int
-        Number of nodes, inner ones included.
-    bounds : tuple of ndarray of shape (3,)
-        Minimum and maximum corner of the known space (NaN when empty).
+    {octree_attributes}
     last_insert_ : dict
         Statistics of the last :meth:`insert_scan`: ``rays`` traversed (super
         rays count once), and, for the methods occgp implements itself,
@@ -120,10 +106,6 @@ class OccupancyOctree(OctreeFiles, OctreeQueries, _OcTree):
     """
 
     _kind = "octree"
-
-    def __repr__(self) -> str:
-        return (f"{type(self).__name__}(resolution={self.resolution!r}, "
-                f"num_leaves={self.num_leaves})")
 
     # ------------------------------------------------------------------ updates
     def insert_scan(
