@@ -13,20 +13,23 @@ from cython.operator cimport dereference as deref, preincrement as inc
 from libc.math cimport floor, isfinite
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 from libc.string cimport memcpy
+from libcpp cimport bool
 from libcpp.memory cimport unique_ptr
 from libcpp.string cimport string
 from libcpp.unordered_map cimport unordered_map
 from libcpp.vector cimport vector
-from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 from _keys cimport (
     KEY_DEPTH as _DEPTH, KEY_MAX_VAL as _MAX_VAL, KEYRAY_SAFE_CELLS, effective_end, ray_codes,
     in_range_mask, pack_key as _pack, set_sensor_model, unpack_key as _unpack,
 )
-from _scan cimport ScanCell, ScanStats, empty_stats, scan_result, scan_updates, scan_weights
+from _scan cimport ScanCell, ScanStats, empty_stats, scan_updates
+from _status cimport Status
 from liboctomap cimport (
     OcTree, OcTreeKey, OcTreeNode, Pointcloud, istringstream, key_type, ostringstream, point3d,
 )
+
+include "_scan_result.pxi"
 
 import threading
 
@@ -73,7 +76,7 @@ cdef class _OcTree:
     # a scan's dense ray counts over its key box, kept between scans (zero between
     # scans unless _counts_dirty) to spare allocating and clearing megabytes per scan
     cdef vector[uint32_t] _counts
-    cdef bint _counts_dirty
+    cdef bool _counts_dirty
     # change detection (liboctomap's rule): packed key -> the cell was new
     cdef bint _tracking
     cdef unordered_map[uint64_t, bint] _changes
@@ -200,17 +203,18 @@ cdef class _OcTree:
         cdef int hi[3]
         cdef int axis
         cdef size_t m = 0
+        cdef Status status = Status.ok
         if boxed:
             for axis in range(3):
                 lo[axis] = key_box[0, axis]
                 hi[axis] = key_box[1, axis]
         with self._lock:
             with nogil:
-                scan_updates(tree, points, o, max_range, ray_mode, culling, w,
-                             superray_threshold, _fully_free, tree, self._counts,
-                             &self._counts_dirty, found, &stats, diagnose, max_cells,
-                             n_threads)
-                if not stats.bad_ends and not stats.too_many:
+                status = scan_updates(tree[0], scan_points(points), points.shape[0], o,
+                                      max_range, ray_mode, culling, w, superray_threshold,
+                                      _fully_free, tree, self._counts, self._counts_dirty,
+                                      found, &stats, diagnose, max_cells, n_threads)
+                if status == Status.ok:
                     cells.resize(found.size())
                     for j in range(<Py_ssize_t>found.size()):
                         key = _unpack(found[j].key)
@@ -223,7 +227,7 @@ cdef class _OcTree:
                     cells.resize(m)
                     self._apply_tracked(tree, cells, scratch)
                 clock_gettime(CLOCK_MONOTONIC, &done)
-        return scan_result(stats, m, done)
+        return scan_result(status, stats, m, done)
 
     def _knn_cells(self, const float[:, ::1] points, const float[::1] origin,
                    double sensor_range, bint culling, int superray_threshold=0,
@@ -272,6 +276,7 @@ cdef class _OcTree:
         cdef unordered_map[uint64_t, Py_ssize_t].iterator it
         cdef Py_ssize_t m = 0, ia = 0, ib = 0
         cdef OcTreeKey key
+        cdef Status status = Status.ok
         with self._lock:
             with nogil:
                 for i in range(n):
@@ -288,21 +293,21 @@ cdef class _OcTree:
                 empty_stats(&sa)
                 empty_stats(&sb)
                 if n_near:
-                    scan_updates(tree, a_v, o, -1.0, False, culling, NULL,
-                                 superray_threshold, _fully_free, tree, self._counts,
-                                 &self._counts_dirty, found_a, &sa, False, max_cells,
-                                 n_threads)
-                if n_far and not sa.bad_ends and not sa.too_many:
-                    scan_updates(tree, b_v, o, sensor_range, False, culling, NULL,
-                                 superray_threshold, _fully_free, tree, self._counts,
-                                 &self._counts_dirty, found_b, &sb, False, max_cells,
-                                 n_threads)
+                    status = scan_updates(tree[0], scan_points(a_v), n_near, o, -1.0, False,
+                                          culling, NULL, superray_threshold, _fully_free,
+                                          tree, self._counts, self._counts_dirty, found_a,
+                                          &sa, False, max_cells, n_threads)
+                if n_far and status == Status.ok:
+                    status = scan_updates(tree[0], scan_points(b_v), n_far, o, sensor_range,
+                                          False, culling, NULL, superray_threshold,
+                                          _fully_free, tree, self._counts,
+                                          self._counts_dirty, found_b, &sb, False,
+                                          max_cells, n_threads)
                 clock_gettime(CLOCK_MONOTONIC, &done)
-        if sa.bad_ends or sb.bad_ends:
-            return None
-        if (sa.too_many or sb.too_many
-                or (max_cells and found_a.size() + found_b.size() > max_cells)):
-            return "too many cells"
+        if status == Status.ok and max_cells and found_a.size() + found_b.size() > max_cells:
+            status = Status.too_many_cells
+        if status != Status.ok:
+            return _Status(<int>status)
         keys = np.empty(found_a.size() + found_b.size(), dtype=np.uint64)
         kinds = np.empty(found_a.size() + found_b.size(), dtype=np.uint8)
         point_cell = np.empty(n_near, dtype=np.int64)
@@ -328,8 +333,8 @@ cdef class _OcTree:
                 tree.coordToKeyChecked(point3d(a_v[i, 0], a_v[i, 1], a_v[i, 2]), key)
                 it = row.find(_pack(key))
                 pc_v[i] = deref(it).second if it != row.end() else -1
-        stats = _sum_stats(scan_result(sa, found_a.size(), done),
-                           scan_result(sb, found_b.size(), done))
+        stats = _sum_stats(scan_result(Status.ok, sa, found_a.size(), done),
+                           scan_result(Status.ok, sb, found_b.size(), done))
         return near_pts, keys[:m], kinds[:m], point_cell, stats
 
     def _apply_cells(self, const uint64_t[::1] keys, const float[::1] updates):
@@ -791,7 +796,7 @@ def _welford(const double[::1] values, long count, double mean, double m2):
     return count, mean, m2
 
 
-cdef bint _fully_free(void* tree, const OcTreeKey& key) noexcept nogil:
+cdef bool _fully_free(void* tree, const OcTreeKey& key) noexcept nogil:
     """FreeTest of an OcTree: the cell is known and at the lower clamping bound."""
     cdef OcTree* t = <OcTree*>tree
     cdef OcTreeNode* node = t.search(key, 0)
