@@ -626,7 +626,8 @@ inline Status scan_updates(const octomap::OcTree& keys, const float* points, ptr
     n_trav = static_cast<ptrdiff_t>(ray_ids.size());
   }
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[2]);
-  if (culling) stats->region_cells = build_region(fully_free, map, ko, lo, hi, max_level, table, region);
+  if (culling)
+    stats->region_cells = build_region(fully_free, map, ko, lo, hi, max_level, table, region);
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[3]);
   for (int axis = 0; axis < 3; ++axis) {
     dims[axis] = static_cast<uint64_t>(hi[axis] - lo[axis] + 1);
@@ -667,10 +668,11 @@ inline Status scan_updates(const octomap::OcTree& keys, const float* points, ptr
     walk_rays(&rays, 0, n_trav, dense ? counts.data() : nullptr, &touched, &table, hits,
               diagnose ? &visits : nullptr, &stats->traversed_cells, &stop);
   } else {
-    std::vector<std::vector<uint64_t>> part_touched(n_threads);  // threads 1, 2, ...: new box cells
+    std::vector<std::vector<uint64_t>> part_touched(n_threads);  // threads 1, 2, ...: new cells
     std::vector<KeyTable> part_tables(n_threads - 1);             // and their other cells
     std::vector<long> part_visits(n_threads, 0);
-    const ptrdiff_t n_chunks = std::min<ptrdiff_t>(n_trav, static_cast<ptrdiff_t>(n_threads) * kChunksPerThread);
+    const ptrdiff_t n_chunks =
+        std::min<ptrdiff_t>(n_trav, static_cast<ptrdiff_t>(n_threads) * kChunksPerThread);
     std::exception_ptr error;
 #pragma omp parallel for num_threads(n_threads) schedule(dynamic)
     for (ptrdiff_t c = 0; c < n_chunks; ++c) {
@@ -765,7 +767,8 @@ inline Status scan_updates(const octomap::OcTree& keys, const float* points, ptr
     for (size_t slot = 0; slot < visits.capacity(); ++slot) {
       if (visits.slot(slot).key == KeyTable::kEmpty) continue;
       const KeyCounts* entry = table.find(visits.slot(slot).key);
-      if ((entry == nullptr || entry->n_hit == 0) && fully_free(map, unpack_key(visits.slot(slot).key)))
+      if ((entry == nullptr || entry->n_hit == 0) &&
+          fully_free(map, unpack_key(visits.slot(slot).key)))
         stats->unnecessary += visits.slot(slot).n_free;
     }
   }
