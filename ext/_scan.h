@@ -8,7 +8,8 @@
 // this are built with OpenMP (OPENMP_MODULES in setup.py). Keys, ray ends and the
 // sensor model come from a liboctomap OcTree of the map's resolution, so every map
 // finds the cells liboctomap finds. Build without floating-point contraction
-// (-ffp-contract=off), as the rest of the core.
+// (-ffp-contract=off), as the rest of the core. The functions are static: each module
+// gets its own copy, which the compiler specialises (its FreeTest, constant arguments).
 #ifndef OCCGP_SCAN_H
 #define OCCGP_SCAN_H
 
@@ -62,7 +63,7 @@ struct ScanStats {
 };
 
 // The statistics of a scan before (or without) its traversal, every clock now.
-inline void empty_stats(ScanStats* stats) {
+static inline void empty_stats(ScanStats* stats) {
   stats->region_cells = -1;
   stats->rays = 0;
   stats->traversed_cells = 0;
@@ -72,19 +73,19 @@ inline void empty_stats(ScanStats* stats) {
 
 namespace scan_detail {
 
-inline bool in_box(const octomap::OcTreeKey& key, const int* lo, const uint64_t* dims) {
+static inline bool in_box(const octomap::OcTreeKey& key, const int* lo, const uint64_t* dims) {
   return static_cast<uint64_t>(static_cast<int>(key[0]) - lo[0]) < dims[0] &&
          static_cast<uint64_t>(static_cast<int>(key[1]) - lo[1]) < dims[1] &&
          static_cast<uint64_t>(static_cast<int>(key[2]) - lo[2]) < dims[2];
 }
 
-inline uint64_t box_index(const octomap::OcTreeKey& key, const int* lo, const uint64_t* dims) {
+static inline uint64_t box_index(const octomap::OcTreeKey& key, const int* lo, const uint64_t* dims) {
   return (static_cast<uint64_t>(key[2] - lo[2]) * dims[1] +
           static_cast<uint64_t>(key[1] - lo[1])) * dims[0] +
          static_cast<uint64_t>(key[0] - lo[0]);
 }
 
-inline octomap::OcTreeKey box_key(uint64_t idx, const int* lo, const uint64_t* dims) {
+static inline octomap::OcTreeKey box_key(uint64_t idx, const int* lo, const uint64_t* dims) {
   octomap::OcTreeKey key;
   key[0] = static_cast<octomap::key_type>(lo[0] + idx % dims[0]);
   idx /= dims[0];
@@ -93,11 +94,22 @@ inline octomap::OcTreeKey box_key(uint64_t idx, const int* lo, const uint64_t* d
   return key;
 }
 
+// Count `w` rays through the cell (kx, ky, kz) in `table`: cells outside the scan's
+// dense box, off the hot path of count_free.
+__attribute__((noinline, cold)) static void count_free_table(int kx, int ky, int kz, uint32_t w,
+                                                             KeyTable* table) {
+  octomap::OcTreeKey key;
+  key[0] = static_cast<octomap::key_type>(kx);
+  key[1] = static_cast<octomap::key_type>(ky);
+  key[2] = static_cast<octomap::key_type>(kz);
+  table->get(pack_key(key))->n_free += w;
+}
+
 // Count `w` rays through the cell (kx, ky, kz): in the scan's dense box (`free_counts`,
 // new cells appended to `touched`), or the table.
-inline void count_free(int kx, int ky, int kz, uint32_t w, bool dense, const int* lo,
-                       const uint64_t* dims, uint32_t* free_counts,
-                       std::vector<uint64_t>* touched, KeyTable* table) {
+static inline void count_free(int kx, int ky, int kz, uint32_t w, bool dense, const int* lo,
+                              const uint64_t* dims, uint32_t* free_counts,
+                              std::vector<uint64_t>* touched, KeyTable* table) {
   const uint64_t x = static_cast<uint64_t>(kx - lo[0]);
   const uint64_t y = static_cast<uint64_t>(ky - lo[1]);
   const uint64_t z = static_cast<uint64_t>(kz - lo[2]);
@@ -108,16 +120,12 @@ inline void count_free(int kx, int ky, int kz, uint32_t w, bool dense, const int
     if (free_counts[idx] == 0) touched->push_back(idx);
     free_counts[idx] += w;
   } else {
-    octomap::OcTreeKey key;
-    key[0] = static_cast<octomap::key_type>(kx);
-    key[1] = static_cast<octomap::key_type>(ky);
-    key[2] = static_cast<octomap::key_type>(kz);
-    table->get(pack_key(key))->n_free += w;
+    count_free_table(kx, ky, kz, w, table);
   }
 }
 
 // One cell's update of a scan: liboctomap's insertPointCloud rule, or ray counting.
-inline float update_value(uint32_t n_free, uint32_t n_hit, bool ray_mode, float l_hit,
+static inline float update_value(uint32_t n_free, uint32_t n_hit, bool ray_mode, float l_hit,
                           float l_miss) {
   if (ray_mode) return static_cast<float>(n_free * static_cast<double>(l_miss) +
                                           n_hit * static_cast<double>(l_hit));
@@ -127,7 +135,7 @@ inline float update_value(uint32_t n_free, uint32_t n_hit, bool ray_mode, float 
 // liboctomap's coordToKeyChecked on one axis, with its arithmetic (floor of the double
 // product, plus 32768); the range is tested on the double first, where liboctomap
 // would cast a huge value to int unchecked.
-inline bool key_checked(double resolution_factor, float coordinate, octomap::key_type* key) {
+static inline bool key_checked(double resolution_factor, float coordinate, octomap::key_type* key) {
   const double scaled = std::floor(resolution_factor * static_cast<double>(coordinate));
   if (scaled < -kMaxVal || scaled >= kMaxVal) return false;
   key[0] = static_cast<octomap::key_type>(static_cast<int>(scaled) + kMaxVal);
@@ -135,15 +143,15 @@ inline bool key_checked(double resolution_factor, float coordinate, octomap::key
 }
 
 // The murmur3 finaliser: spreads the bits of a signature for hashing.
-inline uint64_t mix(uint64_t k) {
+static inline uint64_t mix(uint64_t k) {
   k ^= k >> 33;
   k *= 0xff51afd7ed558ccdULL;
   k ^= k >> 33;
   return k;
 }
 
-inline double dmin(double a, double b) { return a < b ? a : b; }
-inline double dmax(double a, double b) { return a > b ? a : b; }
+static inline double dmin(double a, double b) { return a < b ? a : b; }
+static inline double dmax(double a, double b) { return a > b ? a : b; }
 
 struct Crossing {
   int axis;       // the axis whose border the rays of a group cross
@@ -181,7 +189,7 @@ struct Crossing {
 // near that face are steep, and the half-cell offset moves their first crossing far
 // along them), and the key ranges are computed in doubles, cut to the keys the rays
 // can have.
-inline void super_rays(double res, const octomap::point3d& o, const octomap::OcTreeKey& ko,
+static inline void super_rays(double res, const octomap::point3d& o, const octomap::OcTreeKey& ko,
                        const std::vector<octomap::point3d>& ends,
                        const std::vector<octomap::OcTreeKey>& end_keys,
                        const std::vector<uint8_t>& truncated, KeyTable& table, int threshold,
@@ -376,7 +384,7 @@ inline void super_rays(double res, const octomap::point3d& o, const octomap::OcT
 // end point of the scan (occgp's exactness rule), and each of its test cells (one step
 // toward the origin on every axis where its key differs from the origin's) is already
 // in. Returns the number of cells, or -1 when the box is too large (no culling).
-inline long build_region(FreeTest fully_free, void* map, const octomap::OcTreeKey& ko,
+static inline long build_region(FreeTest fully_free, void* map, const octomap::OcTreeKey& ko,
                          const int* lo, const int* hi, int max_level, const KeyTable& ends,
                          CellBox& region) {
   using namespace scan_detail;
@@ -455,7 +463,7 @@ struct Rays {
 // With s.max_cells, stops (setting `stop`) once `touched` and the entries of `table`
 // past its first `table_base` ones -- distinct cells of the scan, as no two of them
 // are one -- outnumber it; stops when another thread set `stop`.
-inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t* counts,
+static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t* counts,
                       std::vector<uint64_t>* touched, KeyTable* table, size_t table_base,
                       KeyTable* visits, long* traversed, StopFlag* stop) {
   uint32_t w = 1;
@@ -553,7 +561,7 @@ inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t* count
 // exceeds the limit, a table of its own. The counts are merged (integer sums) before
 // the cells are collected, so the cells, their updates and the statistics are the same
 // for every `n_threads`; only the order of `cells` may differ.
-inline Status scan_updates(const octomap::OcTree& keys, const float* points, ptrdiff_t n,
+static inline Status scan_updates(const octomap::OcTree& keys, const float* points, ptrdiff_t n,
                            const octomap::point3d& o, double max_range, bool ray_mode,
                            bool culling, const uint32_t* weights, int superray_threshold,
                            FreeTest fully_free, void* map, std::vector<uint32_t>& counts,
