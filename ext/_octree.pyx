@@ -162,9 +162,10 @@ cdef class _OcTree(_TreeCore):
         (rows: lowest and highest key), cells outside it are left out. region_cells
         is -1 when culling was off or the scan's key box was too large to cull;
         unnecessary_traversals is -1 unless `diagnose` (slow) asks for it.
-        Returns None, changing nothing, when a ray's end (after truncation)
-        lies outside the key range or a ray cannot be walked, and "too many cells",
-        changing nothing, when the scan reaches more than `max_cells` cells (> 0).
+        Returns, changing nothing, ``Status.OUT_OF_RANGE`` when a ray's end (after
+        truncation) lies outside the key range, ``Status.RAY_TOO_SHORT`` when a ray
+        cannot be walked, and ``Status.TOO_MANY_CELLS`` when the scan reaches more
+        than `max_cells` cells (> 0) (:mod:`occgp._status`).
         The rays are walked on up to `n_threads` threads (one with `diagnose`), without
         the GIL; the tree and the statistics are the same for every `n_threads`.
         """
@@ -227,8 +228,8 @@ cdef class _OcTree(_TreeCore):
         (m,) uint64 packed keys (x in the low 16 bits); kinds (m,) uint8;
         point_cell (n_near,) int64, the row of `keys` holding each near point;
         stats as :meth:`_insert_batch` returns them (the two traversals added).
-        Returns None when a ray end lies outside the key range or a ray cannot
-        be walked, and "too many cells" past `max_cells` (> 0). The rays are walked
+        Returns the failure's Status as :meth:`_insert_batch` does (also
+        TOO_MANY_CELLS past `max_cells` (> 0) in all). The rays are walked
         on up to `n_threads` threads; the cells, their classes and the statistics are
         the same for every `n_threads` (the order of the cells may differ).
         """
