@@ -10,7 +10,7 @@ EXTRAS ?= test,dask,ros,iln
 # the CPU build of PyTorch, installed before the iln extra (an unpinned torch pulls the CUDA
 # build, several GB); the package itself asks for torch>=2.1
 TORCH  ?= torch==2.13.0
-BUILD_INPUTS := setup.py pyproject.toml $(wildcard ext/*.pyx ext/*.pxd ext/*.h)
+BUILD_INPUTS := setup.py pyproject.toml $(wildcard ext/*.pyx ext/*.pxd ext/*.pxi ext/*.h)
 
 .PHONY: all demo test bench docs asan soak fuzz system venv install clean distclean
 

@@ -65,7 +65,7 @@ def extensions():
                 f"occgp.{pyx.stem}",
                 [str(pyx.relative_to(HERE))],
                 depends=[str(f.relative_to(HERE)) for f in (HERE / "ext").glob("*.[hp]*")
-                         if f.suffix in (".h", ".pxd")],
+                         if f.suffix in (".h", ".pxd", ".pxi")],
                 language="c++",
                 include_dirs=[np.get_include(), "ext", *inc],
                 library_dirs=libdirs,

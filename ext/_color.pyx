@@ -14,98 +14,22 @@ gives the file liboctomap's own call sequence gives; leaves, and so every
 query, never depend on it.
 """
 
+cimport cython
 from cython.operator cimport dereference as deref, preincrement as inc
-from libc.math cimport isfinite
 from libc.stdint cimport uint8_t, uint64_t
 from libc.string cimport memcpy
 from libcpp cimport bool
 from libcpp.algorithm cimport sort
-from libcpp.memory cimport unique_ptr
 from libcpp.string cimport string
 from libcpp.unordered_map cimport unordered_map
 from libcpp.vector cimport vector
 
-from _keys cimport (
-    KEY_DEPTH as _DEPTH, effective_end, in_range_mask, pack_key as _pack, ray_codes,
-    unpack_key as _unpack,
-)
+from _keys cimport effective_end, pack_key as _pack, unpack_key as _unpack
 from liboctomap cimport (
-    OcTreeKey, Pointcloud, istream, istringstream, key_type, ostream, ostringstream, point3d,
+    Color, ColorOcTree, ColorOcTreeNode, OcTreeKey, Pointcloud, ostringstream, point3d,
 )
-
-import threading
 
 import numpy as np
-
-
-cdef extern from "octomap/ColorOcTree.h" namespace "octomap" nogil:
-    cdef cppclass Color "octomap::ColorOcTreeNode::Color":
-        uint8_t r
-        uint8_t g
-        uint8_t b
-
-    cdef cppclass ColorOcTreeNode:
-        double getOccupancy()
-        float getLogOdds()
-        Color getColor()
-        bool isColorSet()
-        void setColor(uint8_t r, uint8_t g, uint8_t b)
-
-    cdef cppclass ColorOcTree:
-        cppclass leaf_iterator:
-            leaf_iterator() except +
-            ColorOcTreeNode& operator*()
-            leaf_iterator& operator++()
-            bool operator==(const leaf_iterator&)
-            bool operator!=(const leaf_iterator&)
-            double getSize()
-            unsigned getDepth()
-            const OcTreeKey& getKey()
-
-        ColorOcTree(double resolution) except +
-
-        # sensor model
-        void setProbHit(double prob)
-        void setProbMiss(double prob)
-        void setClampingThresMin(double prob)
-        void setClampingThresMax(double prob)
-        void setOccupancyThres(double prob)
-        float getProbHitLog()
-        float getProbMissLog()
-        float getClampingThresMinLog()
-        float getClampingThresMaxLog()
-        float getOccupancyThresLog()
-
-        # updates
-        void insertPointCloud(const Pointcloud& scan, const point3d& sensor_origin,
-                              double maxrange, bool lazy_eval, bool discretize) except +
-        ColorOcTreeNode* averageNodeColor(const OcTreeKey& key, uint8_t r, uint8_t g,
-                                          uint8_t b)
-        ColorOcTreeNode* setNodeColor(const OcTreeKey& key, uint8_t r, uint8_t g, uint8_t b)
-        void updateInnerOccupancy()
-
-        # queries
-        ColorOcTreeNode* search(const OcTreeKey& key, unsigned int depth)
-        bool isNodeOccupied(const ColorOcTreeNode* node)
-        bool coordToKeyChecked(const point3d& coord, OcTreeKey& key)
-        OcTreeKey coordToKey(const point3d& coord)
-        double keyToCoord(key_type key, unsigned depth)
-        leaf_iterator begin_leafs(unsigned char maxDepth) except +
-        leaf_iterator end_leafs()
-
-        # structure
-        double getResolution()
-        void setResolution(double r)
-        size_t size()
-        size_t getNumLeafNodes()
-        size_t memoryUsage()
-        void getMetricMin(double& x, double& y, double& z)
-        void getMetricMax(double& x, double& y, double& z)
-        void clear()
-
-        # serialisation (.ot data block: per node float log-odds, r, g, b, child mask)
-        ostream& writeData(ostream& s) except +
-        istream& readData(istream& s) except +
 
 
 cdef enum:
@@ -121,61 +45,21 @@ cdef struct ColorSum:
     uint64_t r, g, b, n
 
 
-cdef class _ColorOcTree:
+ctypedef ColorOcTree Tree
+ctypedef ColorOcTreeNode Node
+cdef str _PUBLIC_CLASS = "ColorOctree"
+
+include "_tree_core.pxi"
+
+
+cdef class _ColorOcTree(_TreeCore):
     """A liboctomap ``ColorOcTree`` owned by Python. Use :class:`occgp.ColorOctree`."""
 
-    cdef unique_ptr[ColorOcTree] _tree
-    cdef object _lock
     # an update changed the tree since the inner nodes' colours were last computed
     cdef bint _inner_dirty
 
-    def __cinit__(self, *args, **kwargs):
-        self._lock = threading.Lock()
-
-    cdef ColorOcTree* _get(self) except NULL:
-        cdef ColorOcTree* tree = self._tree.get()
-        if tree == NULL:
-            raise ValueError(f"{type(self).__name__} was not initialised "
-                             "(create it with ColorOctree(resolution))")
-        return tree
-
-    def _setup(self, double resolution, double prob_hit, double prob_miss,
-               double clamping_min, double clamping_max, double occupancy_threshold):
-        """Create the C++ tree (parameters were validated by the caller)."""
-        cdef ColorOcTree* tree
-        with self._lock:
-            self._tree.reset(new ColorOcTree(resolution))
-            tree = self._tree.get()
-            tree.setProbHit(prob_hit)
-            tree.setProbMiss(prob_miss)
-            tree.setClampingThresMin(clamping_min)
-            tree.setClampingThresMax(clamping_max)
-            tree.setOccupancyThres(occupancy_threshold)
-            self._inner_dirty = False
-
-    def _set_sensor_model(self, double prob_hit, double prob_miss, double clamping_min,
-                          double clamping_max, double occupancy_threshold):
-        """liboctomap's setters of the sensor model (validated by the caller); the stored
-        values are left as they are."""
-        cdef ColorOcTree* tree
-        with self._lock:
-            tree = self._tree.get()
-            tree.setProbHit(prob_hit)
-            tree.setProbMiss(prob_miss)
-            tree.setClampingThresMin(clamping_min)
-            tree.setClampingThresMax(clamping_max)
-            tree.setOccupancyThres(occupancy_threshold)
-
-    # ------------------------------------------------------------------ key range
-    def _in_range(self, const float[:, ::1] points):
-        """Boolean mask: which rows of `points` have a valid key on every axis."""
-        return in_range_mask(1.0 / self._get().getResolution(), points)
-
-    def _check_rays(self, const float[:, ::1] points, const float[::1] origin,
-                    double max_range):
-        """(codes, cells) of the rays after truncation at `max_range` (< 0: none): see
-        ``mark_rays`` in ``ext/_keys.pxd``."""
-        return ray_codes(1.0 / self._get().getResolution(), points, origin, max_range)
+    cdef void _reset(self) noexcept:
+        self._inner_dirty = False
 
     # ------------------------------------------------------------------ updates
     def _insert_colored(self, const float[:, ::1] points, const float[::1] origin,
@@ -262,45 +146,6 @@ cdef class _ColorOcTree:
                     k[i] = node != NULL
         return known
 
-    def _log_odds_thresholds(self):
-        """(clamping min, clamping max, occupancy threshold, hit, miss) as the tree
-        holds them: float32 log-odds."""
-        cdef ColorOcTree* tree = self._get()
-        return (tree.getClampingThresMinLog(), tree.getClampingThresMaxLog(),
-                tree.getOccupancyThresLog(), tree.getProbHitLog(), tree.getProbMissLog())
-
-    # ------------------------------------------------------------------ queries
-    def _query(self, const float[:, ::1] points, int what):
-        """Per point: 0 → occupancy probability, 1 → log-odds (NaN where unknown),
-        2 → int8 state (-1 unknown, 0 free, 1 occupied)."""
-        cdef ColorOcTree* tree = self._get()
-        cdef Py_ssize_t i, n = points.shape[0]
-        cdef OcTreeKey key
-        cdef ColorOcTreeNode* node
-        out = np.full(n, np.nan) if what != 2 else np.full(n, -1, dtype=np.int8)
-        cdef double[::1] values
-        cdef signed char[::1] states
-        if what == 2:
-            states = out
-        else:
-            values = out
-        with self._lock:
-            with nogil:
-                for i in range(n):
-                    if not tree.coordToKeyChecked(
-                            point3d(points[i, 0], points[i, 1], points[i, 2]), key):
-                        continue
-                    node = tree.search(key, 0)
-                    if node == NULL:
-                        continue
-                    if what == 0:
-                        values[i] = node.getOccupancy()
-                    elif what == 1:
-                        values[i] = node.getLogOdds()
-                    else:
-                        states[i] = 1 if tree.isNodeOccupied(node) else 0
-        return out
-
     def _colors(self, const float[:, ::1] points):
         """(colours uint8 (n, 3), set bool (n,)) of the cells holding `points`: the
         cell's colour, or liboctomap's unset white (255, 255, 255) where the cell is
@@ -375,35 +220,6 @@ cdef class _ColorOcTree:
         return out_c, out_s, out_v, out_rgb
 
     # ------------------------------------------------------------------ structure
-    def _num_leaves(self):
-        cdef ColorOcTree* tree = self._get()
-        cdef size_t n = 0
-        with self._lock:
-            with nogil:
-                if tree.size() > 0:
-                    n = tree.getNumLeafNodes()
-        return n
-
-    def _num_nodes(self):
-        return self._get().size()
-
-    def _memory_usage(self):
-        return self._get().memoryUsage()
-
-    def _bounds(self):
-        cdef ColorOcTree* tree = self._get()
-        cdef double x0 = 0, y0 = 0, z0 = 0, x1 = 0, y1 = 0, z1 = 0
-        with self._lock:
-            tree.getMetricMin(x0, y0, z0)
-            tree.getMetricMax(x1, y1, z1)
-        return np.array([x0, y0, z0]), np.array([x1, y1, z1])
-
-    def _clear(self):
-        cdef ColorOcTree* tree = self._get()
-        with self._lock:
-            tree.clear()
-            self._inner_dirty = False
-
     # ------------------------------------------------------------------ serialisation
     def _write_data(self):
         """The tree's .ot data block (no header), after liboctomap's
@@ -423,18 +239,4 @@ cdef class _ColorOcTree:
 
     def _read_data(self, bytes payload, double resolution):
         """Replace the tree by the .ot data block `payload` (validated by the caller)."""
-        cdef ColorOcTree* tree = self._get()
-        cdef string data = payload
-        cdef unique_ptr[istringstream] stream
-        with self._lock:
-            with nogil:
-                tree.clear()
-                tree.setResolution(resolution)
-                stream.reset(new istringstream(data))
-                tree.readData(deref(stream))
-            failed = deref(stream).fail()
-            self._inner_dirty = False
-        if failed:
-            with self._lock:
-                tree.clear()
-            raise ValueError("liboctomap could not read the tree data")
+        self._read(payload, False, resolution)

@@ -26,13 +26,14 @@ from libcpp.unordered_map cimport unordered_map
 from libcpp.utility cimport pair
 from libcpp.vector cimport vector
 
-from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
-
 from liboctomap cimport OcTree, OcTreeKey, point3d
 from _keys cimport (
     KEY_DEPTH, ray_codes, in_range_mask, pack_key, set_sensor_model, unpack_key,
 )
-from _scan cimport ScanCell, ScanStats, scan_result, scan_updates, scan_weights
+from _scan cimport ScanCell, ScanStats, scan_updates
+from _status cimport Status
+
+include "_scan_result.pxi"
 
 import threading
 
@@ -47,7 +48,7 @@ cdef struct GridView:
     float floor      # lower clamping bound (log-odds)
 
 
-cdef bint _fully_free(void* view, const OcTreeKey& key) noexcept nogil:
+cdef bool _fully_free(void* view, const OcTreeKey& key) noexcept nogil:
     """FreeTest of a grid: the cell is known and at the lower clamping bound."""
     cdef GridView* v = <GridView*>view
     cdef CellMap.iterator found = v.cells.find(pack_key(key))
@@ -74,7 +75,7 @@ cdef class _Grid:
     cdef CellMap _cells
     cdef object _lock
     cdef vector[uint32_t] _counts       # scratch of scan_updates, zero between scans
-    cdef bint _counts_dirty
+    cdef bool _counts_dirty
 
     def __cinit__(self, *args, **kwargs):
         self._lock = threading.Lock()
@@ -146,21 +147,22 @@ cdef class _Grid:
         cdef pair[CellMap.iterator, bool] cell
         cdef float lo = tree.getClampingThresMinLog(), hi = tree.getClampingThresMaxLog()
         cdef timespec done
+        cdef Status status = Status.ok
         view.cells = &self._cells
         view.floor = lo
         with self._lock:
             with nogil:
-                scan_updates(tree, points, o, max_range, ray_mode, culling, w,
-                             superray_threshold, _fully_free, &view, self._counts,
-                             &self._counts_dirty, found, &stats, diagnose, max_cells,
-                             n_threads)
+                status = scan_updates(tree[0], scan_points(points), points.shape[0], o,
+                                      max_range, ray_mode, culling, w, superray_threshold,
+                                      _fully_free, &view, self._counts, self._counts_dirty,
+                                      found, &stats, diagnose, max_cells, n_threads)
                 if self._cells.empty():
                     self._cells.reserve(found.size())
                 for j in range(<Py_ssize_t>found.size()):
                     cell = self._cells.insert(Cell(found[j].key, 0.0))
                     _apply(&deref(cell.first).second, cell.second, found[j].update, lo, hi)
                 clock_gettime(CLOCK_MONOTONIC, &done)
-        return scan_result(stats, found.size(), done)
+        return scan_result(status, stats, found.size(), done)
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):

@@ -6,11 +6,11 @@ its own: ``from _keys cimport pack_key, KeyTable, ...``. The arithmetic is
 liboctomap's, so every map that uses it finds the same cells as its ``OcTree``.
 """
 
-from libc.float cimport FLT_MAX, FLT_MIN
 from libc.math cimport floor
 from libc.stdint cimport int64_t, uint8_t, uint32_t, uint64_t
 from libcpp.vector cimport vector
 
+from _status cimport Status
 from liboctomap cimport OcTree, OcTreeKey, key_type, point3d
 
 
@@ -49,39 +49,26 @@ cdef extern from "_raywalk.h" namespace "occgp" nogil:
         int key(int axis) const
         bint walk_back(const CellBox& region, vector[uint64_t]& cells) except + nogil
 
+cdef extern from "_keys.h" namespace "occgp" nogil:
+    # the three 16-bit keys in one integer (x in the low bits), for hash maps
+    uint64_t pack_key(const OcTreeKey& key)
+    OcTreeKey unpack_key(uint64_t packed)
+    # set `end` to the ray's end as liboctomap's computeUpdate does; True when truncated
+    # (`max_range` < 0: no limit)
+    bint effective_end(const point3d& origin, const point3d& point, double max_range,
+                       point3d* end)
+    # whether liboctomap's traversal of a ray between two different cells ends
+    bint walkable(const point3d& origin, const point3d& end)
+
 cdef enum:
     KEY_MAX_VAL = 32768     # half the number of keys per axis (liboctomap's tree_max_val)
     KEY_DEPTH = 16          # depth of the finest cells in a 16-bit key tree
-
-
-cdef inline uint64_t pack_key(const OcTreeKey& key) noexcept nogil:
-    """The three 16-bit keys in one integer (x in the low bits), for hash maps."""
-    return (<uint64_t>key[0]) | ((<uint64_t>key[1]) << 16) | ((<uint64_t>key[2]) << 32)
-
-
-cdef inline OcTreeKey unpack_key(uint64_t packed) noexcept nogil:
-    return OcTreeKey(<key_type>(packed & 0xFFFF), <key_type>((packed >> 16) & 0xFFFF),
-                     <key_type>((packed >> 32) & 0xFFFF))
 
 
 cdef inline bint in_key_range(double resolution_factor, float coordinate) noexcept nogil:
     """liboctomap's coordToKeyChecked: floor(coord / res) + 32768 must lie in [0, 65536)."""
     cdef double scaled = floor(resolution_factor * <double>coordinate)
     return scaled >= -KEY_MAX_VAL and scaled < KEY_MAX_VAL
-
-
-cdef inline bint effective_end(const point3d& origin, const point3d& point, double max_range,
-                               point3d* end) noexcept nogil:
-    """Set `end` to the ray's end as liboctomap's computeUpdate does; True when truncated.
-
-    `max_range` < 0 means no limit.
-    """
-    cdef point3d direction = point - origin
-    if max_range < 0 or direction.norm() <= max_range:
-        end[0] = point
-        return False
-    end[0] = origin + direction.normalized() * <float>max_range
-    return True
 
 
 cdef inline void mark_in_range(double resolution_factor, const float[:, ::1] points,
@@ -95,28 +82,16 @@ cdef inline void mark_in_range(double resolution_factor, const float[:, ::1] poi
 
 
 cdef enum:
-    RAY_OK = 0              # the ray's end is in range and the traversal can walk it
-    RAY_OUT_OF_RANGE = 1    # its end (after truncation) has no valid key
-    RAY_TOO_SHORT = 2       # it crosses a cell border but is too short to walk
     # liboctomap's KeyRay holds 100000 keys and computeRayKeys does not check it (an
     # assert, off in release builds): a ray may walk at most this many cells there
     KEYRAY_SAFE_CELLS = 99990
 
 
-cdef inline bint walkable(const point3d& origin, const point3d& end) noexcept nogil:
-    """Whether liboctomap's traversal (computeRayKeys, RayWalker) of a ray between two
-    different cells ends: it divides the direction by the length computed from float
-    squares, which must be a normal, finite float (an infinite length leaves a zero
-    direction, a zero one an infinite direction, and the walk then never stops)."""
-    cdef point3d d = end - origin
-    cdef float nsq = d.x() * d.x() + d.y() * d.y() + d.z() * d.z()
-    return nsq >= FLT_MIN and nsq <= FLT_MAX
-
-
 cdef inline void mark_rays(double resolution_factor, const float[:, ::1] points,
                            point3d origin, double max_range, uint8_t[::1] code,
                            int64_t[::1] cells) noexcept nogil:
-    """Per ray (after truncation at `max_range`; < 0: none): its RAY_* code and the
+    """Per ray (after truncation at `max_range`; < 0: none): its status (ok, out_of_range
+    or ray_too_short, ``ext/_status.h``) and the
     Manhattan distance between the keys of its ends (an upper bound, up to 3, of the
     cells its traversal visits); -1 when its end is out of range."""
     cdef Py_ssize_t i
@@ -135,7 +110,7 @@ cdef inline void mark_rays(double resolution_factor, const float[:, ::1] points,
         if not (in_key_range(resolution_factor, end.x())
                 and in_key_range(resolution_factor, end.y())
                 and in_key_range(resolution_factor, end.z())):
-            code[i] = RAY_OUT_OF_RANGE
+            code[i] = <uint8_t>Status.out_of_range
             continue
         key_e[0] = <int64_t>floor(resolution_factor * <double>end.x())
         key_e[1] = <int64_t>floor(resolution_factor * <double>end.y())
@@ -144,7 +119,7 @@ cdef inline void mark_rays(double resolution_factor, const float[:, ::1] points,
         for axis in range(3):
             n += key_e[axis] - key_o[axis] if key_e[axis] >= key_o[axis] else key_o[axis] - key_e[axis]
         cells[i] = n
-        code[i] = RAY_OK if n == 0 or walkable(origin, end) else RAY_TOO_SHORT
+        code[i] = <uint8_t>(Status.ok if n == 0 or walkable(origin, end) else Status.ray_too_short)
 
 
 cdef inline void set_sensor_model(OcTree* tree, double prob_hit, double prob_miss,

@@ -1,4 +1,4 @@
-// Small containers for occgp's compiled maps (used from ext/_scan.pxd, ext/_kernel.pyx).
+// Small containers for occgp's compiled maps (used from ext/_scan.h, ext/_kernel.pyx).
 //
 // KeyMap<Slot>: open-addressing hash table from a packed key (3 x 16 bits) to the
 //   rest of a Slot (a struct whose first member is `uint64_t key`), 16-24 bytes a

@@ -13,24 +13,25 @@ from cython.operator cimport dereference as deref, preincrement as inc
 from libc.math cimport floor, isfinite
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 from libc.string cimport memcpy
+from libcpp cimport bool
 from libcpp.memory cimport unique_ptr
 from libcpp.string cimport string
 from libcpp.unordered_map cimport unordered_map
 from libcpp.vector cimport vector
-from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 from _keys cimport (
-    KEY_DEPTH as _DEPTH, KEY_MAX_VAL as _MAX_VAL, KEYRAY_SAFE_CELLS, effective_end, ray_codes,
-    in_range_mask, pack_key as _pack, set_sensor_model, unpack_key as _unpack,
+    KEY_DEPTH as _DEPTH, KEY_MAX_VAL as _MAX_VAL, KEYRAY_SAFE_CELLS, effective_end,
+    pack_key as _pack, unpack_key as _unpack,
 )
-from _scan cimport ScanCell, ScanStats, empty_stats, scan_result, scan_updates, scan_weights
+from _scan cimport ScanCell, ScanStats, empty_stats, scan_updates
+from _status cimport Status
 from liboctomap cimport (
-    OcTree, OcTreeKey, OcTreeNode, Pointcloud, istringstream, key_type, ostringstream, point3d,
+    OcTree, OcTreeKey, OcTreeNode, Pointcloud, key_type, ostringstream, point3d,
 )
-
-import threading
 
 import numpy as np
+
+include "_scan_result.pxi"
 
 #: Half the number of keys per axis (liboctomap's ``tree_max_val``, 16-level tree).
 TREE_MAX_VAL = _MAX_VAL
@@ -51,6 +52,13 @@ cdef extern from "_octree_batch.h" namespace "occgp" nogil:
                          vector[CellUpdate]& scratch) except +
 
 
+cdef extern from "_octree_io.h" namespace "occgp" nogil:
+    Status check_binary_data(const uint8_t* data, Py_ssize_t n, Py_ssize_t offset,
+                             Py_ssize_t* nodes, Py_ssize_t* end) except +
+    Status check_full_data(const uint8_t* data, Py_ssize_t n, Py_ssize_t offset,
+                           int node_bytes, Py_ssize_t* nodes, Py_ssize_t* end) except +
+
+
 cdef extern from "_octree_edit.h" namespace "occgp" nogil:
     cdef cppclass NodeList:
         vector[double] centers
@@ -64,50 +72,24 @@ cdef extern from "_octree_edit.h" namespace "occgp" nogil:
                        NodeList& out) except +
 
 
+ctypedef OcTree Tree
+ctypedef OcTreeNode Node
+cdef str _PUBLIC_CLASS = "OccupancyOctree"
+
+include "_tree_core.pxi"
+
+
 @cython.auto_pickle(False)
-cdef class _OcTree:
+cdef class _OcTree(_TreeCore):
     """A liboctomap ``OcTree`` owned by Python. Use :class:`occgp.OccupancyOctree`."""
 
-    cdef unique_ptr[OcTree] _tree
-    cdef object _lock
     # a scan's dense ray counts over its key box, kept between scans (zero between
     # scans unless _counts_dirty) to spare allocating and clearing megabytes per scan
     cdef vector[uint32_t] _counts
-    cdef bint _counts_dirty
+    cdef bool _counts_dirty
     # change detection (liboctomap's rule): packed key -> the cell was new
     cdef bint _tracking
     cdef unordered_map[uint64_t, bint] _changes
-
-    def __cinit__(self, *args, **kwargs):
-        self._lock = threading.Lock()
-
-    cdef OcTree* _get(self) except NULL:
-        cdef OcTree* tree = self._tree.get()
-        if tree == NULL:
-            raise ValueError(f"{type(self).__name__} was not initialised "
-                             "(create it with OccupancyOctree(resolution))")
-        return tree
-
-    def _setup(self, double resolution, double prob_hit, double prob_miss,
-               double clamping_min, double clamping_max, double occupancy_threshold):
-        """Create the C++ tree (parameters were validated by the caller)."""
-        cdef OcTree* tree
-        with self._lock:
-            self._tree.reset(new OcTree(resolution))
-            tree = self._tree.get()
-            set_sensor_model(tree, prob_hit, prob_miss, clamping_min, clamping_max,
-                             occupancy_threshold)
-
-    # ------------------------------------------------------------------ key range
-    def _in_range(self, const float[:, ::1] points):
-        """Boolean mask: which rows of `points` have a valid key on every axis."""
-        return in_range_mask(1.0 / self._get().getResolution(), points)
-
-    def _check_rays(self, const float[:, ::1] points, const float[::1] origin,
-                    double max_range):
-        """(codes, cells) of the rays after truncation at `max_range` (< 0: none): see
-        ``mark_rays`` in ``ext/_keys.pxd``."""
-        return ray_codes(1.0 / self._get().getResolution(), points, origin, max_range)
 
     # ------------------------------------------------------------------ updates
     def _insert_point_cloud(self, const float[:, ::1] points, const float[::1] origin,
@@ -180,9 +162,10 @@ cdef class _OcTree:
         (rows: lowest and highest key), cells outside it are left out. region_cells
         is -1 when culling was off or the scan's key box was too large to cull;
         unnecessary_traversals is -1 unless `diagnose` (slow) asks for it.
-        Returns None, changing nothing, when a ray's end (after truncation)
-        lies outside the key range or a ray cannot be walked, and "too many cells",
-        changing nothing, when the scan reaches more than `max_cells` cells (> 0).
+        Returns, changing nothing, ``Status.OUT_OF_RANGE`` when a ray's end (after
+        truncation) lies outside the key range, ``Status.RAY_TOO_SHORT`` when a ray
+        cannot be walked, and ``Status.TOO_MANY_CELLS`` when the scan reaches more
+        than `max_cells` cells (> 0) (:mod:`occgp._status`).
         The rays are walked on up to `n_threads` threads (one with `diagnose`), without
         the GIL; the tree and the statistics are the same for every `n_threads`.
         """
@@ -200,17 +183,18 @@ cdef class _OcTree:
         cdef int hi[3]
         cdef int axis
         cdef size_t m = 0
+        cdef Status status = Status.ok
         if boxed:
             for axis in range(3):
                 lo[axis] = key_box[0, axis]
                 hi[axis] = key_box[1, axis]
         with self._lock:
             with nogil:
-                scan_updates(tree, points, o, max_range, ray_mode, culling, w,
-                             superray_threshold, _fully_free, tree, self._counts,
-                             &self._counts_dirty, found, &stats, diagnose, max_cells,
-                             n_threads)
-                if not stats.bad_ends and not stats.too_many:
+                status = scan_updates(tree[0], scan_points(points), points.shape[0], o,
+                                      max_range, ray_mode, culling, w, superray_threshold,
+                                      _fully_free, tree, self._counts, self._counts_dirty,
+                                      found, &stats, diagnose, max_cells, n_threads)
+                if status == Status.ok:
                     cells.resize(found.size())
                     for j in range(<Py_ssize_t>found.size()):
                         key = _unpack(found[j].key)
@@ -223,7 +207,7 @@ cdef class _OcTree:
                     cells.resize(m)
                     self._apply_tracked(tree, cells, scratch)
                 clock_gettime(CLOCK_MONOTONIC, &done)
-        return scan_result(stats, m, done)
+        return scan_result(status, stats, m, done)
 
     def _knn_cells(self, const float[:, ::1] points, const float[::1] origin,
                    double sensor_range, bint culling, int superray_threshold=0,
@@ -244,8 +228,8 @@ cdef class _OcTree:
         (m,) uint64 packed keys (x in the low 16 bits); kinds (m,) uint8;
         point_cell (n_near,) int64, the row of `keys` holding each near point;
         stats as :meth:`_insert_batch` returns them (the two traversals added).
-        Returns None when a ray end lies outside the key range or a ray cannot
-        be walked, and "too many cells" past `max_cells` (> 0). The rays are walked
+        Returns the failure's Status as :meth:`_insert_batch` does (also
+        TOO_MANY_CELLS past `max_cells` (> 0) in all). The rays are walked
         on up to `n_threads` threads; the cells, their classes and the statistics are
         the same for every `n_threads` (the order of the cells may differ).
         """
@@ -272,6 +256,7 @@ cdef class _OcTree:
         cdef unordered_map[uint64_t, Py_ssize_t].iterator it
         cdef Py_ssize_t m = 0, ia = 0, ib = 0
         cdef OcTreeKey key
+        cdef Status status = Status.ok
         with self._lock:
             with nogil:
                 for i in range(n):
@@ -288,21 +273,21 @@ cdef class _OcTree:
                 empty_stats(&sa)
                 empty_stats(&sb)
                 if n_near:
-                    scan_updates(tree, a_v, o, -1.0, False, culling, NULL,
-                                 superray_threshold, _fully_free, tree, self._counts,
-                                 &self._counts_dirty, found_a, &sa, False, max_cells,
-                                 n_threads)
-                if n_far and not sa.bad_ends and not sa.too_many:
-                    scan_updates(tree, b_v, o, sensor_range, False, culling, NULL,
-                                 superray_threshold, _fully_free, tree, self._counts,
-                                 &self._counts_dirty, found_b, &sb, False, max_cells,
-                                 n_threads)
+                    status = scan_updates(tree[0], scan_points(a_v), n_near, o, -1.0, False,
+                                          culling, NULL, superray_threshold, _fully_free,
+                                          tree, self._counts, self._counts_dirty, found_a,
+                                          &sa, False, max_cells, n_threads)
+                if n_far and status == Status.ok:
+                    status = scan_updates(tree[0], scan_points(b_v), n_far, o, sensor_range,
+                                          False, culling, NULL, superray_threshold,
+                                          _fully_free, tree, self._counts,
+                                          self._counts_dirty, found_b, &sb, False,
+                                          max_cells, n_threads)
                 clock_gettime(CLOCK_MONOTONIC, &done)
-        if sa.bad_ends or sb.bad_ends:
-            return None
-        if (sa.too_many or sb.too_many
-                or (max_cells and found_a.size() + found_b.size() > max_cells)):
-            return "too many cells"
+        if status == Status.ok and max_cells and found_a.size() + found_b.size() > max_cells:
+            status = Status.too_many_cells
+        if status != Status.ok:
+            return _Status(<int>status)
         keys = np.empty(found_a.size() + found_b.size(), dtype=np.uint64)
         kinds = np.empty(found_a.size() + found_b.size(), dtype=np.uint8)
         point_cell = np.empty(n_near, dtype=np.int64)
@@ -328,8 +313,8 @@ cdef class _OcTree:
                 tree.coordToKeyChecked(point3d(a_v[i, 0], a_v[i, 1], a_v[i, 2]), key)
                 it = row.find(_pack(key))
                 pc_v[i] = deref(it).second if it != row.end() else -1
-        stats = _sum_stats(scan_result(sa, found_a.size(), done),
-                           scan_result(sb, found_b.size(), done))
+        stats = _sum_stats(scan_result(Status.ok, sa, found_a.size(), done),
+                           scan_result(Status.ok, sb, found_b.size(), done))
         return near_pts, keys[:m], kinds[:m], point_cell, stats
 
     def _apply_cells(self, const uint64_t[::1] keys, const float[::1] updates):
@@ -430,13 +415,6 @@ cdef class _OcTree:
         with self._lock:
             self._changes.clear()
 
-    def _log_odds_thresholds(self):
-        """(clamping min, clamping max, occupancy threshold, hit, miss) as the tree
-        holds them: float32 log-odds."""
-        cdef OcTree* tree = self._get()
-        return (tree.getClampingThresMinLog(), tree.getClampingThresMaxLog(),
-                tree.getOccupancyThresLog(), tree.getProbHitLog(), tree.getProbMissLog())
-
     def _set_values(self, const uint16_t[:, ::1] keys, const float[::1] log_odds):
         """Set each finest cell's log-odds (liboctomap's setNodeValue, which clamps to the
         tree's bounds), then re-evaluate the inner nodes and prune."""
@@ -460,37 +438,6 @@ cdef class _OcTree:
                 tree.prune()
 
     # ------------------------------------------------------------------ queries
-    def _query(self, const float[:, ::1] points, int what):
-        """Per point: 0 → occupancy probability, 1 → log-odds (NaN where unknown),
-        2 → int8 state (-1 unknown, 0 free, 1 occupied)."""
-        cdef OcTree* tree = self._get()
-        cdef Py_ssize_t i, n = points.shape[0]
-        cdef OcTreeKey key
-        cdef OcTreeNode* node
-        out = np.full(n, np.nan) if what != 2 else np.full(n, -1, dtype=np.int8)
-        cdef double[::1] values
-        cdef signed char[::1] states
-        if what == 2:
-            states = out
-        else:
-            values = out
-        with self._lock:
-            with nogil:
-                for i in range(n):
-                    if not tree.coordToKeyChecked(
-                            point3d(points[i, 0], points[i, 1], points[i, 2]), key):
-                        continue
-                    node = tree.search(key, 0)
-                    if node == NULL:
-                        continue
-                    if what == 0:
-                        values[i] = node.getOccupancy()
-                    elif what == 1:
-                        values[i] = node.getLogOdds()
-                    else:
-                        states[i] = 1 if tree.isNodeOccupied(node) else 0
-        return out
-
     def _query_depth(self, const float[:, ::1] points, int what, unsigned depth):
         """Per point, of the node liboctomap's ``search(key, depth)`` returns (the node at
         `depth` holding the point, or the coarser leaf holding it): 0 → occupancy,
@@ -602,15 +549,6 @@ cdef class _OcTree:
                         pv[i, 2] = hit.z()
         return points, found
 
-    def _set_sensor_model(self, double prob_hit, double prob_miss, double clamping_min,
-                          double clamping_max, double occupancy_threshold):
-        """liboctomap's setters of the sensor model (validated by the caller); the stored
-        values are left as they are."""
-        cdef OcTree* tree = self._get()
-        with self._lock:
-            set_sensor_model(tree, prob_hit, prob_miss, clamping_min, clamping_max,
-                             occupancy_threshold)
-
     def _cast_rays(self, const float[:, ::1] origins, const float[:, ::1] directions,
                    bint ignore_unknown, const double[::1] max_range):
         """liboctomap's ``castRay`` for each (origin, direction) row."""
@@ -686,27 +624,6 @@ cdef class _OcTree:
         return out_c, out_s, out_v
 
     # ------------------------------------------------------------------ structure
-    def _num_leaves(self):
-        cdef OcTree* tree = self._get()
-        with self._lock:
-            with nogil:
-                n = tree.getNumLeafNodes()
-        return n
-
-    def _num_nodes(self):
-        return self._get().size()
-
-    def _memory_usage(self):
-        return self._get().memoryUsage()
-
-    def _bounds(self):
-        cdef OcTree* tree = self._get()
-        cdef double x0 = 0, y0 = 0, z0 = 0, x1 = 0, y1 = 0, z1 = 0
-        with self._lock:
-            tree.getMetricMin(x0, y0, z0)
-            tree.getMetricMax(x1, y1, z1)
-        return np.array([x0, y0, z0]), np.array([x1, y1, z1])
-
     def _prune(self):
         cdef OcTree* tree = self._get()
         with self._lock:
@@ -718,11 +635,6 @@ cdef class _OcTree:
         with self._lock:
             with nogil:
                 tree.expand()
-
-    def _clear(self):
-        cdef OcTree* tree = self._get()
-        with self._lock:
-            tree.clear()
 
     def _to_max_likelihood(self):
         cdef OcTree* tree = self._get()
@@ -748,24 +660,7 @@ cdef class _OcTree:
 
     def _read_data(self, bytes payload, bint binary, double resolution):
         """Replace the tree by the data block `payload` (validated by the caller)."""
-        cdef OcTree* tree = self._get()
-        cdef string data = payload
-        cdef unique_ptr[istringstream] stream
-        with self._lock:
-            with nogil:
-                tree.clear()
-                tree.setResolution(resolution)
-                stream.reset(new istringstream(data))
-                if binary:
-                    tree.readBinaryData(deref(stream))
-                else:
-                    tree.readData(deref(stream))
-            failed = deref(stream).fail()
-        if failed:
-            with self._lock:
-                tree.clear()
-            raise ValueError("liboctomap could not read the tree data")
-
+        self._read(payload, binary, resolution)
 
 def _sum_stats(a, b):
     """Two traversals' statistics (see :func:`scan_result`) as one scan's."""
@@ -791,7 +686,7 @@ def _welford(const double[::1] values, long count, double mean, double m2):
     return count, mean, m2
 
 
-cdef bint _fully_free(void* tree, const OcTreeKey& key) noexcept nogil:
+cdef bool _fully_free(void* tree, const OcTreeKey& key) noexcept nogil:
     """FreeTest of an OcTree: the cell is known and at the lower clamping bound."""
     cdef OcTree* t = <OcTree*>tree
     cdef OcTreeNode* node = t.search(key, 0)
@@ -821,82 +716,29 @@ cdef inline void _push_leaf(OcTree* tree, const OcTreeKey& key, unsigned depth, 
 
 # ---------------------------------------------------------------------- file validation
 def _check_binary_data(const uint8_t[::1] data, Py_ssize_t offset):
-    """Walk a .bt data block without building anything.
+    """Walk a .bt data block without building anything (``ext/_octree_io.h``).
 
     Returns (number of nodes, end offset), or raises ValueError when the block is
     truncated or describes a node deeper than the 16 levels of an OcTree.
     liboctomap trusts its input; this walk makes sure it gets only valid input.
     """
-    cdef Py_ssize_t pos = offset, n = data.shape[0], nodes = 1
-    cdef vector[uint8_t] stack            # depth of each inner node still to read
-    cdef uint8_t depth
-    cdef unsigned code, bits, i
-    cdef int err = 0
-    stack.push_back(0)
+    cdef Py_ssize_t n = data.shape[0], nodes = 0, end = 0
+    cdef Status status
     with nogil:
-        while not stack.empty():
-            depth = stack.back()
-            stack.pop_back()
-            if pos + 2 > n:
-                err = 1
-                break
-            bits = data[pos] | (<unsigned>data[pos + 1] << 8)
-            pos += 2
-            # children with children are read depth-first in child order: push in reverse
-            for i in range(7, -1, -1):
-                code = (bits >> (2 * i)) & 3
-                if code != 0:
-                    nodes += 1
-                if code == 3:
-                    if depth + 1 >= _DEPTH:
-                        err = 2
-                        break
-                    stack.push_back(depth + 1)
-            if err:
-                break
-    if err == 1:
-        raise ValueError(f"truncated data: the tree needs more than the {n - offset} bytes given")
-    if err == 2:
-        raise ValueError("corrupt data: a node lies deeper than the 16 levels of an OcTree")
-    return nodes, pos
+        status = check_binary_data(&data[0] if n else NULL, n, offset, &nodes, &end)
+    _check_status(<int>status, n_bytes=n - offset)
+    return nodes, end
 
 
 def _check_full_data(const uint8_t[::1] data, Py_ssize_t offset, int node_bytes=5):
     """Like :func:`_check_binary_data` for a .ot data block: per node a float log-odds,
     then ``node_bytes - 5`` bytes of payload (3 for a ColorOcTree's r, g, b), then the
     child mask."""
-    cdef Py_ssize_t pos = offset, n = data.shape[0], nodes = 0
+    cdef Py_ssize_t n = data.shape[0], nodes = 0, end = 0
+    cdef Status status
     if node_bytes < 5:
         raise ValueError(f"node_bytes must be at least 5, got {node_bytes}")
-    cdef vector[uint8_t] stack
-    cdef uint8_t depth, mask
-    cdef float value
-    cdef int i, err = 0
-    stack.push_back(0)
     with nogil:
-        while not stack.empty():
-            depth = stack.back()
-            stack.pop_back()
-            if pos + node_bytes > n:
-                err = 1
-                break
-            memcpy(&value, &data[pos], sizeof(float))
-            mask = data[pos + node_bytes - 1]
-            pos += node_bytes
-            nodes += 1
-            if not isfinite(value):
-                err = 3
-                break
-            if mask != 0 and depth + 1 > _DEPTH:
-                err = 2
-                break
-            for i in range(7, -1, -1):
-                if (mask >> i) & 1:
-                    stack.push_back(depth + 1)
-    if err == 1:
-        raise ValueError(f"truncated data: the tree needs more than the {n - offset} bytes given")
-    if err == 2:
-        raise ValueError("corrupt data: a node lies deeper than the 16 levels of an OcTree")
-    if err == 3:
-        raise ValueError("corrupt data: a node holds a non-finite log-odds value")
-    return nodes, pos
+        status = check_full_data(&data[0] if n else NULL, n, offset, node_bytes, &nodes, &end)
+    _check_status(<int>status, n_bytes=n - offset)
+    return nodes, end

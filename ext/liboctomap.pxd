@@ -4,7 +4,7 @@
 C++ names appear here only; everything above this file is snake_case.
 """
 
-from libc.stdint cimport uint16_t
+from libc.stdint cimport uint8_t, uint16_t
 from libcpp cimport bool
 from libcpp.string cimport string
 
@@ -153,3 +153,74 @@ cdef extern from "octomap/octomap.h" namespace "octomap" nogil:
         ostream& writeData(ostream& s) except +
         istream& readBinaryData(istream& s) except +
         istream& readData(istream& s) except +
+
+
+cdef extern from "octomap/ColorOcTree.h" namespace "octomap" nogil:
+    cdef cppclass Color "octomap::ColorOcTreeNode::Color":
+        uint8_t r
+        uint8_t g
+        uint8_t b
+
+    cdef cppclass ColorOcTreeNode:
+        double getOccupancy()
+        float getLogOdds()
+        Color getColor()
+        bool isColorSet()
+        void setColor(uint8_t r, uint8_t g, uint8_t b)
+
+    cdef cppclass ColorOcTree:
+        cppclass leaf_iterator:
+            leaf_iterator() except +
+            ColorOcTreeNode& operator*()
+            leaf_iterator& operator++()
+            bool operator==(const leaf_iterator&)
+            bool operator!=(const leaf_iterator&)
+            double getSize()
+            unsigned getDepth()
+            const OcTreeKey& getKey()
+
+        ColorOcTree(double resolution) except +
+
+        # sensor model
+        void setProbHit(double prob)
+        void setProbMiss(double prob)
+        void setClampingThresMin(double prob)
+        void setClampingThresMax(double prob)
+        void setOccupancyThres(double prob)
+        float getProbHitLog()
+        float getProbMissLog()
+        float getClampingThresMinLog()
+        float getClampingThresMaxLog()
+        float getOccupancyThresLog()
+
+        # updates
+        void insertPointCloud(const Pointcloud& scan, const point3d& sensor_origin,
+                              double maxrange, bool lazy_eval, bool discretize) except +
+        ColorOcTreeNode* averageNodeColor(const OcTreeKey& key, uint8_t r, uint8_t g,
+                                          uint8_t b)
+        ColorOcTreeNode* setNodeColor(const OcTreeKey& key, uint8_t r, uint8_t g, uint8_t b)
+        void updateInnerOccupancy()
+
+        # queries
+        ColorOcTreeNode* search(const OcTreeKey& key, unsigned int depth)
+        bool isNodeOccupied(const ColorOcTreeNode* node)
+        bool coordToKeyChecked(const point3d& coord, OcTreeKey& key)
+        OcTreeKey coordToKey(const point3d& coord)
+        double keyToCoord(key_type key, unsigned depth)
+        leaf_iterator begin_leafs(unsigned char maxDepth) except +
+        leaf_iterator end_leafs()
+
+        # structure
+        double getResolution()
+        void setResolution(double r)
+        size_t size()
+        size_t getNumLeafNodes()
+        size_t memoryUsage()
+        void getMetricMin(double& x, double& y, double& z)
+        void getMetricMax(double& x, double& y, double& z)
+        void clear()
+
+        # serialisation (.ot data block: per node float log-odds, r, g, b, child mask)
+        ostream& writeData(ostream& s) except +
+        istream& readData(istream& s) except +
+        istream& readBinaryData(istream& s) except +

@@ -3,6 +3,8 @@ import numpy as np
 from numpy.typing import NDArray
 from typing_extensions import disjoint_base
 
+from ._status import Status
+
 @disjoint_base
 class _Grid:
     def _set_sensor_model(self, prob_hit: float, prob_miss: float, clamping_min: float,
@@ -17,7 +19,7 @@ class _Grid:
                 max_range: float, ray_mode: bool, culling: bool = False,
                 weights: NDArray[np.uint32] | None = None, superray_threshold: int = 0,
                 diagnose: bool = False, max_cells: int = 0, n_threads: int = 1,
-                ) -> tuple[int, int, int, int, tuple[float, float, float, float], int] | str | None: ...
+                ) -> tuple[int, int, int, int, tuple[float, float, float, float, float], int] | Status: ...
     def _query(self, points: NDArray[np.float32], what: int) -> NDArray[np.float64]: ...
     def _cells_sorted(self, occupied_only: bool,
                       ) -> tuple[NDArray[np.uint16], NDArray[np.float64], NDArray[np.float32]]: ...

@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._octree import TREE_MAX_VAL
+from ._status import Status, check_status
 from ._validation import (
     as_point, as_points, check_bool, check_choice, check_int, check_probability, check_real,
     check_resolution,
@@ -21,8 +22,6 @@ from ._validation import (
 __all__ = ["LogOddsMap", "OctreeFace", "Leaves", "MODES", "METHODS"]
 
 MODES = ("scan", "ray")
-# codes of the compiled cores' _check_rays (ext/_keys.pxd)
-_RAY_OUT_OF_RANGE, _RAY_TOO_SHORT = 1, 2
 #: Rays between two cells whose float squared length is below FLT_MIN cannot be walked.
 _SHORTEST_RAY = float(np.sqrt(np.finfo(np.float32).tiny))
 #: Longest ray whose float squared length is finite.
@@ -621,31 +620,24 @@ class LogOddsMap:
         or a ray is too short for the single-precision traversal to walk it; otherwise
         return each ray's key distance (a bound on the cells it crosses)."""
         codes, cells = self._check_rays(pts, org, rng)
-        if (codes == _RAY_OUT_OF_RANGE).any():
-            self._raise_out_of_range("points", codes != _RAY_OUT_OF_RANGE,
+        if (codes == Status.OUT_OF_RANGE).any():
+            self._raise_out_of_range("points", codes != Status.OUT_OF_RANGE,
                                      " (after truncation at max_range)" if rng >= 0 else "")
-        if (codes == _RAY_TOO_SHORT).any():
-            bad = np.flatnonzero(codes == _RAY_TOO_SHORT)
-            raise ValueError(
-                f"{len(bad)} of {len(codes)} rays from origin to points are shorter than "
-                f"{_SHORTEST_RAY:.2g} m yet cross a cell border (first: row {int(bad[0])}): "
-                "liboctomap's single-precision traversal cannot walk them; the map is "
-                "unchanged")
+        if (codes == Status.RAY_TOO_SHORT).any():
+            bad = np.flatnonzero(codes == Status.RAY_TOO_SHORT)
+            check_status(Status.RAY_TOO_SHORT, n_bad=len(bad), n_total=len(codes),
+                         shortest=_SHORTEST_RAY, first=int(bad[0]))
         return cells
 
     def _record_insert(self, stats, pts: np.ndarray, org: np.ndarray, rng: float,
                        method: str, threshold: int) -> None:
-        """Set ``last_insert_`` from a core's scan insertion, or raise for bad ray ends
-        (None: the core changed nothing)."""
-        if stats is None:
-            self._raise_bad_ends(pts, org, rng)
-            raise AssertionError("the core reported a ray end out of range")  # unreachable
-        if isinstance(stats, str):
-            raise ValueError(
-                f"the scan's {len(pts)} rays reach more than MAX_SCAN_CELLS="
-                f"{self.MAX_SCAN_CELLS} cells at resolution {self.resolution:g} m; use a "
-                "coarser resolution, max_range or fewer points, or raise MAX_SCAN_CELLS; "
-                "the map is unchanged")
+        """Set ``last_insert_`` from a core's scan insertion, or raise for its Status
+        (the core changed nothing)."""
+        if isinstance(stats, Status):
+            if stats != Status.TOO_MANY_CELLS:
+                self._raise_bad_ends(pts, org, rng)     # the rays at fault, by row
+            check_status(stats, n_rays=len(pts), max_scan_cells=self.MAX_SCAN_CELLS,
+                         resolution=self.resolution)
         self.last_insert_ = self._insert_statistics(stats)
         self.last_insert_["superrays"] = threshold > 0
         self._learn_superrays(method, len(pts))
@@ -666,12 +658,9 @@ class LogOddsMap:
 
     def _raise_out_of_range(self, name: str, ok: np.ndarray, what: str) -> None:
         lo, hi = self.key_range
-        bad = int(np.count_nonzero(~ok))
-        raise ValueError(
-            f"{bad} of {len(ok)} {name}{what} lie outside the {self._kind}'s key range "
-            f"[{lo:g}, {hi:g}) m on some axis at resolution {self.resolution:g} "
-            f"(first: row {int(np.flatnonzero(~ok)[0])}); the map is unchanged"
-        )
+        check_status(Status.OUT_OF_RANGE, n_bad=int(np.count_nonzero(~ok)), n_total=len(ok),
+                     name=name, what=what, kind=self._kind, lo=lo, hi=hi,
+                     resolution=self.resolution, first=int(np.flatnonzero(~ok)[0]))
 
 
 class OctreeFace(LogOddsMap):

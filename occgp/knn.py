@@ -27,6 +27,7 @@ from scipy.spatial import cKDTree  # type: ignore[import-untyped]
 from scipy.special import ndtr  # type: ignore[import-untyped]
 
 from ._octree import _welford
+from ._status import Status
 from ._validation import (
     check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
 )
@@ -440,7 +441,7 @@ default="auto"
         threshold = self._adaptive_threshold(method, threshold)
         out = self._knn_cells(pts, org, rng, method.endswith("culling"), threshold,
                               self._max_scan_cells(), n_threads(self._params["n_jobs"]))
-        if out is None or isinstance(out, str):
+        if isinstance(out, Status):
             self._record_insert(out, pts, org, rng, method, threshold)   # raises
             raise AssertionError("unreachable")
         near, keys, kinds, point_cell, stats = out
@@ -553,7 +554,7 @@ class ScanReplay:
             pts, org, rng, _ = got
             out = probe._knn_cells(pts, org, rng, False, 20, probe._max_scan_cells(),
                                    workers)
-            if out is None or isinstance(out, str):
+            if isinstance(out, Status):
                 try:
                     probe._record_insert(out, pts, org, rng, "superray", 20)
                 except ValueError as exc:

@@ -5,6 +5,7 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from occgp import GridMap, KNNMap, OccupancyOctree
+from occgp._status import Status
 from occgp.cli import main
 from occgp.datasets import structured_room, write_pcd
 from occgp.knn import ScanReplay
@@ -198,7 +199,7 @@ def test_max_scan_cells_gives_the_same_outcome_for_every_n_jobs(cls):
             kw = dict(ray_mode=True, culling=method == "culling",
                       threshold=3 if method == "superray" else 0)
             assert _core_insert(m, points, origin, n_threads, max_cells=distinct - 1,
-                                **kw) == "too many cells"
+                                **kw) == Status.TOO_MANY_CELLS
             assert (m.num_cells if cls is GridMap else m.num_nodes) == 0
             assert _core_insert(m, points, origin, n_threads, max_cells=distinct,
                                 **kw)[1] == distinct

@@ -1,0 +1,344 @@
+# AKIMap's adaptive bandwidths (Kwon et al.; dissertation 3.3.3): included by
+# ext/_kernel.pyx, whose tabulated sparse kernel (_kernel_r2) and cimports it uses.
+#
+# Per sample: the covariance of its same-label neighbours within a search radius that
+# grows with the distance from the sensor, then the length-scale factor of Eq. 3.7
+# (occgp's grid and golden-section minimiser, or the published code's gradient
+# descent); the samples are computed on OpenMP threads, each by one thread.
+
+cdef enum:
+    _SCALE_GRID = 16        # occgp's minimiser: coarse grid of log-scales, then golden section
+    _GOLDEN_ITERS = 24
+    _GD_EPOCHS = 100        # the reference code's gradient descent
+cdef double _GD_TOLERANCE = 0.001
+cdef double _GD_RATE = 0.01
+cdef double _COV_NOISE = 0.001
+
+
+cdef inline double _largest_eigenvalue(const double* s) noexcept nogil:
+    """Largest eigenvalue of the symmetric 3x3 matrix s (row-major), in closed form
+    (the trigonometric solution of the characteristic cubic)."""
+    cdef double p1 = s[1] * s[1] + s[2] * s[2] + s[5] * s[5]
+    cdef double q = (s[0] + s[4] + s[8]) / 3.0
+    cdef double a = s[0] - q, b = s[4] - q, c = s[8] - q
+    cdef double p2 = a * a + b * b + c * c + 2.0 * p1
+    cdef double p, det, r
+    if p2 <= 0.0:
+        return q
+    p = sqrt(p2 / 6.0)
+    det = (a * (b * c - s[5] * s[5]) - s[1] * (s[1] * c - s[5] * s[2])
+           + s[2] * (s[1] * s[5] - b * s[2])) / (p * p * p)
+    r = 0.5 * det
+    if r <= -1.0:
+        return q + p            # phi = pi / 3: 2 p cos(pi / 3)
+    if r >= 1.0:
+        return q + 2.0 * p
+    return q + 2.0 * p * cos(acos(r) / 3.0)
+
+
+cdef inline double _scale_loss(const double* r2, const double* target, int m,
+                               double c) noexcept nogil:
+    """Eq. 3.7 over the neighbours inside the initial support, up to the factor
+    |Sigma|^-1/2 / 2: c^-3 sum_j (t_j - k(r_j / c))^2, with H = c^2 Sigma."""
+    cdef double e, total = 0.0, inv = 1.0 / (c * c)
+    cdef int j
+    for j in range(m):
+        e = target[j] - (_kernel_r2(r2[j] * inv) if r2[j] * inv < 1.0 else 0.0)
+        total += e * e
+    return total / (c * c * c)
+
+
+cdef double _scale_minimise(const double* r2, const double* target, int m,
+                            double lo) noexcept nogil:
+    """The length-scale factor c in [lo, 1] minimising Eq. 3.7: the best of a grid of
+    _SCALE_GRID log-spaced values (1 included), refined by golden-section search
+    between its grid neighbours (the loss need not be unimodal on [lo, 1])."""
+    cdef double best_c = 1.0, best = _scale_loss(r2, target, m, 1.0), c, f
+    cdef double step, a, b, x1, x2, f1, f2
+    cdef double g = 0.6180339887498949
+    cdef int j, best_j = _SCALE_GRID - 1
+    step = log(lo) / (_SCALE_GRID - 1)
+    for j in range(_SCALE_GRID - 1):
+        c = exp(log(lo) - j * step) if j else lo
+        f = _scale_loss(r2, target, m, c)
+        if f < best:
+            best, best_c, best_j = f, c, j
+    # bracket [c_{j-1}, c_{j+1}] in log space
+    a = log(lo) - (best_j - 1) * step if best_j > 0 else log(lo)
+    b = log(lo) - (best_j + 1) * step if best_j < _SCALE_GRID - 1 else 0.0
+    if b > 0.0:
+        b = 0.0
+    x1 = b - g * (b - a)
+    x2 = a + g * (b - a)
+    f1 = _scale_loss(r2, target, m, exp(x1))
+    f2 = _scale_loss(r2, target, m, exp(x2))
+    for j in range(_GOLDEN_ITERS):
+        if f1 < f2:
+            b, x2, f2 = x2, x1, f1
+            x1 = b - g * (b - a)
+            f1 = _scale_loss(r2, target, m, exp(x1))
+        else:
+            a, x1, f1 = x1, x2, f2
+            x2 = a + g * (b - a)
+            f2 = _scale_loss(r2, target, m, exp(x2))
+    if f1 < best:
+        best, best_c = f1, exp(x1)
+    if f2 < best:
+        best, best_c = f2, exp(x2)
+    return best_c
+
+
+cdef double _scale_descent(const double* r2, const double* target, int m, double lo,
+                           double w0) noexcept nogil:
+    """The published reference code's scale: gradient descent from c = 1 with step
+    0.01 / epoch, at most 100 epochs, clamped to [lo, 1], stopping when the
+    gradient, the loss or the step falls below 0.001. Its gradient is kept as
+    published (the weight's derivative taken as -1.5 w / c)."""
+    cdef double c = 1.0, r, rot, sn, cs, k, kg, err, w, wg, ksum, esum, grad, loss, new_c
+    cdef int epoch, j
+    for epoch in range(1, _GD_EPOCHS + 1):
+        ksum = 0.0
+        esum = 0.0
+        for j in range(m):
+            r = sqrt(r2[j]) / c
+            rot = 2.0 * M_PI * r
+            sn = sin(rot)
+            cs = cos(rot)
+            k = (2.0 + cs) * (1.0 - r) / 3.0 + sn / (2.0 * M_PI)
+            if k < 0.0:
+                k = 0.0
+            kg = ((1.0 - r) * rot * sn / (3.0 * c) + (cs + 2.0) * r / (3.0 * c)
+                  - r * cs / c)
+            err = target[j] - k
+            ksum += err * kg
+            esum += err * err
+        w = w0 / (c * c * c)
+        wg = -1.5 * w / c
+        grad = wg * esum - w * ksum
+        loss = 0.5 * w * esum
+        new_c = min(1.0, max(c - _GD_RATE * grad / epoch, lo))
+        if fabs(grad) < _GD_TOLERANCE or fabs(loss) < _GD_TOLERANCE or \
+                fabs(c - new_c) < _GD_TOLERANCE:
+            break
+        c = new_c
+    return c
+
+
+cdef inline void _set_bandwidth(const double* h, Py_ssize_t i, double* precision,
+                                double* extent, double* weight) noexcept nogil:
+    """Sample i's kernel from its bandwidth matrix h (symmetric positive definite, row
+    major): precision h^-1, support half-extents sqrt(h_aa), weight |h|^-1/2."""
+    cdef double inv[9]
+    cdef double det
+    cdef int a
+    inv[0] = h[4] * h[8] - h[5] * h[7]
+    inv[1] = h[2] * h[7] - h[1] * h[8]
+    inv[2] = h[1] * h[5] - h[2] * h[4]
+    inv[4] = h[0] * h[8] - h[2] * h[6]
+    inv[5] = h[2] * h[3] - h[0] * h[5]
+    inv[8] = h[0] * h[4] - h[1] * h[3]
+    inv[3] = inv[1]
+    inv[6] = inv[2]
+    inv[7] = inv[5]
+    det = h[0] * inv[0] + h[1] * inv[3] + h[2] * inv[6]
+    for a in range(9):
+        precision[9 * i + a] = inv[a] / det
+    for a in range(3):
+        extent[3 * i + a] = sqrt(h[4 * a])
+    weight[i] = 1.0 / sqrt(det)
+
+
+cdef inline long _cell_find(const int64_t* keys, long n, int64_t key) noexcept nogil:
+    """Index of `key` in the sorted array `keys`, or -1."""
+    cdef long lo = 0, hi = n, mid
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if keys[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo if lo < n and keys[lo] == key else -1
+
+
+cdef void _bandwidth_one(
+        Py_ssize_t i, const double* x, const uint8_t* labels, const double* origin,
+        double res, double radius_max, double max_range, bint published, double floor2,
+        double cell, const int64_t* grid_lo, const int64_t* grid_dims,
+        const int64_t* cell_keys, long n_cells, const int64_t* cell_start,
+        const int64_t* order, double* buf, double* precision, double* extent,
+        double* weight, double* scale, int64_t* n_same) noexcept nogil:
+    """Sample i's bandwidth: covariance of its same-label neighbours within the
+    search radius, then the scale of Eq. 3.7 (see AKIMap._bandwidths)."""
+    cdef double xi[3]
+    cdef double d[3]
+    cdef double sig[9]
+    cdef double inv[9]
+    cdef double dist, radius, r2max, det, lo_scale, c, w0, q
+    cdef long cmin[3]
+    cdef long cmax[3]
+    cdef long cx, cy, cz, slot
+    cdef int64_t t, j
+    cdef int a, b, m = 0, same = 0, other = 0, k
+    cdef uint8_t y = labels[i]
+    cdef double* r2buf = buf
+    for a in range(3):
+        xi[a] = x[3 * i + a]
+    dist = sqrt((xi[0] - origin[0]) ** 2 + (xi[1] - origin[1]) ** 2
+                + (xi[2] - origin[2]) ** 2)
+    # r(d) = min((R - res) / sensor_range * d + res, R), R from sensor_range on (so a
+    # tiny sensor_range gives no 0 * inf); R where R < res (the formula dips below R)
+    if dist >= max_range:
+        radius = radius_max
+    else:
+        radius = min((radius_max - res) / max_range * dist + res, radius_max)
+    if not radius >= min(radius_max, res):
+        radius = min(radius_max, res)
+    r2max = radius * radius
+    for a in range(9):
+        sig[a] = 0.0
+    for a in range(3):
+        cmin[a] = max(<long>floor((xi[a] - radius) / cell) - <long>grid_lo[a], 0)
+        cmax[a] = min(<long>floor((xi[a] + radius) / cell) - <long>grid_lo[a],
+                      <long>grid_dims[a] - 1)
+    # pass 1: the neighbours (offsets and labels into buf, 4 doubles each) and the
+    # scatter of the same-label ones about x_i
+    for cz in range(cmin[2], cmax[2] + 1):
+        for cy in range(cmin[1], cmax[1] + 1):
+            for cx in range(cmin[0], cmax[0] + 1):
+                slot = _cell_find(cell_keys, n_cells,
+                                  (cz * grid_dims[1] + cy) * grid_dims[0] + cx)
+                if slot < 0:
+                    continue
+                for t in range(cell_start[slot], cell_start[slot + 1]):
+                    j = order[t]
+                    for a in range(3):
+                        d[a] = x[3 * j + a] - xi[a]
+                    if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > r2max:
+                        continue
+                    buf[4 * m] = d[0]
+                    buf[4 * m + 1] = d[1]
+                    buf[4 * m + 2] = d[2]
+                    buf[4 * m + 3] = 1.0 if labels[j] == y else 0.0
+                    m += 1
+                    if labels[j] == y:
+                        same += 1
+                        for a in range(3):
+                            for b in range(3):
+                                sig[3 * a + b] += d[a] * d[b]
+    n_same[i] = same
+    if same <= 2:               # isotropic fallback: H = res^2 I (+ floor^2 I)
+        for a in range(9):
+            sig[a] = 0.0
+        for a in range(3):
+            sig[4 * a] = res * res + floor2
+        _set_bandwidth(sig, i, precision, extent, weight)
+        scale[i] = 1.0
+        return
+    for a in range(9):
+        sig[a] /= (same - 2)
+    for a in range(3):
+        sig[4 * a] += _COV_NOISE
+    inv[0] = sig[4] * sig[8] - sig[5] * sig[7]
+    inv[1] = sig[2] * sig[7] - sig[1] * sig[8]
+    inv[2] = sig[1] * sig[5] - sig[2] * sig[4]
+    inv[4] = sig[0] * sig[8] - sig[2] * sig[6]
+    inv[5] = sig[2] * sig[3] - sig[0] * sig[5]
+    inv[8] = sig[0] * sig[4] - sig[1] * sig[3]
+    det = sig[0] * inv[0] + sig[1] * (sig[5] * sig[6] - sig[3] * sig[8]) \
+        + sig[2] * (sig[3] * sig[7] - sig[4] * sig[6])
+    inv[3] = inv[1]
+    inv[6] = inv[2]
+    inv[7] = inv[5]
+    for a in range(9):
+        inv[a] /= det
+    w0 = 1.0 / sqrt(det)
+    lo_scale = res / sqrt(_largest_eigenvalue(sig))
+    # pass 2: squared normalised distances under Sigma of the neighbours inside the
+    # initial support, and their targets (Eq. 3.6): k(r_j) if same label, else 0
+    k = 0
+    for t in range(m):
+        d[0] = buf[4 * t]
+        d[1] = buf[4 * t + 1]
+        d[2] = buf[4 * t + 2]
+        q = (inv[0] * d[0] * d[0] + inv[4] * d[1] * d[1] + inv[8] * d[2] * d[2]
+             + 2.0 * (inv[1] * d[0] * d[1] + inv[2] * d[0] * d[2] + inv[5] * d[1] * d[2]))
+        if q < 1.0:
+            if buf[4 * t + 3] == 0.0:
+                other += 1
+            # compact in place: entry k <- (q, target); k <= t so no overwrite ahead
+            r2buf[2 * k] = q
+            r2buf[2 * k + 1] = _kernel_r2(q) if buf[4 * t + 3] != 0.0 else 0.0
+            k += 1
+    c = 1.0
+    if other > 0 and lo_scale < 1.0:
+        # de-interleave (r2, target) pairs into two arrays after the k pairs
+        for t in range(k):
+            buf[2 * k + t] = r2buf[2 * t]
+            buf[3 * k + t] = r2buf[2 * t + 1]
+        if published:
+            c = _scale_descent(buf + 2 * k, buf + 3 * k, k, lo_scale, w0)
+        else:
+            c = _scale_minimise(buf + 2 * k, buf + 3 * k, k, lo_scale)
+    if floor2 > 0.0:            # H = c^2 Sigma + floor^2 I
+        for a in range(9):
+            sig[a] *= c * c
+        for a in range(3):
+            sig[4 * a] += floor2
+        _set_bandwidth(sig, i, precision, extent, weight)
+    else:
+        for a in range(9):
+            precision[9 * i + a] = inv[a] / (c * c)
+        for a in range(3):
+            extent[3 * i + a] = c * sqrt(sig[4 * a])
+        weight[i] = w0 / (c * c * c)
+    scale[i] = c
+
+
+def _akimap_bandwidths(const double[:, ::1] samples, const uint8_t[::1] labels,
+                       const double[::1] origin, double res, double radius_max,
+                       double max_range, bint published, double floor, int n_threads,
+                       double cell):
+    """Per sample: precision (inverse bandwidth, (n, 3, 3)), support half-extents (n, 3),
+    weight |H|^-1/2, the length-scale factor c (H = c^2 Sigma + floor^2 I) and the
+    number of same-label samples in its search ball (itself included). The samples
+    are bucketed in cubes of edge `cell` (at least `radius_max`; wider where they
+    would span more than 2^20 cubes)."""
+    cdef Py_ssize_t n = samples.shape[0], i
+    precision = np.empty((n, 3, 3))
+    extent = np.empty((n, 3))
+    weight = np.empty(n)
+    scale = np.empty(n)
+    n_same = np.empty(n, dtype=np.int64)
+    if n == 0:
+        return precision, extent, weight, scale, n_same
+    # samples bucketed in cubes of edge cell, the cubes sorted by key
+    cell = max(cell, radius_max)
+    ck = np.floor(np.asarray(samples) / cell).astype(np.int64)
+    lo = ck.min(axis=0)
+    dims = ck.max(axis=0) - lo + 1
+    ck -= lo
+    flat = (ck[:, 2] * dims[1] + ck[:, 1]) * dims[0] + ck[:, 0]
+    order = np.argsort(flat, kind="stable").astype(np.int64)
+    keys, start = np.unique(flat[order], return_index=True)
+    start = np.append(start, n).astype(np.int64)
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    lo = np.ascontiguousarray(lo, dtype=np.int64)
+    dims = np.ascontiguousarray(dims, dtype=np.int64)
+    cdef const int64_t[::1] lo_v = lo, dims_v = dims, keys_v = keys, start_v = start
+    cdef const int64_t[::1] order_v = order
+    cdef double[:, :, ::1] p_v = precision
+    cdef double[:, ::1] e_v = extent
+    cdef double[::1] w_v = weight, s_v = scale
+    cdef int64_t[::1] n_v = n_same
+    cdef long n_cells = keys.shape[0]
+    n_threads = max(n_threads, 1)
+    scratch = np.empty((n_threads, 4 * n))   # per thread: a sample's neighbours
+    cdef double[:, ::1] buf = scratch
+    with nogil:
+        for i in prange(n, schedule="dynamic", chunksize=64, num_threads=n_threads):
+            _bandwidth_one(i, &samples[0, 0], &labels[0], &origin[0], res, radius_max,
+                           max_range, published, floor * floor, cell, &lo_v[0], &dims_v[0],
+                           &keys_v[0], n_cells, &start_v[0], &order_v[0],
+                           &buf[threadid(), 0],
+                           &p_v[0, 0, 0], &e_v[0, 0], &w_v[0], &s_v[0], &n_v[0])
+    return precision, extent, weight, scale, n_same
