@@ -15,14 +15,16 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docfill import fill_doc
 from .._validation import as_points, check_int, check_real
-from ._scenes import as_rays, check_max_range
+from ._scenes import SEED_SECTIONS, check_max_range, first_hits, scene_doc_sections
 
 __all__ = ["LaserScan2D", "Scene2D", "room_2d"]
 
 _INF = np.inf
 MAX_BEAMS = 2**26  # most beams (n_poses * n_beams) one Scene2D.scan casts
 MAX_POSES = 10**7  # most poses Scene2D.poses makes
+_SECTIONS = scene_doc_sections(2)
 
 
 class LaserScan2D(NamedTuple):
@@ -201,13 +203,11 @@ class Scene2D:
         """``(min (2,), max (2,))`` inside the outer walls."""
         return self._interior[0].copy(), self._interior[1].copy()
 
+    @fill_doc(**_SECTIONS)
     def occupancy(self, points: ArrayLike) -> NDArray[np.bool_]:
         """Exact membership of 2D `points` in the union of the solids.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 2)
-            Query points in the world frame, in metres.
+        {points_param}
 
         Returns
         -------
@@ -216,10 +216,7 @@ class Scene2D:
 
         Raises
         ------
-        TypeError
-            If `points` does not hold real numbers.
-        ValueError
-            If `points` is not of shape (n_points, 2) or holds NaN or inf.
+        {points_raises}
 
         Examples
         --------
@@ -246,26 +243,21 @@ class Scene2D:
                 out[idx] |= solid.contains(points[idx])
         return out
 
+    @fill_doc(**_SECTIONS)
     def signed_distance(self, points: ArrayLike) -> NDArray[np.float64]:
         """Signed Euclidean distance to the solids (negative inside).
 
         Exact outside the solids; inside overlapping solids, the magnitude is
         the depth inside the deepest single solid (a lower bound).
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 2)
-            Query points in the world frame, in metres.
+        {points_param}
 
         Returns
         -------
         distance : ndarray of shape (n_points,)
             In metres; inf everywhere for a scene without solids.
 
-        Raises
-        ------
-        TypeError, ValueError
-            As :meth:`occupancy`.
+        {as_occupancy}
 
         Examples
         --------
@@ -278,34 +270,11 @@ class Scene2D:
             np.minimum(out, solid.signed_distance(points), out=out)
         return out
 
+    @fill_doc(**_SECTIONS)
     def ray_cast(self, origins: ArrayLike, directions: ArrayLike, max_range: float = np.inf):
         """Exact first intersection of 2D rays with the solids.
 
-        Parameters
-        ----------
-        origins : array-like of shape (2,) or (n_rays, 2)
-            Ray origins; one origin is shared by all rays.
-        directions : array-like of shape (n_rays, 2)
-            Normalised internally; must be non-zero.
-        max_range : float, default=inf
-            Positive; rays that hit nothing closer are misses.
-
-        Returns
-        -------
-        distances : ndarray of shape (n_rays,)
-            Distance to the first hit, `max_range` for misses. A ray starting
-            inside a solid hits at 0.
-        hit : ndarray of shape (n_rays,), dtype bool
-
-        Raises
-        ------
-        TypeError
-            If `origins` or `directions` does not hold real numbers, or
-            `max_range` is not a real number.
-        ValueError
-            If `directions` is not of shape (n_rays, 2), `origins` neither of
-            shape (2,) nor that of `directions`, either holds NaN or inf, a
-            direction is zero, or `max_range` is not positive.
+        {ray_cast_sections}
 
         Examples
         --------
@@ -313,13 +282,7 @@ class Scene2D:
         >>> float(d[0]), bool(hit[0])
         (9.0, True)
         """
-        origins, directions = as_rays(origins, directions, dim=2)
-        max_range = check_max_range(max_range)
-        t = np.full(len(directions), np.inf)
-        for solid in self.solids:
-            np.minimum(t, solid.intersect(origins, directions), out=t)
-        hit = (t <= max_range) & np.isfinite(t)
-        return np.where(hit, t, max_range), hit
+        return first_hits(self.solids, origins, directions, max_range, dim=2)
 
     def poses(self, n_poses: int = 26):
         """Poses equally spaced (by arc length) along :attr:`path`.
@@ -440,6 +403,7 @@ class Scene2D:
         ]
 
 
+@fill_doc(seed_sections=SEED_SECTIONS.format(scene="Scene2D"))
 def room_2d(seed: int = 0) -> Scene2D:
     """The 22 x 18 m 2D room of the GP occupancy-map experiments.
 
@@ -454,16 +418,7 @@ def room_2d(seed: int = 0) -> Scene2D:
         0 gives the fixed default room; another seed moves each box and disc
         by up to 0.3 m (deterministically), keeping them 0.5 m from the path.
 
-    Returns
-    -------
-    scene : Scene2D
-
-    Raises
-    ------
-    TypeError
-        If `seed` is not an int.
-    ValueError
-        If `seed` is negative.
+    {seed_sections}
 
     Examples
     --------
