@@ -15,6 +15,8 @@ of Miao et al. is computed here with the same conventions.
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sklearn import metrics as _skm
@@ -44,6 +46,13 @@ y_prob : array-like of shape (n_points,)
     "type_error": """TypeError
     If an array is not numeric or boolean.""",
 }
+
+
+def _invalid_input(more):
+    """The Raises section of a score that checks its input as :func:`mse` does, and `more`."""
+    text = textwrap.fill(f"If the input is invalid (see :func:`mse`){more}.", 76)
+    return "\n".join(["Raises", "------", "ValueError", textwrap.indent(text, "    "),
+                      _SECTIONS["type_error"]])
 
 
 def _check_labels_probs(y_true, y_prob):
@@ -153,7 +162,7 @@ def roc_curve(
     return fpr, tpr, thresholds
 
 
-@fill_doc(**_SECTIONS)
+@fill_doc(**_SECTIONS, raises=_invalid_input(" or `y_true` holds only one class"))
 def roc_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     """Area under the ROC curve of occupancy predictions.
 
@@ -168,12 +177,7 @@ def roc_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     auc : float
         1 for a perfect ranking, 0.5 for a random one, 0 for an inverted one.
 
-    Raises
-    ------
-    ValueError
-        If the input is invalid (see :func:`roc_curve`) or `y_true` holds only
-        one class.
-    {type_error}
+    {raises}
 
     See Also
     --------
@@ -220,7 +224,7 @@ def mse(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     return float(np.mean((probs - labels) ** 2))
 
 
-@fill_doc(**_SECTIONS)
+@fill_doc(**_SECTIONS, raises=_invalid_input(" or `threshold` is not in [0, 1]"))
 def accuracy(
     y_true: ArrayLike, y_prob: ArrayLike, threshold: float = 0.5
 ) -> tuple[float, float]:
@@ -245,12 +249,7 @@ def accuracy(
         Fraction of free points with ``p < threshold``; NaN if there are no
         free points.
 
-    Raises
-    ------
-    ValueError
-        If the input is invalid (see :func:`mse`) or `threshold` is not in
-        [0, 1].
-    {type_error}
+    {raises}
 
     Examples
     --------
@@ -277,7 +276,8 @@ def _accuracy(labels, probs, threshold):
     return acc_occ, acc_free
 
 
-@fill_doc(**_SECTIONS)
+@fill_doc(**_SECTIONS,
+          raises=_invalid_input(" or `y_true` holds no occupied point (TPR undefined)"))
 def tpr_fdr_curve(
     y_true: ArrayLike, y_prob: ArrayLike
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -300,12 +300,7 @@ def tpr_fdr_curve(
     thresholds : ndarray of shape (n_thresholds + 1,)
         Decreasing thresholds, the first ``inf``.
 
-    Raises
-    ------
-    ValueError
-        If the input is invalid (see :func:`mse`) or `y_true` holds no
-        occupied point (TPR undefined).
-    {type_error}
+    {raises}
 
     See Also
     --------
@@ -346,7 +341,7 @@ def _require_positive(labels):
         )
 
 
-@fill_doc(**_SECTIONS)
+@fill_doc(**_SECTIONS, raises=_invalid_input(" or `y_true` holds no occupied point"))
 def tpr_fdr_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     """Area under the TPR–FDR curve (higher is better).
 
@@ -365,12 +360,7 @@ def tpr_fdr_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
         1 for a perfect ranking; about the fraction of occupied points for a
         random one.
 
-    Raises
-    ------
-    ValueError
-        If the input is invalid (see :func:`mse`) or `y_true` holds no
-        occupied point.
-    {type_error}
+    {raises}
 
     See Also
     --------
@@ -401,7 +391,8 @@ def tpr_fdr_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     return tpr_fdr_auc_unchecked(labels, probs)
 
 
-@fill_doc(**_SECTIONS)
+@fill_doc(**_SECTIONS, raises=_invalid_input(
+    ", `y_true` holds only one class, or `threshold` is not in [0, 1]"))
 def score_all(
     y_true: ArrayLike, y_prob: ArrayLike, threshold: float = 0.5
 ) -> dict[str, float]:
@@ -421,12 +412,7 @@ def score_all(
         ``tpr_fdr_auc`` (floats), ``n_test`` (int, number of test points) and
         ``unknown_fraction`` (float, fraction of NaN predictions).
 
-    Raises
-    ------
-    ValueError
-        If the input is invalid (see :func:`mse`), `y_true` holds only one
-        class, or `threshold` is not in [0, 1].
-    {type_error}
+    {raises}
 
     Examples
     --------
