@@ -17,6 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
 from .._validation import as_points, check_int, check_real
+from ._geometry import slab_interval
 from ._scenes import SEED_SECTIONS, check_max_range, first_hits, scene_doc_sections
 
 __all__ = ["LaserScan2D", "Scene2D", "room_2d"]
@@ -79,18 +80,6 @@ class LaserScan2D(NamedTuple):
         return self.end_points[self.hit]
 
 
-def _slab(o, d, lo, hi):
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ta, tb = (lo - o) / d, (hi - o) / d
-    t0, t1 = np.minimum(ta, tb), np.maximum(ta, tb)
-    par = d == 0.0
-    if par.any():
-        inside = (o >= lo) & (o <= hi)
-        t0 = np.where(par, np.where(inside, -_INF, _INF), t0)
-        t1 = np.where(par, np.where(inside, _INF, -_INF), t1)
-    return t0, t1
-
-
 def _padded(lo, hi):
     """A box grown by far more than the rounding error of the solids' membership tests."""
     pad = 1e-9 * (1.0 + np.maximum(np.abs(lo), np.abs(hi)).max() + (hi - lo).max())
@@ -123,8 +112,8 @@ class Rect:
 
     def intersect(self, o, d):
         o, d = self._local(o), d @ self.rotation
-        ax, bx = _slab(o[:, 0], d[:, 0], -self.half[0], self.half[0])
-        ay, by = _slab(o[:, 1], d[:, 1], -self.half[1], self.half[1])
+        ax, bx = slab_interval(o[:, 0], d[:, 0], -self.half[0], self.half[0])
+        ay, by = slab_interval(o[:, 1], d[:, 1], -self.half[1], self.half[1])
         t0, t1 = np.maximum(ax, ay), np.minimum(bx, by)
         start = np.maximum(t0, 0.0)
         return np.where((t1 >= start) & (t0 <= t1), start, _INF)
