@@ -126,18 +126,25 @@ def read_npz(path: Any, format_name: str, versions: tuple[int, ...],
                              optional)
 
 
+def read_npy_header(f) -> tuple:
+    """``(shape, fortran_order, dtype)`` from the ``.npy`` stream `f`, left at its data.
+
+    ValueError for a ``.npy`` format version other than 1.0 and 2.0.
+    """
+    version = np.lib.format.read_magic(f)
+    if version == (1, 0):
+        return np.lib.format.read_array_header_1_0(f)
+    if version == (2, 0):
+        return np.lib.format.read_array_header_2_0(f)
+    raise ValueError(f"unsupported .npy version {version}")
+
+
 def _header(npz, key: str, source: str):
     """(zip info, shape, dtype, header bytes) of member `key`, its data unread."""
     try:
         info = npz.zip.getinfo(key + ".npy")
         with npz.zip.open(info) as f:
-            ver = np.lib.format.read_magic(f)
-            if ver == (1, 0):
-                shape, _, dtype = np.lib.format.read_array_header_1_0(f)
-            elif ver == (2, 0):
-                shape, _, dtype = np.lib.format.read_array_header_2_0(f)
-            else:
-                raise ValueError(f"unsupported .npy version {ver}")
+            shape, _, dtype = read_npy_header(f)
             header = f.tell()
     except _READ_ERRORS as exc:
         raise ValueError(f"{source}: corrupt array {key!r} ({type(exc).__name__}: "

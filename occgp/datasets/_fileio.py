@@ -9,7 +9,26 @@ from pathlib import Path
 
 from .._validation import as_path
 
-__all__ = ["as_path", "read_bytes", "read_maybe_compressed"]
+__all__ = ["as_path", "read_bytes", "read_maybe_compressed", "read_text", "READER_SECTIONS"]
+
+#: Docstring sections the file readers share (fragments for :func:`occgp._docfill.fill_doc`).
+READER_SECTIONS = {
+    "raises_oserror": """Raises
+------
+OSError
+    If the file is missing or unreadable.""",
+    "path_type_error": """TypeError
+    If `path` is not a str or os.PathLike.""",
+    "unwritable": """OSError
+    If the file cannot be written.""",
+    "path_to_scans": """Parameters
+----------
+path : str or os.PathLike
+
+Returns
+-------
+scans : list of Scan""",
+}
 
 
 def _check_file(path: Path) -> None:
@@ -41,3 +60,12 @@ def read_maybe_compressed(path) -> bytes:
         return openers[suffix](raw)
     except (OSError, EOFError, ValueError, zlib.error, lzma.LZMAError) as exc:
         raise ValueError(f"{path}: corrupt or truncated {suffix[1:]} stream ({exc})") from None
+
+
+def read_text(path) -> str:
+    """:func:`read_maybe_compressed` decoded as UTF-8; ValueError naming the file if it is not."""
+    raw = read_maybe_compressed(path)
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a text file (invalid UTF-8)") from None

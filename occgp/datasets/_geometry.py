@@ -42,7 +42,7 @@ def rotation_matrix(yaw: float = 0.0, pitch: float = 0.0, roll: float = 0.0) -> 
 # --------------------------------------------------------------------------- #
 # interval helpers (all arrays of shape (n,))
 # --------------------------------------------------------------------------- #
-def _slab_interval(o, d, lo, hi):
+def slab_interval(o, d, lo, hi):
     """Ray parameters with ``lo <= o + t d <= hi`` as an interval (t0, t1)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         ta = (lo - o) / d
@@ -155,7 +155,7 @@ class Box(_Solid):
         t0 = np.full(len(o), -_INF)
         t1 = np.full(len(o), _INF)
         for k in range(3):
-            a, b = _slab_interval(o[:, k], d[:, k], -self.half_extents[k], self.half_extents[k])
+            a, b = slab_interval(o[:, k], d[:, k], -self.half_extents[k], self.half_extents[k])
             t0 = np.maximum(t0, a)
             t1 = np.minimum(t1, b)
         return t0, t1
@@ -338,6 +338,6 @@ class Frustum(_Solid):
             t0 = np.where(lin, np.where(b < 0, root, np.where((b == 0) & (c <= 0), -_INF, t0)), t0)
             t1 = np.where(lin, np.where(b > 0, root, np.where((b == 0) & (c <= 0), _INF, t1)), t1)
         # keep g >= 0 (a single nappe) and 0 <= z <= height
-        ga, gb = _slab_interval(g0, gd, 0.0, _INF)
-        za, zb = _slab_interval(o[:, 2], d[:, 2], 0.0, self.height)
+        ga, gb = slab_interval(g0, gd, 0.0, _INF)
+        za, zb = slab_interval(o[:, 2], d[:, 2], 0.0, self.height)
         return np.maximum.reduce([t0, ga, za]), np.minimum.reduce([t1, gb, zb])

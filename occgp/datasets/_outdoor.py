@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from .._docfill import fill_doc
 from .._validation import check_int, check_real
 from ._geometry import Box, Ellipsoid, Frustum, rotation_matrix
 from ._scenes import Scene
@@ -46,6 +47,16 @@ SENSOR_HEIGHT = 1.73
 MAX_SIZE = 400.0
 MIN_SIZE = 30.0
 _CLEARANCE = 0.5
+#: The Returns section of the pose makers, and the first entry of their Raises section.
+_POSES_RETURNS = """Returns
+-------
+poses : ndarray of shape (n_poses, 4, 4)
+    Sensor-to-world transforms.
+
+Raises
+------
+TypeError
+    If an argument has a wrong type."""
 
 
 class OutdoorScene(Scene):
@@ -91,6 +102,7 @@ class OutdoorScene(Scene):
         return lo - np.array([0.0, 0.0, 1.0]), hi.copy()
 
     # ------------------------------------------------------------------ poses
+    @fill_doc(poses_returns=_POSES_RETURNS)
     def trajectory(self, n_poses: int = 15, height: float = SENSOR_HEIGHT,
                    margin: float = 5.0) -> NDArray[np.float64]:
         """Evenly spaced sensor poses driving along the main road's right lane.
@@ -108,15 +120,7 @@ class OutdoorScene(Scene):
         margin : float, default=5.0
             Distance kept from the square's edges, metres, in [0, size / 2).
 
-        Returns
-        -------
-        poses : ndarray of shape (n_poses, 4, 4)
-            Sensor-to-world transforms.
-
-        Raises
-        ------
-        TypeError
-            If an argument has a wrong type.
+        {poses_returns}
         ValueError
             If an argument is out of its range.
 
@@ -134,6 +138,7 @@ class OutdoorScene(Scene):
         origins = np.column_stack([x, np.full(n_poses, LANE_Y), np.full(n_poses, height)])
         return _poses(origins, np.zeros(n_poses))
 
+    @fill_doc(poses_returns=_POSES_RETURNS)
     def random_poses(self, n_poses: int, seed: int = 0, height: float = SENSOR_HEIGHT,
                      heading_jitter: float = 0.3) -> NDArray[np.float64]:
         """Seeded sensor poses on the roads, clear of every object by 0.5 m.
@@ -154,15 +159,7 @@ class OutdoorScene(Scene):
         heading_jitter : float, default=0.3
             Largest turn from the road's direction, radians, in [0, pi].
 
-        Returns
-        -------
-        poses : ndarray of shape (n_poses, 4, 4)
-            Sensor-to-world transforms.
-
-        Raises
-        ------
-        TypeError
-            If an argument has a wrong type.
+        {poses_returns}
         ValueError
             If an argument is out of its range, or the poses cannot be
             placed (100 rounds of 256 candidates).

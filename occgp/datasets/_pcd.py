@@ -14,8 +14,9 @@ import struct
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._docfill import fill_doc
 from .._validation import as_path, check_bool
-from ._fileio import read_bytes
+from ._fileio import READER_SECTIONS, read_bytes
 from ._scan import Scan, drop_non_finite, make_scan
 
 __all__ = ["read_pcd", "write_pcd", "lzf_decompress", "lzf_compress_literal"]
@@ -433,6 +434,7 @@ def read_pcd(path, *, return_fields: bool = False):
 # --------------------------------------------------------------------------- #
 # writer
 # --------------------------------------------------------------------------- #
+@fill_doc(**READER_SECTIONS)
 def write_pcd(
     path,
     points: ArrayLike,
@@ -469,8 +471,7 @@ def write_pcd(
     TypeError
         If `path` is not a str or os.PathLike, `data` is not a str, or
         `fields` is not a dict.
-    OSError
-        If the file cannot be written.
+    {unwritable}
 
     Examples
     --------

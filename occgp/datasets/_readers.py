@@ -18,7 +18,8 @@ import warnings
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._fileio import as_path, read_bytes, read_maybe_compressed
+from .._docfill import fill_doc
+from ._fileio import READER_SECTIONS, as_path, read_bytes, read_text
 from ._pcd import read_pcd
 from ._scan import Scan, drop_non_finite, make_scan, check_origin
 
@@ -28,6 +29,14 @@ __all__ = [
 ]
 
 _TEXT_SUFFIXES = (".xyz", ".txt", ".dat", ".log")
+#: The `fields` parameter and the Returns section of the folder and dispatch readers.
+_FIELDS_TO_SCANS = """fields : int, str or numpy.dtype, optional
+    Record layout of ``.bin`` files, passed to :func:`read_kitti_bin`
+    (default: by file name).
+
+Returns
+-------
+scans : list of Scan"""
 _COMPRESSED = (".bz2", ".gz", ".xz")
 
 
@@ -119,6 +128,7 @@ def _bin_record(fields, path):
     return np.dtype({"names": names, "formats": ["<f4"] * fields}), what
 
 
+@fill_doc(**READER_SECTIONS)
 def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0), *, fields=None,
                    return_fields: bool = False):
     """Read a KITTI or nuScenes lidar scan: packed records whose first fields are x y z.
@@ -163,10 +173,7 @@ def read_kitti_bin(path, origin: ArrayLike = (0.0, 0.0, 0.0), *, fields=None,
         dtype gives its own field names (values in the dtype's native byte
         order).
 
-    Raises
-    ------
-    OSError
-        If the file is missing or unreadable.
+    {raises_oserror}
     ValueError
         If the file size is not a whole number of records (the message
         gives the file, its size and the record size, and suggests
@@ -272,6 +279,7 @@ class _Cursor:
         return int(self.take("<u4", 1, what)[0])
 
 
+@fill_doc(**READER_SECTIONS)
 def read_scan_graph(path) -> list:
     """Read an OctoMap ScanGraph binary file (``.graph``) as a list of scans.
 
@@ -284,25 +292,15 @@ def read_scan_graph(path) -> list:
     (stored so, or overflowing in the transform) are dropped, and their
     number logged on the ``"occgp"`` logger (PCL's habit).
 
-    Parameters
-    ----------
-    path : str or os.PathLike
+    {path_to_scans}
 
-    Returns
-    -------
-    scans : list of Scan
-
-    Raises
-    ------
-    OSError
-        If the file is missing or unreadable.
+    {raises_oserror}
     ValueError
         If the file is truncated (the message gives the bytes expected and
         found), has trailing bytes, its Vector3 / Quaternion tags are not
         3 / 4, a quaternion is zero or not finite, or a node position is
         not finite.
-    TypeError
-        If `path` is not a str or os.PathLike.
+    {path_type_error}
 
     Examples
     --------
@@ -349,6 +347,7 @@ def read_scan_graph(path) -> list:
     return scans
 
 
+@fill_doc(**READER_SECTIONS)
 def write_scan_graph(path, scans) -> None:
     """Write scans as an OctoMap ScanGraph binary file readable by ``graph2tree``.
 
@@ -368,8 +367,7 @@ def write_scan_graph(path, scans) -> None:
     TypeError
         If `path` is not a str or os.PathLike, or `scans` is not a sequence
         of Scan or (points, origin) pairs.
-    OSError
-        If the file cannot be written.
+    {unwritable}
 
     Examples
     --------
@@ -418,14 +416,6 @@ def write_scan_graph(path, scans) -> None:
 # --------------------------------------------------------------------------- #
 # plain text
 # --------------------------------------------------------------------------- #
-def _text_of(path):
-    raw = read_maybe_compressed(path)
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError:
-        raise ValueError(f"{path}: not a text file (invalid UTF-8)") from None
-
-
 def _bad_line(text, first_line):
     """Describe the first line that is not ``x y z [...]`` (error path only)."""
     for i, line in enumerate(text.splitlines()):
@@ -456,6 +446,7 @@ def _parse_xyz(text, path, first_line=1):
     return table
 
 
+@fill_doc(**READER_SECTIONS)
 def read_xyz(path, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Scan:
     """Read a plain-text point list, one ``x y z`` per line.
 
@@ -475,10 +466,7 @@ def read_xyz(path, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Scan:
     -------
     scan : Scan
 
-    Raises
-    ------
-    OSError
-        If the file is missing or unreadable.
+    {raises_oserror}
     ValueError
         For a malformed line (with its line number where numpy reports
         it), a corrupt compressed stream, ``NODE`` lines (an OctoMap scan
@@ -498,7 +486,7 @@ def read_xyz(path, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Scan:
     """
     path = as_path(path)
     origin = check_origin(origin)
-    text = _text_of(path)
+    text = read_text(path)
     if re.search(r"^\s*NODE\b", text, flags=re.MULTILINE):
         raise ValueError(
             f"{path}: contains NODE lines (an OctoMap scan log with poses); "
@@ -507,6 +495,7 @@ def read_xyz(path, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Scan:
     return Scan(drop_non_finite(_parse_xyz(text, path), path), origin)
 
 
+@fill_doc(**READER_SECTIONS)
 def read_scan_log(path) -> list:
     """Read an OctoMap plain-text scan log (the input of ``log2graph``).
 
@@ -517,23 +506,13 @@ def read_scan_log(path) -> list:
     :func:`read_xyz`, and so are points with a NaN or inf coordinate
     (dropped, their number logged).
 
-    Parameters
-    ----------
-    path : str or os.PathLike
+    {path_to_scans}
 
-    Returns
-    -------
-    scans : list of Scan
-
-    Raises
-    ------
-    OSError
-        If the file is missing or unreadable.
+    {raises_oserror}
     ValueError
         If a point comes before the first NODE line, or a line is malformed
         (a NODE pose must be six finite numbers).
-    TypeError
-        If `path` is not a str or os.PathLike.
+    {path_type_error}
 
     Examples
     --------
@@ -545,7 +524,7 @@ def read_scan_log(path) -> list:
     [[1.0, 1.0, 0.0]]
     """
     path = as_path(path)
-    return _scan_log_from_text(_text_of(path), path)
+    return _scan_log_from_text(read_text(path), path)
 
 
 def _scan_log_from_text(text, path):
@@ -602,6 +581,7 @@ def _kind(path):
     return None
 
 
+@fill_doc(fields_to_scans=_FIELDS_TO_SCANS)
 def load_scan_folder(path, pattern: str | None = "*.pcd", *, fields=None) -> list:
     """Read a folder of scan files (la3dm style), in natural file-name order.
 
@@ -616,13 +596,7 @@ def load_scan_folder(path, pattern: str | None = "*.pcd", *, fields=None) -> lis
         Glob pattern of the files to read (default ``"*.pcd"``), relative to
         the folder; None reads every file with a supported suffix (see
         :func:`read_scans`).
-    fields : int, str or numpy.dtype, optional
-        Record layout of the ``.bin`` files, passed to
-        :func:`read_kitti_bin` (default: by file name).
-
-    Returns
-    -------
-    scans : list of Scan
+    {fields_to_scans}
 
     Raises
     ------
@@ -672,6 +646,7 @@ def load_scan_folder(path, pattern: str | None = "*.pcd", *, fields=None) -> lis
     return scans
 
 
+@fill_doc(fields_to_scans=_FIELDS_TO_SCANS)
 def read_scans(path, *, fields=None) -> list:
     """Read scans from a file or folder, choosing the reader by suffix.
 
@@ -695,13 +670,7 @@ def read_scans(path, *, fields=None) -> list:
     ----------
     path : str or os.PathLike
         A scan file or a folder of them.
-    fields : int, str or numpy.dtype, optional
-        Record layout of ``.bin`` files (see :func:`read_kitti_bin`);
-        default: by file name.
-
-    Returns
-    -------
-    scans : list of Scan
+    {fields_to_scans}
 
     Raises
     ------
@@ -736,7 +705,7 @@ def read_scans(path, *, fields=None) -> list:
     if kind == "graph":
         return read_scan_graph(path)
     if kind == "text":
-        text = _text_of(path)
+        text = read_text(path)
         if re.search(r"^\s*NODE\b", text, flags=re.MULTILINE):
             return _scan_log_from_text(text, path)
         return [Scan(drop_non_finite(_parse_xyz(text, path), path), np.zeros(3))]

@@ -15,14 +15,17 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docfill import fill_doc
 from .._validation import as_points, check_int, check_real
-from ._scenes import as_rays, check_max_range
+from ._geometry import slab_interval
+from ._scenes import SEED_SECTIONS, check_max_range, first_hits, scene_doc_sections
 
 __all__ = ["LaserScan2D", "Scene2D", "room_2d"]
 
 _INF = np.inf
 MAX_BEAMS = 2**26  # most beams (n_poses * n_beams) one Scene2D.scan casts
 MAX_POSES = 10**7  # most poses Scene2D.poses makes
+_SECTIONS = scene_doc_sections(2)
 
 
 class LaserScan2D(NamedTuple):
@@ -77,18 +80,6 @@ class LaserScan2D(NamedTuple):
         return self.end_points[self.hit]
 
 
-def _slab(o, d, lo, hi):
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ta, tb = (lo - o) / d, (hi - o) / d
-    t0, t1 = np.minimum(ta, tb), np.maximum(ta, tb)
-    par = d == 0.0
-    if par.any():
-        inside = (o >= lo) & (o <= hi)
-        t0 = np.where(par, np.where(inside, -_INF, _INF), t0)
-        t1 = np.where(par, np.where(inside, _INF, -_INF), t1)
-    return t0, t1
-
-
 def _padded(lo, hi):
     """A box grown by far more than the rounding error of the solids' membership tests."""
     pad = 1e-9 * (1.0 + np.maximum(np.abs(lo), np.abs(hi)).max() + (hi - lo).max())
@@ -121,8 +112,8 @@ class Rect:
 
     def intersect(self, o, d):
         o, d = self._local(o), d @ self.rotation
-        ax, bx = _slab(o[:, 0], d[:, 0], -self.half[0], self.half[0])
-        ay, by = _slab(o[:, 1], d[:, 1], -self.half[1], self.half[1])
+        ax, bx = slab_interval(o[:, 0], d[:, 0], -self.half[0], self.half[0])
+        ay, by = slab_interval(o[:, 1], d[:, 1], -self.half[1], self.half[1])
         t0, t1 = np.maximum(ax, ay), np.minimum(bx, by)
         start = np.maximum(t0, 0.0)
         return np.where((t1 >= start) & (t0 <= t1), start, _INF)
@@ -201,13 +192,11 @@ class Scene2D:
         """``(min (2,), max (2,))`` inside the outer walls."""
         return self._interior[0].copy(), self._interior[1].copy()
 
+    @fill_doc(**_SECTIONS)
     def occupancy(self, points: ArrayLike) -> NDArray[np.bool_]:
         """Exact membership of 2D `points` in the union of the solids.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 2)
-            Query points in the world frame, in metres.
+        {points_param}
 
         Returns
         -------
@@ -216,10 +205,7 @@ class Scene2D:
 
         Raises
         ------
-        TypeError
-            If `points` does not hold real numbers.
-        ValueError
-            If `points` is not of shape (n_points, 2) or holds NaN or inf.
+        {points_raises}
 
         Examples
         --------
@@ -246,26 +232,21 @@ class Scene2D:
                 out[idx] |= solid.contains(points[idx])
         return out
 
+    @fill_doc(**_SECTIONS)
     def signed_distance(self, points: ArrayLike) -> NDArray[np.float64]:
         """Signed Euclidean distance to the solids (negative inside).
 
         Exact outside the solids; inside overlapping solids, the magnitude is
         the depth inside the deepest single solid (a lower bound).
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 2)
-            Query points in the world frame, in metres.
+        {points_param}
 
         Returns
         -------
         distance : ndarray of shape (n_points,)
             In metres; inf everywhere for a scene without solids.
 
-        Raises
-        ------
-        TypeError, ValueError
-            As :meth:`occupancy`.
+        {as_occupancy}
 
         Examples
         --------
@@ -278,34 +259,11 @@ class Scene2D:
             np.minimum(out, solid.signed_distance(points), out=out)
         return out
 
+    @fill_doc(**_SECTIONS)
     def ray_cast(self, origins: ArrayLike, directions: ArrayLike, max_range: float = np.inf):
         """Exact first intersection of 2D rays with the solids.
 
-        Parameters
-        ----------
-        origins : array-like of shape (2,) or (n_rays, 2)
-            Ray origins; one origin is shared by all rays.
-        directions : array-like of shape (n_rays, 2)
-            Normalised internally; must be non-zero.
-        max_range : float, default=inf
-            Positive; rays that hit nothing closer are misses.
-
-        Returns
-        -------
-        distances : ndarray of shape (n_rays,)
-            Distance to the first hit, `max_range` for misses. A ray starting
-            inside a solid hits at 0.
-        hit : ndarray of shape (n_rays,), dtype bool
-
-        Raises
-        ------
-        TypeError
-            If `origins` or `directions` does not hold real numbers, or
-            `max_range` is not a real number.
-        ValueError
-            If `directions` is not of shape (n_rays, 2), `origins` neither of
-            shape (2,) nor that of `directions`, either holds NaN or inf, a
-            direction is zero, or `max_range` is not positive.
+        {ray_cast_sections}
 
         Examples
         --------
@@ -313,13 +271,7 @@ class Scene2D:
         >>> float(d[0]), bool(hit[0])
         (9.0, True)
         """
-        origins, directions = as_rays(origins, directions, dim=2)
-        max_range = check_max_range(max_range)
-        t = np.full(len(directions), np.inf)
-        for solid in self.solids:
-            np.minimum(t, solid.intersect(origins, directions), out=t)
-        hit = (t <= max_range) & np.isfinite(t)
-        return np.where(hit, t, max_range), hit
+        return first_hits(self.solids, origins, directions, max_range, dim=2)
 
     def poses(self, n_poses: int = 26):
         """Poses equally spaced (by arc length) along :attr:`path`.
@@ -440,6 +392,7 @@ class Scene2D:
         ]
 
 
+@fill_doc(seed_sections=SEED_SECTIONS.format(scene="Scene2D"))
 def room_2d(seed: int = 0) -> Scene2D:
     """The 22 x 18 m 2D room of the GP occupancy-map experiments.
 
@@ -454,16 +407,7 @@ def room_2d(seed: int = 0) -> Scene2D:
         0 gives the fixed default room; another seed moves each box and disc
         by up to 0.3 m (deterministically), keeping them 0.5 m from the path.
 
-    Returns
-    -------
-    scene : Scene2D
-
-    Raises
-    ------
-    TypeError
-        If `seed` is not an int.
-    ValueError
-        If `seed` is negative.
+    {seed_sections}
 
     Examples
     --------

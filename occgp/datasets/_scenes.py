@@ -23,6 +23,7 @@ import numbers
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docfill import fill_doc
 from .._validation import as_numeric, as_point, as_points, check_int
 from ._geometry import Box, Ellipsoid, Frustum, rotation_matrix
 from ._scan import Scan
@@ -73,6 +74,80 @@ def check_max_range(max_range):
     if not max_range > 0:
         raise ValueError(f"max_range must be positive (inf: no limit), got {max_range}")
     return max_range
+
+
+def first_hits(solids, origins, directions, max_range, dim=3):
+    """``ray_cast`` of a scene of `solids`: checks the rays, returns ``(distances, hit)``."""
+    origins, directions = as_rays(origins, directions, dim)
+    max_range = check_max_range(max_range)
+    t = np.full(len(directions), np.inf)
+    for solid in solids:
+        np.minimum(t, solid.intersect(origins, directions), out=t)
+    hit = (t <= max_range) & np.isfinite(t)
+    return np.where(hit, t, max_range), hit
+
+
+def scene_doc_sections(dim):
+    """The docstring sections that the scenes' queries share, for scenes of `dim` dimensions.
+
+    Fragments for :func:`occgp._docfill.fill_doc`: ``points_param`` (the Parameters
+    section of ``occupancy`` and ``signed_distance``), ``points_raises`` (the errors of
+    ``occupancy``), ``as_occupancy`` (the Raises section of ``signed_distance``) and
+    ``ray_cast_sections`` (Parameters, Returns and Raises of ``ray_cast``).
+    """
+    return {
+        "points_param": f"""Parameters
+----------
+points : array-like of shape (n_points, {dim})
+    Query points in the world frame, in metres.""",
+        "points_raises": f"""TypeError
+    If `points` does not hold real numbers.
+ValueError
+    If `points` is not of shape (n_points, {dim}) or holds NaN or inf.""",
+        "as_occupancy": """Raises
+------
+TypeError, ValueError
+    As :meth:`occupancy`.""",
+        "ray_cast_sections": f"""Parameters
+----------
+origins : array-like of shape ({dim},) or (n_rays, {dim})
+    Ray origins; one origin is shared by all rays.
+directions : array-like of shape (n_rays, {dim})
+    Ray directions (normalised internally; must be non-zero).
+max_range : float, default=inf
+    Positive; rays that hit nothing closer are misses.
+
+Returns
+-------
+distances : ndarray of shape (n_rays,)
+    Distance to the first hit along the unit direction, `max_range`
+    for misses. A ray starting inside a solid hits at 0.
+hit : ndarray of shape (n_rays,), dtype bool
+
+Raises
+------
+TypeError
+    If `origins` or `directions` does not hold real numbers, or
+    `max_range` is not a real number.
+ValueError
+    If `directions` is not of shape (n_rays, {dim}), `origins` neither of
+    shape ({dim},) nor that of `directions`, either holds NaN or inf, a
+    direction is zero, or `max_range` is not positive.""",
+    }
+
+
+#: The Returns and Raises sections of the room builders that take a `seed` alone.
+SEED_SECTIONS = """Returns
+-------
+scene : {scene}
+
+Raises
+------
+TypeError
+    If `seed` is not an int.
+ValueError
+    If `seed` is negative."""
+_ROOM_SECTIONS = SEED_SECTIONS.format(scene="Scene")
 
 
 class Scene:
@@ -141,13 +216,11 @@ class Scene:
         """``(min (3,), max (3,))`` of the free interior box of the room."""
         return self._interior[0].copy(), self._interior[1].copy()
 
+    @fill_doc(**scene_doc_sections(3))
     def occupancy(self, points: ArrayLike) -> NDArray[np.bool_]:
         """Exact membership of `points` in the union of the solids.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            Query points in the world frame, in metres.
+        {points_param}
 
         Returns
         -------
@@ -156,10 +229,7 @@ class Scene:
 
         Raises
         ------
-        TypeError
-            If `points` does not hold real numbers.
-        ValueError
-            If `points` is not of shape (n_points, 3) or not finite.
+        {points_raises}
 
         Examples
         --------
@@ -172,6 +242,7 @@ class Scene:
             out |= solid.contains(points)
         return out
 
+    @fill_doc(**scene_doc_sections(3))
     def signed_distance(self, points: ArrayLike) -> NDArray[np.float64]:
         """Signed Euclidean distance to the scene's surface (negative inside).
 
@@ -179,20 +250,14 @@ class Scene:
         is the depth inside the deepest single solid (a lower bound). The
         sign always agrees with :meth:`occupancy`.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            Query points in the world frame, in metres.
+        {points_param}
 
         Returns
         -------
         distance : ndarray of shape (n_points,)
             In metres.
 
-        Raises
-        ------
-        TypeError, ValueError
-            As :meth:`occupancy`.
+        {as_occupancy}
 
         Examples
         --------
@@ -203,34 +268,11 @@ class Scene:
         points = as_points(points, "points")
         return np.min([s.signed_distance(points) for s in self.solids], axis=0)
 
+    @fill_doc(**scene_doc_sections(3))
     def ray_cast(self, origins: ArrayLike, directions: ArrayLike, max_range: float = np.inf):
         """Exact first intersection of rays with the solids.
 
-        Parameters
-        ----------
-        origins : array-like of shape (3,) or (n_rays, 3)
-            Ray origins; one origin is shared by all rays.
-        directions : array-like of shape (n_rays, 3)
-            Ray directions (normalised internally; must be non-zero).
-        max_range : float, default=inf
-            Rays that hit nothing closer are misses.
-
-        Returns
-        -------
-        distances : ndarray of shape (n_rays,)
-            Distance to the first hit along the unit direction, `max_range`
-            for misses. A ray starting inside a solid hits at 0.
-        hit : ndarray of shape (n_rays,), dtype bool
-
-        Raises
-        ------
-        TypeError
-            If `origins` or `directions` does not hold real numbers, or
-            `max_range` is not a real number.
-        ValueError
-            If `directions` is not of shape (n_rays, 3), `origins` neither of
-            shape (3,) nor that of `directions`, either holds NaN or inf, a
-            direction is zero, or `max_range` is not positive.
+        {ray_cast_sections}
 
         Examples
         --------
@@ -238,13 +280,7 @@ class Scene:
         >>> float(d[0]), bool(hit[0])
         (1.0, True)
         """
-        origins, directions = as_rays(origins, directions)
-        max_range = check_max_range(max_range)
-        t = np.full(len(directions), np.inf)
-        for solid in self.solids:
-            np.minimum(t, solid.intersect(origins, directions), out=t)
-        hit = (t <= max_range) & np.isfinite(t)
-        return np.where(hit, t, max_range), hit
+        return first_hits(self.solids, origins, directions, max_range)
 
     def poses(self, n_poses: int = 4, scans_per_pose: int = 3, seed: int = 0):
         """Sensor positions and scan headings.
@@ -518,6 +554,7 @@ def _build_room(name, objects, seed, jitter_xy, jitter_yaw):
     return Scene(solids, labels, (lo, hi), name, DEFAULT_POSITIONS, DEFAULT_HEADING)
 
 
+@fill_doc(seed_sections=_ROOM_SECTIONS)
 def structured_room(seed: int = 0) -> Scene:
     """A 10 x 7 x 2 m room with axis-aligned furniture (boxes, cylinders).
 
@@ -532,16 +569,7 @@ def structured_room(seed: int = 0) -> Scene:
         0 gives the fixed default layout; any other seed moves each object
         (deterministically) by up to 0.3 m, keeping the sensor poses free.
 
-    Returns
-    -------
-    scene : Scene
-
-    Raises
-    ------
-    TypeError
-        If `seed` is not an int.
-    ValueError
-        If `seed` is negative.
+    {seed_sections}
 
     Examples
     --------
@@ -554,6 +582,7 @@ def structured_room(seed: int = 0) -> Scene:
     return _build_room("structured", _structured_objects(), seed, 0.3, 0.0)
 
 
+@fill_doc(seed_sections=_ROOM_SECTIONS)
 def unstructured_room(seed: int = 0) -> Scene:
     """A 10 x 7 x 2 m room with irregular objects (slanted, curved, conical).
 
@@ -568,16 +597,7 @@ def unstructured_room(seed: int = 0) -> Scene:
         0 gives the fixed default layout; any other seed moves and turns
         each object (by up to 0.3 m and 20 degrees), keeping the poses free.
 
-    Returns
-    -------
-    scene : Scene
-
-    Raises
-    ------
-    TypeError
-        If `seed` is not an int.
-    ValueError
-        If `seed` is negative.
+    {seed_sections}
 
     Examples
     --------

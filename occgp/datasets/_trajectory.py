@@ -9,8 +9,9 @@ scans recorded in the sensor frame into the world frame.
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docfill import fill_doc
 from .._validation import check_real
-from ._fileio import read_maybe_compressed
+from ._fileio import READER_SECTIONS, read_text
 from ._scan import Scan, make_scan
 
 __all__ = ["read_kitti_poses", "read_tum_trajectory", "apply_poses"]
@@ -20,12 +21,7 @@ _ROT_TOL = 1e-3
 
 def _lines(path):
     """(line number, tokens) of the non-blank, non-comment lines of a text file."""
-    raw = read_maybe_compressed(path)
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        raise ValueError(f"{path}: not a text file (invalid UTF-8)") from None
-    for i, line in enumerate(text.splitlines(), start=1):
+    for i, line in enumerate(read_text(path).splitlines(), start=1):
         tokens = line.split("#", 1)[0].split()
         if tokens:
             yield i, tokens
@@ -77,6 +73,7 @@ def _check_tol(tol):
     return check_real(tol, "tol", low=0.0, high=1.0, low_open=False)
 
 
+@fill_doc(**READER_SECTIONS)
 def read_kitti_poses(path, *, tol: float = _ROT_TOL) -> NDArray[np.float64]:
     """Read a KITTI odometry pose file (``poses/XX.txt``).
 
@@ -97,16 +94,12 @@ def read_kitti_poses(path, *, tol: float = _ROT_TOL) -> NDArray[np.float64]:
     poses : ndarray of shape (n_poses, 4, 4)
         Homogeneous sensor-to-world transforms, one per line.
 
-    Raises
-    ------
-    OSError
-        If the file is missing or unreadable.
+    {raises_oserror}
     ValueError
         For a line without exactly 12 numbers, a non-numeric or non-finite
         value, a rotation that is not orthonormal within `tol` or is a
         reflection (each with its line number), or a file without poses.
-    TypeError
-        If `path` is not a str or os.PathLike.
+    {path_type_error}
 
     Examples
     --------
@@ -131,6 +124,7 @@ def read_kitti_poses(path, *, tol: float = _ROT_TOL) -> NDArray[np.float64]:
     return poses
 
 
+@fill_doc(**READER_SECTIONS)
 def read_tum_trajectory(path, *, tol: float = _ROT_TOL):
     """Read a TUM RGB-D trajectory: ``timestamp tx ty tz qx qy qz qw`` per line.
 
@@ -150,17 +144,13 @@ def read_tum_trajectory(path, *, tol: float = _ROT_TOL):
     poses : ndarray of shape (n_poses, 4, 4)
         Homogeneous sensor-to-world transforms.
 
-    Raises
-    ------
-    OSError
-        If the file is missing or unreadable.
+    {raises_oserror}
     ValueError
         For a line without exactly 8 numbers, a non-numeric or non-finite
         value, a quaternion whose norm is not 1 within `tol`, a timestamp
         smaller than the previous one (each with its line number), or a
         file without poses.
-    TypeError
-        If `path` is not a str or os.PathLike.
+    {path_type_error}
 
     Examples
     --------

@@ -13,12 +13,22 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docfill import fill_doc
 from .._validation import as_point, as_points, check_int, check_real, check_seed
 from ._protocols import TestSet, grid_test_set
 
 
 # cells whose corner points are tested at once in _visible (27 points of 3 floats each)
 _BAND_CHUNK = 100_000
+#: The last parameters and the Returns section of the cell labellers.
+_CELL_SECTIONS = """resolution : float
+    Cell edge, metres, > 0.
+samples : int, default=5
+    Sample points per axis, in [1, 16]; 1 tests the centre alone.
+
+Returns
+-------
+labels : ndarray of bool, shape (n_cells,)"""
 
 
 class _Lifted:
@@ -372,6 +382,7 @@ class _Indexed:
         return out
 
 
+@fill_doc(cell_sections=_CELL_SECTIONS)
 def cell_labels(scene: Any, centres: ArrayLike, resolution: float, *,
                 samples: int = 5) -> NDArray[np.bool_]:
     """Ground truth of octree cells: whether a solid of `scene` reaches into each cell.
@@ -393,14 +404,7 @@ def cell_labels(scene: Any, centres: ArrayLike, resolution: float, *,
         ``signed_distance(points)``.
     centres : array-like of shape (n_cells, 3)
         Cell centres, metres.
-    resolution : float
-        Cell edge, metres, > 0.
-    samples : int, default=5
-        Sample points per axis, in [1, 16]; 1 tests the centre alone.
-
-    Returns
-    -------
-    labels : ndarray of bool, shape (n_cells,)
+    {cell_sections}
 
     Raises
     ------
@@ -444,6 +448,7 @@ def cell_labels(scene: Any, centres: ArrayLike, resolution: float, *,
     return labels
 
 
+@fill_doc(cell_sections=_CELL_SECTIONS)
 def exact_labels(scene: Any, centres: ArrayLike, resolution: float, samples: int = 5,
                  ) -> NDArray[np.bool_]:
     """Exact labels of 2D or 3D cells: :func:`cell_labels` for any scene of occgp.
@@ -462,14 +467,7 @@ def exact_labels(scene: Any, centres: ArrayLike, resolution: float, samples: int
         :class:`occgp.datasets.Scene2D`.
     centres : array-like of shape (n_cells, 3) or (n_cells, 2)
         Cell centres, of the scene's dimension.
-    resolution : float
-        Cell edge, metres, > 0.
-    samples : int, default=5
-        Sample points per axis, in [1, 16] (see :func:`cell_labels`).
-
-    Returns
-    -------
-    labels : ndarray of bool, shape (n_cells,)
+    {cell_sections}
 
     Raises
     ------

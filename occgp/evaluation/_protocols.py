@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from tqdm.auto import tqdm
 
+from .._docfill import fill_doc
 from .._validation import as_point, as_points, check_real, check_seed
 from ..maps import available_maps, make_map, map_type
 from .metrics import score_all
@@ -35,6 +36,27 @@ MethodSpec = Union[Callable[[], Any], str, Mapping[str, Any]]
 _logger = logging.getLogger("occgp")
 _clock = time.perf_counter  # the timer of `run_method` (tests replace it)
 _MAX_GRID_POINTS = 50_000_000
+
+#: Docstring sections of the comparisons of several methods (see :func:`occgp._docfill.fill_doc`).
+_METHODS_SECTIONS = {
+    "methods_params": """methods : mapping of str to (callable, str or dict), or sequence of str
+    Method name (the rows' ``method``) to its map: a factory
+    ``factory() -> map`` (see :func:`run_method`), a registered map name
+    (:func:`occgp.maps.available_maps`), built with its default
+    parameters, or a dict ``{"map": name, **params}``, built by
+    :func:`occgp.maps.make_map` (an optional key ``"insert"`` holds
+    options every ``insert_scan`` call gets, e.g. ``{"map": "octree",
+    "resolution": 0.1, "insert": {"mode": "ray"}}``). A sequence of
+    registered map names stands for ``{name: name, ...}``. Every entry is
+    checked before any map is built.
+scans : iterable of (points, origin)
+    The scans to insert.
+test_set : TestSet or (points, labels)
+    Where to score the maps.""",
+    "methods_type_error": """TypeError
+    If `methods` is neither a mapping nor a sequence of str, or one of
+    its values is neither callable, a str nor a dict.""",
+}
 
 
 class TestSet(NamedTuple):
@@ -512,6 +534,7 @@ def run_method(name: str, factory: MethodSpec, scans: Iterable[Sequence[Any]],
     return _run(name, factory, _check_scans(scans), _as_test_set(test_set), progress)
 
 
+@fill_doc(**_METHODS_SECTIONS)
 def compare_methods(methods: Mapping[str, MethodSpec] | Sequence[str],
                     scans: Iterable[Sequence[Any]], test_set: TestSet | Sequence[Any],
                     *, progress: bool | None = None) -> list[MapResult]:
@@ -519,21 +542,7 @@ def compare_methods(methods: Mapping[str, MethodSpec] | Sequence[str],
 
     Parameters
     ----------
-    methods : mapping of str to (callable, str or dict), or sequence of str
-        Method name (the rows' ``method``) to its map: a factory
-        ``factory() -> map`` (see :func:`run_method`), a registered map name
-        (:func:`occgp.maps.available_maps`), built with its default
-        parameters, or a dict ``{"map": name, **params}``, built by
-        :func:`occgp.maps.make_map` (an optional key ``"insert"`` holds
-        options every ``insert_scan`` call gets, e.g. ``{"map": "octree",
-        "resolution": 0.1, "insert": {"mode": "ray"}}``). A sequence of
-        registered map names
-        stands for ``{name: name, ...}``. Every entry is checked before any
-        map is built.
-    scans : iterable of (points, origin)
-        The scans to insert.
-    test_set : TestSet or (points, labels)
-        Where to score the maps.
+    {methods_params}
     progress : bool or None, default=None
         Show progress bars; None shows them only on a terminal.
 
@@ -549,9 +558,7 @@ def compare_methods(methods: Mapping[str, MethodSpec] | Sequence[str],
         registered (the message lists :func:`occgp.maps.available_maps`),
         does not take 3D points, or does not take a parameter given or needs
         one not given, or a scan or the test set is malformed.
-    TypeError
-        If `methods` is neither a mapping nor a sequence of str, or one of
-        its values is neither callable, a str nor a dict.
+    {methods_type_error}
 
     See Also
     --------
@@ -578,6 +585,7 @@ def compare_methods(methods: Mapping[str, MethodSpec] | Sequence[str],
     return [_run(name, f, checked, test_set, progress) for name, f in methods.items()]
 
 
+@fill_doc(**_METHODS_SECTIONS)
 def equal_time_comparison(methods: Mapping[str, MethodSpec] | Sequence[str],
                           scans: Iterable[Sequence[Any]],
                           test_set: TestSet | Sequence[Any], *, step: float = 0.05,
@@ -597,21 +605,7 @@ def equal_time_comparison(methods: Mapping[str, MethodSpec] | Sequence[str],
 
     Parameters
     ----------
-    methods : mapping of str to (callable, str or dict), or sequence of str
-        Method name (the rows' ``method``) to its map: a factory
-        ``factory() -> map`` (see :func:`run_method`), a registered map name
-        (:func:`occgp.maps.available_maps`), built with its default
-        parameters, or a dict ``{"map": name, **params}``, built by
-        :func:`occgp.maps.make_map` (an optional key ``"insert"`` holds
-        options every ``insert_scan`` call gets, e.g. ``{"map": "octree",
-        "resolution": 0.1, "insert": {"mode": "ray"}}``). A sequence of
-        registered map names
-        stands for ``{name: name, ...}``. Every entry is checked before any
-        map is built.
-    scans : iterable of (points, origin)
-        The scans to insert.
-    test_set : TestSet or (points, labels)
-        Where to score the maps.
+    {methods_params}
     step : float, default=0.05
         Fraction of the data dropped per round, in (0, 1).
     seed : int, numpy.random.Generator or None, default=0
@@ -638,9 +632,7 @@ def equal_time_comparison(methods: Mapping[str, MethodSpec] | Sequence[str],
         If `step` is not in (0, 1), `max_rounds` is negative, `full_rows`
         misses a method, a map name or its parameters are rejected (see
         :func:`compare_methods`), or the input is malformed.
-    TypeError
-        If `methods` is neither a mapping nor a sequence of str, or one of
-        its values is neither callable, a str nor a dict.
+    {methods_type_error}
 
     Notes
     -----

@@ -12,19 +12,25 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docfill import fill_doc
+
 __all__ = ["tpr_fdr_points", "tpr_fdr_area", "tpr_fdr_auc_unchecked"]
 
+#: The Parameters section of the functions on checked labels and probabilities.
+_CHECKED_PARAMS = """Parameters
+----------
+labels : ndarray of bool, shape (n_points,)
+    True labels, at least one occupied.
+probs : ndarray of float64, shape (n_points,)
+    Probabilities in [0, 1], no NaN."""
 
+
+@fill_doc(checked_params=_CHECKED_PARAMS)
 def tpr_fdr_points(labels: NDArray[np.bool_], probs: NDArray[np.float64],
                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Counts at every distinct threshold, highest first, after (0, 0).
 
-    Parameters
-    ----------
-    labels : ndarray of bool, shape (n_points,)
-        True labels, at least one occupied.
-    probs : ndarray of float64, shape (n_points,)
-        Probabilities in [0, 1], no NaN.
+    {checked_params}
 
     Returns
     -------
@@ -59,15 +65,11 @@ def tpr_fdr_area(fdr: ArrayLike, tpr: ArrayLike) -> float:
     return float(np.trapezoid(np.r_[0.0, tpr, 1.0], np.r_[0.0, fdr, 1.0]))
 
 
+@fill_doc(checked_params=_CHECKED_PARAMS)
 def tpr_fdr_auc_unchecked(labels: NDArray[np.bool_], probs: NDArray[np.float64]) -> float:
     """:func:`~occgp.evaluation.metrics.tpr_fdr_auc` of checked arrays.
 
-    Parameters
-    ----------
-    labels : ndarray of bool, shape (n_points,)
-        True labels, at least one occupied.
-    probs : ndarray of float64, shape (n_points,)
-        Probabilities in [0, 1], no NaN.
+    {checked_params}
 
     Returns
     -------

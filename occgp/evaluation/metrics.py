@@ -15,10 +15,13 @@ of Miao et al. is computed here with the same conventions.
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sklearn import metrics as _skm
 
+from .._docfill import fill_doc
 from .._validation import as_numeric, check_real
 from ._tpr_fdr import tpr_fdr_auc_unchecked, tpr_fdr_points
 
@@ -31,6 +34,25 @@ __all__ = [
     "tpr_fdr_auc",
     "score_all",
 ]
+
+#: The docstring sections every score shares (see :func:`occgp._docfill.fill_doc`).
+_SECTIONS = {
+    "y_params": """Parameters
+----------
+y_true : array-like of shape (n_points,)
+    True labels: ``True``/``1`` occupied, ``False``/``0`` free.
+y_prob : array-like of shape (n_points,)
+    Predicted occupancy probabilities in [0, 1]; NaN = unknown.""",
+    "type_error": """TypeError
+    If an array is not numeric or boolean.""",
+}
+
+
+def _invalid_input(more):
+    """The Raises section of a score that checks its input as :func:`mse` does, and `more`."""
+    text = textwrap.fill(f"If the input is invalid (see :func:`mse`){more}.", 76)
+    return "\n".join(["Raises", "------", "ValueError", textwrap.indent(text, "    "),
+                      _SECTIONS["type_error"]])
 
 
 def _check_labels_probs(y_true, y_prob):
@@ -90,6 +112,7 @@ def _require_both_classes(labels, what):
         )
 
 
+@fill_doc(**_SECTIONS)
 def roc_curve(
     y_true: ArrayLike, y_prob: ArrayLike, *, drop_intermediate: bool = True
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -98,12 +121,7 @@ def roc_curve(
     A point is predicted occupied when its probability is at least the
     threshold. Unknown points (NaN) count as p = 0.5.
 
-    Parameters
-    ----------
-    y_true : array-like of shape (n_points,)
-        True labels: ``True``/``1`` occupied, ``False``/``0`` free.
-    y_prob : array-like of shape (n_points,)
-        Predicted occupancy probabilities in [0, 1]; NaN = unknown.
+    {y_params}
     drop_intermediate : bool, default=True
         Drop thresholds that lie on straight segments of the curve (as in
         scikit-learn); the area is unchanged.
@@ -124,8 +142,7 @@ def roc_curve(
         If the arrays are not 1-D of equal non-zero length, if `y_true` holds
         other values than 0/1, if `y_prob` leaves [0, 1], or if `y_true` holds
         only one class.
-    TypeError
-        If an array is not numeric or boolean.
+    {type_error}
 
     See Also
     --------
@@ -145,6 +162,7 @@ def roc_curve(
     return fpr, tpr, thresholds
 
 
+@fill_doc(**_SECTIONS, raises=_invalid_input(" or `y_true` holds only one class"))
 def roc_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     """Area under the ROC curve of occupancy predictions.
 
@@ -152,25 +170,14 @@ def roc_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     probability than a random free one, ties counting one half (exact,
     tie-aware). Unknown points (NaN) count as p = 0.5.
 
-    Parameters
-    ----------
-    y_true : array-like of shape (n_points,)
-        True labels: ``True``/``1`` occupied, ``False``/``0`` free.
-    y_prob : array-like of shape (n_points,)
-        Predicted occupancy probabilities in [0, 1]; NaN = unknown.
+    {y_params}
 
     Returns
     -------
     auc : float
         1 for a perfect ranking, 0.5 for a random one, 0 for an inverted one.
 
-    Raises
-    ------
-    ValueError
-        If the input is invalid (see :func:`roc_curve`) or `y_true` holds only
-        one class.
-    TypeError
-        If an array is not numeric or boolean.
+    {raises}
 
     See Also
     --------
@@ -188,17 +195,13 @@ def roc_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     return float(_skm.roc_auc_score(labels, probs))
 
 
+@fill_doc(**_SECTIONS)
 def mse(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     """Mean squared error of occupancy probabilities against 0/1 labels.
 
     Unknown points (NaN) count as p = 0.5, so each costs 0.25.
 
-    Parameters
-    ----------
-    y_true : array-like of shape (n_points,)
-        True labels: ``True``/``1`` occupied, ``False``/``0`` free.
-    y_prob : array-like of shape (n_points,)
-        Predicted occupancy probabilities in [0, 1]; NaN = unknown.
+    {y_params}
 
     Returns
     -------
@@ -210,8 +213,7 @@ def mse(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     ValueError
         If the arrays are not 1-D of equal non-zero length, if `y_true` holds
         other values than 0/1, or if `y_prob` leaves [0, 1].
-    TypeError
-        If an array is not numeric or boolean.
+    {type_error}
 
     Examples
     --------
@@ -222,6 +224,7 @@ def mse(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     return float(np.mean((probs - labels) ** 2))
 
 
+@fill_doc(**_SECTIONS, raises=_invalid_input(" or `threshold` is not in [0, 1]"))
 def accuracy(
     y_true: ArrayLike, y_prob: ArrayLike, threshold: float = 0.5
 ) -> tuple[float, float]:
@@ -233,12 +236,7 @@ def accuracy(
     threshold 0.5 an unknown point (NaN, counted as p = 0.5) is therefore
     wrong whatever its label, as the evaluation protocol requires.
 
-    Parameters
-    ----------
-    y_true : array-like of shape (n_points,)
-        True labels: ``True``/``1`` occupied, ``False``/``0`` free.
-    y_prob : array-like of shape (n_points,)
-        Predicted occupancy probabilities in [0, 1]; NaN = unknown.
+    {y_params}
     threshold : float, default=0.5
         Occupancy threshold in [0, 1].
 
@@ -251,13 +249,7 @@ def accuracy(
         Fraction of free points with ``p < threshold``; NaN if there are no
         free points.
 
-    Raises
-    ------
-    ValueError
-        If the input is invalid (see :func:`mse`) or `threshold` is not in
-        [0, 1].
-    TypeError
-        If an array is not numeric or boolean.
+    {raises}
 
     Examples
     --------
@@ -284,6 +276,8 @@ def _accuracy(labels, probs, threshold):
     return acc_occ, acc_free
 
 
+@fill_doc(**_SECTIONS,
+          raises=_invalid_input(" or `y_true` holds no occupied point (TPR undefined)"))
 def tpr_fdr_curve(
     y_true: ArrayLike, y_prob: ArrayLike
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -295,12 +289,7 @@ def tpr_fdr_curve(
     probability is a threshold, highest first, so ties move together (the
     curve is tie-aware). Unknown points (NaN) count as p = 0.5.
 
-    Parameters
-    ----------
-    y_true : array-like of shape (n_points,)
-        True labels: ``True``/``1`` occupied, ``False``/``0`` free.
-    y_prob : array-like of shape (n_points,)
-        Predicted occupancy probabilities in [0, 1]; NaN = unknown.
+    {y_params}
 
     Returns
     -------
@@ -311,13 +300,7 @@ def tpr_fdr_curve(
     thresholds : ndarray of shape (n_thresholds + 1,)
         Decreasing thresholds, the first ``inf``.
 
-    Raises
-    ------
-    ValueError
-        If the input is invalid (see :func:`mse`) or `y_true` holds no
-        occupied point (TPR undefined).
-    TypeError
-        If an array is not numeric or boolean.
+    {raises}
 
     See Also
     --------
@@ -358,6 +341,7 @@ def _require_positive(labels):
         )
 
 
+@fill_doc(**_SECTIONS, raises=_invalid_input(" or `y_true` holds no occupied point"))
 def tpr_fdr_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     """Area under the TPR–FDR curve (higher is better).
 
@@ -368,12 +352,7 @@ def tpr_fdr_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     flat segment to (1, 1): beyond the all-occupied prediction TPR stays 1.
     The area is the trapezoid rule along this path on FDR in [0, 1].
 
-    Parameters
-    ----------
-    y_true : array-like of shape (n_points,)
-        True labels: ``True``/``1`` occupied, ``False``/``0`` free.
-    y_prob : array-like of shape (n_points,)
-        Predicted occupancy probabilities in [0, 1]; NaN = unknown.
+    {y_params}
 
     Returns
     -------
@@ -381,13 +360,7 @@ def tpr_fdr_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
         1 for a perfect ranking; about the fraction of occupied points for a
         random one.
 
-    Raises
-    ------
-    ValueError
-        If the input is invalid (see :func:`mse`) or `y_true` holds no
-        occupied point.
-    TypeError
-        If an array is not numeric or boolean.
+    {raises}
 
     See Also
     --------
@@ -418,6 +391,8 @@ def tpr_fdr_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     return tpr_fdr_auc_unchecked(labels, probs)
 
 
+@fill_doc(**_SECTIONS, raises=_invalid_input(
+    ", `y_true` holds only one class, or `threshold` is not in [0, 1]"))
 def score_all(
     y_true: ArrayLike, y_prob: ArrayLike, threshold: float = 0.5
 ) -> dict[str, float]:
@@ -426,12 +401,7 @@ def score_all(
     Validates the input once, counts NaN as p = 0.5, and returns ROC AUC,
     MSE, both accuracies at `threshold` and the TPR–FDR AUC.
 
-    Parameters
-    ----------
-    y_true : array-like of shape (n_points,)
-        True labels: ``True``/``1`` occupied, ``False``/``0`` free.
-    y_prob : array-like of shape (n_points,)
-        Predicted occupancy probabilities in [0, 1]; NaN = unknown.
+    {y_params}
     threshold : float, default=0.5
         Occupancy threshold of the accuracies (strict, see :func:`accuracy`).
 
@@ -442,13 +412,7 @@ def score_all(
         ``tpr_fdr_auc`` (floats), ``n_test`` (int, number of test points) and
         ``unknown_fraction`` (float, fraction of NaN predictions).
 
-    Raises
-    ------
-    ValueError
-        If the input is invalid (see :func:`mse`), `y_true` holds only one
-        class, or `threshold` is not in [0, 1].
-    TypeError
-        If an array is not numeric or boolean.
+    {raises}
 
     Examples
     --------

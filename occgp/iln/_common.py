@@ -13,9 +13,11 @@ from collections.abc import Mapping
 import numpy as np
 
 from .._validation import as_numeric, check_int
+from ._range import LidarModel
 
 __all__ = ["MAX_OUTPUT_PIXELS", "MODEL_NAMES", "torch_models", "pretrained_model", "resolve",
-           "resolve_models", "out_model", "predict_image", "as_size", "as_pose"]
+           "resolve_models", "out_model", "predict_image", "as_size", "as_size_list", "as_lidar",
+           "as_pose", "check_rows", "column_line", "DOC_SECTIONS"]
 
 #: Largest up-sampled image, pixels (e.g. 512 x 8192): bounds the memory of one call.
 MAX_OUTPUT_PIXELS = 2 ** 22
@@ -23,6 +25,26 @@ MAX_OUTPUT_PIXELS = 2 ** 22
 MODEL_NAMES = ("bilinear", "inverse-bilinear", "pretrained")
 #: Largest deviation of a pose's rotation from orthonormal (``R R^T - I``).
 _ORTHO_TOL = 1e-6
+#: Docstring sections of the front ends (fragments for :func:`occgp._docfill.fill_doc`):
+#: ``model_errors``, the errors of building a model by name, and ``table_sections``, the
+#: Returns and Raises sections of the table formatters.
+DOC_SECTIONS = {
+    "model_errors": """OSError
+    If ``"pretrained"`` is asked and no weights ship with this
+    installation.
+ImportError
+    If PyTorch is not installed.""",
+    "table_sections": """Returns
+-------
+table : str
+
+Raises
+------
+ValueError
+    If a row lacks a field.
+TypeError
+    If a row is not a mapping.""",
+}
 
 
 def torch_models(name):
@@ -139,6 +161,53 @@ def as_size(size, name):
     if rows < 1 or cols < 1:
         raise ValueError(f"{name} must be positive (rows, cols), got ({rows}, {cols})")
     return rows, cols
+
+
+def as_size_list(value, name, allow_empty=False):
+    """A list of checked ``(rows, cols)`` from one size or a sequence of them, none repeated."""
+    if isinstance(value, str) or (isinstance(value, tuple) and len(value) == 2 and all(
+            isinstance(s, (int, np.integer)) for s in value)):
+        value = [value]                           # one size
+    if not hasattr(value, "__iter__"):
+        raise TypeError(f"{name} must be a sequence of sizes, got {type(value).__name__}")
+    out = [as_size(s, f"{name}[{i}]") for i, s in enumerate(value)]
+    if not out and not allow_empty:
+        raise ValueError(f"{name} must hold at least one size")
+    if len(set(out)) != len(out):
+        raise ValueError(f"{name} must not repeat a size, got {['%dx%d' % s for s in out]}")
+    return out
+
+
+def as_lidar(lidar):
+    """`lidar`, a :class:`~occgp.iln.LidarModel`, or ``LidarModel.carla()`` for None."""
+    lidar = LidarModel.carla() if lidar is None else lidar
+    if not isinstance(lidar, LidarModel):
+        raise TypeError(f"lidar must be a LidarModel (occgp.iln), got {type(lidar).__name__}")
+    return lidar
+
+
+def check_rows(rows, fields):
+    """`rows` as a list of mappings that hold every key of `fields` (the table formatters)."""
+    records = []
+    for i, row in enumerate(rows):
+        if not isinstance(row, Mapping):
+            raise TypeError(f"rows[{i}] must be a dict, got {type(row).__name__}")
+        missing = [f for f in fields if f not in row]
+        if missing:
+            raise ValueError(f"rows[{i}] lacks {missing}")
+        records.append(row)
+    return records
+
+
+def column_line(header, cells):
+    """``(line, widths)``: `line` joins a row of strings into columns as wide as the `header`
+    and `cells` strings need, the first left-aligned and the others right-aligned."""
+    widths = [max([len(h)] + [len(c[j]) for c in cells]) for j, h in enumerate(header)]
+
+    def line(items):
+        return "  ".join(s.ljust(w) if j == 0 else s.rjust(w)
+                         for j, (s, w) in enumerate(zip(items, widths)))
+    return line, widths
 
 
 def as_pose(pose):

@@ -26,6 +26,7 @@ import numbers
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docfill import fill_doc, fill_text
 from .._validation import as_numeric, as_points, check_choice
 
 __all__ = [
@@ -62,6 +63,20 @@ def _side(value, name):
     return value
 
 
+#: Docstring sections of the methods that take an image size (see :func:`occgp._docfill.fill_doc`).
+_SIZE_SECTIONS = {
+    "size_params": """rows : int
+    Beams (image rows), 1 to 65536.
+cols : int
+    Image columns, 1 to 65536; ``rows * cols`` at most
+    ``MAX_PIXELS`` (2**24).""",
+    "size_errors": """TypeError
+    If `rows` or `cols` is not an int.
+ValueError
+    If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
+    exceeds ``MAX_PIXELS`` (2**24).""",
+}
+
 _PRESET_DOC = """{summary}
 
         Parameters
@@ -78,18 +93,14 @@ _PRESET_DOC = """{summary}
 
         Raises
         ------
-        TypeError
-            If `rows` or `cols` is not an int.
-        ValueError
-            If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
-            exceeds ``MAX_PIXELS`` (2**24).
+        {{size_errors}}
         """
 
 
 def _preset(summary: str, rows: int):
     """Give a preset constructor of :class:`LidarModel` its docstring."""
     def decorate(fn):
-        fn.__doc__ = _PRESET_DOC.format(summary=summary, rows=rows)
+        fn.__doc__ = fill_text(_PRESET_DOC.format(summary=summary, rows=rows), _SIZE_SECTIONS)
         return fn
     return decorate
 
@@ -184,16 +195,13 @@ class LidarModel:
     def hdl32e(cls, rows: int = 32, cols: int = 1024) -> "LidarModel":
         return cls(rows, cols, (-30.67, 10.67), 360.0, 100.0)
 
+    @fill_doc(**_SIZE_SECTIONS)
     def with_size(self, rows: int, cols: int) -> "LidarModel":
         """The same fields of view and range at another image size.
 
         Parameters
         ----------
-        rows : int
-            Beams (image rows), 1 to 65536.
-        cols : int
-            Image columns, 1 to 65536; ``rows * cols`` at most
-            ``MAX_PIXELS`` (2**24).
+        {size_params}
 
         Returns
         -------
@@ -202,11 +210,7 @@ class LidarModel:
 
         Raises
         ------
-        TypeError
-            If `rows` or `cols` is not an int.
-        ValueError
-            If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
-            exceeds ``MAX_PIXELS`` (2**24).
+        {size_errors}
         """
         return dataclasses.replace(self, rows=rows, cols=cols)
 
@@ -231,6 +235,7 @@ class LidarModel:
                           sort_keys=True)
 
     @classmethod
+    @fill_doc(**_SIZE_SECTIONS)
     def from_json(cls, text: str, rows: int, cols: int) -> "LidarModel":
         """The model of :meth:`to_json`'s `text` at size ``(rows, cols)``.
 
@@ -240,11 +245,7 @@ class LidarModel:
             JSON of an object with exactly the keys ``vertical_fov`` (a list
             of two numbers), ``horizontal_fov`` and ``max_range``, as
             :meth:`to_json` writes.
-        rows : int
-            Beams (image rows), 1 to 65536.
-        cols : int
-            Image columns, 1 to 65536; ``rows * cols`` at most
-            ``MAX_PIXELS`` (2**24).
+        {size_params}
 
         Returns
         -------

@@ -38,6 +38,7 @@ import zlib
 import numpy as np
 from numpy.typing import NDArray
 
+from .._npz_io import read_npy_header
 from .._validation import as_path, check_bool, check_int, check_n_jobs
 from ..datasets._geometry import Box, Ellipsoid, Frustum, first_hit
 from ._common import as_pose
@@ -517,13 +518,7 @@ def _read_member(zf, name, path, check):
     """Read one ``.npy`` member of a shard, checking its header with `check` first."""
     try:
         with zf.open(name + ".npy") as fh:
-            version = np.lib.format.read_magic(fh)
-            if version == (1, 0):
-                shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
-            elif version == (2, 0):
-                shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
-            else:
-                raise ValueError(f"unsupported .npy version {version}")
+            shape, fortran, dtype = read_npy_header(fh)
             check(shape, dtype)
             count = int(np.prod(shape, dtype=np.int64))
             if count * dtype.itemsize > zf.getinfo(name + ".npy").file_size:

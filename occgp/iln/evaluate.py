@@ -16,8 +16,12 @@ from typing import Any
 
 import numpy as np
 
+from .._docfill import fill_doc
 from .._validation import as_numeric, check_real
-from ._common import as_size, out_model, predict_image, resolve_models
+from ._common import (
+    DOC_SECTIONS, as_lidar, as_size, as_size_list, check_rows, column_line, out_model,
+    predict_image, resolve_models,
+)
 from ._range import LidarModel, range_image_to_points
 from .metrics import range_mae, voxel_scores
 
@@ -65,6 +69,7 @@ def _images(test_images, sizes):
     return out
 
 
+@fill_doc(**DOC_SECTIONS)
 def evaluate(models: Any, test_images: Mapping[Any, Any], *,
              in_size: Any = (16, 1024), out_sizes: Any = DEFAULT_OUT_SIZES,
              lidar: LidarModel | None = None, voxel_size: float = 0.1,
@@ -128,11 +133,7 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
         model, or `voxel_size` is not positive.
     TypeError
         If an argument has a wrong type.
-    OSError
-        If ``"pretrained"`` is asked and no weights ship with this
-        installation.
-    ImportError
-        If PyTorch is not installed.
+    {model_errors}
 
     Examples
     --------
@@ -147,22 +148,9 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
     from tqdm.auto import tqdm
 
     in_size = as_size(in_size, "in_size")
-    if isinstance(out_sizes, str) or (isinstance(out_sizes, tuple) and len(out_sizes) == 2
-                                      and all(isinstance(s, (int, np.integer))
-                                              for s in out_sizes)):
-        out_sizes = [out_sizes]                   # one size
-    if not hasattr(out_sizes, "__iter__"):
-        raise TypeError(f"out_sizes must be a sequence of sizes, got {type(out_sizes).__name__}")
-    out_sizes = [as_size(s, f"out_sizes[{i}]") for i, s in enumerate(out_sizes)]
-    if not out_sizes:
-        raise ValueError("out_sizes must hold at least one size")
-    if len(set(out_sizes)) != len(out_sizes):
-        raise ValueError(f"out_sizes must not repeat a size, got "
-                         f"{['%dx%d' % s for s in out_sizes]}")
+    out_sizes = as_size_list(out_sizes, "out_sizes")
     voxel_size = check_real(voxel_size, "voxel_size", low=0.0)
-    lidar = LidarModel.carla() if lidar is None else lidar
-    if not isinstance(lidar, LidarModel):
-        raise TypeError(f"lidar must be a LidarModel (occgp.iln), got {type(lidar).__name__}")
+    lidar = as_lidar(lidar)
     images = _images(test_images, [in_size] + [s for s in out_sizes if s != in_size])
     in_lidar = lidar.with_size(*in_size)
     for size, arr in images.items():
@@ -206,6 +194,7 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
     return rows
 
 
+@fill_doc(**DOC_SECTIONS)
 def format_table(rows: Any, *, floatfmt: str = ".3f", with_time: bool = False) -> str:
     """Rows of :func:`evaluate` in Table 4.1's layout.
 
@@ -222,16 +211,7 @@ def format_table(rows: Any, *, floatfmt: str = ".3f", with_time: bool = False) -
     with_time : bool, default=False
         Add a column of ``seconds_per_image``.
 
-    Returns
-    -------
-    table : str
-
-    Raises
-    ------
-    ValueError
-        If a row lacks a field.
-    TypeError
-        If a row is not a mapping.
+    {table_sections}
 
     Examples
     --------
@@ -242,24 +222,12 @@ def format_table(rows: Any, *, floatfmt: str = ".3f", with_time: bool = False) -
     Bilinear  2.372  0.202      0.322   0.328  0.325
     """
     fields = ("method", "resolution") + METRICS + (("seconds_per_image",) if with_time else ())
-    records = []
-    for i, row in enumerate(rows):
-        if not isinstance(row, Mapping):
-            raise TypeError(f"rows[{i}] must be a dict, got {type(row).__name__}")
-        missing = [f for f in fields if f not in row]
-        if missing:
-            raise ValueError(f"rows[{i}] lacks {missing}")
-        records.append(row)
+    records = check_rows(rows, fields)
     columns = METRICS + (("seconds_per_image",) if with_time else ())
     header = ["Method"] + [_LABELS.get(c, "time [s]") for c in columns]
     cells = [[str(r["method"])] + [format(float(r[c]), floatfmt) for c in columns]
              for r in records]
-    widths = [max([len(h)] + [len(c[j]) for c in cells]) for j, h in enumerate(header)]
-
-    def line(items):
-        return "  ".join(s.ljust(w) if j == 0 else s.rjust(w)
-                         for j, (s, w) in enumerate(zip(items, widths)))
-
+    line, _ = column_line(header, cells)
     lines = [line(header)]
     current = None
     for rec, cell in zip(records, cells):

@@ -18,8 +18,12 @@ from typing import Any
 
 import numpy as np
 
+from .._docfill import fill_doc
 from .._validation import check_bool, check_int, check_real
-from ._common import as_pose, as_size, out_model, predict_image, resolve_models
+from ._common import (
+    DOC_SECTIONS, as_lidar, as_pose, as_size, as_size_list, check_rows, column_line, out_model,
+    predict_image, resolve_models,
+)
 from ._range import LidarModel, range_image_to_points
 
 __all__ = ["mapping_experiment", "format_mapping_table", "DEFAULT_SIZES"]
@@ -95,6 +99,7 @@ def _world(points, pose):
     return points @ pose[:3, :3].T + pose[:3, 3]
 
 
+@fill_doc(**DOC_SECTIONS)
 def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = None,
                        n_scans: int = 10, in_size: Any = (16, 1024),
                        sizes: Any = DEFAULT_SIZES, truth_sizes: Any = ((64, 1024),),
@@ -183,11 +188,7 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
         sampled test cells in view hold only one class.
     TypeError
         If an argument has a wrong type or `scene` is not a Scene.
-    OSError
-        If ``"pretrained"`` is asked and no weights ship with this
-        installation.
-    ImportError
-        If PyTorch is not installed.
+    {model_errors}
 
     Examples
     --------
@@ -206,22 +207,11 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
 
     models = {"ILN": "pretrained"} if models is None else models
     n_scans = check_int(n_scans, "n_scans", low=1, high=1000)
-    lidar = LidarModel.carla() if lidar is None else lidar
-    if not isinstance(lidar, LidarModel):
-        raise TypeError(f"lidar must be a LidarModel (occgp.iln), got {type(lidar).__name__}")
+    lidar = as_lidar(lidar)
     in_size = as_size(in_size, "in_size")
 
     def size_list(value, name, allow_empty):
-        if isinstance(value, str) or (isinstance(value, tuple) and len(value) == 2 and all(
-                isinstance(s, (int, np.integer)) for s in value)):
-            value = [value]
-        if not hasattr(value, "__iter__"):
-            raise TypeError(f"{name} must be a sequence of sizes, got {type(value).__name__}")
-        out = [as_size(s, f"{name}[{i}]") for i, s in enumerate(value)]
-        if not out and not allow_empty:
-            raise ValueError(f"{name} must hold at least one size")
-        if len(set(out)) != len(out):
-            raise ValueError(f"{name} must not repeat a size, got {['%dx%d' % s for s in out]}")
+        out = as_size_list(value, name, allow_empty)
         for s in out:
             out_model(lidar, *s)               # checks the pixel count
         return out
@@ -291,6 +281,7 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
     return rows
 
 
+@fill_doc(**DOC_SECTIONS)
 def format_mapping_table(rows: Any) -> str:
     """Rows of :func:`mapping_experiment` as a table (AUC, known cells, time per scan).
 
@@ -298,16 +289,7 @@ def format_mapping_table(rows: Any) -> str:
     ----------
     rows : iterable of dict
 
-    Returns
-    -------
-    table : str
-
-    Raises
-    ------
-    ValueError
-        If a row lacks a field.
-    TypeError
-        If a row is not a mapping.
+    {table_sections}
 
     Examples
     --------
@@ -318,23 +300,9 @@ def format_mapping_table(rows: Any) -> str:
     ---------------  -----------  -----  -----  ------------------  ---------------  --------------
     16x1024 (input)        11800  0.800  50.0%               0.000            0.100           0.100
     """
-    from collections.abc import Mapping
-
-    records = []
-    for i, row in enumerate(rows):
-        if not isinstance(row, Mapping):
-            raise TypeError(f"rows[{i}] must be a dict, got {type(row).__name__}")
-        missing = [key for key, _, _ in _COLUMNS if key not in row]
-        if missing:
-            raise ValueError(f"rows[{i}] lacks {missing}")
-        records.append(row)
+    records = check_rows(rows, [key for key, _, _ in _COLUMNS])
     header = [label for _, label, _ in _COLUMNS]
     cells = [[format(r[key], fmt) for key, _, fmt in _COLUMNS] for r in records]
-    widths = [max([len(h)] + [len(c[j]) for c in cells]) for j, h in enumerate(header)]
-
-    def line(items):
-        return "  ".join(s.ljust(w) if j == 0 else s.rjust(w)
-                         for j, (s, w) in enumerate(zip(items, widths)))
-
+    line, widths = column_line(header, cells)
     return "\n".join([line(header), "  ".join("-" * w for w in widths)]
                      + [line(c) for c in cells])

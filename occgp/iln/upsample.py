@@ -15,13 +15,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docfill import fill_doc
 from .._validation import as_numeric, check_bool
-from ._common import MAX_OUTPUT_PIXELS, MODEL_NAMES, out_model, predict_image, resolve
+from ._common import (
+    DOC_SECTIONS, MAX_OUTPUT_PIXELS, MODEL_NAMES, out_model, predict_image, resolve,
+)
 from ._range import LidarModel, points_to_range_image, range_image_to_points
 
 __all__ = ["upsample", "upsample_range_image", "resolve_model", "MAX_OUTPUT_PIXELS",
            "MODEL_NAMES"]
 
+@fill_doc(**DOC_SECTIONS)
 def resolve_model(model: Any, lidar: LidarModel | None = None, device: Any = None):
     """The range-image model that a name or a model stands for.
 
@@ -49,11 +53,7 @@ def resolve_model(model: Any, lidar: LidarModel | None = None, device: Any = Non
         If `model` is an unknown name.
     TypeError
         If `model` is neither a str nor an occgp.iln model.
-    OSError
-        If ``"pretrained"`` is asked and no weights ship with this
-        installation.
-    ImportError
-        If PyTorch is not installed.
+    {model_errors}
     """
     return resolve(model, lidar, device, "resolve_model")
 
@@ -91,6 +91,7 @@ def _input_image(data, lidar):
     return image.astype(np.float32), lidar
 
 
+@fill_doc(**DOC_SECTIONS)
 def upsample_range_image(range_image: ArrayLike, *, rows: int = 64, cols: int = 1024,
                          model: Any = "bilinear", lidar: LidarModel | None = None,
                          device: Any = None) -> NDArray[np.float32]:
@@ -127,10 +128,7 @@ def upsample_range_image(range_image: ArrayLike, *, rows: int = 64, cols: int = 
         name.
     TypeError
         If an argument has a wrong type.
-    OSError
-        If ``model="pretrained"`` and no weights ship with this installation.
-    ImportError
-        If PyTorch is not installed.
+    {model_errors}
 
     Examples
     --------
@@ -153,6 +151,7 @@ def upsample_range_image(range_image: ArrayLike, *, rows: int = 64, cols: int = 
     return predict_image(net, image, lidar, out_lidar)
 
 
+@fill_doc(**DOC_SECTIONS)
 def upsample(points_or_range_image: ArrayLike, *, rows: int = 64, cols: int = 1024,
              model: Any = "bilinear", lidar: LidarModel | None = None, device: Any = None,
              return_image: bool = False):
@@ -202,10 +201,7 @@ def upsample(points_or_range_image: ArrayLike, *, rows: int = 64, cols: int = 10
         an unknown name.
     TypeError
         If an argument has a wrong type.
-    OSError
-        If ``model="pretrained"`` and no weights ship with this installation.
-    ImportError
-        If PyTorch is not installed.
+    {model_errors}
 
     Examples
     --------

@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from ..._docfill import fill_doc
 from ..._validation import check_bool, check_int, check_real
 
 __all__ = ["MAX_RANGE", "DEFAULT_CHUNK", "as_tensor", "check_image", "check_queries",
@@ -132,30 +133,47 @@ def neighbourhood(images: torch.Tensor, queries: torch.Tensor, wrap: bool):
     return idx, rel, wb, r
 
 
-#: The Parameters section of every model's ``query`` (filled in by :func:`query_doc`).
-_QUERY_PARAMS = """        Parameters
-        ----------
-        features : {features}
-        images : torch.Tensor of shape (B, H, W)
-            Range images divided by `max_range` (0 for no return).
-        queries : torch.Tensor of shape (B, N, 2)
-            ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
-            ``0 <= v <= H``, ``0 <= u <= W``.
-        wrap : bool
-            Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
-            neighbours are always clamped.
-"""
+#: The input note, Parameters and first Returns lines of every model's ``query`` (filled in
+#: by :func:`query_doc`).
+_QUERY_SECTIONS = """No input checks (:meth:`predict` and :meth:`weights` check theirs).
+
+Parameters
+----------
+features : {features}
+images : torch.Tensor of shape (B, H, W)
+    Range images divided by `max_range` (0 for no return).
+queries : torch.Tensor of shape (B, N, 2)
+    ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
+    ``0 <= v <= H``, ``0 <= u <= W``.
+wrap : bool
+    Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
+    neighbours are always clamped.
+
+Returns
+-------
+ranges : torch.Tensor of shape (B, N)
+    Normalised ranges (metres / `max_range`), 0 for no return.
+weights : torch.Tensor of shape (B, N, 4)"""
 _ENCODED_FEATURES = ("torch.Tensor of shape (B, C, H, W)\n"
-                     "            What :meth:`encode` returned for `images`.")
+                     "    What :meth:`encode` returned for `images`.")
+
+#: The image and query parameters of :meth:`RangeModel.predict` and :meth:`RangeModel.weights`.
+_IMAGE_PARAMS = """Parameters
+----------
+range_image : array-like or torch.Tensor of shape (rows, cols) or (batch, rows, cols)
+    Ranges in metres, 0 where there is no return. Finite, in [0, 1e6].
+queries : array-like or torch.Tensor of shape (n_queries, 2) or (batch, n_queries, 2)
+    ``(v, u)`` in the input image's pixel units (pixel centres at integer + 0.5), with
+    ``0 <= v <= rows`` and ``0 <= u <= cols``. Unbatched queries with a batch of images
+    are used for every image.
+wrap : bool, optional
+    Horizontal neighbours (and encoder padding) wrap around (360° sensor); default: the
+    model's `wrap`."""
 
 
 def query_doc(features: str = _ENCODED_FEATURES) -> Callable:
-    """Decorator: fill the shared Parameters section into a ``query`` docstring."""
-    def fill(method: Callable) -> Callable:
-        text = _QUERY_PARAMS.format(features=features)
-        method.__doc__ = method.__doc__.replace("{query_params}", text)
-        return method
-    return fill
+    """Decorator: fill the shared sections into a ``query`` docstring (``{query_sections}``)."""
+    return fill_doc(query_sections=_QUERY_SECTIONS.format(features=features))
 
 
 def renormalise(w: torch.Tensor) -> torch.Tensor:
@@ -275,20 +293,11 @@ class RangeModel(nn.Module):
             q = q[None].expand(bsz, -1, -1)
         return images, q, batched, was_numpy, out_device
 
+    @fill_doc(image_params=_IMAGE_PARAMS)
     def predict(self, range_image, queries, wrap: bool | None = None, chunk: int = DEFAULT_CHUNK):
         """Ranges at continuous queries of a range image.
 
-        Parameters
-        ----------
-        range_image : array-like or torch.Tensor of shape (rows, cols) or (batch, rows, cols)
-            Ranges in metres, 0 where there is no return. Finite, in [0, 1e6].
-        queries : array-like or torch.Tensor of shape (n_queries, 2) or (batch, n_queries, 2)
-            ``(v, u)`` in the input image's pixel units (pixel centres at integer + 0.5), with
-            ``0 <= v <= rows`` and ``0 <= u <= cols``. Unbatched queries with a batch of images
-            are used for every image.
-        wrap : bool, optional
-            Horizontal neighbours (and encoder padding) wrap around (360° sensor); default: the
-            model's `wrap`.
+        {image_params}
         chunk : int, default=65536
             Queries evaluated at once per image (memory bound; the result does not depend on it).
 
@@ -334,6 +343,7 @@ class RangeModel(nn.Module):
             return pred.cpu().numpy().astype(np.float32, copy=False)
         return pred.to(out_device)
 
+    @fill_doc(image_params=_IMAGE_PARAMS)
     def weights(self, range_image, queries, wrap: bool | None = None) -> np.ndarray:
         """Weights the model gives the 4 neighbours of each query.
 
@@ -341,17 +351,7 @@ class RangeModel(nn.Module):
         for :class:`LIIF`. Same input rules as :meth:`predict`, evaluated in one pass (no
         chunking).
 
-        Parameters
-        ----------
-        range_image : array-like or torch.Tensor of shape (rows, cols) or (batch, rows, cols)
-            Ranges in metres, 0 where there is no return. Finite, in [0, 1e6].
-        queries : array-like or torch.Tensor of shape (n_queries, 2) or (batch, n_queries, 2)
-            ``(v, u)`` in the input image's pixel units (pixel centres at integer + 0.5), with
-            ``0 <= v <= rows`` and ``0 <= u <= cols``. Unbatched queries with a batch of images
-            are used for every image.
-        wrap : bool, optional
-            Horizontal neighbours (and encoder padding) wrap around (360° sensor); default: the
-            model's `wrap`.
+        {image_params}
 
         Returns
         -------

@@ -4,12 +4,23 @@ from __future__ import annotations
 
 import torch
 
+from ..._docfill import fill_doc
 from ._base import RangeModel, neighbourhood, query_doc, renormalise
 from ._registry import register
 
 __all__ = ["Bilinear", "InverseBilinear"]
 
+#: The Parameters section of both models.
+_PARAMS = """Parameters
+----------
+max_range : float, default=80.0
+    Normalising range in metres (no effect on the result).
+wrap : bool, default=True
+    Horizontal wrap-around (360° sensors)."""
+
+
 @register("bilinear")
+@fill_doc(params=_PARAMS)
 class Bilinear(RangeModel):
     """Bilinear interpolation of the 4 neighbouring pixels (no parameters).
 
@@ -17,12 +28,7 @@ class Bilinear(RangeModel):
     weights of the others renormalised; a query whose weight lies entirely on no-return pixels
     (all 4 lack a return, or it sits on a no-return pixel's centre line) returns 0.
 
-    Parameters
-    ----------
-    max_range : float, default=80.0
-        Normalising range in metres (no effect on the result).
-    wrap : bool, default=True
-        Horizontal wrap-around (360° sensors).
+    {params}
     """
 
     arg_names = ("max_range", "wrap")
@@ -35,18 +41,11 @@ class Bilinear(RangeModel):
     def _neighbour_weights(wb: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
         return renormalise(wb * (r > 0))
 
-    @query_doc(features="None\n            What :meth:`encode` returned (ignored).")
+    @query_doc(features="None\n    What :meth:`encode` returned (ignored).")
     def query(self, features, images, queries, wrap):
         """Interpolation at queries (see the class), no-return neighbours dropped.
 
-        No input checks (:meth:`predict` and :meth:`weights` check theirs).
-
-{query_params}
-        Returns
-        -------
-        ranges : torch.Tensor of shape (B, N)
-            Normalised ranges (metres / `max_range`), 0 for no return.
-        weights : torch.Tensor of shape (B, N, 4)
+        {query_sections}
             The interpolation weights of the neighbours (top, left), (top, right),
             (bottom, left), (bottom, right), renormalised over those with a return; 0 for
             no-return neighbours; all 0 when no bilinear weight lies on a return (the range
@@ -58,6 +57,7 @@ class Bilinear(RangeModel):
 
 
 @register("inverse-bilinear")
+@fill_doc(params=_PARAMS)
 class InverseBilinear(Bilinear):
     """Bilinear interpolation of the inverse ranges of the 4 neighbouring pixels (no parameters).
 
@@ -69,12 +69,7 @@ class InverseBilinear(Bilinear):
     ``b_t / r_t`` renormalised (``b_t`` the bilinear weights); no-return neighbours are dropped
     as in :class:`Bilinear`.
 
-    Parameters
-    ----------
-    max_range : float, default=80.0
-        Normalising range in metres (no effect on the result).
-    wrap : bool, default=True
-        Horizontal wrap-around (360° sensors).
+    {params}
     """
 
     @staticmethod

@@ -153,14 +153,7 @@ class ILN(EncodedModel):
     def query(self, features, images, queries, wrap):
         """Ranges and interpolation weights at queries: Σ w_t r_t over the 4 neighbours.
 
-        No input checks (:meth:`predict` and :meth:`weights` check theirs).
-
-{query_params}
-        Returns
-        -------
-        ranges : torch.Tensor of shape (B, N)
-            Normalised ranges (metres / `max_range`), 0 for no return.
-        weights : torch.Tensor of shape (B, N, 4)
+        {query_sections}
             Softmax weights of the neighbours (top, left), (top, right), (bottom, left),
             (bottom, right); 0 for no-return neighbours; all 0 when none has a return.
         """

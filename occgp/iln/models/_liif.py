@@ -78,14 +78,7 @@ class LIIF(EncodedModel):
     def query(self, features, images, queries, wrap):
         """Ranges at queries: the MLP's 4 per-neighbour predictions blended by area weights.
 
-        No input checks (:meth:`predict` and :meth:`weights` check theirs).
-
-{query_params}
-        Returns
-        -------
-        ranges : torch.Tensor of shape (B, N)
-            Normalised ranges (metres / `max_range`), 0 for no return.
-        weights : torch.Tensor of shape (B, N, 4)
+        {query_sections}
             Renormalised area (bilinear) weights of the neighbours (top, left), (top, right),
             (bottom, left), (bottom, right); 0 for no-return neighbours; all 0 when no weight
             is left (the range is then 0). The ranges are not clamped and may be below 0.
