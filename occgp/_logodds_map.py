@@ -32,6 +32,31 @@ _SENSOR_PARAMS = ("prob_hit", "prob_miss", "clamping_min", "clamping_max",
                   "occupancy_threshold")
 
 
+#: The sensor model of the log-odds maps (liboctomap's), as numpydoc parameters.
+SENSOR_MODEL = """\
+prob_hit : float, default=0.7
+    Probability that a cell is occupied given a ray ends in it; in (0.5, 1).
+prob_miss : float, default=0.4
+    Probability that a cell is occupied given a ray crosses it; in (0, 0.5).
+clamping_min : float, default=0.1192
+    Lower clamping bound (probability); in (0, 0.5).
+clamping_max : float, default=0.971
+    Upper clamping bound (probability); in (0.5, 1).
+occupancy_threshold : float, default=0.5
+    Cells at or above this probability count as occupied; in (0, 1)."""
+
+#: The attributes every octree shows.
+OCTREE_ATTRIBUTES = """\
+resolution : float
+    Edge length of the smallest cells.
+num_leaves : int
+    Number of leaves (known cells after pruning).
+num_nodes : int
+    Number of nodes, inner ones included.
+bounds : tuple of ndarray of shape (3,)
+    Minimum and maximum corner of the known space (NaN when empty)."""
+
+
 class Leaves(NamedTuple):
     """The leaves (cells) of a map, as arrays (one row per leaf)."""
 

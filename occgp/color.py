@@ -8,10 +8,10 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._docs import OCTREE_ATTRIBUTES, SENSOR_MODEL, fill_doc
+from ._docfill import fill_doc
 from . import _octomap_format as fmt
 from ._color import FUSE_AVERAGE, FUSE_MEAN, _ColorOcTree
-from ._logodds_map import OctreeFace
+from ._logodds_map import OCTREE_ATTRIBUTES, SENSOR_MODEL, OctreeFace
 from .maps import register
 from ._octree import KEYRAY_CELLS, _check_full_data
 from ._validation import as_path, check_bool, check_choice, check_resolution

@@ -8,10 +8,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._docs import SENSOR_MODEL, fill_doc
+from ._docfill import fill_doc
 from . import _npz_io
 from ._grid import _Grid
-from ._logodds_map import Leaves, LogOddsMap
+from ._logodds_map import SENSOR_MODEL, Leaves, LogOddsMap
 from .maps import register
 from ._validation import check_bool, check_n_jobs, n_threads
 

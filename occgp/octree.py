@@ -8,8 +8,8 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._docs import OCTREE_ATTRIBUTES, SENSOR_MODEL, fill_doc
-from ._logodds_map import MODES, Leaves
+from ._docfill import fill_doc
+from ._logodds_map import MODES, OCTREE_ATTRIBUTES, SENSOR_MODEL, Leaves
 from ._octree import KEYRAY_CELLS, _OcTree
 from ._octree_files import OctreeFiles
 from ._octree_queries import Nodes, OctreeQueries, pack_keys, unpack_keys
