@@ -149,34 +149,18 @@ class OccupancyOctree(OctreeFiles, OctreeQueries, _OcTree):
         method : {"auto", "plain", "culling", "superray", "superray+culling"}, \
 default="auto"
             How the rays are traversed; every method gives the same map, bit for
-            bit. ``"auto"`` is ``"superray+culling"`` (``"plain"`` with
+            bit (the user guide's "Update methods" tells how each works).
+            ``"auto"`` is ``"superray+culling"`` (``"plain"`` with
             `discretize`). ``"plain"`` traverses every ray in full (with
-            ``mode="scan"`` it is liboctomap's ``insertPointCloud`` itself;
-            otherwise occgp's traversal, which visits the cells
-            ``computeRayKeys`` visits, and one-pass tree update). ``"superray"``
-            groups the rays that end in a cell holding at least
-            `superray_threshold` end points into *super rays* [1]_: rays whose
-            crossings of the cell borders on the way (the mapping lines) give
-            the same keys traverse the same cells, so one of them is traversed
-            and counted for all. A ray joins a super ray only when its margins
-            to every border exceed the error bound of liboctomap's
-            single-precision traversal, which keeps the map identical; other
-            rays are traversed on their own. ``"culling"``
-            first grows the scan's *culling region* [1]_: the cells around the
-            sensor that are fully free (at the lower clamp), hold no end point
-            of the scan, and are reached from the sensor through such cells
-            only. A ray's cells in the region form a prefix of its traversal
-            and their updates would change nothing, so they are skipped: each
-            ray is walked back from its end until it enters the region (when
-            the walk can be certified to give liboctomap's cells; forward
-            otherwise). It pays off once the map has saturated free space, e.g.
-            along a trajectory. ``"superray+culling"`` does both, and adapts:
-            after a scan whose grouping took longer than the traversal it saved
-            (as measured in that scan), the next :attr:`SUPERRAY_BACKOFF` scans
-            use the culling region alone, twice as many after each further such
-            scan in a row (the map is the same either way). In
-            every super-ray method, cells whose rays the mapping lines split
-            into more classes than they have rays are not grouped.
+            ``mode="scan"``, liboctomap's ``insertPointCloud`` itself).
+            ``"superray"`` traverses once for all the rays of a *super ray* [1]_
+            (rays ending in a cell with at least `superray_threshold` end
+            points that provably cross the same cells). ``"culling"`` skips
+            each ray's cells inside the scan's *culling region* [1]_ (fully
+            free cells around the sensor, whose updates would change nothing).
+            ``"superray+culling"`` does both, and pauses super rays for
+            :attr:`SUPERRAY_BACKOFF` scans (doubling in a row) after a scan
+            whose grouping cost more than it saved.
         superray_threshold : int, default=20
             With the super-ray methods, the fewest end points a cell must hold
             for its rays to be grouped; at least 1.
@@ -194,18 +178,14 @@ default="auto"
             Both corners must lie in the key range.
         n_jobs : int or None, default=None
             Threads that walk the scan's rays (None: 1, -1: every core; at
-            most the cores, and about one per 64 rays). Each thread counts its
-            share of the rays on its own; the counts are merged (integer sums)
-            before the one tree update, so the map and :attr:`last_insert_`'s
-            counts are the same for every `n_jobs`. It applies to occgp's
-            traversal (every `method` but ``"plain"`` with ``mode="scan"``, and
-            that one too where it falls back to occgp's traversal: change
-            tracking on, or rays too long for liboctomap's key buffer);
-            liboctomap's own ``insertPointCloud`` runs on one thread. Each
-            thread's dense counts take 4 bytes per cell of the scan's key box,
-            within 2^24 cells for all threads together: a scan whose box holds
-            more than 2^24 / n cells runs on fewer threads, and one whose box
-            holds more than 2^24 cells counts in hash tables (on every thread).
+            most the cores, and about one per 64 rays). The threads' counts
+            are merged (integer sums) before the one tree update, so the map
+            and :attr:`last_insert_`'s counts are the same for every `n_jobs`.
+            liboctomap's own ``insertPointCloud`` (``method="plain"``,
+            ``mode="scan"``) runs on one thread. Each thread counts densely
+            in 4 bytes per cell of the scan's key box, within 2^24 cells for
+            all threads together; larger boxes run on fewer threads, or count
+            in hash tables.
 
         Returns
         -------
