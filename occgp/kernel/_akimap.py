@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _npz_io
+from .._docs import fill_doc
 from .._kernel import _akimap_bandwidths
 from .._validation import as_point, as_points, check_real, n_threads
 from ..maps import register
@@ -283,22 +284,15 @@ class AKIMap(KernelMapBase):
         """The bandwidth floor in use, in metres (see `bandwidth_floor`)."""
         return self._validated_params().floor
 
+    @fill_doc()
     def training_data(self, points: ArrayLike,
                       origin: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The samples and labels (1 occupied, 0 free) an update would use, drawn from
         the map's random generator (so this advances it).
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            End points of the beams in the world frame, in metres.
-        origin : array-like of shape (3,)
-            Sensor position, in metres.
+        {scan_parameters}
 
-        Returns
-        -------
-        samples : ndarray of shape (n_samples, 3)
-        labels : ndarray of shape (n_samples,)
+        {training_returns}
 
         Raises
         ------

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docs import fill_doc
 from .._validation import check_real
 from ..maps import register
 from ._kernel_map import KernelMapBase
@@ -162,23 +163,16 @@ class BGKMap(KernelMapBase):
         return f"BGKMap(resolution={self.resolution!r}, ell={self.ell!r}, " \
                f"num_cells={self.num_cells})"
 
+    @fill_doc()
     def training_data(self, points: ArrayLike,
                       origin: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The samples and labels (1 occupied, 0 free) that :meth:`update` uses.
 
         Nothing in the map changes.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            End points of the beams in the world frame, in metres.
-        origin : array-like of shape (3,)
-            Sensor position, in metres.
+        {scan_parameters}
 
-        Returns
-        -------
-        samples : ndarray of shape (n_samples, 3)
-        labels : ndarray of shape (n_samples,)
+        {training_returns}
 
         Raises
         ------

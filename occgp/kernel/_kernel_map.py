@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docs import fill_doc
 from .._kernel import _KernelCells
 from .._validation import (as_point, as_points, check_bool, check_n_jobs, check_probability,
                            check_real, n_threads)
@@ -25,6 +26,13 @@ from ..octree import OccupancyOctree
 from ._kernel_io import KernelMapFiles
 from ._kernel_samples import MAX_VAL, MAX_WEIGHT, check_max_cells, support_cells
 from ._kernel_utils import KernelCells
+
+#: The Parameters section of the queries (see :func:`occgp._docs.fill_doc`).
+_QUERY_POINTS = """\
+Parameters
+----------
+points : array-like of shape (n_points, 3)
+    Query points, in metres."""
 
 
 class KernelMapBase(KernelMapFiles, _KernelCells):
@@ -91,6 +99,7 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         """
         return {name: getattr(self, name) for name in self._param_names()}
 
+    @fill_doc()
     def set_params(self, **params: Any):
         """Change parameters (scikit-learn's convention).
 
@@ -104,10 +113,7 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         **params
             Constructor parameters, by name.
 
-        Returns
-        -------
-        self
-            The map.
+        {map_returns}
 
         Raises
         ------
@@ -222,21 +228,15 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
             self._set_rng_state(state)
             raise
 
+    @fill_doc()
     def update(self, points: ArrayLike, origin: ArrayLike):
         """Add one scan's evidence; return self.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            End points of the beams in the world frame, in metres. An empty scan
-            changes nothing.
-        origin : array-like of shape (3,)
-            Sensor position, in metres.
+        An empty scan changes nothing.
 
-        Returns
-        -------
-        self
-            The updated map.
+        {scan_parameters}
+
+        {updated_map_returns}
 
         Raises
         ------
@@ -269,24 +269,17 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         self._accepted()
         return self
 
+    @fill_doc()
     def insert_scan(self, points: ArrayLike, origin: ArrayLike, **options: Any):
         """Add one scan's evidence (:class:`occgp.maps.OccupancyMap`'s call); return self.
 
         The same as :meth:`update`.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            End points of the beams in the world frame, in metres.
-        origin : array-like of shape (3,)
-            Sensor position, in metres.
+        {scan_parameters}
         **options
             None: the kernel maps take no per-scan option.
 
-        Returns
-        -------
-        self
-            The updated map.
+        {updated_map_returns}
 
         Raises
         ------
@@ -301,13 +294,11 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         return self.update(points, origin)
 
     # ------------------------------------------------------------ queries
+    @fill_doc(query_points=_QUERY_POINTS)
     def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
         """Posterior mean of occupancy, alpha / (alpha + beta), at each point's cell.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            Query points, in metres.
+        {query_points}
 
         Returns
         -------
@@ -326,16 +317,14 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         pts = as_points(points, "points")
         return self._query(pts, check_real(self.prior, "prior", low=0.0), 0)
 
+    @fill_doc(query_points=_QUERY_POINTS)
     def variance(self, points: ArrayLike) -> NDArray[np.float64]:
         """Posterior variance of occupancy, ab / ((a + b)^2 (a + b + 1)), at each point's cell.
 
         ``a`` and ``b`` are the cell's alpha and beta with `prior` added (the
         variance of the Beta posterior).
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            Query points, in metres.
+        {query_points}
 
         Returns
         -------
@@ -350,6 +339,7 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         pts = as_points(points, "points")
         return self._query(pts, check_real(self.prior, "prior", low=0.0), 1)
 
+    @fill_doc(query_points=_QUERY_POINTS)
     def is_occupied(self, points: ArrayLike, threshold: float | None = None, *,
                     return_unknown: bool = False):
         """Whether each point's cell is occupied: its occupancy at least `occupancy_threshold`.
@@ -357,10 +347,7 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         Cells no kernel reached are unknown, reported as not occupied; ask for
         `return_unknown` to tell them apart from free ones.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            Query points, in metres.
+        {query_points}
         threshold : float, default=None
             Deprecated: set the map's `occupancy_threshold` instead. A
             probability in (0, 1); when given, a cell is occupied when its
