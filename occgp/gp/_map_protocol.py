@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import logit
 
+from .._docs import fill_doc
 from .._validation import (as_numeric, as_point, as_points, check_bool, check_probability,
                            check_resolution)
 
@@ -192,6 +193,7 @@ class MapProtocol:
             return np.full(len(X), np.nan)
         return np.where(self._known(X), self.predict_proba(X), np.nan)
 
+    @fill_doc()
     def is_occupied(self, points: ArrayLike, *, return_unknown: bool = False):
         """Whether each point is occupied: its probability is at least ``occupancy_threshold``.
 
@@ -205,11 +207,7 @@ class MapProtocol:
         return_unknown : bool, default=False
             Also return the mask of unknown points.
 
-        Returns
-        -------
-        occupied : ndarray of bool, shape (n_points,)
-        unknown : ndarray of bool, shape (n_points,)
-            Only when `return_unknown` is True.
+        {occupied_returns}
 
         Raises
         ------
@@ -248,6 +246,7 @@ class MapProtocol:
         """
         return int(self._nbytes()) if self._fitted() else 0
 
+    @fill_doc()
     def set_params(self, **params):
         """Set the constructor's parameters (scikit-learn's convention), checked.
 
@@ -256,9 +255,7 @@ class MapProtocol:
         **params
             Parameter names and values (``name__sub`` for a nested object's).
 
-        Returns
-        -------
-        self
+        {map_returns}
 
         Raises
         ------
