@@ -3,19 +3,23 @@
 A docstring names a shared piece by a line holding only ``{name}``; :func:`fill_doc`
 replaces that line by the piece, each of its lines indented as the placeholder was.
 The rendered ``__doc__`` is complete numpydoc (what Sphinx, ``help()`` and the
-docstring tests read)::
+docstring tests read). On a class it fills the class's docstring and those of the
+methods the class body defines::
 
     @fill_doc()
-    def load(cls, path):
-        '''Read a model written by :meth:`save`.
+    class Model:
+        @classmethod
+        def load(cls, path):
+            '''Read a model written by :meth:`save`.
 
-        {load_parameters}
-        ...
-        '''
+            {load_parameters}
+            ...
+            '''
 """
 
 from __future__ import annotations
 
+import inspect
 import re
 from typing import Callable, TypeVar
 
@@ -128,7 +132,10 @@ def _indented(text: str, indent: str) -> str:
 
 
 def fill_doc(**pieces: str) -> Callable[[T], T]:
-    """Decorator: fill the ``{name}`` lines of a function's or class's docstring.
+    """Decorator: fill the ``{name}`` lines of a function's or class's docstrings.
+
+    On a class, the docstrings of the functions, class and static methods its
+    body defines are filled too.
 
     Parameters
     ----------
@@ -139,8 +146,8 @@ def fill_doc(**pieces: str) -> Callable[[T], T]:
     Returns
     -------
     decorate : callable
-        Sets the object's ``__doc__`` (unless it has none, as under
-        ``python -OO``) and returns the object itself.
+        Sets the ``__doc__`` of the object (and of a class's members), unless
+        it has none (as under ``python -OO``), and returns the object itself.
 
     Raises
     ------
@@ -149,11 +156,20 @@ def fill_doc(**pieces: str) -> Callable[[T], T]:
     """
     table = {**PIECES, **pieces}
 
-    def decorate(obj: T) -> T:
+    def fill(obj: object) -> None:
         doc = obj.__doc__
         if doc:
             obj.__doc__ = _PLACEHOLDER.sub(
                 lambda m: _indented(table[m.group(2)], m.group(1)), doc)
+
+    def decorate(obj: T) -> T:
+        fill(obj)
+        if isinstance(obj, type):
+            for member in vars(obj).values():
+                if isinstance(member, (classmethod, staticmethod)):
+                    fill(member.__func__)
+                elif inspect.isfunction(member):
+                    fill(member)
         return obj
 
     return decorate

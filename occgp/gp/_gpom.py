@@ -94,6 +94,7 @@ def _subsample(y, size, rng):
 
 @register("gpom", dims=(2,), formats=(".npz",),
           description="Gaussian-process occupancy map with a local GP per query (2D)")
+@fill_doc()
 class GPOM(PLSCProba, MapProtocol, BaseEstimator):
     """Gaussian-process occupancy map with a local GP per query point.
 
@@ -327,7 +328,6 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
                    "y_train": (np.float64, ("n_train",))}
     _FITTED = ("kernel_", "noise_", "plsc_", "log_marginal_likelihood_value_", "n_dims_")
 
-    @fill_doc()
     def save(self, path: str | os.PathLike) -> "GPOM":
         """Write the model (parameters and, once fitted, its training set) to an ``.npz``.
 
@@ -359,7 +359,6 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
         return write_gp(self, path, arrays)
 
     @classmethod
-    @fill_doc()
     def load(cls, path: str | os.PathLike) -> "GPOM":
         """Read a model written by :meth:`save`.
 
@@ -449,7 +448,6 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
         var = np.maximum(variance - np.einsum("bm,bm->b", v[:, :, 0], v[:, :, 0]), 0.0)
         return mean, var
 
-    @fill_doc()
     def predict(self, X: ArrayLike, return_var: bool = False):
         """Latent mean (and variance) of the local GP at each query point.
 

@@ -31,6 +31,7 @@ __all__ = ["GPOMIK"]
 
 @register("gpomik", dims=(2,), formats=(".npz",),
           description="Gaussian-process occupancy map with integral kernels (2D)")
+@fill_doc()
 class GPOMIK(PLSCProba, MapProtocol, BaseEstimator):
     """Gaussian-process occupancy map with integral kernels (GPOMIK).
 
@@ -326,7 +327,6 @@ default="clenshaw-curtis"
         alpha = solve_lower(L, obs.y, np.r_[z_old, z_new])
         return Cell(obs, L, alpha)
 
-    @fill_doc()
     def kl_divergence(self, hits=None, segment_starts=None, segment_ends=None):
         """KL divergence that adding each observation would bring to the map.
 
@@ -409,7 +409,6 @@ default="clenshaw-curtis"
             kl[take] = np.minimum(kl[take], kl_gain(np.maximum(var, 1e-300), mu, sub.y, noise))
         return kl, K12_newest, K22
 
-    @fill_doc()
     def update(self, hits: ArrayLike | None = None, segment_starts: ArrayLike | None = None,
                segment_ends: ArrayLike | None = None) -> "GPOMIK":
         """Add observations by Cholesky updates, with active sampling.
@@ -479,7 +478,6 @@ default="clenshaw-curtis"
     _FITTED = ("kernel_", "quadrature_", "noise_", "jitter_", "plsc_",
                "log_marginal_likelihood_value_", "n_dims_", "n_accepted_", "n_rejected_")
 
-    @fill_doc()
     def save(self, path: str | os.PathLike) -> "GPOMIK":
         """Write the model (parameters and, once fitted, every local model) to an ``.npz``.
 
@@ -550,7 +548,6 @@ default="clenshaw-curtis"
         return write_gp(self, path, arrays)
 
     @classmethod
-    @fill_doc()
     def load(cls, path: str | os.PathLike) -> "GPOMIK":
         """Read a model written by :meth:`save` (the format is described there).
 
@@ -618,7 +615,6 @@ default="clenshaw-curtis"
         return predict_cell(cell, X, self.kernel_, self._quadrature, self._n_threads, return_var)
 
 
-    @fill_doc()
     def predict(self, X: ArrayLike, return_var: bool = False):
         """Latent mean (and variance) of the occupancy function at points `X`.
 

@@ -67,6 +67,7 @@ def scan_observations(points: ArrayLike, origin: ArrayLike, hit: ArrayLike | Non
     return pts[mask], starts, pts
 
 
+@fill_doc()
 class MapProtocol:
     """Mix-in: the map protocol (:class:`occgp.maps.OccupancyMap`) of a 2D estimator.
 
@@ -193,7 +194,6 @@ class MapProtocol:
             return np.full(len(X), np.nan)
         return np.where(self._known(X), self.predict_proba(X), np.nan)
 
-    @fill_doc()
     def is_occupied(self, points: ArrayLike, *, return_unknown: bool = False):
         """Whether each point is occupied: its probability is at least ``occupancy_threshold``.
 
@@ -246,7 +246,6 @@ class MapProtocol:
         """
         return int(self._nbytes()) if self._fitted() else 0
 
-    @fill_doc()
     def set_params(self, **params):
         """Set the constructor's parameters (scikit-learn's convention), checked.
 

@@ -53,6 +53,7 @@ _CLASSES = {c.__name__: c for c in (GPOMIK, LineTracking, DirichletProcessCluste
 
 @register("gp-mixture", dims=(2,), formats=(".npz",),
           description="Mixture of GPOMIK experts merged by a committee (2D)")
+@fill_doc()
 class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     """Mixture of Gaussian-process experts merged by a committee (Kim & Kim).
 
@@ -407,7 +408,6 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     _SPEC = {"starts": (np.float64, ("n_obs", "n_dims")), "ends": (np.float64, ("n_obs", "n_dims")),
              "labels": (np.float64, ("n_obs",)), "call_sizes": (np.int64, ("n_calls",))}
 
-    @fill_doc()
     def save(self, path) -> "GPMixture":
         """Write the model (parameters and, once fitted, its evidence) to an ``.npz``.
 
@@ -451,7 +451,6 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         return write_gp(self, path, arrays, params)
 
     @classmethod
-    @fill_doc()
     def load(cls, path) -> "GPMixture":
         """Read a model written by :meth:`save` (its calls are replayed).
 
@@ -527,7 +526,6 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
             committee.add(idx, mean, var, priors[e])
         return committee, priors
 
-    @fill_doc()
     def predict(self, X: ArrayLike, return_var: bool = False):
         """Merged latent mean (and variance) of the occupancy function at `X`.
 
@@ -572,7 +570,6 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         return a, b
 
     # --------------------------------------------------------------- update
-    @fill_doc()
     def update(self, hits: ArrayLike | None = None, segment_starts: ArrayLike | None = None,
                segment_ends: ArrayLike | None = None) -> "GPMixture":
         """Add observations: cluster them and update only the experts they reach.

@@ -33,12 +33,17 @@ MAX_CELL_INDEX = 1e15
 #: Most cells one segment may cross; segments are also traversed in chunks of about this many
 #: crossings, so memory stays bounded (about 130 bytes a crossing).
 MAX_SEGMENT_CELLS = 4_000_000
-#: The Parameters section of the grid's queries (see :func:`occgp._docs.fill_doc`).
+#: The sections of the grid's queries (see :func:`occgp._docs.fill_doc`).
 _QUERY_PARAMETERS = """\
 Parameters
 ----------
 X : array-like of shape (n_points, n_dims)
     Query points, in metres. Must be finite."""
+_AS_LOG_ODDS_RAISES = """\
+Raises
+------
+NotFittedError, ValueError, TypeError
+    As :meth:`log_odds`."""
 
 
 def _unique_rows(keys: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -235,6 +240,7 @@ def _check_data(hits, segment_starts, segment_ends, dim=None, resolution=None):
 
 @register("gp-grid", dims=(2, 3), formats=(".npz",),
           description="Log-odds occupancy grid of hits and beams, the GP maps' baseline")
+@fill_doc(query_parameters=_QUERY_PARAMETERS, as_log_odds_raises=_AS_LOG_ODDS_RAISES)
 class OccupancyGrid(MapProtocol, BaseEstimator):
     """Log-odds occupancy grid in 2D or 3D, the classic baseline of GP maps.
 
@@ -468,7 +474,6 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
         known[known] = table[index[known]] == query[known]
         return index, known
 
-    @fill_doc(query_parameters=_QUERY_PARAMETERS)
     def log_odds(self, X: ArrayLike) -> NDArray[np.float64]:
         """Log-odds of occupancy of the cells holding the points of `X`; NaN where unknown.
 
@@ -499,7 +504,6 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
         out[known] = self.log_odds_[index[known]]
         return out
 
-    @fill_doc(query_parameters=_QUERY_PARAMETERS)
     def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
         """Probability that the cells holding the points of `X` are occupied.
 
@@ -511,10 +515,7 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
             Occupancy probability of the cell of each point; 0.5 (the prior)
             for a cell never observed.
 
-        Raises
-        ------
-        NotFittedError, ValueError, TypeError
-            As :meth:`log_odds`.
+        {as_log_odds_raises}
 
         Examples
         --------
@@ -524,7 +525,6 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
         """
         return np.nan_to_num(expit(self.log_odds(X)), nan=0.5)
 
-    @fill_doc(query_parameters=_QUERY_PARAMETERS)
     def is_known(self, X: ArrayLike) -> NDArray[np.bool_]:
         """Whether the cells holding the points of `X` have been observed.
 
@@ -536,10 +536,7 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
             False for a cell never observed, or a point beyond the grid's
             key range.
 
-        Raises
-        ------
-        NotFittedError, ValueError, TypeError
-            As :meth:`log_odds`.
+        {as_log_odds_raises}
 
         Examples
         --------
@@ -606,7 +603,6 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
     _SPEC = {"keys": (np.int64, ("n_cells", "n_dims")), "log_odds": (np.float64, ("n_cells",))}
     _FITTED = ("n_dims_", "n_updates_")
 
-    @fill_doc()
     def save(self, path: str | os.PathLike) -> "OccupancyGrid":
         """Write the grid (parameters and, once fitted, its cells) to an ``.npz``.
 
@@ -634,7 +630,6 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
         return write_gp(self, path, arrays)
 
     @classmethod
-    @fill_doc()
     def load(cls, path: str | os.PathLike) -> "OccupancyGrid":
         """Read a grid written by :meth:`save`.
 

@@ -31,6 +31,7 @@ def _check_random_state(value):
 
 @register("akimap", formats=(".npz",),
           description="Adaptive anisotropic kernel inference on cells", random_state=0)
+@fill_doc()
 class AKIMap(KernelMapBase):
     """Occupancy by adaptive anisotropic kernel inference (Kwon et al., AKIMap).
 
@@ -284,7 +285,6 @@ class AKIMap(KernelMapBase):
         """The bandwidth floor in use, in metres (see `bandwidth_floor`)."""
         return self._validated_params().floor
 
-    @fill_doc()
     def training_data(self, points: ArrayLike,
                       origin: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The samples and labels (1 occupied, 0 free) an update would use, drawn from

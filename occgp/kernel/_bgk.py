@@ -15,6 +15,7 @@ from ._kernel_samples import (MAX_CELLS_PER_UPDATE, beam_chunks, check_free_coun
 
 @register("bgk", formats=(".npz",),
           description="Bayesian generalised kernel inference on cells (isotropic)")
+@fill_doc()
 class BGKMap(KernelMapBase):
     """Occupancy by Bayesian generalized kernel inference (Doherty et al., "BGKOctoMap").
 
@@ -163,7 +164,6 @@ class BGKMap(KernelMapBase):
         return f"BGKMap(resolution={self.resolution!r}, ell={self.ell!r}, " \
                f"num_cells={self.num_cells})"
 
-    @fill_doc()
     def training_data(self, points: ArrayLike,
                       origin: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The samples and labels (1 occupied, 0 free) that :meth:`update` uses.

@@ -26,6 +26,7 @@ CELL_SPEC = {"keys": (np.uint16, ("n_cells", 3)), "alpha": (np.float32, ("n_cell
              "beta": (np.float32, ("n_cells",))}
 
 
+@fill_doc()
 class KernelMapFiles:
     """Save, load and pickle for the kernel maps (mixed into their base class).
 
@@ -62,7 +63,6 @@ class KernelMapFiles:
     def _extra_state(self) -> dict:
         return {}
 
-    @fill_doc()
     def save(self, path: str | os.PathLike):
         """Write the map, its parameters and all its evidence to an ``.npz`` file.
 
@@ -119,7 +119,6 @@ class KernelMapFiles:
         return self
 
     @classmethod
-    @fill_doc()
     def load(cls, path: str | os.PathLike):
         """Read a map written by :meth:`save` (the format is described there).
 

@@ -35,6 +35,7 @@ points : array-like of shape (n_points, 3)
     Query points, in metres."""
 
 
+@fill_doc(query_points=_QUERY_POINTS)
 class KernelMapBase(KernelMapFiles, _KernelCells):
     """What the kernel maps share: cells, Beta posteriors, parameters and queries.
 
@@ -99,7 +100,6 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         """
         return {name: getattr(self, name) for name in self._param_names()}
 
-    @fill_doc()
     def set_params(self, **params: Any):
         """Change parameters (scikit-learn's convention).
 
@@ -228,7 +228,6 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
             self._set_rng_state(state)
             raise
 
-    @fill_doc()
     def update(self, points: ArrayLike, origin: ArrayLike):
         """Add one scan's evidence; return self.
 
@@ -269,7 +268,6 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         self._accepted()
         return self
 
-    @fill_doc()
     def insert_scan(self, points: ArrayLike, origin: ArrayLike, **options: Any):
         """Add one scan's evidence (:class:`occgp.maps.OccupancyMap`'s call); return self.
 
@@ -294,7 +292,6 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         return self.update(points, origin)
 
     # ------------------------------------------------------------ queries
-    @fill_doc(query_points=_QUERY_POINTS)
     def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
         """Posterior mean of occupancy, alpha / (alpha + beta), at each point's cell.
 
@@ -317,7 +314,6 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         pts = as_points(points, "points")
         return self._query(pts, check_real(self.prior, "prior", low=0.0), 0)
 
-    @fill_doc(query_points=_QUERY_POINTS)
     def variance(self, points: ArrayLike) -> NDArray[np.float64]:
         """Posterior variance of occupancy, ab / ((a + b)^2 (a + b + 1)), at each point's cell.
 
@@ -339,7 +335,6 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         pts = as_points(points, "points")
         return self._query(pts, check_real(self.prior, "prior", low=0.0), 1)
 
-    @fill_doc(query_points=_QUERY_POINTS)
     def is_occupied(self, points: ArrayLike, threshold: float | None = None, *,
                     return_unknown: bool = False):
         """Whether each point's cell is occupied: its occupancy at least `occupancy_threshold`.
