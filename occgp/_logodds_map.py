@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._docs import fill_doc
 from ._octree import TREE_MAX_VAL
 from ._status import Status, check_status
 from ._validation import (
@@ -242,6 +243,7 @@ class LogOddsMap:
         """
         return self._query(self._as_float32_points(points, "points"), 1)
 
+    @fill_doc()
     def is_occupied(self, points: ArrayLike, *, return_unknown: bool = False):
         """Whether each point lies in an occupied cell.
 
@@ -255,11 +257,7 @@ class LogOddsMap:
         return_unknown : bool, default=False
             Also return the mask of points in unknown cells.
 
-        Returns
-        -------
-        occupied : ndarray of bool, shape (n_points,)
-        unknown : ndarray of bool, shape (n_points,)
-            Only when `return_unknown` is True.
+        {occupied_returns}
 
         Examples
         --------

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._docs import fill_doc
 from ._logodds_map import Leaves, OctreeFace
 from ._octree import TREE_DEPTH, TREE_MAX_VAL
 from ._validation import as_numeric, as_points, check_bool, check_int, check_real
@@ -243,6 +244,7 @@ class OctreeQueries(OctreeFace):
         """
         return self._depth_query(points, depth, 1)
 
+    @fill_doc()
     def is_occupied(self, points: ArrayLike, *, return_unknown: bool = False,
                     depth: int = 0):
         """Whether each point lies in an occupied cell.
@@ -260,11 +262,7 @@ class OctreeQueries(OctreeFace):
             Tree depth of the answering node, as for :meth:`occupancy`: an
             inner node is occupied when one of its children is.
 
-        Returns
-        -------
-        occupied : ndarray of bool, shape (n_points,)
-        unknown : ndarray of bool, shape (n_points,)
-            Only when `return_unknown` is True.
+        {occupied_returns}
 
         Raises
         ------

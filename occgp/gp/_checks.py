@@ -2,20 +2,26 @@
 
 from __future__ import annotations
 
+from .._docs import fill_doc
 from .._validation import check_int, check_real
 
 __all__ = ["check_at_least", "check_angle"]
 
+#: The Parameters every check starts with (see :func:`occgp._docs.fill_doc`).
+_VALUE_NAME = """\
+Parameters
+----------
+value : object
+    The value to check.
+name : str
+    The argument's name, for the messages."""
 
+
+@fill_doc(value_name=_VALUE_NAME)
 def check_at_least(value: object, name: str, low: int, high: int | None = None) -> int:
     """Return `value` as an int after checking it is an int (not a bool) in [low, high].
 
-    Parameters
-    ----------
-    value : object
-        The value to check.
-    name : str
-        The argument's name, for the messages.
+    {value_name}
     low : int
         Smallest accepted value.
     high : int, default=None
@@ -40,15 +46,11 @@ def check_at_least(value: object, name: str, low: int, high: int | None = None) 
     return v
 
 
+@fill_doc(value_name=_VALUE_NAME)
 def check_angle(value: object, name: str) -> float:
     """Return `value` as a float after checking it is an angle in [0, 90] degrees.
 
-    Parameters
-    ----------
-    value : object
-        The value to check.
-    name : str
-        The argument's name, for the messages.
+    {value_name}
 
     Returns
     -------

@@ -20,17 +20,18 @@ from sklearn.base import BaseEstimator
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
-from .. import _npz_io
+from .._docs import fill_doc
 from .._validation import as_numeric, as_points, check_bool, check_probability, check_real
 from ..maps import register
 from ._checks import check_at_least
 from ._gpr import JITTER, factorise, optimize_hyperparameters
 from ._integral_kernel import as_segments, check_kernel
-from ._io import GP_FORMAT, GP_VERSIONS, check_gp_fitted, gp_fitted, gp_params, read_gp
+from ._io import check_gp_fitted, fitted_scalars, gp_fitted, read_gp, set_fitted_scalars, \
+    write_gp
 from ._kernels import SquaredExponential, check_bounds
 from ._limits import MAX_DENSE_BYTES, MAX_RESTARTS, check_coordinates, check_dense, threads
 from ._map_protocol import MapProtocol
-from ._plsc import fit_plsc, loo_predictions, plsc_proba
+from ._plsc import PLSCProba, fit_plsc, loo_predictions
 
 __all__ = ["GPOM"]
 
@@ -93,7 +94,8 @@ def _subsample(y, size, rng):
 
 @register("gpom", dims=(2,), formats=(".npz",),
           description="Gaussian-process occupancy map with a local GP per query (2D)")
-class GPOM(MapProtocol, BaseEstimator):
+@fill_doc()
+class GPOM(PLSCProba, MapProtocol, BaseEstimator):
     """Gaussian-process occupancy map with a local GP per query point.
 
     Laser beams (segments from the sensor origin to the beam end) are
@@ -342,62 +344,35 @@ class GPOM(MapProtocol, BaseEstimator):
 
         :meth:`load` reads it back into a model that predicts exactly as this one.
 
-        Parameters
-        ----------
-        path : str or path-like
-            Destination file (overwritten).
+        {save_parameters}
 
         Returns
         -------
         self : GPOM
 
-        Raises
-        ------
-        TypeError
-            If `path` is not a str or path-like, or a parameter holds a value
-            that cannot be saved (see :meth:`GPOMIK.save <occgp.gp.GPOMIK.save>`).
-        OSError
-            If the file cannot be written.
+        {gp_save_raises}
         """
-        params = gp_params(self)
         arrays = {}
         if hasattr(self, "plsc_"):
-            lml = float(self.log_marginal_likelihood_value_)
-            arrays["fitted"] = gp_fitted({
-                "kernel_": self.kernel_, "noise_": float(self.noise_),
-                "plsc_": tuple(float(v) for v in self.plsc_),
-                "log_marginal_likelihood_value_": lml if np.isfinite(lml) else None,
-                "n_dims_": int(self.n_dims_)})
+            arrays["fitted"] = gp_fitted(fitted_scalars(self))
             arrays["X_train"], arrays["y_train"] = self.X_train_, self.y_train_
-        _npz_io.write_npz(path, GP_FORMAT, GP_VERSIONS[-1], type(self).__name__, params,
-                          arrays)
-        return self
+        return write_gp(self, path, arrays)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "GPOM":
         """Read a model written by :meth:`save`.
 
-        Parameters
-        ----------
-        path : str or path-like
+        {load_parameters}
 
         Returns
         -------
         GPOM
             Fitted when the saved model was.
 
-        Raises
-        ------
-        TypeError
-            If `path` is not a str or path-like.
-        OSError
-            If the file does not exist, is not a regular file or cannot be read.
-        ValueError
-            If it is not an ``.npz`` archive, is truncated or corrupt, is of
-            another format, version or class, lacks an entry or has an
-            unexpected one, an entry has the wrong dtype or shape; if the
-            parameters or the fitted state are not valid (NaN or inf, targets
-            other than hits (+1) then free points (-1), both present).
+        {load_raises}
+            Also if the parameters or the fitted state are not valid (NaN or
+            inf, targets other than hits (+1) then free points (-1), both
+            present).
         """
         source, model, arrays, fitted = read_gp(cls, path, cls._TRAIN_SPEC)
         if fitted is None:
@@ -411,12 +386,9 @@ class GPOM(MapProtocol, BaseEstimator):
         if not (0 < n_hits < len(y) and (y[:n_hits] == 1).all() and (y[n_hits:] == -1).all()):
             raise ValueError(f"{source}: corrupt fitted state of a GPOM: 'y_train' must be "
                              f"+1 (hits) then -1 (free points), both present")
-        model.n_dims_ = X.shape[1]
+        set_fitted_scalars(model, fitted)
         model.X_train_, model.y_train_ = X, y
         model._hit_tree, model._free_tree = cKDTree(X[:n_hits]), cKDTree(X[n_hits:])
-        model.kernel_, model.noise_ = fitted["kernel_"], float(fitted["noise_"])
-        model.log_marginal_likelihood_value_ = fitted["log_marginal_likelihood_value_"]
-        model.plsc_ = tuple(float(v) for v in fitted["plsc_"])
         return model
 
     # ---------------------------------------------------------- map protocol
@@ -479,12 +451,7 @@ class GPOM(MapProtocol, BaseEstimator):
     def predict(self, X: ArrayLike, return_var: bool = False):
         """Latent mean (and variance) of the local GP at each query point.
 
-        Parameters
-        ----------
-        X : array-like of shape (n_queries, n_dims)
-            Query points. Must be finite.
-        return_var : bool, default=False
-            Also return the latent variance.
+        {predict_parameters}
 
         Returns
         -------
@@ -495,14 +462,7 @@ class GPOM(MapProtocol, BaseEstimator):
             Only when `return_var` is True. A query beyond the kernel's reach
             of every training point gets the prior (mean 0, the variance).
 
-        Raises
-        ------
-        NotFittedError
-            If called before :meth:`fit`.
-        ValueError
-            If `X` is not of shape (n_queries, n_dims) or holds NaN or inf.
-        TypeError
-            If `X` does not hold real numbers, or `return_var` is not a bool.
+        {predict_raises}
 
         Examples
         --------
@@ -528,30 +488,3 @@ class GPOM(MapProtocol, BaseEstimator):
             part = near[start:start + batch]
             mean[part], var[part] = self._predict_batch(X[part], n_hit, n_free, workers)
         return (mean, var) if return_var else mean
-
-    def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
-        """Probability of occupancy at each query point (PLSC on the local GP).
-
-        Parameters
-        ----------
-        X : array-like of shape (n_queries, n_dims)
-            Query points. Must be finite.
-
-        Returns
-        -------
-        proba : ndarray of shape (n_queries,)
-            ``Phi((a mean + b) / sqrt(1 + a**2 var))`` with ``(a, b) = plsc_``.
-
-        Raises
-        ------
-        NotFittedError, ValueError, TypeError
-            As :meth:`predict`.
-
-        Examples
-        --------
-        >>> m = GPOM(optimizer=False).fit([[2.0]], [[0.0]], [[2.0]])
-        >>> m.predict_proba([[2.0], [0.5]]).shape
-        (2,)
-        """
-        mean, var = self.predict(X, return_var=True)
-        return plsc_proba(mean, var, *self.plsc_)

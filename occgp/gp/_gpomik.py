@@ -10,20 +10,20 @@ from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from .. import _npz_io
+from .._docs import fill_doc
 from .._validation import as_points, check_bool, check_probability, check_real
 from ..maps import register
 from ._cells import Cell, kl_gain, predict_cell, spatial_groups
 from ._checks import check_at_least
 from ._gpr import cholesky, jitter_for, optimize_hyperparameters, solve_lower, with_noise
 from ._integral_kernel import check_kernel, check_quadrature, covariance
-from ._io import GP_FORMAT, GP_VERSIONS, check_gp_fitted, gp_fitted, gp_params, gpomik_cells, \
-    read_gp
+from ._io import check_gp_fitted, fitted_scalars, gp_fitted, gpomik_cells, read_gp, \
+    set_fitted_scalars, write_gp
 from ._kernels import SquaredExponential
 from ._limits import MAX_RESTARTS, check_coordinates, check_dense, check_segments, generator, threads
 from ._map_protocol import MapProtocol
 from ._observations import Observations, make_observations
-from ._plsc import fit_plsc, loo_predictions, plsc_proba
+from ._plsc import PLSCProba, fit_plsc, loo_predictions
 
 __all__ = ["GPOMIK"]
 
@@ -31,7 +31,8 @@ __all__ = ["GPOMIK"]
 
 @register("gpomik", dims=(2,), formats=(".npz",),
           description="Gaussian-process occupancy map with integral kernels (2D)")
-class GPOMIK(MapProtocol, BaseEstimator):
+@fill_doc()
+class GPOMIK(PLSCProba, MapProtocol, BaseEstimator):
     """Gaussian-process occupancy map with integral kernels (GPOMIK).
 
     Laser returns are point observations of the latent occupancy (target +1);
@@ -341,12 +342,7 @@ default="clenshaw-curtis"
         observation gives its own divergence, and the smallest one counts.
         The model is not changed.
 
-        Parameters
-        ----------
-        hits : array-like of shape (n_hits, D), default=None
-            Laser returns, in the fitted model's dimension D.
-        segment_starts, segment_ends : array-like of shape (n_beams, D), default=None
-            Beams, given together. `hits` or the beams may be None, not both.
+        {update_parameters}
 
         Returns
         -------
@@ -425,10 +421,7 @@ default="clenshaw-curtis"
         spatially when more than one cell's worth). Hyper-parameters and PLSC
         stay as fitted.
 
-        Parameters
-        ----------
-        hits : array-like of shape (n_hits, D), default=None
-        segment_starts, segment_ends : array-like of shape (n_beams, D), default=None
+        {update_parameters}
 
         Returns
         -------
@@ -521,10 +514,7 @@ default="clenshaw-curtis"
             float64 (sum n_i (n_i + 1) / 2,): the lower triangle of each local
             model's Cholesky factor, row by row (``numpy.tril_indices``).
 
-        Parameters
-        ----------
-        path : str or path-like
-            Destination file (overwritten).
+        {save_parameters}
 
         Returns
         -------
@@ -540,17 +530,12 @@ default="clenshaw-curtis"
         OSError
             If the file cannot be written.
         """
-        params = gp_params(self)
         arrays = {}
         if hasattr(self, "cells_"):
             cells = self.cells_
-            lml = float(self.log_marginal_likelihood_value_)
             arrays["fitted"] = gp_fitted({
-                "kernel_": self.kernel_, "quadrature_": self._quadrature,
-                "noise_": float(self.noise_), "jitter_": float(self.jitter_),
-                "plsc_": tuple(float(v) for v in self.plsc_),
-                "log_marginal_likelihood_value_": lml if np.isfinite(lml) else None,
-                "n_dims_": int(self.n_dims_), "n_accepted_": int(self.n_accepted_),
+                **fitted_scalars(self), "quadrature_": self._quadrature,
+                "jitter_": float(self.jitter_), "n_accepted_": int(self.n_accepted_),
                 "n_rejected_": int(self.n_rejected_)})
             arrays["cell_sizes"] = np.array([c.size for c in cells], dtype=np.int64)
             arrays["L_fortran"] = np.array(
@@ -560,36 +545,23 @@ default="clenshaw-curtis"
                 arrays[f] = np.concatenate([getattr(c.obs, f) for c in cells])
             arrays["alpha"] = np.concatenate([c.alpha for c in cells])
             arrays["L"] = np.concatenate([c.L[np.tril_indices(c.size)] for c in cells])
-        _npz_io.write_npz(path, GP_FORMAT, GP_VERSIONS[-1], type(self).__name__, params,
-                          arrays)
-        return self
+        return write_gp(self, path, arrays)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "GPOMIK":
         """Read a model written by :meth:`save` (the format is described there).
 
-        Parameters
-        ----------
-        path : str or path-like
+        {load_parameters}
 
         Returns
         -------
         GPOMIK
             Fitted when the saved model was.
 
-        Raises
-        ------
-        TypeError
-            If `path` is not a str or path-like.
-        OSError
-            If the file does not exist, is not a regular file or cannot be read.
-        ValueError
-            If it is not an ``.npz`` archive, is truncated or corrupt, is of
-            another format, version or class, lacks an entry or has an
-            unexpected one, an entry has the wrong dtype or shape; if the
-            parameters or the fitted state are not valid (NaN or inf, sizes
-            that disagree, a factor with a diagonal entry <= 0, targets that
-            do not match the labels and lengths).
+        {load_raises}
+            Also if the parameters or the fitted state are not valid (NaN or
+            inf, sizes that disagree, a factor with a diagonal entry <= 0,
+            targets that do not match the labels and lengths).
         """
         source, model, arrays, fitted = read_gp(cls, path, cls._OBS_SPEC)
         if fitted is None:
@@ -597,11 +569,8 @@ default="clenshaw-curtis"
         n_dims = arrays["starts"].shape[1]
         fitted = check_gp_fitted(fitted, cls._FITTED, n_dims, source, "GPOMIK")
         cells = gpomik_cells(arrays, fitted, source)
-        model.kernel_, model.noise_ = fitted["kernel_"], float(fitted["noise_"])
+        set_fitted_scalars(model, fitted)
         model.jitter_ = float(fitted["jitter_"])
-        model.plsc_ = tuple(float(v) for v in fitted["plsc_"])
-        model.log_marginal_likelihood_value_ = fitted["log_marginal_likelihood_value_"]
-        model.n_dims_ = n_dims
         model._quadrature, model._n_threads = fitted["quadrature_"], threads(model.n_jobs)
         model.cells_ = cells
         model.n_accepted_ = int(fitted["n_accepted_"])
@@ -654,27 +623,11 @@ default="clenshaw-curtis"
         plus three length scales) holds it; a query in no box gets the prior
         (mean 0, variance of the kernel).
 
-        Parameters
-        ----------
-        X : array-like of shape (n_queries, D)
-            Query points in the fitted model's dimension D. Must be finite.
-        return_var : bool, default=False
-            Also return the latent variance.
+        {predict_parameters}
 
-        Returns
-        -------
-        mean : ndarray of shape (n_queries,)
-        var : ndarray of shape (n_queries,)
-            Only with `return_var`.
+        {predict_returns}
 
-        Raises
-        ------
-        NotFittedError
-            If called before :meth:`fit`.
-        ValueError
-            If `X` is not of shape (n_queries, D) or holds NaN or inf.
-        TypeError
-            If `X` does not hold real numbers, or `return_var` is not a bool.
+        {predict_raises}
         """
         X = self._check_X(X)
         return_var = check_bool(return_var, "return_var")
@@ -693,26 +646,3 @@ default="clenshaw-curtis"
             better = v < best[inside]
             mean[inside[better]], best[inside[better]] = m[better], v[better]
         return (mean, best) if return_var else mean
-
-    def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
-        """Probability of occupancy at points `X` (PLSC on the latent prediction).
-
-        Parameters
-        ----------
-        X : array-like of shape (n_queries, D)
-            Query points in the fitted model's dimension D. Must be finite.
-
-        Returns
-        -------
-        proba : ndarray of shape (n_queries,)
-            ``Phi((a mean + b) / sqrt(1 + a**2 var))`` with ``(a, b) = plsc_``
-            and the mean and variance of :meth:`predict`.
-
-        Raises
-        ------
-        NotFittedError, ValueError, TypeError
-            As :meth:`predict`.
-        """
-        mean, var = self.predict(X, return_var=True)
-        a, b = self.plsc_
-        return plsc_proba(mean, var, a, b)

@@ -21,8 +21,8 @@ from ._kernels import Matern32, SparseKernel, SquaredExponential
 from ._observations import Observations
 from ._quadrature import ClenshawCurtis, Rule, Simpson
 
-__all__ = ["GP_FORMAT", "GP_VERSIONS", "GP_CLASSES", "gp_params", "gp_fitted", "read_gp",
-           "check_gp_fitted", "gpomik_cells"]
+__all__ = ["GP_FORMAT", "GP_VERSIONS", "GP_CLASSES", "gp_params", "gp_fitted", "write_gp",
+           "read_gp", "check_gp_fitted", "fitted_scalars", "set_fitted_scalars", "gpomik_cells"]
 
 #: Format of the GP models' files (see GPOMIK.save, GPOM.save).
 GP_FORMAT = "occgp.gp_model"
@@ -52,6 +52,16 @@ def gp_params(model, classes=None, params=None) -> dict:
 def gp_fitted(value: dict) -> np.ndarray:
     """The ``fitted`` entry: `value` as a 0-d str array of JSON."""
     return np.array(_npz_io.json_text(_npz_io.encode_value(value, GP_CLASSES)))
+
+
+def write_gp(model, path, arrays: dict, params: dict | None = None):
+    """Write `model`'s file at `path`: its `params` (default :func:`gp_params`) and `arrays`.
+
+    Returns `model` (``save`` returns it).
+    """
+    params = gp_params(model) if params is None else params
+    _npz_io.write_npz(path, GP_FORMAT, GP_VERSIONS[-1], type(model).__name__, params, arrays)
+    return model
 
 
 def read_gp(cls, path, spec, classes=None):
@@ -117,6 +127,23 @@ def check_gp_fitted(fitted: dict, keys, n_dims: int, source: str, name: str) -> 
     fitted = dict(fitted)
     fitted["log_marginal_likelihood_value_"] = np.nan if lml is None else float(lml)
     return fitted
+
+
+def fitted_scalars(model) -> dict:
+    """The fitted scalars of :func:`check_gp_fitted` (GPOM's, GPOMIK's) of `model`, JSON-ready."""
+    lml = float(model.log_marginal_likelihood_value_)
+    return {"kernel_": model.kernel_, "noise_": float(model.noise_),
+            "plsc_": tuple(float(v) for v in model.plsc_),
+            "log_marginal_likelihood_value_": lml if np.isfinite(lml) else None,
+            "n_dims_": int(model.n_dims_)}
+
+
+def set_fitted_scalars(model, fitted: dict) -> None:
+    """Give `model` the scalars of :func:`fitted_scalars` from a checked `fitted` entry."""
+    model.kernel_, model.noise_ = fitted["kernel_"], float(fitted["noise_"])
+    model.plsc_ = tuple(float(v) for v in fitted["plsc_"])
+    model.log_marginal_likelihood_value_ = fitted["log_marginal_likelihood_value_"]
+    model.n_dims_ = int(fitted["n_dims_"])
 
 
 def gpomik_cells(arrays: dict, fitted: dict, source: str) -> list:

@@ -17,10 +17,23 @@ import numbers
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docs import fill_doc
 from .._validation import as_numeric, check_bool, check_int
 from ._limits import MAX_DENSE_BYTES
 
 __all__ = ["SquaredExponential", "Matern32", "SparseKernel"]
+
+#: The Parameters section of the kernels (see :func:`occgp._docs.fill_doc`).
+_KERNEL_PARAMETERS = """\
+Parameters
+----------
+variance : float, default=1.0
+    Signal variance ``sigma_f ** 2``.
+length_scale : float or array-like of shape (n_features,), default=1.0
+    One length scale, or one per input dimension (ARD).
+variance_bounds, length_scale_bounds : pair of float
+    Bounds used when hyper-parameters are fitted (default ``(1e-3, 1e3)``
+    and ``(1e-2, 1e2)``)."""
 
 _SQRT3 = np.sqrt(3.0)
 _TWO_PI = 2.0 * np.pi
@@ -353,21 +366,14 @@ class Stationary:
         return np.full(_as_samples(X, "X").shape[0], variance)
 
 
+@fill_doc(kernel_parameters=_KERNEL_PARAMETERS)
 class SquaredExponential(Stationary):
     """Squared exponential kernel ``variance * exp(-s / 2)``, optionally ARD.
 
     ``s = sum_d ((x_d - x'_d) / l_d) ** 2``. Its line integral against a point
     has a closed form (erf), which the integral kernels use.
 
-    Parameters
-    ----------
-    variance : float, default=1.0
-        Signal variance ``sigma_f ** 2``.
-    length_scale : float or array-like of shape (n_features,), default=1.0
-        One length scale, or one per input dimension (ARD).
-    variance_bounds, length_scale_bounds : pair of float
-        Bounds used when hyper-parameters are fitted (default ``(1e-3, 1e3)``
-        and ``(1e-2, 1e2)``).
+    {kernel_parameters}
 
     Examples
     --------
@@ -389,17 +395,14 @@ class SquaredExponential(Stationary):
         return np.exp(-0.5 * s)
 
 
+@fill_doc(kernel_parameters=_KERNEL_PARAMETERS)
 class Matern32(Stationary):
     """Matérn kernel with smoothness 3/2: ``variance * (1 + sqrt(3) r) exp(-sqrt(3) r)``.
 
     ``r = sqrt(s)``, the scaled distance. Once differentiable: its integrals
     are computed by quadrature split at the closest point.
 
-    Parameters
-    ----------
-    variance : float, default=1.0
-    length_scale : float or array-like of shape (n_features,), default=1.0
-    variance_bounds, length_scale_bounds : pair of float
+    {kernel_parameters}
 
     Examples
     --------
@@ -419,6 +422,7 @@ class Matern32(Stationary):
         return 3.0 * np.exp(-_SQRT3 * np.sqrt(s))
 
 
+@fill_doc(kernel_parameters=_KERNEL_PARAMETERS)
 class SparseKernel(Stationary):
     """The compactly supported kernel of Melkumyan & Ramos (2009).
 
@@ -429,11 +433,7 @@ class SparseKernel(Stationary):
     eigenvalues down to about -5e-6 times the trace), which the noise
     variance on the diagonal covers.
 
-    Parameters
-    ----------
-    variance : float, default=1.0
-    length_scale : float or array-like of shape (n_features,), default=1.0
-    variance_bounds, length_scale_bounds : pair of float
+    {kernel_parameters}
 
     References
     ----------

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import logit
 
+from .._docs import fill_doc
 from .._validation import (as_numeric, as_point, as_points, check_bool, check_probability,
                            check_resolution)
 
@@ -66,6 +67,7 @@ def scan_observations(points: ArrayLike, origin: ArrayLike, hit: ArrayLike | Non
     return pts[mask], starts, pts
 
 
+@fill_doc()
 class MapProtocol:
     """Mix-in: the map protocol (:class:`occgp.maps.OccupancyMap`) of a 2D estimator.
 
@@ -205,11 +207,7 @@ class MapProtocol:
         return_unknown : bool, default=False
             Also return the mask of unknown points.
 
-        Returns
-        -------
-        occupied : ndarray of bool, shape (n_points,)
-        unknown : ndarray of bool, shape (n_points,)
-            Only when `return_unknown` is True.
+        {occupied_returns}
 
         Raises
         ------
@@ -256,9 +254,7 @@ class MapProtocol:
         **params
             Parameter names and values (``name__sub`` for a nested object's).
 
-        Returns
-        -------
-        self
+        {map_returns}
 
         Raises
         ------

@@ -20,7 +20,7 @@ from sklearn.base import BaseEstimator, clone
 from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
-from .. import _npz_io
+from .._docs import fill_doc
 from .._validation import (as_points, check_bool, check_choice, check_int, check_n_jobs,
                            check_probability, check_real)
 from ..maps import register
@@ -33,13 +33,13 @@ from ._experts import (Reach, concat_observations, downdated, fit_expert, hit_or
 from ._gpomik import GPOMIK
 from ._gpr import optimize_shared_hyperparameters
 from ._integral_kernel import check_quadrature
-from ._io import GP_FORMAT, GP_VERSIONS, gp_fitted, gp_params, read_gp
+from ._io import gp_fitted, gp_params, read_gp, write_gp
 from ._limits import generator, threads
 from ._lines import LineTracking
 from ._map_protocol import MapProtocol
 from ._observations import Observations, make_observations
 from ._planes import PlaneClustering
-from ._plsc import fit_plsc, plsc_proba
+from ._plsc import PLSCProba, fit_plsc
 
 __all__ = ["GPMixture"]
 
@@ -53,7 +53,8 @@ _CLASSES = {c.__name__: c for c in (GPOMIK, LineTracking, DirichletProcessCluste
 
 @register("gp-mixture", dims=(2,), formats=(".npz",),
           description="Mixture of GPOMIK experts merged by a committee (2D)")
-class GPMixture(MapProtocol, BaseEstimator):
+@fill_doc()
+class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     """Mixture of Gaussian-process experts merged by a committee (Kim & Kim).
 
     The observations (hits and beams, as for :class:`GPOMIK`) are split into
@@ -422,10 +423,7 @@ class GPMixture(MapProtocol, BaseEstimator):
         same model (the experts are fitted again: loading takes the time of
         those calls).
 
-        Parameters
-        ----------
-        path : str or path-like
-            Destination file (overwritten).
+        {save_parameters}
 
         Returns
         -------
@@ -450,31 +448,21 @@ class GPMixture(MapProtocol, BaseEstimator):
             arrays["fitted"] = gp_fitted({"seed": int(self._seed)})
             arrays.update(starts=obs.starts, ends=obs.ends, labels=obs.labels,
                           call_sizes=np.array(self._calls, dtype=np.int64))
-        _npz_io.write_npz(path, GP_FORMAT, GP_VERSIONS[-1], type(self).__name__, params, arrays)
-        return self
+        return write_gp(self, path, arrays, params)
 
     @classmethod
     def load(cls, path) -> "GPMixture":
         """Read a model written by :meth:`save` (its calls are replayed).
 
-        Parameters
-        ----------
-        path : str or path-like
+        {load_parameters}
 
         Returns
         -------
         GPMixture
             Fitted when the saved model was.
 
-        Raises
-        ------
-        TypeError
-            If `path` is not a str or path-like.
-        OSError
-            If the file does not exist, is not a regular file or cannot be read.
-        ValueError
-            If it is not such an ``.npz`` archive, is corrupt or of another
-            class, its observations are not valid (labels other than +1 and
+        {load_raises}
+            Also if its observations are not valid (labels other than +1 and
             -1, call sizes that do not add up), or replaying them fails.
         """
         source, model, arrays, fitted = read_gp(cls, path, cls._SPEC, _CLASSES)
@@ -541,27 +529,11 @@ class GPMixture(MapProtocol, BaseEstimator):
     def predict(self, X: ArrayLike, return_var: bool = False):
         """Merged latent mean (and variance) of the occupancy function at `X`.
 
-        Parameters
-        ----------
-        X : array-like of shape (n_queries, D)
-            Query points in the fitted model's dimension D. Must be finite.
-        return_var : bool, default=False
-            Also return the merged latent variance.
+        {predict_parameters}
 
-        Returns
-        -------
-        mean : ndarray of shape (n_queries,)
-        var : ndarray of shape (n_queries,)
-            Only with `return_var`.
+        {predict_returns}
 
-        Raises
-        ------
-        NotFittedError
-            If called before :meth:`fit`.
-        ValueError
-            If `X` is not of shape (n_queries, D) or holds NaN or inf.
-        TypeError
-            If `X` does not hold real numbers, or `return_var` is not a bool.
+        {predict_raises}
         """
         check_is_fitted(self, "experts_")
         X = as_points(X, "X", self.n_dims_)
@@ -569,29 +541,6 @@ class GPMixture(MapProtocol, BaseEstimator):
         with threadpool_limits(1):
             mean, var = self._committee(X)[0].result()
         return (mean, var) if return_var else mean
-
-    def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
-        """Probability of occupancy at `X` (PLSC of the merged prediction).
-
-        Parameters
-        ----------
-        X : array-like of shape (n_queries, D)
-            Query points in the fitted model's dimension D. Must be finite.
-
-        Returns
-        -------
-        proba : ndarray of shape (n_queries,)
-            ``Phi((a mean + b) / sqrt(1 + a**2 var))`` with ``(a, b) = plsc_``
-            and the merged mean and variance of :meth:`predict`.
-
-        Raises
-        ------
-        NotFittedError, ValueError, TypeError
-            As :meth:`predict`.
-        """
-        mean, var = self.predict(X, return_var=True)
-        a, b = self.plsc_
-        return plsc_proba(mean, var, a, b)
 
     # ----------------------------------------------------------------- PLSC
     def _fit_plsc(self, obs, expert_of, groups, rng):
@@ -636,10 +585,7 @@ class GPMixture(MapProtocol, BaseEstimator):
         is left untouched (the same object, unchanged). The PLSC stays as
         fitted. :attr:`updated_experts_` lists the experts changed or created.
 
-        Parameters
-        ----------
-        hits : array-like of shape (n_hits, D), default=None
-        segment_starts, segment_ends : array-like of shape (n_beams, D), default=None
+        {update_parameters}
 
         Returns
         -------

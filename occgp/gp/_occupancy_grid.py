@@ -16,9 +16,9 @@ from scipy.special import expit, logit
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from .. import _npz_io
+from .._docs import fill_doc
 from .._validation import as_points, check_probability, check_real
-from ._io import GP_FORMAT, GP_VERSIONS, gp_fitted, gp_params, read_gp
+from ._io import gp_fitted, read_gp, write_gp
 from ..maps import register
 from ._map_protocol import MapProtocol
 
@@ -33,6 +33,17 @@ MAX_CELL_INDEX = 1e15
 #: Most cells one segment may cross; segments are also traversed in chunks of about this many
 #: crossings, so memory stays bounded (about 130 bytes a crossing).
 MAX_SEGMENT_CELLS = 4_000_000
+#: The sections of the grid's queries (see :func:`occgp._docs.fill_doc`).
+_QUERY_PARAMETERS = """\
+Parameters
+----------
+X : array-like of shape (n_points, n_dims)
+    Query points, in metres. Must be finite."""
+_AS_LOG_ODDS_RAISES = """\
+Raises
+------
+NotFittedError, ValueError, TypeError
+    As :meth:`log_odds`."""
 
 
 def _unique_rows(keys: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -229,6 +240,7 @@ def _check_data(hits, segment_starts, segment_ends, dim=None, resolution=None):
 
 @register("gp-grid", dims=(2, 3), formats=(".npz",),
           description="Log-odds occupancy grid of hits and beams, the GP maps' baseline")
+@fill_doc(query_parameters=_QUERY_PARAMETERS, as_log_odds_raises=_AS_LOG_ODDS_RAISES)
 class OccupancyGrid(MapProtocol, BaseEstimator):
     """Log-odds occupancy grid in 2D or 3D, the classic baseline of GP maps.
 
@@ -465,10 +477,7 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
     def log_odds(self, X: ArrayLike) -> NDArray[np.float64]:
         """Log-odds of occupancy of the cells holding the points of `X`; NaN where unknown.
 
-        Parameters
-        ----------
-        X : array-like of shape (n_points, n_dims)
-            Query points, in metres. Must be finite.
+        {query_parameters}
 
         Returns
         -------
@@ -498,10 +507,7 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
     def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
         """Probability that the cells holding the points of `X` are occupied.
 
-        Parameters
-        ----------
-        X : array-like of shape (n_points, n_dims)
-            Query points, in metres. Must be finite.
+        {query_parameters}
 
         Returns
         -------
@@ -509,10 +515,7 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
             Occupancy probability of the cell of each point; 0.5 (the prior)
             for a cell never observed.
 
-        Raises
-        ------
-        NotFittedError, ValueError, TypeError
-            As :meth:`log_odds`.
+        {as_log_odds_raises}
 
         Examples
         --------
@@ -525,10 +528,7 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
     def is_known(self, X: ArrayLike) -> NDArray[np.bool_]:
         """Whether the cells holding the points of `X` have been observed.
 
-        Parameters
-        ----------
-        X : array-like of shape (n_points, n_dims)
-            Query points, in metres. Must be finite.
+        {query_parameters}
 
         Returns
         -------
@@ -536,10 +536,7 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
             False for a cell never observed, or a point beyond the grid's
             key range.
 
-        Raises
-        ------
-        NotFittedError, ValueError, TypeError
-            As :meth:`log_odds`.
+        {as_log_odds_raises}
 
         Examples
         --------
@@ -617,54 +614,34 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
         :meth:`load` reads it back into a grid that answers, and goes on
         updating, exactly as this one.
 
-        Parameters
-        ----------
-        path : str or path-like
-            Destination file (overwritten).
+        {save_parameters}
 
         Returns
         -------
         self : OccupancyGrid
 
-        Raises
-        ------
-        TypeError
-            If `path` is not a str or path-like, or a parameter holds a value
-            that cannot be saved.
-        OSError
-            If the file cannot be written.
+        {gp_save_raises}
         """
-        params = gp_params(self)
         arrays = {}
         if self._fitted():
             arrays["fitted"] = gp_fitted({"n_dims_": int(self.n_dims_),
                                           "n_updates_": int(self.n_updates_)})
             arrays["keys"], arrays["log_odds"] = self.keys_, self.log_odds_
-        _npz_io.write_npz(path, GP_FORMAT, GP_VERSIONS[-1], type(self).__name__, params, arrays)
-        return self
+        return write_gp(self, path, arrays)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "OccupancyGrid":
         """Read a grid written by :meth:`save`.
 
-        Parameters
-        ----------
-        path : str or path-like
+        {load_parameters}
 
         Returns
         -------
         OccupancyGrid
             Fitted when the saved grid was.
 
-        Raises
-        ------
-        TypeError
-            If `path` is not a str or path-like.
-        OSError
-            If the file does not exist, is not a regular file or cannot be read.
-        ValueError
-            If it is not such an ``.npz`` archive, is corrupt or of another
-            class, or its cells are not valid (keys not sorted and distinct,
+        {load_raises}
+            Also if its cells are not valid (keys not sorted and distinct,
             log-odds outside the clamping bounds, a dimension other than 2
             or 3).
         """

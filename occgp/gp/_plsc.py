@@ -20,7 +20,7 @@ from scipy import optimize, special
 
 from .._validation import as_numeric, check_bool, check_real
 
-__all__ = ["loo_predictions", "fit_plsc", "plsc_proba"]
+__all__ = ["loo_predictions", "fit_plsc", "plsc_proba", "PLSCProba"]
 
 
 def _finite(x, name, ndim=None):
@@ -193,3 +193,41 @@ def plsc_proba(mu: ArrayLike, var: ArrayLike, a: float, b: float) -> NDArray[np.
         raise ValueError(f"mu and var must broadcast together, got shapes {mu.shape} and "
                          f"{var.shape}") from None
     return special.ndtr((a * mu + b) / np.sqrt(1.0 + a * a * var))
+
+
+class PLSCProba:
+    """Mix-in: ``predict_proba`` of a latent GP model, PLSC on its ``predict``.
+
+    The class defines ``predict(X, return_var=True)`` and, once fitted,
+    ``plsc_`` (PLSC's ``(a, b)``).
+    """
+
+    def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
+        """Probability of occupancy at points `X` (PLSC on the latent prediction).
+
+        Parameters
+        ----------
+        X : array-like of shape (n_queries, D)
+            Query points in the fitted model's dimension D. Must be finite.
+
+        Returns
+        -------
+        proba : ndarray of shape (n_queries,)
+            ``Phi((a mean + b) / sqrt(1 + a**2 var))`` with ``(a, b) = plsc_``
+            and the mean and variance of :meth:`predict`.
+
+        Raises
+        ------
+        NotFittedError, ValueError, TypeError
+            As :meth:`predict`.
+
+        Examples
+        --------
+        >>> from occgp.gp import GPOM
+        >>> m = GPOM(optimizer=False).fit([[2.0]], [[0.0]], [[2.0]])
+        >>> m.predict_proba([[2.0], [0.5]]).shape
+        (2,)
+        """
+        mean, var = self.predict(X, return_var=True)
+        a, b = self.plsc_
+        return plsc_proba(mean, var, a, b)

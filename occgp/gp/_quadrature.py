@@ -22,7 +22,16 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import integrate
 
+from .._docs import fill_doc
+
 __all__ = ["ClenshawCurtis", "Simpson", "clenshaw_curtis", "simpson"]
+
+#: The rules' first parameter (see :func:`occgp._docs.fill_doc`).
+_TOL = """\
+Parameters
+----------
+tol : float, default=1e-10
+    Error allowed on one piece, relative to the profile's half mass."""
 
 #: Most nodes of :func:`clenshaw_curtis` (its weights take O(n**2) work) and the highest
 #: `max_order` of the adaptive rules.
@@ -287,13 +296,11 @@ class Rule:
         return f"{type(self).__name__}(tol={self.tol!r}, max_order={self.max_order!r})"
 
 
+@fill_doc(tol=_TOL)
 class ClenshawCurtis(Rule):
     """Adaptive-order Clenshaw–Curtis quadrature (the GPOMIK paper's choice).
 
-    Parameters
-    ----------
-    tol : float, default=1e-10
-        Error allowed on one piece, relative to the profile's half mass.
+    {tol}
     max_order : int, default=257
         Highest order, at most 16385; longer pieces are split into panels of it.
 
@@ -307,13 +314,11 @@ class ClenshawCurtis(Rule):
     _family = staticmethod(clenshaw_curtis)
 
 
+@fill_doc(tol=_TOL)
 class Simpson(Rule):
     """Composite Simpson quadrature with an adaptive number of nodes (Kim & Kim's choice).
 
-    Parameters
-    ----------
-    tol : float, default=1e-10
-        Error allowed on one piece, relative to the profile's half mass.
+    {tol}
     max_order : int, default=4097
         Most nodes on one panel, at most 16385; longer pieces are split into
         panels.

@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _npz_io
+from .._docs import fill_doc
 from .._kernel import _akimap_bandwidths
 from .._validation import as_point, as_points, check_real, n_threads
 from ..maps import register
@@ -30,6 +31,7 @@ def _check_random_state(value):
 
 @register("akimap", formats=(".npz",),
           description="Adaptive anisotropic kernel inference on cells", random_state=0)
+@fill_doc()
 class AKIMap(KernelMapBase):
     """Occupancy by adaptive anisotropic kernel inference (Kwon et al., AKIMap).
 
@@ -288,17 +290,9 @@ class AKIMap(KernelMapBase):
         """The samples and labels (1 occupied, 0 free) an update would use, drawn from
         the map's random generator (so this advances it).
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            End points of the beams in the world frame, in metres.
-        origin : array-like of shape (3,)
-            Sensor position, in metres.
+        {scan_parameters}
 
-        Returns
-        -------
-        samples : ndarray of shape (n_samples, 3)
-        labels : ndarray of shape (n_samples,)
+        {training_returns}
 
         Raises
         ------

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docs import fill_doc
 from .._validation import check_real
 from ..maps import register
 from ._kernel_map import KernelMapBase
@@ -14,6 +15,7 @@ from ._kernel_samples import (MAX_CELLS_PER_UPDATE, beam_chunks, check_free_coun
 
 @register("bgk", formats=(".npz",),
           description="Bayesian generalised kernel inference on cells (isotropic)")
+@fill_doc()
 class BGKMap(KernelMapBase):
     """Occupancy by Bayesian generalized kernel inference (Doherty et al., "BGKOctoMap").
 
@@ -168,17 +170,9 @@ class BGKMap(KernelMapBase):
 
         Nothing in the map changes.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            End points of the beams in the world frame, in metres.
-        origin : array-like of shape (3,)
-            Sensor position, in metres.
+        {scan_parameters}
 
-        Returns
-        -------
-        samples : ndarray of shape (n_samples, 3)
-        labels : ndarray of shape (n_samples,)
+        {training_returns}
 
         Raises
         ------

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import _npz_io
+from .._docs import fill_doc
 from .._validation import as_path
 
 #: The format's name and the versions this code reads (it writes the last).
@@ -25,6 +26,7 @@ CELL_SPEC = {"keys": (np.uint16, ("n_cells", 3)), "alpha": (np.float32, ("n_cell
              "beta": (np.float32, ("n_cells",))}
 
 
+@fill_doc()
 class KernelMapFiles:
     """Save, load and pickle for the kernel maps (mixed into their base class).
 
@@ -67,16 +69,9 @@ class KernelMapFiles:
         :meth:`load` reads it back into a map that predicts, and goes on
         updating, exactly as this one.
 
-        Parameters
-        ----------
-        path : str or path-like
-            Destination file (overwritten; written at `path` exactly, no
-            suffix is added).
+        {save_parameters}
 
-        Returns
-        -------
-        self
-            The map.
+        {map_returns}
 
         Raises
         ------
@@ -130,10 +125,7 @@ class KernelMapFiles:
         The file is read with ``numpy.load(..., allow_pickle=False)``; every
         entry's dtype, shape and size is checked before its data is read.
 
-        Parameters
-        ----------
-        path : str or path-like
-            A file written by ``save`` of this class.
+        {load_parameters}
 
         Returns
         -------
@@ -141,18 +133,10 @@ class KernelMapFiles:
             A map with the saved parameters, cells and (AKIMap) random stream
             and ``last_bandwidths_``.
 
-        Raises
-        ------
-        TypeError
-            If `path` is not a str or path-like.
-        OSError
-            If the file does not exist, is not a regular file or cannot be read.
-        ValueError
-            If it is not an ``.npz`` archive, is truncated or corrupt, is of
-            another format, format version or class, lacks an entry or has an
-            unexpected one, or an entry has the wrong dtype or shape; if the
-            parameters are not those of the class or out of range; if the
-            evidence holds NaN, inf or negative values, or a cell key twice.
+        {load_raises}
+            Also if the parameters are not those of the class or out of range;
+            if the evidence holds NaN, inf or negative values, or a cell key
+            twice.
         """
         name = cls.__name__
         source, _, params, arrays = read_kernel_file(cls, path)

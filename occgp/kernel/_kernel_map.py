@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._docs import fill_doc
 from .._kernel import _KernelCells
 from .._validation import (as_point, as_points, check_bool, check_n_jobs, check_probability,
                            check_real, n_threads)
@@ -26,7 +27,15 @@ from ._kernel_io import KernelMapFiles
 from ._kernel_samples import MAX_VAL, MAX_WEIGHT, check_max_cells, support_cells
 from ._kernel_utils import KernelCells
 
+#: The Parameters section of the queries (see :func:`occgp._docs.fill_doc`).
+_QUERY_POINTS = """\
+Parameters
+----------
+points : array-like of shape (n_points, 3)
+    Query points, in metres."""
 
+
+@fill_doc(query_points=_QUERY_POINTS)
 class KernelMapBase(KernelMapFiles, _KernelCells):
     """What the kernel maps share: cells, Beta posteriors, parameters and queries.
 
@@ -104,10 +113,7 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         **params
             Constructor parameters, by name.
 
-        Returns
-        -------
-        self
-            The map.
+        {map_returns}
 
         Raises
         ------
@@ -225,18 +231,11 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
     def update(self, points: ArrayLike, origin: ArrayLike):
         """Add one scan's evidence; return self.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            End points of the beams in the world frame, in metres. An empty scan
-            changes nothing.
-        origin : array-like of shape (3,)
-            Sensor position, in metres.
+        An empty scan changes nothing.
 
-        Returns
-        -------
-        self
-            The updated map.
+        {scan_parameters}
+
+        {updated_map_returns}
 
         Raises
         ------
@@ -274,19 +273,11 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
 
         The same as :meth:`update`.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            End points of the beams in the world frame, in metres.
-        origin : array-like of shape (3,)
-            Sensor position, in metres.
+        {scan_parameters}
         **options
             None: the kernel maps take no per-scan option.
 
-        Returns
-        -------
-        self
-            The updated map.
+        {updated_map_returns}
 
         Raises
         ------
@@ -304,10 +295,7 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
     def occupancy(self, points: ArrayLike) -> NDArray[np.float64]:
         """Posterior mean of occupancy, alpha / (alpha + beta), at each point's cell.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            Query points, in metres.
+        {query_points}
 
         Returns
         -------
@@ -332,10 +320,7 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         ``a`` and ``b`` are the cell's alpha and beta with `prior` added (the
         variance of the Beta posterior).
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            Query points, in metres.
+        {query_points}
 
         Returns
         -------
@@ -357,10 +342,7 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         Cells no kernel reached are unknown, reported as not occupied; ask for
         `return_unknown` to tell them apart from free ones.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            Query points, in metres.
+        {query_points}
         threshold : float, default=None
             Deprecated: set the map's `occupancy_threshold` instead. A
             probability in (0, 1); when given, a cell is occupied when its
