@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._docs import fill_doc
+from ._docfill import fill_doc
 from ._octree import TREE_MAX_VAL
 from ._status import Status, check_status
 from ._validation import (

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._docs import fill_doc
+from ._docfill import fill_doc
 from ._logodds_map import Leaves, OctreeFace
 from ._octree import TREE_DEPTH, TREE_MAX_VAL
 from ._validation import as_numeric, as_points, check_bool, check_int, check_real

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .._docs import fill_doc
+from .._docfill import fill_doc
 from .._validation import check_int, check_real
 
 __all__ = ["check_at_least", "check_angle"]

@@ -20,7 +20,7 @@ from sklearn.base import BaseEstimator
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
-from .._docs import fill_doc
+from .._docfill import fill_doc
 from .._validation import as_numeric, as_points, check_bool, check_probability, check_real
 from ..maps import register
 from ._checks import check_at_least

@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from .._docs import fill_doc
+from .._docfill import fill_doc
 from .._validation import as_points, check_bool, check_probability, check_real
 from ..maps import register
 from ._cells import Cell, kl_gain, predict_cell, spatial_groups

@@ -17,7 +17,7 @@ import numbers
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._docs import fill_doc
+from .._docfill import fill_doc
 from .._validation import as_numeric, check_bool, check_int
 from ._limits import MAX_DENSE_BYTES
 

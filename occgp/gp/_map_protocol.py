@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import logit
 
-from .._docs import fill_doc
+from .._docfill import fill_doc
 from .._validation import (as_numeric, as_point, as_points, check_bool, check_probability,
                            check_resolution)
 

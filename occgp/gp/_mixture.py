@@ -20,7 +20,7 @@ from sklearn.base import BaseEstimator, clone
 from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
-from .._docs import fill_doc
+from .._docfill import fill_doc
 from .._validation import (as_points, check_bool, check_choice, check_int, check_n_jobs,
                            check_probability, check_real)
 from ..maps import register

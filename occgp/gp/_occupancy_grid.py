@@ -16,7 +16,7 @@ from scipy.special import expit, logit
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from .._docs import fill_doc
+from .._docfill import fill_doc
 from .._validation import as_points, check_probability, check_real
 from ._io import gp_fitted, read_gp, write_gp
 from ..maps import register

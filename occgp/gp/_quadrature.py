@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import integrate
 
-from .._docs import fill_doc
+from .._docfill import fill_doc
 
 __all__ = ["ClenshawCurtis", "Simpson", "clenshaw_curtis", "simpson"]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._docs import fill_doc
+from .._docfill import fill_doc
 from .._validation import check_real
 from ..maps import register
 from ._kernel_map import KernelMapBase

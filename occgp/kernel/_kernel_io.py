@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import _npz_io
-from .._docs import fill_doc
+from .._docfill import fill_doc
 from .._validation import as_path
 
 #: The format's name and the versions this code reads (it writes the last).

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._docs import fill_doc
+from .._docfill import fill_doc
 from .._kernel import _KernelCells
 from .._validation import (as_point, as_points, check_bool, check_n_jobs, check_probability,
                            check_real, n_threads)
