@@ -3,6 +3,8 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from sklearn import metrics as skm
 
+from occgp import metrics
+
 from occgp.metrics import (
     accuracy,
     mse,
@@ -240,3 +242,30 @@ def test_bad_threshold(func):
     # a bool is no threshold (True would otherwise be taken as 1.0)
     with pytest.raises(TypeError, match="threshold must be a real number, got bool"):
         func([0, 1], [0.2, 0.7], threshold=True)
+
+
+# ------------------------------------------------------------ anchored / unanchored area
+def test_tpr_fdr_unanchored_curve_drops_the_origin():
+    y, p = [1, 0, 1, 0], [0.9, 0.7, 0.6, 0.1]
+    fdr, tpr, thr = metrics.tpr_fdr_curve(y, p, anchored=False)
+    assert fdr.tolist() == [0.0, 0.5, 1 / 3, 0.5]
+    assert tpr.tolist() == [0.5, 0.5, 1.0, 1.0]
+    assert thr.tolist() == [0.9, 0.7, 0.6, 0.1]
+
+
+def test_tpr_fdr_unanchored_area_by_hand():
+    y, p = [1, 0, 1, 0], [0.9, 0.7, 0.6, 0.1]
+    # points (0, .5), (.5, .5), (1/3, 1), (.5, 1): .25 - .125 + 1/6
+    assert metrics.tpr_fdr_auc(y, p, anchored=False) == pytest.approx(0.25 - 0.125 + 1 / 6,
+                                                                      abs=1e-15)
+    # anchored: + the segment from (0, 0) to (0, .5) (area 0) and (.5, 1) -> (1, 1): .5
+    assert metrics.tpr_fdr_auc(y, p) == pytest.approx(0.25 - 0.125 + 1 / 6 + 0.5, abs=1e-15)
+    # one operating point: no area
+    assert metrics.tpr_fdr_auc([1, 0], [0.5, 0.5], anchored=False) == 0.0
+
+
+def test_tpr_fdr_anchored_must_be_bool():
+    with pytest.raises(TypeError, match="anchored must be a bool"):
+        metrics.tpr_fdr_auc([1, 0], [0.9, 0.1], anchored=1)
+    with pytest.raises(TypeError, match="anchored must be a bool"):
+        metrics.tpr_fdr_curve([1, 0], [0.9, 0.1], anchored="no")

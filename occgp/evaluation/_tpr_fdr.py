@@ -49,31 +49,42 @@ def tpr_fdr_points(labels: NDArray[np.bool_], probs: NDArray[np.float64],
     return fdr, tpr, thresholds
 
 
-def tpr_fdr_area(fdr: ArrayLike, tpr: ArrayLike) -> float:
-    """Trapezoid area of a TPR-FDR path from (0, 0) through the operating points
-    (by decreasing threshold), closed with a flat segment to (1, 1).
+def tpr_fdr_area(fdr: ArrayLike, tpr: ArrayLike, anchored: bool = True) -> float:
+    """Trapezoid area along a TPR-FDR path of operating points (by decreasing threshold).
+
+    Anchored: the path runs from (0, 0) through the points and is closed with a
+    flat segment to (1, 1) (occgp's area). Unanchored: the path through the
+    points only (the authors' area; 0 for fewer than two points).
 
     Parameters
     ----------
     fdr, tpr : array-like of shape (n_thresholds,)
         The operating points, by decreasing threshold, without (0, 0).
+    anchored : bool, default=True
+        Whether the path is anchored at (0, 0) and (1, 1).
 
     Returns
     -------
     area : float
     """
-    return float(np.trapezoid(np.r_[0.0, tpr, 1.0], np.r_[0.0, fdr, 1.0]))
+    if anchored:
+        return float(np.trapezoid(np.r_[0.0, tpr, 1.0], np.r_[0.0, fdr, 1.0]))
+    fdr, tpr = np.asarray(fdr, dtype=np.float64), np.asarray(tpr, dtype=np.float64)
+    return float(np.trapezoid(tpr, fdr)) if len(fdr) > 1 else 0.0
 
 
 @fill_doc(checked_params=_CHECKED_PARAMS)
-def tpr_fdr_auc_unchecked(labels: NDArray[np.bool_], probs: NDArray[np.float64]) -> float:
+def tpr_fdr_auc_unchecked(labels: NDArray[np.bool_], probs: NDArray[np.float64],
+                          anchored: bool = True) -> float:
     """:func:`~occgp.evaluation.metrics.tpr_fdr_auc` of checked arrays.
 
     {checked_params}
+    anchored : bool, default=True
+        Whether the area is anchored at (0, 0) and (1, 1) (see :func:`tpr_fdr_area`).
 
     Returns
     -------
     auc : float
     """
     fdr, tpr, _ = tpr_fdr_points(labels, probs)
-    return tpr_fdr_area(fdr[1:], tpr[1:])
+    return tpr_fdr_area(fdr[1:], tpr[1:], anchored)

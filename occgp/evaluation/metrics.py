@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from sklearn import metrics as _skm
 
 from .._docfill import fill_doc
-from .._validation import as_numeric, check_real
+from .._validation import as_numeric, check_bool, check_real
 from ._tpr_fdr import tpr_fdr_auc_unchecked, tpr_fdr_points
 
 __all__ = [
@@ -279,7 +279,7 @@ def _accuracy(labels, probs, threshold):
 @fill_doc(**_SECTIONS,
           raises=_invalid_input(" or `y_true` holds no occupied point (TPR undefined)"))
 def tpr_fdr_curve(
-    y_true: ArrayLike, y_prob: ArrayLike
+    y_true: ArrayLike, y_prob: ArrayLike, *, anchored: bool = True
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """True positive rate against false discovery rate over thresholds.
 
@@ -290,15 +290,19 @@ def tpr_fdr_curve(
     curve is tie-aware). Unknown points (NaN) count as p = 0.5.
 
     {y_params}
+    anchored : bool, default=True
+        Whether the curve starts at (0, 0) (threshold ``inf``); False: the
+        measured operating points only.
 
     Returns
     -------
     fdr : ndarray of shape (n_thresholds + 1,)
-        False discovery rates (x axis, like ``fpr`` of :func:`roc_curve`).
+        False discovery rates (x axis, like ``fpr`` of :func:`roc_curve`);
+        ``n_thresholds`` entries when not `anchored`.
     tpr : ndarray of shape (n_thresholds + 1,)
         True positive rates, non-decreasing.
     thresholds : ndarray of shape (n_thresholds + 1,)
-        Decreasing thresholds, the first ``inf``.
+        Decreasing thresholds, the first ``inf`` when `anchored`.
 
     {raises}
 
@@ -327,10 +331,16 @@ def tpr_fdr_curve(
     [0.0, 0.0, 0.5, 0.3333333333333333, 0.5]
     >>> tpr.tolist()
     [0.0, 0.5, 0.5, 1.0, 1.0]
+    >>> tpr_fdr_curve([1, 0, 1, 0], [0.9, 0.7, 0.6, 0.1], anchored=False)[0].tolist()
+    [0.0, 0.5, 0.3333333333333333, 0.5]
     """
+    anchored = check_bool(anchored, "anchored")
     labels, probs, _ = _check_labels_probs(y_true, y_prob)
     _require_positive(labels)
-    return tpr_fdr_points(labels, probs)
+    fdr, tpr, thresholds = tpr_fdr_points(labels, probs)
+    if anchored:
+        return fdr, tpr, thresholds
+    return fdr[1:], tpr[1:], thresholds[1:]
 
 
 def _require_positive(labels):
@@ -342,17 +352,25 @@ def _require_positive(labels):
 
 
 @fill_doc(**_SECTIONS, raises=_invalid_input(" or `y_true` holds no occupied point"))
-def tpr_fdr_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
+def tpr_fdr_auc(y_true: ArrayLike, y_prob: ArrayLike, *, anchored: bool = True) -> float:
     """Area under the TPR–FDR curve (higher is better).
 
     Miao et al. rank occupancy maps by the area under the TPR–FDR curve
-    traced by varying the occupancy threshold. Here the curve of
-    :func:`tpr_fdr_curve` runs from (0, 0) through every threshold in
-    decreasing order to (fraction of free points, 1), and is closed with a
-    flat segment to (1, 1): beyond the all-occupied prediction TPR stays 1.
-    The area is the trapezoid rule along this path on FDR in [0, 1].
+    traced by varying the occupancy threshold. Anchored (occgp's area, the
+    default), the curve of :func:`tpr_fdr_curve` runs from (0, 0) through
+    every threshold in decreasing order to (fraction of free points, 1), and
+    is closed with a flat segment to (1, 1): beyond the all-occupied
+    prediction TPR stays 1. The area is the trapezoid rule along this path on
+    FDR in [0, 1]. Unanchored (the authors' area), the path holds the
+    measured operating points only, from the highest threshold's to the
+    lowest's: the trapezoid rule ``sum((fdr[i+1] - fdr[i]) * (tpr[i+1] +
+    tpr[i]) / 2)`` over them (0 for a single point); it leaves out the
+    stretches before the first point and after the last, so curves whose
+    points span different FDR ranges are measured over different ranges.
 
     {y_params}
+    anchored : bool, default=True
+        Anchor the path at (0, 0) and (1, 1) (True) or not (False).
 
     Returns
     -------
@@ -385,10 +403,13 @@ def tpr_fdr_auc(y_true: ArrayLike, y_prob: ArrayLike) -> float:
     1.0
     >>> round(tpr_fdr_auc([1, 0, 1, 0], [0.9, 0.7, 0.6, 0.1]), 4)
     0.7917
+    >>> round(tpr_fdr_auc([1, 0, 1, 0], [0.9, 0.7, 0.6, 0.1], anchored=False), 4)
+    0.2917
     """
+    anchored = check_bool(anchored, "anchored")
     labels, probs, _ = _check_labels_probs(y_true, y_prob)
     _require_positive(labels)
-    return tpr_fdr_auc_unchecked(labels, probs)
+    return tpr_fdr_auc_unchecked(labels, probs, anchored)
 
 
 @fill_doc(**_SECTIONS, raises=_invalid_input(
