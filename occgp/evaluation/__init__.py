@@ -20,6 +20,7 @@ ranked with :func:`nca_feature_weights`.
 """
 
 from ._ground_truth import cell_labels, cells_in_view, exact_labels, exact_test_set
+from ._matching import MatchedCounts, matched_counts
 from ._nca import MAX_NCA_BYTES, NCAResult, nca_feature_weights
 from ._protocols import (
     MapResult, TestSet, compare_methods, equal_time_comparison, evaluate_map, grid_test_set,
@@ -35,4 +36,4 @@ __all__ = ["TestSet", "MapResult", "held_out_split", "grid_test_set", "exact_tes
            "run_method", "compare_methods", "equal_time_comparison", "format_table",
            "rows_to_records", "nca_feature_weights", "NCAResult", "MAX_NCA_BYTES",
            "grid_search", "GridSearchResult", "cell_labels", "KNN_GRID", "OCTOMAP_GRID",
-           "KNN_WEIGHT_GRID", "THRESHOLDS"]
+           "KNN_WEIGHT_GRID", "THRESHOLDS", "matched_counts", "MatchedCounts"]
