@@ -35,12 +35,15 @@ from .maps import register
 from .octree import OccupancyOctree, unpack_keys
 
 __all__ = ["KNNMap", "ScanReplay", "check_knn_params", "check_octomap_params",
-           "mean_knn_distances", "point_log_odds"]
+           "check_score_stats", "mean_knn_distances", "point_log_odds", "fixed_log_odds"]
 
 #: The parameters of the k-NN model, as :class:`KNNMap` takes them (``cdf`` and
 #: ``n_jobs`` aside).
 KNN_PARAMS = ("k", "p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "p_t", "sensor_range")
 CDFS = ("normal", "truncated")
+#: Where the mean and standard deviation of the scores come from: Welford's running
+#: statistics, or the whole data set's (fixed for the run).
+STATS = ("online", "dataset")
 MAX_K = 1000
 _MAX_RANGE = 1e15
 # the underlying tree's own sensor model: used only to tell end cells (l_hit > 0)
@@ -90,11 +93,28 @@ def check_knn_params(params: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def check_score_stats(value: Any, name: str = "score_stats") -> tuple[float, float] | None:
+    """None, or a (mean, std) pair of finite reals with ``std >= 0``, as floats.
+
+    Raises TypeError (not a pair of reals) or ValueError (not finite, negative
+    std), naming `name`.
+    """
+    if value is None:
+        return None
+    if isinstance(value, (str, bytes)) or not np.iterable(value) or len(value) != 2:
+        raise TypeError(f"{name} must be None or a (mean, std) pair, got "
+                        f"{type(value).__name__}")
+    mean = check_real(value[0], f"{name}[0] (the mean)")
+    std = check_real(value[1], f"{name}[1] (the std)", low=0.0, low_open=False)
+    return (mean, std)
+
+
 def _check_all(params: dict[str, Any]) -> dict[str, Any]:
     """Every KNNMap constructor parameter checked, in the constructor's order."""
     model = check_knn_params({name: params[name] for name in KNN_PARAMS})
     return {"resolution": check_resolution(params["resolution"]), **model,
             "cdf": check_choice(params["cdf"], "cdf", CDFS),
+            "score_stats": check_score_stats(params["score_stats"]),
             "n_jobs": check_n_jobs(params["n_jobs"])}
 
 
@@ -141,6 +161,12 @@ def point_log_odds(s: NDArray[np.float64], count: int, mean: float, m2: float, p
     ``cdf="truncated"`` truncates the normal at s = 0 (distances are >= 0).
     """
     std = math.sqrt(m2 / count) if count > 0 else 0.0
+    return fixed_log_odds(s, mean, std, p_u, p_l, cdf)
+
+
+def fixed_log_odds(s: NDArray[np.float64], mean: float, std: float, p_u: float, p_l: float,
+                   cdf: str = "normal") -> NDArray[np.float64]:
+    """:func:`point_log_odds` with the statistics given as a mean and a standard deviation."""
     with np.errstate(invalid="ignore", divide="ignore"):
         if std > 0:
             z = (s - mean) / std
@@ -213,6 +239,13 @@ class KNNMap(OccupancyOctree):
     cdf : {"normal", "truncated"}, default="normal"
         F: the normal CDF of the paper, or the normal truncated at s = 0 (the
         scores are distances), as the authors' code does.
+    score_stats : (float, float) or None, default=None
+        None: μ and σ are Welford's running statistics (online). A pair
+        ``(mean, std)``: μ and σ fixed for the whole run, as the authors' code
+        takes them from the whole data set (e.g.
+        :meth:`ScanReplay.score_stats`, or :attr:`score_mean_` and
+        :attr:`score_std_` of a map built from every scan); finite, ``std >=
+        0``. Welford's statistics are still kept (the attributes below).
     n_jobs : int or None, default=None
         Threads for the k-NN queries (``cKDTree.query(workers=)``) and for
         walking a scan's rays (as ``OccupancyOctree.insert_scan(n_jobs=)``:
@@ -266,11 +299,12 @@ class KNNMap(OccupancyOctree):
                  p_l: float = 0.38, p_m: float = 0.26, p_m_out: float = 0.38,
                  p_min: float = 0.02, p_max: float = 0.98, p_t: float = 0.5,
                  sensor_range: float = 4.0, cdf: str = "normal",
+                 score_stats: tuple[float, float] | None = None,
                  n_jobs: int | None = None) -> None:
         params = _check_all({"resolution": resolution, "k": k, "p_u": p_u, "p_l": p_l,
                               "p_m": p_m, "p_m_out": p_m_out, "p_min": p_min, "p_max": p_max,
                               "p_t": p_t, "sensor_range": sensor_range, "cdf": cdf,
-                              "n_jobs": n_jobs})
+                              "score_stats": score_stats, "n_jobs": n_jobs})
         self._build(params, _CLASS_HIT, _CLASS_MISS, params["p_min"], params["p_max"],
                     params["p_t"])
         self._scores = (0, 0.0, 0.0)       # Welford: count, mean, sum of squared deviations
@@ -363,6 +397,11 @@ class KNNMap(OccupancyOctree):
         return self._params["cdf"]
 
     @property
+    def score_stats(self) -> tuple[float, float] | None:
+        """The fixed (mean, std) of the scores, or None (Welford's, online)."""
+        return self._params["score_stats"]
+
+    @property
     def prob_hit(self) -> float:
         raise AttributeError("KNNMap has no prob_hit: a cell holding points gets the sum "
                              "of its points' logit(p(s)) (see p_u, p_l)")
@@ -449,9 +488,11 @@ default="auto"
         s = mean_knn_distances(near.astype(np.float64), [self.k],
                                n_threads(self._params["n_jobs"]))[:, 0]
         scores = _welford(s, *self._scores)
-        updates = _cell_updates(kinds, point_cell, point_log_odds(
-            s, *scores, self.p_u, self.p_l, self.cdf), _log_odds(self.p_m),
-            _log_odds(self.p_m_out))
+        fixed = self._params["score_stats"]
+        values = (point_log_odds(s, *scores, self.p_u, self.p_l, self.cdf) if fixed is None
+                  else fixed_log_odds(s, *fixed, self.p_u, self.p_l, self.cdf))
+        updates = _cell_updates(kinds, point_cell, values, _log_odds(self.p_m),
+                                _log_odds(self.p_m_out))
         seconds = time.perf_counter() - t0
         self._apply_cells(keys, updates)
         self._scores = scores
@@ -511,6 +552,12 @@ class ScanReplay:
     ks : sequence of int, default=(1,)
         The values of k to score points for.
     cdf : {"normal", "truncated"}, default="normal"
+    stats : {"online", "dataset"}, default="online"
+        μ and σ of the scores: Welford's running statistics, as
+        :class:`KNNMap` keeps them, or the whole data set's, fixed for the run
+        (the final Welford statistics over every finite score of every scan,
+        :meth:`score_stats`), as ``KNNMap(score_stats=replay.score_stats(k))``
+        uses them.
     n_jobs : int or None, default=None
         Threads for the k-NN queries and the rays' traversal (the replay is the
         same for every `n_jobs`).
@@ -528,7 +575,7 @@ class ScanReplay:
 
     def __init__(self, scans: Iterable[Sequence[Any]], resolution: float = 0.1, *,
                  sensor_range: float = 4.0, ks: Sequence[int] = (1,), cdf: str = "normal",
-                 n_jobs: int | None = None) -> None:
+                 stats: str = "online", n_jobs: int | None = None) -> None:
         k_values = (ks,) if isinstance(ks, (int, np.integer)) else ks
         self.ks = tuple(check_int(k, "ks", low=1, high=MAX_K) for k in k_values)
         if not self.ks:
@@ -537,6 +584,7 @@ class ScanReplay:
         self.sensor_range = check_real(sensor_range, "sensor_range", low=0.0,
                                        high=_MAX_RANGE, high_open=False)
         self.cdf = check_choice(cdf, "cdf", CDFS)
+        self.stats = check_choice(stats, "stats", STATS)
         workers = n_threads(check_n_jobs(n_jobs))
         probe = KNNMap(self.resolution, sensor_range=self.sensor_range)
         local = []
@@ -569,6 +617,10 @@ class ScanReplay:
             local.append((keys, kinds, point_cell, s, per_k))
             self.n_points += len(pts)
             self.n_near += len(s)
+        self._final_stats = tuple(stats)
+        if self.stats == "dataset":
+            local = [(keys, kinds, point_cell, s, list(self._final_stats))
+                     for keys, kinds, point_cell, s, _ in local]
         self.n_scans = len(local)
         all_keys = np.concatenate([x[0] for x in local]) if local else np.empty(0, np.uint64)
         self.keys = np.unique(all_keys)
@@ -580,6 +632,32 @@ class ScanReplay:
     def num_cells(self) -> int:
         """Number of cells the scans update."""
         return len(self.keys)
+
+    def score_stats(self, k: int) -> tuple[float, float]:
+        """The data set's mean and standard deviation of the scores for `k`.
+
+        Welford's statistics over every finite score of every scan (the values
+        :attr:`KNNMap.score_mean_` and :attr:`KNNMap.score_std_` reach after
+        the last scan); (0.0, 0.0) when there is none.
+
+        Parameters
+        ----------
+        k : int
+            One of :attr:`ks`.
+
+        Returns
+        -------
+        mean, std : float
+
+        Raises
+        ------
+        ValueError
+            If `k` was not scored.
+        """
+        if k not in self.ks:
+            raise ValueError(f"k={k!r} was not scored; this ScanReplay holds ks={self.ks}")
+        count, mean, m2 = self._final_stats[self.ks.index(k)]
+        return (mean, math.sqrt(m2 / count) if count > 0 else 0.0)
 
     @property
     def centres(self) -> NDArray[np.float64]:

@@ -180,10 +180,11 @@ def leaf_values(tree) -> dict[tuple, np.float32]:
 
 
 def knn_reference(scans, resolution, *, k, p_u, p_l, p_m, p_m_out, p_min, p_max,
-                  sensor_range):
+                  sensor_range, score_stats=None):
     """Cell key → float32 log-odds after inserting `scans` with the k-NN inverse sensor
-    model: brute-force neighbours, Welford one point at a time, the normal CDF from
-    ``math.erfc``, the ray port above, one clamped update per cell and scan."""
+    model: brute-force neighbours, Welford one point at a time (or the fixed
+    `score_stats` (mean, std)), the normal CDF from ``math.erfc``, the ray port above,
+    one clamped update per cell and scan."""
     rf = 1.0 / resolution
     l_in, l_out = logodds32(p_m), logodds32(p_m_out)
     lo, hi = logodds32(p_min), logodds32(p_max)
@@ -207,15 +208,16 @@ def knn_reference(scans, resolution, *, k, p_u, p_l, p_m, p_m_out, p_min, p_max,
                 delta = s - mean
                 mean += delta / count
                 m2 += delta * (s - mean)
-        std = math.sqrt(m2 / count) if count else 0.0
+        mu, std = (mean, math.sqrt(m2 / count) if count else 0.0) if score_stats is None \
+            else score_stats
         point_sum: dict[tuple, float] = defaultdict(float)
         for p, s in zip(near, scores):
             if not math.isfinite(s):
                 f = 1.0
             elif std > 0:
-                f = 0.5 * math.erfc(-(s - mean) / (std * math.sqrt(2.0)))
+                f = 0.5 * math.erfc(-(s - mu) / (std * math.sqrt(2.0)))
             else:
-                f = 1.0 if s > mean else (0.0 if s < mean else 0.5)
+                f = 1.0 if s > mu else (0.0 if s < mu else 0.5)
             prob = p_u - (p_u - p_l) * f
             point_sum[tuple(_key(c, rf) for c in p)] += math.log(prob / (1.0 - prob))
         update: dict[tuple, np.float32] = {key: f32(v) for key, v in point_sum.items()}

@@ -243,3 +243,67 @@ def test_replay_rejects_bad_input():
         rep.knn_log_odds([{"k": 1}])
     with pytest.raises(ValueError, match=r"params\[0\].*p_u >= p_l"):
         rep.knn_log_odds([dict(PARAMS, k=1, p_u=0.2, p_l=0.3)])
+
+
+# ---------------------------------------------------------------------- data-set statistics
+@pytest.mark.parametrize("seed", [0, 1])
+def test_fixed_statistics_match_the_slow_reference(seed):
+    scans = noisy_scans(np.random.default_rng(seed))
+    fixed = (0.11, 0.04)
+    m = build(scans, score_stats=fixed)
+    ref = knn_reference(scans, 0.2, sensor_range=3.0, score_stats=fixed, **PARAMS)
+    got = leaf_values(m)
+    assert set(got) == set(ref)
+    keys = sorted(ref)
+    np.testing.assert_allclose([got[k] for k in keys], [ref[k] for k in keys],
+                               rtol=0, atol=2e-6)
+    # the fixed statistics change the map; Welford's are still kept
+    online = build(scans)
+    assert leaf_values(online) != got
+    assert (m.n_scores_, m.score_mean_, m.score_std_) == (online.n_scores_,
+                                                         online.score_mean_, online.score_std_)
+    assert m.score_stats == fixed and online.score_stats is None
+
+
+def test_fixed_statistics_pickle_and_zero_std():
+    scans = noisy_scans(np.random.default_rng(4))
+    m = build(scans[:2], score_stats=(0.1, 0.0))
+    again = pickle.loads(pickle.dumps(m))
+    assert again.score_stats == (0.1, 0.0)
+    for mm in (m, again):
+        mm.insert_scan(*scans[2], method="plain")
+    assert leaf_values(m) == leaf_values(again)
+    ref = knn_reference(scans, 0.2, sensor_range=3.0, score_stats=(0.1, 0.0), **PARAMS)
+    got = leaf_values(m)
+    np.testing.assert_allclose([got[k] for k in sorted(ref)], [ref[k] for k in sorted(ref)],
+                               rtol=0, atol=2e-6)
+
+
+def test_dataset_replay_equals_maps_with_the_dataset_statistics():
+    scans = noisy_scans(np.random.default_rng(13), n_scans=4, n_wall=80)
+    rep = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(1, 3), stats="dataset")
+    online = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(1, 3))
+    combos = [dict(PARAMS), dict(PARAMS, k=1, p_u=0.74, p_l=0.38)]
+    keys = [tuple(int((key >> np.uint64(16 * a)) & np.uint64(0xFFFF)) for a in range(3))
+            for key in rep.keys]
+    for row, params in zip(rep.knn_log_odds(combos), combos):
+        full = build(scans, **params)
+        # the data set's statistics are those a map reaches after the last scan
+        assert rep.score_stats(params["k"]) == (full.score_mean_, full.score_std_)
+        got = leaf_values(build(scans, score_stats=rep.score_stats(params["k"]), **params))
+        assert [got[k] for k in keys] == row.tolist()
+    assert not np.array_equal(rep.knn_log_odds(combos), online.knn_log_odds(combos))
+    assert online.score_stats(3) == rep.score_stats(3)
+
+
+def test_score_stats_bad_input():
+    with pytest.raises(TypeError, match="score_stats must be None or a"):
+        KNNMap(0.1, score_stats=0.1)
+    with pytest.raises(ValueError, match=r"score_stats\[1\] \(the std\) must lie in"):
+        KNNMap(0.1, score_stats=(0.1, -1.0))
+    with pytest.raises(ValueError, match=r"score_stats\[0\] \(the mean\) must lie in"):
+        KNNMap(0.1, score_stats=(np.nan, 1.0))
+    with pytest.raises(ValueError, match="stats must be one of"):
+        ScanReplay([], 0.2, stats="global")
+    with pytest.raises(ValueError, match="k=2 was not scored"):
+        ScanReplay([], 0.2).score_stats(2)
