@@ -8,7 +8,7 @@ import pytest
 
 from occgp import KNNMap, OccupancyOctree
 from occgp.evaluation import (
-    KNN_GRID, OCTOMAP_GRID, THRESHOLDS, cell_labels, grid_search,
+    KNN_GRID, OCTOMAP_GRID, THRESHOLDS, cell_labels, grid_search, matched_counts,
 )
 from occgp.knn import ScanReplay
 from occgp.metrics import tpr_fdr_auc
@@ -167,3 +167,141 @@ def test_no_occupied_cell(replay):
     _, rep = replay
     with pytest.raises(ValueError, match="no occupied cell"):
         grid_search(rep, np.zeros(rep.num_cells, bool), {"p_u": [0.9]})
+
+
+# ------------------------------------------------------------ scoring options
+GRID2 = {"k": [3], "p_u": [0.9, 0.7], "p_l": [0.3], "p_m": [0.2], "p_m_out": [0.4],
+         "p_min": [0.05], "p_max": [0.95]}
+
+
+def test_the_strict_protocol_is_the_default(replay):
+    _, rep = replay
+    labels = cell_labels(Wall(), rep.centers, 0.2)
+    res = grid_search(rep, labels, GRID2)
+    assert res.scoring == "exact" and not res.masked
+    assert all("auc_exact" not in r for r in res.results)
+    full = grid_search(rep, labels, GRID2, mask=np.ones(rep.num_cells, bool))
+    assert full.masked
+    for a, b in zip(res.results, full.results):
+        assert b["auc"] == b["auc_exact"] == a["auc"] and b["tpr"] == a["tpr"]
+
+
+def test_mask_scores_only_its_cells(replay):
+    _, rep = replay
+    labels = cell_labels(Wall(), rep.centers, 0.2)
+    mask = rep.centers[:, 1] > 0
+    res = grid_search(rep, labels, GRID2, mask=mask)
+    plain = grid_search(rep, labels, GRID2)
+    values = rep.knn_log_odds([{k: r[k] for k in GRID2} for r in res.results])
+    ts = [t for t in sorted(THRESHOLDS, reverse=True) if 0.05 <= t <= 0.95]
+    for row, v, strict in zip(res.results, values, plain.results):
+        tpr, fdr = [], []
+        for t in ts:
+            occ = (v >= np.float32(np.log(t / (1 - t)))) & mask
+            if occ.any():
+                tpr.append((occ & labels).sum() / (labels & mask).sum())
+                fdr.append((occ & ~labels).sum() / occ.sum())
+        assert row["tpr"] == pytest.approx(tpr) and row["fdr"] == pytest.approx(fdr)
+        assert row["auc"] == pytest.approx(np.trapezoid(np.r_[0, tpr, 1], np.r_[0, fdr, 1]))
+        assert row["auc_exact"] == strict["auc"]
+    # every threshold: the metric on the masked cells
+    full = grid_search(rep, labels, GRID2, mask=mask, thresholds=None)
+    probs = 1 / (1 + np.exp(-values.astype(float)))
+    assert [r["auc"] for r in full.results] == pytest.approx(
+        [tpr_fdr_auc(labels[mask], p[mask]) for p in probs])
+
+
+def test_authors_scoring_is_matched_counts_and_the_unanchored_area(replay):
+    _, rep = replay
+    labels = cell_labels(Wall(), rep.centers, 0.2)
+    mask = rep.centers[:, 2] < 0.5
+    res = grid_search(rep, labels, GRID2, mask=mask, scoring="authors")
+    assert res.scoring == "authors" and res.masked
+    strict = grid_search(rep, labels, GRID2)
+    values = rep.knn_log_odds([{k: r[k] for k in GRID2} for r in res.results])
+    ts = [t for t in sorted(THRESHOLDS, reverse=True) if 0.05 <= t <= 0.95]
+    for row, v, s in zip(res.results, values, strict.results):
+        tpr, fdr = [], []
+        for t in ts:
+            occ = v >= np.float32(np.log(t / (1 - t)))
+            if (occ & mask).any():
+                c = matched_counts(rep.keys[occ], rep.keys[labels], rep.keys[mask])
+                tpr.append(c.tpr)
+                fdr.append(c.fdr)
+        assert row["tpr"] == pytest.approx(tpr) and row["fdr"] == pytest.approx(fdr)
+        assert row["auc"] == pytest.approx(np.trapezoid(tpr, fdr))
+        assert row["auc_exact"] == s["auc"]
+    # the ±1 rule only adds true positives
+    nomask = grid_search(rep, labels, GRID2, scoring="authors")
+    for a, s in zip(nomask.results, strict.results):
+        assert all(x >= y - 1e-12 for x, y in zip(a["tpr"], s["tpr"]))
+        assert all(x <= y + 1e-12 for x, y in zip(a["fdr"], s["fdr"]))
+
+
+def test_authors_scoring_on_a_hand_built_replay():
+    # one scan, three points in a row along y at x = 2: three end cells, rays before them
+    pts = np.array([[2.05, 0.05, 0.05], [2.05, 0.35, 0.05], [2.05, 0.65, 0.05]])
+    rep = ScanReplay([(pts, [0.05, 0.05, 0.05])], 0.1, sensor_range=3.0)
+    ends = np.isclose(rep.centers[:, 0], 2.05)
+    assert ends.sum() == 3
+    # the truth: the ray cell just before each end cell (x = 1.95), one cell off
+    behind = np.isclose(rep.centers[:, 0], 1.95) & np.isin(
+        np.round(rep.centers[:, 1], 2), [0.05, 0.35, 0.65])
+    assert behind.sum() == 3
+    grid = {"k": [1], "p_u": [0.9], "p_l": [0.9], "p_m": [0.2], "p_m_out": [0.2]}
+    strict = grid_search(rep, behind, grid, thresholds=[0.5])
+    authors = grid_search(rep, behind, grid, thresholds=[0.5], scoring="authors")
+    # at p_t = 0.5 the three end cells are occupied, everything else free: strictly
+    # 3 FP, 3 FN; by the authors' rule each end cell matches the occupied cell next to
+    # it (3 TP, no FP), while the three occupied cells predicted free stay FN
+    assert strict.results[0]["tpr"] == (0.0,) and strict.results[0]["fdr"] == (1.0,)
+    assert authors.results[0]["tpr"] == (0.5,) and authors.results[0]["fdr"] == (0.0,)
+    assert authors.results[0]["auc"] == 0.0          # one point: no area
+    assert authors.results[0]["auc_exact"] == strict.results[0]["auc"] == 0.0
+
+
+def test_truncated_cdf_and_dataset_statistics(replay):
+    scans, rep = replay
+    labels = cell_labels(Wall(), rep.centers, 0.2)
+    for cdf, stats in (("truncated", "online"), ("normal", "dataset"),
+                       ("truncated", "dataset")):
+        res = grid_search(scans, labels, GRID2, resolution=0.2, sensor_range=3.0, cdf=cdf,
+                          stats=stats)
+        other = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(3,), cdf=cdf, stats=stats)
+        assert res.results == grid_search(other, labels, GRID2, cdf=cdf, stats=stats).results
+        values = other.knn_log_odds([{k: r[k] for k in GRID2} for r in res.results])
+        assert not np.array_equal(values, rep.knn_log_odds(
+            [{k: r[k] for k in GRID2} for r in res.results]))
+    # the maps: those KNNMap builds with the same cdf and fixed statistics
+    other = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(3,), cdf="truncated", stats="dataset")
+    params = {k: v[0] for k, v in GRID2.items()}
+    m = KNNMap(0.2, sensor_range=3.0, cdf="truncated", score_stats=other.score_stats(3),
+               **params)
+    for points, origin in scans:
+        m.insert_scan(points, origin)
+    got = m.occupancy(other.centers)
+    want = 1 / (1 + np.exp(-other.knn_log_odds([params])[0].astype(float)))
+    np.testing.assert_allclose(got, want, rtol=1e-6)
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    (dict(scoring="loose"), ValueError, "scoring must be one of"),
+    (dict(mask=np.ones(3, bool)), ValueError, r"mask must have shape"),
+    (dict(mask="all"), TypeError, "mask must be booleans"),
+    (dict(scoring="authors", thresholds=None), ValueError, "thresholds=None"),
+    (dict(cdf="kde"), ValueError, "cdf must be one of"),
+    (dict(stats="global"), ValueError, "stats must be one of"),
+    (dict(cdf="truncated"), ValueError, "cdf='truncated' differs from the ScanReplay's"),
+    (dict(stats="dataset"), ValueError, "stats='dataset' differs from the ScanReplay's"),
+])
+def test_bad_scoring_options(replay, kwargs, exc, match):
+    _, rep = replay
+    with pytest.raises(exc, match=match):
+        grid_search(rep, cell_labels(Wall(), rep.centers, 0.2), {"p_u": [0.9]}, **kwargs)
+
+
+def test_mask_without_an_occupied_cell(replay):
+    _, rep = replay
+    labels = cell_labels(Wall(), rep.centers, 0.2)
+    with pytest.raises(ValueError, match="mask holds no occupied cell"):
+        grid_search(rep, labels, {"p_u": [0.9]}, mask=~labels)

@@ -21,7 +21,8 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from .._validation import check_choice, check_int, check_n_jobs, check_real, n_threads
-from ..knn import KNNMap, ScanReplay, check_knn_params, check_octomap_params
+from ..knn import CDFS, STATS, KNNMap, ScanReplay, check_knn_params, check_octomap_params
+from . import _matching
 from ._ground_truth import cell_labels
 from ._tpr_fdr import tpr_fdr_area, tpr_fdr_auc_unchecked
 
@@ -57,6 +58,8 @@ KNN_WEIGHT_GRID = {"k": (1, 3, 5, 7), "p_u": _steps(0.02, 0.98, 0.12),
                    "p_m_out": _steps(0.02, 0.38, 0.12), "p_min": _steps(0.02, 0.38, 0.12),
                    "p_max": _steps(0.5, 0.98, 0.12)}
 _KNN_KEYS = ("k", "p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max")
+_SCORE_KEYS = ("auc", "auc_exact", "thresholds", "tpr", "fdr")
+SCORINGS = ("exact", "authors")
 _OCTOMAP_KEYS = ("prob_hit", "prob_miss", "clamping_min", "clamping_max")
 
 
@@ -67,9 +70,12 @@ class GridSearchResult(NamedTuple):
     ----------
     results : list of dict
         One row per parameter combination (constraints met), in grid order:
-        its parameters, ``auc`` (area under the TPR–FDR curve), and
-        ``thresholds``, ``tpr``, ``fdr`` (tuples, one entry per threshold
-        with a defined FDR, decreasing thresholds).
+        its parameters, ``auc`` (area under the TPR–FDR curve, by the
+        search's `scoring` and `mask`), and ``thresholds``, ``tpr``, ``fdr``
+        (tuples, one entry per threshold with a defined FDR, decreasing
+        thresholds). When the search scored otherwise than occgp's strict
+        protocol (``scoring="authors"`` or a `mask`), also ``auc_exact``: the
+        strict protocol's area (exact cells, every reached cell, anchored).
     best_params : dict
         The parameters of the row with the highest ``auc`` (the first on ties).
     best_score : float
@@ -81,6 +87,11 @@ class GridSearchResult(NamedTuple):
     seconds : float
         Wall time of the search (the replay's set-up included when the search
         made it).
+    scoring : str
+        ``"exact"`` (occgp's strict protocol) or ``"authors"`` (Miao et al.'s
+        ±1-cell rule and unanchored area), as :func:`grid_search` scored.
+    masked : bool
+        Whether only the cells of a `mask` were scored.
     """
 
     results: list[dict[str, Any]]
@@ -89,6 +100,8 @@ class GridSearchResult(NamedTuple):
     best_index: int
     n_rejected: int
     seconds: float
+    scoring: str = "exact"
+    masked: bool = False
 
     def operating_points(self) -> list[dict[str, Any]]:
         """One row per (combination, threshold) of the search.
@@ -101,8 +114,7 @@ class GridSearchResult(NamedTuple):
         """
         rows = []
         for row in self.results:
-            params = {k: v for k, v in row.items() if k not in ("auc", "thresholds", "tpr",
-                                                                   "fdr")}
+            params = {k: v for k, v in row.items() if k not in _SCORE_KEYS}
             for t, tpr, fdr in zip(row["thresholds"], row["tpr"], row["fdr"]):
                 rows.append({**params, "p_t": t, "tpr": tpr, "fdr": fdr})
         return rows
@@ -150,7 +162,54 @@ def _curve(values, labels, thresholds):
     return kept, tpr, fdr
 
 
-def _score_chunk(replay, labels, method, combos, thresholds, batch_size):
+def _authors_curve(values, scorer, thresholds):
+    """TPR and FDR at each threshold by the authors' ±1-cell one-to-one rule over the
+    scored cells (NaN FDR dropped)."""
+    rows, table, n_ref, ref_scored = (scorer["rows"], scorer["table"], scorer["n_ref"],
+                                      scorer["ref_scored"])
+    v = values[rows]
+    tpr, fdr, kept = [], [], []
+    for t, lt in thresholds:
+        active = v >= lt
+        n = int(np.count_nonzero(active))
+        if n == 0:
+            continue
+        tp = int(np.count_nonzero(_matching.greedy_matches(table, active, n_ref)))
+        fn = int(np.count_nonzero(ref_scored & ~active))
+        tpr.append(tp / (tp + fn))
+        fdr.append((n - tp) / n)
+        kept.append(t)
+    return kept, tpr, fdr
+
+
+def _score_row(values, labels, scorer, ts):
+    """The row's scores: ``auc``, the curve, and ``auc_exact`` when not strict."""
+    if ts is None:
+        prob = 1.0 - 1.0 / (1.0 + np.exp(values.astype(np.float64)))
+        mask = scorer["mask"]
+        if mask is None:
+            return {"auc": tpr_fdr_auc_unchecked(labels, prob), "thresholds": (), "tpr": (),
+                    "fdr": ()}
+        return {"auc": tpr_fdr_auc_unchecked(labels[mask], prob[mask]),
+                "auc_exact": tpr_fdr_auc_unchecked(labels, prob), "thresholds": (),
+                "tpr": (), "fdr": ()}
+    kept, tpr, fdr = _curve(values, labels, ts)
+    exact = {"auc": tpr_fdr_area(fdr, tpr), "thresholds": tuple(kept), "tpr": tuple(tpr),
+             "fdr": tuple(fdr)}
+    if scorer["scoring"] == "exact" and scorer["mask"] is None:
+        return exact
+    if scorer["scoring"] == "exact":
+        mask = scorer["mask"]
+        kept, tpr, fdr = _curve(values[mask], labels[mask], ts)
+        area = tpr_fdr_area(fdr, tpr)
+    else:
+        kept, tpr, fdr = _authors_curve(values, scorer, ts)
+        area = tpr_fdr_area(fdr, tpr, anchored=False)
+    return {"auc": area, "auc_exact": exact["auc"], "thresholds": tuple(kept),
+            "tpr": tuple(tpr), "fdr": tuple(fdr)}
+
+
+def _score_chunk(replay, labels, method, combos, thresholds, batch_size, scorer):
     rows = []
     for start in range(0, len(combos), batch_size):
         batch = combos[start:start + batch_size]
@@ -162,24 +221,44 @@ def _score_chunk(replay, labels, method, combos, thresholds, batch_size):
             bounds = [(p["clamping_min"], p["clamping_max"]) for p in batch]
         for b, params in enumerate(batch):
             lo, hi = bounds[b]
-            if thresholds is None:
-                prob = 1.0 - 1.0 / (1.0 + np.exp(values[b].astype(np.float64)))
-                rows.append({**params, "auc": tpr_fdr_auc_unchecked(labels, prob),
-                             "thresholds": (), "tpr": (), "fdr": ()})
-                continue
-            ts = [(t, np.float32(_threshold_log_odds(t)))
-                  for t in sorted(thresholds, reverse=True) if lo - 1e-12 <= t <= hi + 1e-12]
-            kept, tpr, fdr = _curve(values[b], labels, ts)
-            rows.append({**params, "auc": tpr_fdr_area(fdr, tpr), "thresholds": tuple(kept),
-                         "tpr": tuple(tpr), "fdr": tuple(fdr)})
+            ts = None if thresholds is None else [
+                (t, np.float32(_threshold_log_odds(t)))
+                for t in sorted(thresholds, reverse=True) if lo - 1e-12 <= t <= hi + 1e-12]
+            rows.append({**params, **_score_row(values[b], labels, scorer, ts)})
     return rows
+
+
+def _make_scorer(replay, labels, mask, scoring, thresholds):
+    """What scoring needs besides a map's values: the mask, and for the authors' rule
+    the neighbour table of the scored cells (built once for the whole search)."""
+    if mask is not None:
+        mask = np.asarray(mask)
+        if mask.dtype != bool:
+            raise TypeError(f"mask must be booleans over the replay's cells, got dtype "
+                            f"{mask.dtype}")
+        if mask.shape != (replay.num_cells,):
+            raise ValueError(f"mask must have shape ({replay.num_cells},) (the replay's "
+                             f"cells), got {mask.shape}")
+        if not (labels & mask).any():
+            raise ValueError("mask holds no occupied cell of truth: the TPR is undefined")
+    scorer: dict[str, Any] = {"mask": mask, "scoring": scoring}
+    if scoring == "authors":
+        if thresholds is None:
+            raise ValueError("thresholds=None (every distinct value) is not available with "
+                             "scoring='authors': give the thresholds")
+        rows = np.flatnonzero(mask) if mask is not None else np.arange(replay.num_cells)
+        reference = replay.keys[labels]
+        scorer.update(rows=rows, n_ref=len(reference), ref_scored=labels[rows],
+                      table=_matching.neighbour_table(replay.keys[rows], reference))
+    return scorer
 
 
 def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
                 param_grid: Mapping[str, Sequence[Any]] | Sequence[Mapping[str, Sequence[Any]]],
                 *, method: str = "knn", resolution: float = 0.1, sensor_range: float = 4.0,
-                thresholds: Sequence[float] | None = THRESHOLDS, batch_size: int = 32,
-                n_jobs: int | None = None) -> GridSearchResult:
+                thresholds: Sequence[float] | None = THRESHOLDS, mask: Any = None,
+                scoring: str = "exact", cdf: str | None = None, stats: str | None = None,
+                batch_size: int = 32, n_jobs: int | None = None) -> GridSearchResult:
     """Score every combination of a parameter grid by its map's TPR–FDR AUC.
 
     Miao et al.'s search: each combination's map (:class:`occgp.KNNMap` for
@@ -217,7 +296,32 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
     sensor_range : float, default=4.0
     thresholds : sequence of float or None, default=THRESHOLDS
         The thresholds ``p_t`` (probabilities) of each curve; None: every
-        distinct value of the map (:func:`occgp.metrics.tpr_fdr_auc`).
+        distinct value of the map (:func:`occgp.metrics.tpr_fdr_auc`; not with
+        ``scoring="authors"``).
+    mask : array-like of bool of shape (n_cells,) or None, default=None
+        The cells to score (:attr:`ScanReplay.keys` order): a region, or the
+        cells known in a reference map (the authors score only the cells known
+        in both maps); None: every cell the scans reach. Must hold an occupied
+        cell of `truth`.
+    scoring : {"exact", "authors"}, default="exact"
+        ``"exact"``, occgp's strict protocol: a cell predicted occupied is a
+        true positive only if it is occupied itself, and the area is anchored
+        at (0, 0) and (1, 1) (:func:`occgp.metrics.tpr_fdr_auc`).
+        ``"authors"``, Miao et al.'s: true positives by the ±1-cell one-to-one
+        rule of :func:`occgp.evaluation.matched_counts` (the reference's
+        occupied cells: the replay's cells `truth` marks occupied), false
+        negatives the exact occupied cells predicted free, and the area under
+        the measured operating points only (``anchored=False``). Unless the
+        search is strict (``"exact"`` without a `mask`), every row also holds
+        ``auc_exact``, the strict protocol's area.
+    cdf : {"normal", "truncated"} or None, default=None
+        The score CDF of the k-NN maps (:class:`occgp.KNNMap`); None: the
+        replay's (``"normal"`` when the search builds it). A ScanReplay given
+        as `scans` must have been made with it.
+    stats : {"online", "dataset"} or None, default=None
+        The score statistics (:class:`occgp.knn.ScanReplay`): Welford's
+        running ones or the whole data set's; None: the replay's
+        (``"online"`` when the search builds it). As `cdf`.
     batch_size : int, default=32
         Combinations replayed at once (memory: ``batch_size * n_cells * 8``
         bytes).
@@ -235,7 +339,13 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
     ValueError
         For an unknown parameter, an empty grid or one with no combination
         left by the constraints, labels of the wrong shape or without an
-        occupied cell, or a bad `method`, `thresholds` or `batch_size`.
+        occupied cell, a `mask` of the wrong shape or without an occupied
+        cell, a bad `method`, `thresholds`, `scoring`, `cdf`, `stats` or
+        `batch_size`, or a `cdf` or `stats` that differs from the given
+        ScanReplay's.
+    TypeError
+        If `truth` or `mask` is not of booleans, or `thresholds` not a
+        sequence.
 
     Examples
     --------
@@ -248,6 +358,11 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
     """
     t0 = time.perf_counter()
     method = check_choice(method, "method", ("knn", "octomap"))
+    scoring = check_choice(scoring, "scoring", SCORINGS)
+    if cdf is not None:
+        cdf = check_choice(cdf, "cdf", CDFS)
+    if stats is not None:
+        stats = check_choice(stats, "stats", STATS)
     batch_size = check_int(batch_size, "batch_size", low=1, high=100_000)
     n_jobs = check_n_jobs(n_jobs)
     if thresholds is not None:
@@ -281,9 +396,14 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
                          f"({len(combos)} tried)")
     if isinstance(scans, ScanReplay):
         replay = scans
+        for name, value in (("cdf", cdf), ("stats", stats)):
+            if value is not None and value != getattr(replay, name):
+                raise ValueError(f"{name}={value!r} differs from the ScanReplay's "
+                                 f"({getattr(replay, name)!r}): make the replay with it")
     else:
         ks = sorted({c["k"] for c in kept}) if method == "knn" else [1]
-        replay = ScanReplay(scans, resolution, sensor_range=sensor_range, ks=ks, n_jobs=n_jobs)
+        replay = ScanReplay(scans, resolution, sensor_range=sensor_range, ks=ks,
+                            cdf=cdf or "normal", stats=stats or "online", n_jobs=n_jobs)
     if hasattr(truth, "occupancy"):
         labels = cell_labels(truth, replay.centers, replay.resolution)
     else:
@@ -297,14 +417,15 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
     if not labels.any():
         raise ValueError(f"truth holds no occupied cell among the {replay.num_cells} cells "
                          "the scans reach: the TPR is undefined")
+    scorer = _make_scorer(replay, labels, mask, scoring, thresholds)
     workers = n_threads(n_jobs)
     n_chunks = min(2 * workers, len(kept)) if workers > 1 else 1
     chunks = [kept[i::n_chunks] for i in range(n_chunks)]
     if n_chunks == 1:
-        parts = [_score_chunk(replay, labels, method, kept, thresholds, batch_size)]
+        parts = [_score_chunk(replay, labels, method, kept, thresholds, batch_size, scorer)]
     else:
         parts = Parallel(n_jobs=n_jobs)(
-            delayed(_score_chunk)(replay, labels, method, c, thresholds, batch_size)
+            delayed(_score_chunk)(replay, labels, method, c, thresholds, batch_size, scorer)
             for c in chunks)
     # chunk i holds the combinations i, i + n_chunks, ...: back to grid order
     results: list[dict[str, Any]] = [{}] * len(kept)
@@ -312,7 +433,6 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
         results[i::n_chunks] = rows
     aucs = np.array([r["auc"] for r in results])
     best = int(np.argmax(aucs))
-    best_params = {k: v for k, v in results[best].items()
-                   if k not in ("auc", "thresholds", "tpr", "fdr")}
+    best_params = {k: v for k, v in results[best].items() if k not in _SCORE_KEYS}
     return GridSearchResult(results, best_params, float(aucs[best]), best, n_rejected,
-                            time.perf_counter() - t0)
+                            time.perf_counter() - t0, scoring, mask is not None)
