@@ -94,10 +94,25 @@ def check_knn_params(params: dict[str, Any]) -> dict[str, Any]:
 
 
 def check_score_stats(value: Any, name: str = "score_stats") -> tuple[float, float] | None:
-    """None, or a (mean, std) pair of finite reals with ``std >= 0``, as floats.
+    """Check fixed score statistics: None, or a (mean, std) pair.
 
-    Raises TypeError (not a pair of reals) or ValueError (not finite, negative
-    std), naming `name`.
+    Parameters
+    ----------
+    value : None or (float, float)
+        The statistics to check: finite reals, ``std >= 0``.
+    name : str, default="score_stats"
+        The name the errors give.
+
+    Returns
+    -------
+    stats : (float, float) or None
+
+    Raises
+    ------
+    TypeError
+        If `value` is not None nor a pair of reals.
+    ValueError
+        If a value is not finite or the std is negative.
     """
     if value is None:
         return None
@@ -166,7 +181,23 @@ def point_log_odds(s: NDArray[np.float64], count: int, mean: float, m2: float, p
 
 def fixed_log_odds(s: NDArray[np.float64], mean: float, std: float, p_u: float, p_l: float,
                    cdf: str = "normal") -> NDArray[np.float64]:
-    """:func:`point_log_odds` with the statistics given as a mean and a standard deviation."""
+    """:func:`point_log_odds` with the statistics given as a mean and a standard deviation.
+
+    Parameters
+    ----------
+    s : ndarray of float64
+        The scores (inf: too few neighbours).
+    mean, std : float
+        μ and σ of the CDF (σ = 0: the step at μ).
+    p_u, p_l : float
+        Probabilities of the best-supported and of the most isolated points.
+    cdf : {"normal", "truncated"}, default="normal"
+
+    Returns
+    -------
+    log_odds : ndarray of float64
+        ``logit(p(s))``, as :func:`point_log_odds`.
+    """
     with np.errstate(invalid="ignore", divide="ignore"):
         if std > 0:
             z = (s - mean) / std
