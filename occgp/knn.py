@@ -23,9 +23,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree  # type: ignore[import-untyped]
-from scipy.special import ndtr  # type: ignore[import-untyped]
 
+from ._knn_scores import fixed_log_odds, mean_knn_distances, point_log_odds
 from ._octree import _welford
 from ._status import Status
 from ._validation import (
@@ -116,9 +115,12 @@ def check_score_stats(value: Any, name: str = "score_stats") -> tuple[float, flo
     """
     if value is None:
         return None
-    if isinstance(value, (str, bytes)) or not np.iterable(value) or len(value) != 2:
+    if isinstance(value, (str, bytes)) or not np.iterable(value):
         raise TypeError(f"{name} must be None or a (mean, std) pair, got "
                         f"{type(value).__name__}")
+    value = tuple(value)
+    if len(value) != 2:
+        raise TypeError(f"{name} must be None or a (mean, std) pair, got {len(value)} values")
     mean = check_real(value[0], f"{name}[0] (the mean)")
     std = check_real(value[1], f"{name}[1] (the std)", low=0.0, low_open=False)
     return (mean, std)
@@ -143,73 +145,6 @@ def check_octomap_params(params: dict[str, Any]) -> dict[str, float]:
                       "prob_hit": 0.7})
     return {"prob_hit": hit, "prob_miss": q["prob_miss"], "clamping_min": q["clamping_min"],
             "clamping_max": q["clamping_max"]}
-
-
-def mean_knn_distances(points: NDArray[np.float64], ks: Sequence[int],
-                       workers: int = 1) -> NDArray[np.float64]:
-    """Mean distance of each point to its k nearest other points, for each k in `ks`.
-
-    Returns shape (n_points, len(ks)); inf where the scan holds at most k points.
-    The means are running sums of the sorted distances, so every k gives the
-    same value whatever the other ks are.
-    """
-    n = len(points)
-    kmax = max(ks)
-    out = np.full((n, len(ks)), np.inf)
-    if n < 2:
-        return out
-    dist, _ = cKDTree(points).query(points, k=min(kmax, n - 1) + 1, workers=workers)
-    # column 0 is the point itself (or a duplicate, at the same distance 0)
-    csum = np.cumsum(dist[:, 1:], axis=1)
-    for j, k in enumerate(ks):
-        if k <= n - 1:
-            out[:, j] = csum[:, k - 1] / k
-    return out
-
-
-def point_log_odds(s: NDArray[np.float64], count: int, mean: float, m2: float, p_u: float,
-                   p_l: float, cdf: str = "normal") -> NDArray[np.float64]:
-    """logit(p(s)) with p(s) = p_u - (p_u - p_l) F(s), F the normal CDF of (mean, std).
-
-    ``std = sqrt(m2 / count)`` (Welford's). With ``std == 0`` F is the step at
-    `mean` (0.5 on it); a score of inf (too few neighbours) gets F = 1, p = p_l.
-    ``cdf="truncated"`` truncates the normal at s = 0 (distances are >= 0).
-    """
-    std = math.sqrt(m2 / count) if count > 0 else 0.0
-    return fixed_log_odds(s, mean, std, p_u, p_l, cdf)
-
-
-def fixed_log_odds(s: NDArray[np.float64], mean: float, std: float, p_u: float, p_l: float,
-                   cdf: str = "normal") -> NDArray[np.float64]:
-    """:func:`point_log_odds` with the statistics given as a mean and a standard deviation.
-
-    Parameters
-    ----------
-    s : ndarray of float64
-        The scores (inf: too few neighbours).
-    mean, std : float
-        μ and σ of the CDF (σ = 0: the step at μ).
-    p_u, p_l : float
-        Probabilities of the best-supported and of the most isolated points.
-    cdf : {"normal", "truncated"}, default="normal"
-
-    Returns
-    -------
-    log_odds : ndarray of float64
-        ``logit(p(s))``, as :func:`point_log_odds`.
-    """
-    with np.errstate(invalid="ignore", divide="ignore"):
-        if std > 0:
-            z = (s - mean) / std
-            f = ndtr(z)
-            if cdf == "truncated":
-                f0 = ndtr(-mean / std)
-                f = np.clip((f - f0) / (1.0 - f0), 0.0, 1.0) if f0 < 1.0 else np.ones_like(f)
-        else:
-            f = np.where(s > mean, 1.0, np.where(s < mean, 0.0, 0.5))
-    f = np.where(np.isfinite(s), f, 1.0)
-    p = p_u - (p_u - p_l) * f
-    return np.log(p / (1.0 - p))
 
 
 @register("knn", formats=(".bt", ".ot"),
@@ -521,7 +456,7 @@ default="auto"
         scores = _welford(s, *self._scores)
         fixed = self._params["score_stats"]
         values = (point_log_odds(s, *scores, self.p_u, self.p_l, self.cdf) if fixed is None
-                  else fixed_log_odds(s, *fixed, self.p_u, self.p_l, self.cdf))
+                  else fixed_log_odds(s, fixed[0], fixed[1], self.p_u, self.p_l, self.cdf))
         updates = _cell_updates(kinds, point_cell, values, _log_odds(self.p_m),
                                 _log_odds(self.p_m_out))
         seconds = time.perf_counter() - t0
@@ -620,7 +555,7 @@ class ScanReplay:
         probe = KNNMap(self.resolution, sensor_range=self.sensor_range)
         local = []
         self.n_points = self.n_near = 0
-        stats = [(0, 0.0, 0.0)] * len(self.ks)
+        running = [(0, 0.0, 0.0)] * len(self.ks)
         for i, scan in enumerate(scans):
             try:
                 points, origin = scan
@@ -643,12 +578,12 @@ class ScanReplay:
             s = mean_knn_distances(near.astype(np.float64), self.ks, workers)
             per_k = []
             for j in range(len(self.ks)):
-                stats[j] = _welford(np.ascontiguousarray(s[:, j]), *stats[j])
-                per_k.append(stats[j])
+                running[j] = _welford(np.ascontiguousarray(s[:, j]), *running[j])
+                per_k.append(running[j])
             local.append((keys, kinds, point_cell, s, per_k))
             self.n_points += len(pts)
             self.n_near += len(s)
-        self._final_stats = tuple(stats)
+        self._final_stats = tuple(running)
         if self.stats == "dataset":
             local = [(keys, kinds, point_cell, s, list(self._final_stats))
                      for keys, kinds, point_cell, s, _ in local]
