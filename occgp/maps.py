@@ -257,6 +257,36 @@ class MapType:
         """The names of the class's constructor parameters."""
         return _init_parameters(self.cls)
 
+    def check_params(self, params: Mapping[str, Any]) -> None:
+        """Check that the constructor takes every name of `params` and that `params`
+        with the registered defaults gives it every parameter it needs.
+
+        Parameters
+        ----------
+        params : mapping
+            Constructor parameters by name (their values are the class's to check).
+
+        Raises
+        ------
+        ValueError
+            If the constructor takes no parameter of a name, or lacks one it needs.
+        """
+        known = self.parameters()
+        unknown = [p for p in params if p not in known]
+        if unknown and "**" not in known:
+            raise ValueError(f"the {self.name!r} map takes no parameter {unknown[0]!r}; it "
+                             f"takes {', '.join(k for k in known if k != '**') or 'none'}")
+        try:
+            sig = inspect.signature(self.cls)
+        except (TypeError, ValueError):
+            return                  # no signature to check: the class will tell
+        missing = [p.name for p in sig.parameters.values()
+                   if p.default is p.empty and p.kind in (p.POSITIONAL_OR_KEYWORD,
+                                                          p.KEYWORD_ONLY)
+                   and p.name not in params and p.name not in self.defaults]
+        if missing:
+            raise ValueError(f"the {self.name!r} map needs the parameters {missing}")
+
 
 _REGISTRY: dict[str, MapType] = {}
 # the modules whose import registers the built-in map types (the 2D GP maps live in a
@@ -420,8 +450,8 @@ def make_map(name: str, **params: Any) -> Any:
     Raises
     ------
     ValueError
-        If `name` is not registered, a parameter is not one the class takes,
-        or the class rejects a value.
+        If `name` is not registered, a parameter is not one the class takes or
+        one it needs is missing, or the class rejects a value.
     TypeError
         If the class rejects a value's type.
 
@@ -432,11 +462,7 @@ def make_map(name: str, **params: Any) -> Any:
     0.2
     """
     entry = map_type(name)
-    known = entry.parameters()
-    unknown = [p for p in params if p not in known]
-    if unknown and "**" not in known:
-        raise ValueError(f"the {name!r} map takes no parameter {unknown[0]!r}; it takes "
-                         f"{', '.join(k for k in known if k != '**') or 'none'}")
+    entry.check_params(params)
     return entry.cls(**{**entry.defaults, **params})
 
 

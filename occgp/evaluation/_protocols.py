@@ -10,7 +10,6 @@ time their updates and score them, one :class:`MapResult` per method.
 from __future__ import annotations
 
 import functools
-import inspect
 import logging
 import math
 import time
@@ -413,24 +412,10 @@ def _map_factory(name, spec):
         raise ValueError(f"method {name!r}: the {map_name!r} map takes points of "
                          f"{' or '.join(map(str, entry.dims))} dimensions, the scans here "
                          f"are 3D; 3D maps: {', '.join(available_maps(dims=3))}")
-    known = entry.parameters()
-    unknown = [p for p in params if p not in known]
-    if unknown and "**" not in known:
-        raise ValueError(f"method {name!r}: the {map_name!r} map takes no parameter "
-                         f"{unknown[0]!r}; it takes "
-                         f"{', '.join(k for k in known if k != '**') or 'none'}")
     try:
-        inspect.signature(entry.cls).bind(**{**entry.defaults, **params})
-    except TypeError:
-        missing = [p.name for p in inspect.signature(entry.cls).parameters.values()
-                   if p.default is p.empty and p.kind in (p.POSITIONAL_OR_KEYWORD,
-                                                          p.KEYWORD_ONLY)
-                   and p.name not in params and p.name not in entry.defaults]
-        raise ValueError(f"method {name!r}: the {map_name!r} map needs the parameters "
-                         f"{missing}; give them as {{'map': {map_name!r}, "
-                         f"{missing[0] if missing else 'name'!r}: ...}}") from None
-    except ValueError:          # no signature to check: make_map will tell
-        pass
+        entry.check_params(params)
+    except ValueError as exc:
+        raise ValueError(f"method {name!r}: {exc}") from None
     return functools.partial(make_map, map_name, **params), options
 
 
