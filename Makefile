@@ -6,7 +6,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.occgp-installed
-EXTRAS ?= test,dask,ros,iln
+EXTRAS ?= test,dask,ros,iln,stereo
 # the CPU build of PyTorch, installed before the iln extra (an unpinned torch pulls the CUDA
 # build, several GB); the package itself asks for torch>=2.1
 TORCH  ?= torch==2.13.0

@@ -1,400 +1,394 @@
-"""The k-NN inverse sensor model against OctoMap on the noisy stereo data sets.
+"""The k-NN inverse sensor model against OctoMap on rendered stereo matched by StereoSGBM.
 
-Miao, Hunter and Georgilas's comparison, best against best, on occgp's
-simulated stereo data sets (``occgp.datasets.stereo_datasets()``: 5 tetromino
-layouts x plain / textured boxes x buildings / open lot, at camera depth noise
-0.005, 0.01 and 0.02 m at 1 m; the default 320 x 180 camera, 2 orbits of 40
-frames, clouds voxel-filtered at 0.1 m). Every map is a 0.1 m octree with a
-4 m sensor range. Tables (all measured in this run, side by side):
+Miao, Hunter and Georgilas's protocol on exact synthetic ground truth: the 20
+data sets (``occgp.datasets.rendered_stereo_datasets()``: 5 tetromino layouts x
+plain / textured boxes x buildings / open lot), each an orbit of 80 keyframes
+(2 x 40) rendered as rectified 640 x 360 grey pairs (f = 337.2 px, baseline
+0.12 m; Voronoi or cardboard boxes, asphalt, brick facades, sun and shadows,
+sensor blur, noise and gain mismatch), matched by OpenCV's StereoSGBM,
+triangulated within 8 m and voxel-filtered at 0.1 m. Every map is a 0.1 m
+octree with a 4 m sensor range.
 
-1. Per data set: OctoMap's best TPR-FDR AUC after its grid search
-   (``OCTOMAP_GRID``, 180 combinations with the 9 thresholds) against the k-NN
-   method's best after its grid search (``KNN_GRID``, 4,050), both replayed
-   from one ``ScanReplay(scans, ks=(1,))`` and scored against
-   ``cell_labels`` of the scene; the improvement, the best parameters of each,
-   the seconds of each search, of the replay's set-up and of the k-NN search
-   with its set-up.
-2. The improvement per noise level.
-3. The paper's Fig. 5 as a table: the improvement against OctoMap's best AUC,
-   sorted by it, and its mean per tercile of OctoMap's AUC.
-4. NCA parameter weights (the paper's section 3.5): on the I / textured /
-   buildings data set at each noise level, random operating points of
-   ``KNN_WEIGHT_GRID`` (k in 1, 3, 5, 7; the clamping varied too) with their
-   thresholds; the normalised weight of each of the 8 parameters for TPR and
-   for FDR (``nca_feature_weights``; the paper: k < 0.1).
-5. Insert time per scan, ``KNNMap`` against ``OccupancyOctree`` (``max_range
-   = 4``), on the same scans, interleaved repeats; the median ratio.
-6. The run-time models of section 3.6 fitted by least squares over map builds
-   from prefixes of the scans: OctoMap ``t = a N + b``, k-NN ``t = (a k + b) N
-   + c`` (N: points inserted).
-7. The issue's targets, met or missed, as measured above.
+Per data set, a seeded sample of the authors' 1,600 StereoSGBM parameter sets
+(``sgbm_parameter_sets(RANK_SETS, seed=0)``: a uniform sample keeps the full
+grid's spread) is ranked by the FDR of its naive map (every cell holding a
+point occupied) over every ``RANK_EVERY``-th keyframe, and the 1st, middle and
+last sets are matched on all 80 keyframes. On each of these 60 cloud sets both
+grid searches run (``KNN_GRID``, 4,050 combinations, and ``OCTOMAP_GRID``,
+180, with the 9 thresholds), and the multi-scan k-NN score
+(``KNNMap(history=HISTORY)``, beyond the paper) gets the same 4,050. Each
+combination is scored under both protocols in one pass:
 
-Run: ``python bench/bench_knn.py`` (about 15 minutes on 2 cores);
-``--quick`` (6 data sets, NCA on one with 2,000 samples, one repeat set:
-under 3 minutes) for a smoke run; ``--plot fig5.png`` also draws table 3.
+* occgp's strict protocol (the default, ``auc_exact``): every cell the scans
+  reach, exact cells, area anchored at (0, 0) and (1, 1);
+* the authors' (``scoring="authors"``): the cells known both in the map and in
+  the reference map (the map of the true-depth clouds of the same keyframes,
+  through the same pipeline), true positives by the ±1-cell one-to-one rule,
+  the area under the measured points only.
+
+Tables (all measured in this run):
+
+1. The clouds' errors against the exact geometry (``point_errors``): share of
+   points beyond 0.1 / 0.3 / 1 m of a surface, in front of and behind the
+   first surface on their ray, by surface kind, for the 1st / middle / last
+   sets, plain and textured boxes.
+2. Per data set and rank: the naive map's FDR, OctoMap's best AUC and the
+   k-NN model's (paper's score and multi-scan) under both protocols.
+3. The paper's Fig. 5 as a table: the gain against OctoMap's best AUC, sorted,
+   absolute and relative, both protocols.
+4. Summary per rank and half (``tune`` / ``test``): mean and maximum gains.
+5. Defaults chosen on the tuning half (the combination with the best mean
+   strict AUC over the tuning data sets, all ranks) and reported on the test
+   half beside each data set's best.
+6. Times per data set: render, rank, match, replays and searches.
+7. The issue's targets on the test half, met or missed.
+
+Run: ``python bench/bench_knn.py --n-jobs 2`` (about 50 minutes on 2 cores);
+``--quick`` (4 data sets, 12 ranked sets, 24 keyframes) for a smoke run.
+``--json FILE`` keeps every data set's result as it is measured and
+``--resume`` skips those already in it. ``bench/bench_knn_simulated.py`` holds
+the earlier comparison on the analytic noise model (Gaussian depth noise and
+speckle), with the NCA parameter weights and run-time models.
 """
 
 from __future__ import annotations
 
 import argparse
-import itertools
-import math
+import json
+import os
 import sys
 import time
 
 import numpy as np
 
-from occgp import KNNMap, OccupancyOctree
-from occgp.datasets import stereo_datasets
-from occgp.evaluation import (KNN_GRID, KNN_WEIGHT_GRID, OCTOMAP_GRID, THRESHOLDS, cell_labels,
-                              grid_search, nca_feature_weights)
-from occgp.knn import ScanReplay, check_knn_params
+from occgp.datasets import (PointErrors, Scan, StereoRig, disparity_to_points, point_errors,
+                            rank_sgbm_sets, rendered_stereo_datasets, sgbm_parameter_sets,
+                            voxel_filter)
+from occgp.evaluation import KNN_GRID, OCTOMAP_GRID, cell_labels, grid_search
+from occgp.knn import ScanReplay
 
 from bench_gp import table  # the GP bench's (same folder)
 
 RESOLUTION = 0.1
 SENSOR_RANGE = 4.0
-NCA_FEATURES = ("k", "p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "p_t")
-NCA_KS = (1, 3, 5, 7)
-#: The data sets of the quick run (2 per noise level) and of tables 4-6.
-QUICK_SETS = ("I_textured_buildings", "S_plain_open")
-DETAIL_SETS = ("I_textured_buildings",)
+N_FRAMES, ORBITS = 40, 2
+RANK_SETS, RANK_EVERY = 48, 8
+HISTORY = 4
+RANKS = ("1st", "middle", "last")
+QUICK_SETS = ("I_plain_buildings", "I_textured_open", "T_plain_open", "T_textured_buildings")
 
 
 def log(msg):
     print(msg, file=sys.stderr, flush=True)
 
 
-def base_name(d):
-    return d.name.rsplit("_noise", 1)[0]
-
-
-# ---------------------------------------------------------------- 1-3: best against best
-def compare(d, n_jobs):
-    """One data set: simulate, replay, label, both searches."""
-    t0 = time.perf_counter()
-    scans = d.scans()
-    t_sim = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    replay = ScanReplay(scans, RESOLUTION, sensor_range=SENSOR_RANGE, ks=(1,))
-    t_replay = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    labels = cell_labels(d.scene(), replay.centers, RESOLUTION)
-    t_labels = time.perf_counter() - t0
-    octo = grid_search(replay, labels, OCTOMAP_GRID, method="octomap", n_jobs=n_jobs)
-    knn = grid_search(replay, labels, KNN_GRID, method="knn", n_jobs=n_jobs)
-    row = dict(name=d.name, noise=d.depth_noise, scans=len(scans), points=replay.n_points,
-               near=replay.n_near, cells=replay.num_cells, occupied=int(labels.sum()),
-               octo_auc=octo.best_score, knn_auc=knn.best_score,
-               gain=knn.best_score - octo.best_score, octo_params=octo.best_params,
-               knn_params=knn.best_params, octo_s=octo.seconds, knn_s=knn.seconds,
-               replay_s=t_replay, labels_s=t_labels, sim_s=t_sim,
-               octo_maps=len(octo.results), knn_maps=len(knn.results))
-    return row, scans, labels
-
-
-def fmt_octo(p):
-    return f"hit {p['prob_hit']:.2f} miss {p['prob_miss']:.2f}"
-
-
-def fmt_knn(p):
-    return f"u {p['p_u']:.2f} l {p['p_l']:.2f} m {p['p_m']:.2f} m_out {p['p_m_out']:.2f}"
-
-
-def per_dataset_table(rows):
-    r0 = rows[0]
-    print(f"== 1. Best against best per data set ({len(rows)} data sets): OctoMap "
-          f"{r0['octo_maps']} maps x {len(THRESHOLDS)} thresholds = "
-          f"{r0['octo_maps'] * len(THRESHOLDS)} combinations, k-NN (k = 1) {r0['knn_maps']} "
-          f"maps x {len(THRESHOLDS)} = {r0['knn_maps'] * len(THRESHOLDS)}; AUC of the TPR-FDR "
-          f"curve against exact ground truth of the cells the scans reach; seconds on "
-          f"1 process ==")
-    table([[r["name"], f"{r['noise']:g}", r["points"], r["cells"], f"{r['octo_auc']:.4f}",
-            f"{r['knn_auc']:.4f}", f"{r['gain']:+.4f}", fmt_octo(r["octo_params"]),
-            fmt_knn(r["knn_params"]), f"{r['octo_s']:.2f}", f"{r['replay_s']:.2f}",
-            f"{r['knn_s']:.2f}", f"{r['replay_s'] + r['knn_s']:.2f}"] for r in rows],
-          ["data set", "noise", "points", "cells", "OctoMap AUC", "k-NN AUC", "improvement",
-           "OctoMap best", "k-NN best", "OctoMap search [s]", "replay set-up [s]",
-           "k-NN search [s]", "k-NN total [s]"])
-    sim = sum(r["sim_s"] for r in rows)
-    lab = sum(r["labels_s"] for r in rows)
-    print(f"(not in the searches: simulating the scans took {sim:.1f} s in all, "
-          f"{sim / len(rows):.1f} s a data set; labelling the cells {lab:.1f} s, "
-          f"{lab / len(rows):.2f} s a data set)\n")
-
-
-def noise_table(rows):
-    print("== 2. Improvement (k-NN best AUC - OctoMap best AUC) per noise level ==")
+def true_scans(pairs, rig):
+    """The keyframes' clouds from the renderer's true depth, through the same pipeline."""
     out = []
-    for noise in sorted({r["noise"] for r in rows}):
-        g = np.array([r["gain"] for r in rows if r["noise"] == noise])
-        o = np.array([r["octo_auc"] for r in rows if r["noise"] == noise])
-        k = np.array([r["knn_auc"] for r in rows if r["noise"] == noise])
-        out.append([f"{noise:g}", len(g), f"{o.mean():.4f}", f"{k.mean():.4f}",
-                    f"{g.mean():+.4f}", f"{g.min():+.4f}", f"{g.max():+.4f}",
-                    int((g > 1e-9).sum()), int((np.abs(g) <= 1e-9).sum()),
-                    int((g < -1e-9).sum())])
-    table(out, ["noise", "data sets", "mean OctoMap AUC", "mean k-NN AUC", "mean improvement",
-                "min", "max", "k-NN better", "equal", "k-NN worse"])
-
-
-def fig5_table(rows, plot):
-    rows = sorted(rows, key=lambda r: r["octo_auc"])
-    print("== 3. The paper's Fig. 5: improvement against OctoMap's best AUC, sorted by "
-          "OctoMap's AUC ==")
-    table([[i + 1, r["name"], f"{r['octo_auc']:.4f}", f"{r['knn_auc']:.4f}",
-            f"{r['gain']:+.4f}"] for i, r in enumerate(rows)],
-          ["rank", "data set", "OctoMap AUC", "k-NN AUC", "improvement"])
-    print("Terciles of OctoMap's best AUC:")
-    out = []
-    for t, part in enumerate(np.array_split(np.arange(len(rows)), 3)):
-        if not len(part):
-            continue
-        sub = [rows[i] for i in part]
-        g = np.array([r["gain"] for r in sub])
-        noises = sorted({r["noise"] for r in rows})
-        counts = " / ".join(str(sum(r["noise"] == n for r in sub)) for n in noises)
-        out.append([("lowest", "middle", "highest")[t], len(sub),
-                    f"{sub[0]['octo_auc']:.4f} - {sub[-1]['octo_auc']:.4f}",
-                    f"{g.mean():+.4f}", f"{g.min():+.4f}", f"{g.max():+.4f}", counts])
-    table(out, ["tercile", "data sets", "OctoMap AUC", "mean improvement", "min", "max",
-                "at noise " + " / ".join(f"{n:g}" for n in sorted({r['noise'] for r in rows}))])
-    if plot:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
-        for noise in sorted({r["noise"] for r in rows}):
-            sub = [r for r in rows if r["noise"] == noise]
-            ax.scatter([r["octo_auc"] for r in sub], [r["gain"] for r in sub], s=18,
-                       label=f"depth noise {noise:g}")
-        ax.axhline(0, color="k", lw=0.8)
-        ax.set_xlabel("OctoMap's best TPR-FDR AUC")
-        ax.set_ylabel("k-NN best AUC - OctoMap best AUC")
-        ax.legend()
-        fig.savefig(plot, dpi=120)
-        print(f"(Fig. 5 drawn to {plot})\n")
-
-
-# ---------------------------------------------------------------- 4: NCA weights
-def weight_grid_points():
-    """Every valid combination of KNN_WEIGHT_GRID and its number of thresholds."""
-    keys = list(KNN_WEIGHT_GRID)
-    combos, n_thr = [], []
-    for values in itertools.product(*(KNN_WEIGHT_GRID[k] for k in keys)):
-        c = dict(zip(keys, values))
-        try:
-            check_knn_params({**c, "p_t": c["p_min"], "sensor_range": SENSOR_RANGE})
-        except ValueError:
-            continue
-        combos.append(c)
-        n_thr.append(sum(c["p_min"] - 1e-12 <= t <= c["p_max"] + 1e-12 for t in THRESHOLDS))
-    return combos, np.array(n_thr)
-
-
-def nca_table(details, n_samples, n_jobs, seed=0):
-    combos, n_thr = weight_grid_points()
-    total = int(n_thr.sum())
-    rng = np.random.default_rng(seed)
-    # sample the maps first, then the operating points among theirs (thresholds that
-    # leave no cell occupied give none: top up with more maps until there are enough)
-    n_first = min(len(combos), math.ceil(1.25 * n_samples / n_thr.mean()))
-    out, notes = [], []
-    for name, (scans, labels) in details.items():
-        t0 = time.perf_counter()
-        replay = ScanReplay(scans, RESOLUTION, sensor_range=SENSOR_RANGE, ks=NCA_KS)
-        t_replay = time.perf_counter() - t0
-        assert replay.num_cells == len(labels)
-        order = rng.permutation(len(combos))
-        points, n_maps, t_search = [], 0, 0.0
-        while len(points) < n_samples and n_maps < len(combos):
-            step = n_first if n_maps == 0 else max(
-                1, math.ceil(1.25 * (n_samples - len(points)) / n_thr.mean()))
-            pick = np.sort(order[n_maps:n_maps + step])
-            res = grid_search(replay, labels, [combos[i] for i in pick], method="knn",
-                              n_jobs=n_jobs)
-            points += res.operating_points()
-            n_maps += len(pick)
-            t_search += res.seconds
-        take = rng.choice(len(points), min(n_samples, len(points)), replace=False)
-        X = np.array([[points[i][f] for f in NCA_FEATURES] for i in take], dtype=np.float64)
-        for metric in ("tpr", "fdr"):
-            y = np.array([points[i][metric] for i in take])
-            t0 = time.perf_counter()
-            w = nca_feature_weights(X, y)
-            t_nca = time.perf_counter() - t0
-            share = float(w.weights[0] / w.weights.sum()) if w.weights.sum() > 0 else 0.0
-            out.append([name, metric.upper(), *(f"{v:.3f}" for v in w.normalized),
-                        f"{share:.3f}", "yes" if w.normalized[0] < 0.1 else "no",
-                        "yes" if share < 0.1 else "no", len(take), w.n_iter,
-                        "yes" if w.converged else "no", f"{t_nca:.1f}"])
-        notes.append(f"{name}: replay (ks = {NCA_KS}) {t_replay:.1f} s, {n_maps} maps drawn "
-                     f"and searched in {t_search:.1f} s giving {len(points)} operating points, "
-                     f"{len(take)} of them drawn")
-    print(f"== 4. NCA parameter weights (Yang et al.'s NCA-FS, regression, standardised, "
-          f"lambda = 1/n): {n_samples} random operating points of KNN_WEIGHT_GRID per data "
-          f"set ({len(combos)} valid maps x their thresholds = {total} in all; maps drawn first, "
-          f"seeded, then the points among theirs); weights normalised to a maximum of 1, and k's "
-          f"share of their sum ==")
-    table(out, ["data set", "response", *NCA_FEATURES, "k / sum", "k < 0.1 (max 1)",
-                "k < 0.1 (sum 1)", "samples", "iterations",
-                "converged", "NCA [s]"])
-    for n in notes:
-        print(f"  {n}")
-    print()
+    for p in pairs:
+        with np.errstate(divide="ignore"):
+            disparity = rig.focal_length * rig.baseline / p.depth
+        points = voxel_filter(disparity_to_points(disparity, rig, p.position, p.rotation),
+                              RESOLUTION)
+        out.append(Scan(points, np.asarray(p.position, dtype=np.float64)))
     return out
 
 
-# ---------------------------------------------------------------- 5: insert time
-def insert_table(details, repeats):
-    out, ratios = [], []
-    for name, (scans, _) in details.items():
-        t_oct = np.zeros((repeats, len(scans)))
-        t_knn = np.zeros((repeats, len(scans)))
-        t_query = np.zeros((repeats, len(scans)))
-        for rep in range(repeats):
-            octree = OccupancyOctree(RESOLUTION)
-            knn = KNNMap(RESOLUTION, sensor_range=SENSOR_RANGE)
-            for i, (points, origin) in enumerate(scans):
-                order = (0, 1) if (i + rep) % 2 == 0 else (1, 0)
-                for which in order:
-                    t0 = time.perf_counter()
-                    if which == 0:
-                        octree.insert_scan(points, origin, max_range=SENSOR_RANGE)
-                        t_oct[rep, i] = time.perf_counter() - t0
-                    else:
-                        knn.insert_scan(points, origin)
-                        t_knn[rep, i] = time.perf_counter() - t0
-                        t_query[rep, i] = knn.last_insert_["knn_seconds"]
-        ratio = float(np.median(t_knn.sum(axis=1) / t_oct.sum(axis=1)))
-        ratios.append(ratio)
-        n = len(scans)
-        out.append([name, n, int(np.mean([len(s.points) for s in scans])),
-                    f"{1e3 * np.median(t_oct.sum(axis=1)) / n:.2f}",
-                    f"{1e3 * np.median(t_knn.sum(axis=1)) / n:.2f}",
-                    f"{1e3 * np.median(t_query.sum(axis=1)) / n:.2f}",
-                    f"{float(np.median(t_knn / t_oct)):.2f}", f"{ratio:.2f}"])
-    print(f"== 5. Insert time per scan: KNNMap (k = 1) against OccupancyOctree (max_range "
-          f"= {SENSOR_RANGE:g}, method auto), the same scans, {repeats} interleaved repeats "
-          f"(medians) ==")
-    table(out, ["data set", "scans", "points / scan", "OccupancyOctree [ms]", "KNNMap [ms]",
-                "of which k-NN scores [ms]", "median per-scan ratio", "ratio (totals)"])
-    return max(ratios)
+def aucs(result):
+    """(strict, authors) AUC arrays of a search scored under the authors' protocol."""
+    rows = result.results
+    return (np.array([r["auc_exact"] for r in rows]), np.array([r["auc"] for r in rows]))
 
 
-# ---------------------------------------------------------------- 6: run-time models
-def build_seconds(make, scans, **kwargs):
+def params_of(result):
+    keys = [k for k in result.results[0] if k not in ("auc", "auc_exact", "thresholds",
+                                                       "tpr", "fdr")]
+    return [{k: r[k] for k in keys} for r in result.results]
+
+
+def error_counts(errors: PointErrors):
+    rows = errors.table()
+    return {r["surface"]: {k: (v * r["points"] if k not in ("surface", "points") else v)
+                           for k, v in r.items()} for r in rows}
+
+
+def measure(d, rig, quick, n_jobs):
+    """One data set: render, rank, match the three sets, replay, search."""
+    times = {}
+    scene = d.scene()
     t0 = time.perf_counter()
-    tree = make()
-    for points, origin in scans:
-        tree.insert_scan(points, origin, **kwargs)
-    return time.perf_counter() - t0
+    n_frames = 12 if quick else N_FRAMES
+    pairs = d.render(rig, n_frames=n_frames, orbits=ORBITS, truth=True, n_jobs=n_jobs)
+    times["render"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    sets = sgbm_parameter_sets(12 if quick else RANK_SETS, seed=0)
+    order, fdr = rank_sgbm_sets(pairs[::4 if quick else RANK_EVERY], rig, scene, sets,
+                                resolution=RESOLUTION, n_jobs=n_jobs)
+    times["rank"] = time.perf_counter() - t0
+    ref = ScanReplay(true_scans(pairs, rig), RESOLUTION, sensor_range=SENSOR_RANGE)
+    picks = {"1st": int(order[0]), "middle": int(order[len(order) // 2]),
+             "last": int(order[-1])}
+    out = {"name": d.name, "half": d.half, "texture": d.texture, "ranks": {},
+           "rank_fdr": {"min": float(fdr.min()), "median": float(np.median(fdr)),
+                        "max": float(fdr.max())}}
+    for rank, i in picks.items():
+        t0 = time.perf_counter()
+        scans = d.scans(sets[i], rig=rig, pairs=pairs, n_jobs=n_jobs)
+        t_match = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        replay = ScanReplay(scans, RESOLUTION, sensor_range=SENSOR_RANGE, ks=(1,))
+        labels = cell_labels(scene, replay.centers, RESOLUTION)
+        mask = np.isin(replay.keys, ref.keys)
+        t_replay = time.perf_counter() - t0
+        kw = dict(scoring="authors", mask=mask, n_jobs=n_jobs)
+        octo = grid_search(replay, labels, OCTOMAP_GRID, method="octomap", **kw)
+        knn = grid_search(replay, labels, KNN_GRID, method="knn", **kw)
+        t0 = time.perf_counter()
+        hist_replay = ScanReplay(scans, RESOLUTION, sensor_range=SENSOR_RANGE, ks=(1,),
+                                 history=HISTORY)
+        t_hist = time.perf_counter() - t0
+        assert np.array_equal(hist_replay.keys, replay.keys)
+        hist = grid_search(hist_replay, labels, KNN_GRID, method="knn", **kw)
+        errors = error_counts(point_errors(scene, scans))
+        entry = {"sgbm": sets[i], "naive_fdr": float(fdr[i]),
+                 "points": int(replay.n_points), "cells": int(replay.num_cells),
+                 "scored": int(mask.sum()), "errors": errors,
+                 "times": {"match": t_match, "replay": t_replay, "octo": octo.seconds,
+                           "knn": knn.seconds, "history": t_hist + hist.seconds}}
+        for name, res in (("octo", octo), ("knn", knn), ("hist", hist)):
+            strict, authors = aucs(res)
+            entry[name] = {"strict": strict.tolist(), "authors": authors.tolist()}
+        out["ranks"][rank] = entry
+        if "octo_params" not in out:
+            out["octo_params"] = params_of(octo)
+            out["knn_params"] = params_of(knn)
+    out["times"] = times
+    return out
 
 
-def runtime_table(details, prefixes, repeats):
-    data = []          # (name, m, N, t_octomap, {k: t_knn}), each the fastest of the repeats
-    for name, (scans, _) in details.items():
-        for m in prefixes:
-            part = scans[:m]
-            N = sum(len(s.points) for s in part)
-            t_oct, t_knn = math.inf, dict.fromkeys(NCA_KS, math.inf)
-            for _ in range(repeats):
-                t_oct = min(t_oct, build_seconds(lambda: OccupancyOctree(RESOLUTION), part,
-                                                 max_range=SENSOR_RANGE))
-                for k in NCA_KS:
-                    t_knn[k] = min(t_knn[k], build_seconds(
-                        lambda: KNNMap(RESOLUTION, k=k, sensor_range=SENSOR_RANGE), part))
-            data.append((name, m, N, t_oct, t_knn))
-    print(f"== 6. Run-time models (the paper's section 3.6): map builds from the first m "
-          f"scans of each data set; N = points inserted; each time the fastest of "
-          f"{repeats} build(s) ==")
-    table([[name, m, N, f"{t:.3f}", *(f"{tk[k]:.3f}" for k in NCA_KS)]
-           for name, m, N, t, tk in data],
-          ["data set", "scans m", "N", "OctoMap [s]", *(f"k-NN k={k} [s]" for k in NCA_KS)])
-    N = np.array([d[2] for d in data], dtype=np.float64)
-    t = np.array([d[3] for d in data])
-    A = np.column_stack([N, np.ones_like(N)])
-    coef_o, r2_o = fit(A, t)
-    kk = np.repeat([NCA_KS], len(data), axis=0).ravel().astype(np.float64)
-    NN = np.repeat(N, len(NCA_KS))
-    tk = np.array([[d[4][k] for k in NCA_KS] for d in data]).ravel()
-    coef_k, r2_k = fit(np.column_stack([kk * NN, NN, np.ones_like(NN)]), tk)
-    table([["OctoMap", "t = a N + b", f"{coef_o[0]:.4e}", f"{coef_o[1]:.4e}", "", len(t),
-            f"{r2_o:.4f}"],
-           ["k-NN", "t = (a k + b) N + c", f"{coef_k[0]:.4e}", f"{coef_k[1]:.4e}",
-            f"{coef_k[2]:.4e}", len(tk), f"{r2_k:.4f}"]],
-          ["method", "model", "a", "b", "c", "builds", "R^2"])
+# ------------------------------------------------------------------------ tables
+def best(entry, method, protocol):
+    return max(entry[method][protocol])
 
 
-def fit(A, t):
-    coef, *_ = np.linalg.lstsq(A, t, rcond=None)
-    resid = t - A @ coef
-    r2 = 1.0 - float(resid @ resid) / float(((t - t.mean()) ** 2).sum())
-    return coef, r2
+def error_table(results):
+    print("== 1. Cloud errors against the exact geometry (share of points; front: in free "
+          "space before the first surface on the ray, behind: past it) ==")
+    rows = []
+    for texture in (False, True):
+        for rank in RANKS:
+            total = {}
+            for r in results:
+                if r["texture"] != texture:
+                    continue
+                for kind, c in r["ranks"][rank]["errors"].items():
+                    acc = total.setdefault(kind, {})
+                    for k, v in c.items():
+                        if k != "surface":
+                            acc[k] = acc.get(k, 0) + v
+            for kind in sorted(total, key=lambda k: (k != "all", k)):
+                c = total[kind]
+                n = c["points"]
+                if not n:
+                    continue
+                rows.append(["textured" if texture else "plain", rank, kind, f"{n}"]
+                            + [f"{c[k] / n:.3f}" for k in (">0.1", ">0.1 front", ">0.1 behind",
+                                                           ">0.3", ">0.3 front", ">0.3 behind",
+                                                           ">1", ">1 front", ">1 behind")])
+    table(rows, ["boxes", "SGBM rank", "surface", "points", ">0.1 m", "front", "behind",
+                 ">0.3 m", "front", "behind", ">1 m", "front", "behind"])
 
 
-# ---------------------------------------------------------------- 7: targets
-def targets_table(rows, insert_ratio, quick):
-    noisy = [r for r in rows if r["noise"] == max(r["noise"] for r in rows)]
-    clean = [r for r in rows if r["noise"] == min(r["noise"] for r in rows)]
-    gain_noisy = float(np.mean([r["gain"] for r in noisy]))
-    worst = min(clean, key=lambda r: r["gain"])
-    slowest = max(rows, key=lambda r: r["replay_s"] + r["knn_s"])
-    t_max = slowest["replay_s"] + slowest["knn_s"]
-    mark = lambda ok: "met" if ok else "missed"  # noqa: E731
-    n_all = len(rows)
-    print(f"== 7. The issue's targets, as measured above"
-          f"{' (quick run: a subset of the data sets, not the targets proper)' if quick else ''}"
-          f" ==")
-    table([[f"noisiest third (noise {noisy[0]['noise']:g}): mean improvement >= +0.03",
-            f"{gain_noisy:+.4f} over {len(noisy)} data sets", mark(gain_noisy >= 0.03)],
-           [f"cleanest third (noise {clean[0]['noise']:g}): every improvement >= -0.01",
-            f"worst {worst['gain']:+.4f} ({worst['name']})", mark(worst["gain"] >= -0.01)],
-           ["4,050-combination search <= 60 s per data set (replay set-up + search)",
-            f"max {t_max:.2f} s ({slowest['name']}) over {n_all}", mark(t_max <= 60.0)],
-           ["KNNMap insert <= 2x OccupancyOctree's (worst data set's median ratio)",
-            f"{insert_ratio:.2f}", mark(insert_ratio <= 2.0)]],
-          ["target", "measured", "result"])
+def per_dataset_table(results):
+    print("== 2. Best AUC per data set and SGBM rank (strict: occgp's protocol; authors': "
+          "Miao et al.'s) ==")
+    rows = []
+    for r in results:
+        for rank in RANKS:
+            e = r["ranks"][rank]
+            row = [r["name"], r["half"], rank, f"{e['naive_fdr']:.3f}", f"{e['points']}"]
+            for protocol in ("strict", "authors"):
+                o = best(e, "octo", protocol)
+                row += [f"{o:.4f}", f"{best(e, 'knn', protocol) - o:+.4f}",
+                        f"{best(e, 'hist', protocol) - o:+.4f}"]
+            rows.append(row)
+    table(rows, ["data set", "half", "rank", "naive FDR", "points", "OctoMap strict",
+                 "k-NN gain", f"k-NN h={HISTORY} gain", "OctoMap authors'", "k-NN gain",
+                 f"k-NN h={HISTORY} gain"])
+
+
+def fig5_table(results):
+    print("== 3. Fig. 5: gain of the k-NN model's best AUC over OctoMap's best against "
+          "OctoMap's best (sorted by it; relative gain in %) ==")
+    for protocol in ("authors", "strict"):
+        rows = []
+        for r in results:
+            for rank in RANKS:
+                e = r["ranks"][rank]
+                o = best(e, "octo", protocol)
+                g = best(e, "knn", protocol) - o
+                h = best(e, "hist", protocol) - o
+                rows.append((o, [r["name"], rank, f"{o:.4f}", f"{g:+.4f}",
+                                 f"{100 * g / o:+.1f}", f"{h:+.4f}", f"{100 * h / o:+.1f}"]))
+        rows.sort(key=lambda x: x[0])
+        print(f"-- {protocol} protocol --")
+        table([row for _, row in rows], ["data set", "rank", "OctoMap best", "k-NN gain",
+                                         "rel %", f"h={HISTORY} gain", "rel %"])
+
+
+def gains(results, rank, protocol, method, half=None):
+    out = []
+    for r in results:
+        if half is not None and r["half"] != half:
+            continue
+        e = r["ranks"][rank]
+        o = best(e, "octo", protocol)
+        out.append((best(e, method, protocol) - o, (best(e, method, protocol) - o) / o))
+    return np.array(out).reshape(-1, 2)
+
+
+def summary_table(results):
+    print("== 4. Gains per SGBM rank and half (absolute; relative in %) ==")
+    rows = []
+    for half in ("tune", "test", None):
+        for rank in RANKS:
+            for protocol in ("authors", "strict"):
+                for method in ("knn", "hist"):
+                    g = gains(results, rank, protocol, method, half)
+                    if not len(g):
+                        continue
+                    rows.append([half or "all", rank, protocol,
+                                 "k-NN" if method == "knn" else f"k-NN h={HISTORY}",
+                                 f"{len(g)}", f"{g[:, 0].mean():+.4f}", f"{g[:, 0].max():+.4f}",
+                                 f"{g[:, 0].min():+.4f}", f"{100 * g[:, 1].mean():+.1f}",
+                                 f"{100 * g[:, 1].max():+.1f}"])
+    table(rows, ["half", "rank", "protocol", "model", "sets", "mean", "max", "min", "mean %",
+                 "max %"])
+
+
+def choose_defaults(results):
+    """The combination with the best mean strict AUC over the tuning half, every rank."""
+    tune = [r for r in results if r["half"] == "tune"] or results
+    chosen = {}
+    for method, params in (("octo", "octo_params"), ("knn", "knn_params"),
+                           ("hist", "knn_params")):
+        mean = np.mean([r["ranks"][rank][method]["strict"] for r in tune for rank in RANKS],
+                       axis=0)
+        i = int(np.argmax(mean))
+        chosen[method] = (i, tune[0][params][i], float(mean[i]))
+    return chosen
+
+
+def defaults_table(results, chosen):
+    print("== 5. Defaults chosen on the tuning half (best mean strict AUC), reported on the "
+          "test half ==")
+    for method, (_, p, m) in chosen.items():
+        print(f"{method:5s} {p}  (tuning mean strict AUC {m:.4f})")
+    rows = []
+    for rank in RANKS:
+        for protocol in ("strict", "authors"):
+            test = [r for r in results if r["half"] == "test"]
+            if not test:
+                continue
+            cells = [rank, protocol]
+            for method in ("octo", "knn", "hist"):
+                i = chosen[method][0]
+                cells += [f"{np.mean([r['ranks'][rank][method][protocol][i] for r in test]):.4f}",
+                          f"{np.mean([best(r['ranks'][rank], method, protocol) for r in test]):.4f}"]
+            rows.append(cells)
+    table(rows, ["rank", "protocol", "OctoMap default", "OctoMap best", "k-NN default",
+                 "k-NN best", f"h={HISTORY} default", f"h={HISTORY} best"])
+
+
+def times_table(results):
+    print("== 6. Seconds per data set (render: 80 keyframes with true depth; rank: the "
+          "sample of SGBM sets on the ranking keyframes; per rank: match, replay, searches) ==")
+    rows = []
+    for r in results:
+        t = r["times"]
+        e = [r["ranks"][rank]["times"] for rank in RANKS]
+        rows.append([r["name"], f"{t['render']:.1f}", f"{t['rank']:.1f}",
+                     f"{np.mean([x['match'] for x in e]):.1f}",
+                     f"{np.mean([x['replay'] for x in e]):.1f}",
+                     f"{np.mean([x['octo'] for x in e]):.1f}",
+                     f"{np.mean([x['knn'] for x in e]):.1f}",
+                     f"{np.mean([x['history'] for x in e]):.1f}"])
+    table(rows, ["data set", "render", "rank", "match", "replay+labels", "OctoMap search",
+                 "k-NN search", f"h={HISTORY} replay+search"])
+
+
+def targets_table(results):
+    print("== 7. Targets (test half) ==")
+    test = [r for r in results if r["half"] == "test"] or results
+    rows = []
+
+    def mark(ok):
+        return "met" if ok else "MISSED"
+
+    for protocol in ("authors", "strict"):
+        g = gains(test, "last", protocol, "knn")[:, 0]
+        worst = min(gains(test, rank, protocol, "knn")[:, 0].min() for rank in RANKS)
+        rows.append([f"{protocol}: k-NN best - OctoMap best, mean over last-ranked sets "
+                     ">= +0.03", f"{g.mean():+.4f}",
+                     mark(g.mean() >= 0.03) if protocol == "authors" else "reported"])
+        rows.append([f"{protocol}: never below OctoMap's best by more than 0.01",
+                     f"{worst:+.4f}", mark(worst >= -0.01) if protocol == "authors"
+                     else "reported"])
+    h = gains(test, "last", "strict", "hist")[:, 0]
+    rows.append([f"strict: k-NN h={HISTORY} best - OctoMap best, mean over last-ranked "
+                 ">= +0.02", f"{h.mean():+.4f}", mark(h.mean() >= 0.02)])
+    table(rows, ["target", "measured", "result"])
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true",
-                        help="6 data sets, NCA on one with 2,000 samples, fewer repeats")
+                        help="4 data sets, 12 ranked sets, 24 keyframes")
     parser.add_argument("--n-jobs", type=int, default=None,
-                        help="grid-search workers (joblib; default: 1 process)")
-    parser.add_argument("--nca-samples", type=int, default=None,
-                        help="operating points per NCA fit (default 5,625; quick 2,000)")
-    parser.add_argument("--plot", default=None, help="draw table 3 (Fig. 5) to this PNG")
+                        help="workers (joblib processes; default: 1)")
+    parser.add_argument("--json", default=None, help="keep the results in this file")
+    parser.add_argument("--resume", action="store_true",
+                        help="skip the data sets already in --json")
     args = parser.parse_args()
     t_start = time.perf_counter()
-    sets = stereo_datasets()
-    noisiest = max(d.depth_noise for d in sets)
+    rig = StereoRig()
+    sets = rendered_stereo_datasets()
     if args.quick:
-        sets = [d for d in sets if base_name(d) in QUICK_SETS]
-        detail = {d.name for d in sets if base_name(d) in DETAIL_SETS
-                  and d.depth_noise == noisiest}
-    else:
-        detail = {d.name for d in sets if base_name(d) in DETAIL_SETS}
-    n_samples = args.nca_samples or (2000 if args.quick else 5625)
-    rows, details = [], {}
+        sets = [d for d in sets if d.name in QUICK_SETS]
+    # the tuning half first: the defaults only need it
+    sets.sort(key=lambda d: d.half != "tune")
+    results = []
+    if args.resume and args.json and os.path.exists(args.json):
+        with open(args.json) as f:
+            results = json.load(f)
+    done = {r["name"] for r in results}
     for i, d in enumerate(sets):
-        row, scans, labels = compare(d, args.n_jobs)
-        rows.append(row)
-        if d.name in detail:
-            details[d.name] = (scans, labels)
-        log(f"[{i + 1}/{len(sets)}] {d.name}: OctoMap {row['octo_auc']:.4f}, k-NN "
-            f"{row['knn_auc']:.4f} ({row['gain']:+.4f}); {time.perf_counter() - t_start:.0f} s")
-    per_dataset_table(rows)
-    noise_table(rows)
-    fig5_table(rows, args.plot)
-    log("NCA weights ...")
-    nca_table(details, n_samples, args.n_jobs)
-    log("insert times ...")
-    insert_ratio = insert_table(details, 2 if args.quick else 3)
-    log("run-time models ...")
-    runtime_table(details, (10, 20, 40, 80), 1 if args.quick else 2)
-    targets_table(rows, insert_ratio, args.quick)
+        if d.name in done:
+            continue
+        r = measure(d, rig, args.quick, args.n_jobs)
+        results.append(r)
+        if args.json:
+            with open(args.json, "w") as f:
+                json.dump(results, f)
+        e = r["ranks"]
+        log(f"[{i + 1}/{len(sets)}] {d.name} ({d.half}): "
+            + "; ".join(f"{rank} OctoMap {best(e[rank], 'octo', 'authors'):.3f} k-NN "
+                        f"{best(e[rank], 'knn', 'authors') - best(e[rank], 'octo', 'authors'):+.3f}"
+                        for rank in RANKS)
+            + f"; {time.perf_counter() - t_start:.0f} s")
+    order = {d.name: i for i, d in enumerate(rendered_stereo_datasets())}
+    results.sort(key=lambda r: order[r["name"]])
+    print(f"{len(results)} data sets x {len(RANKS)} StereoSGBM ranks; rig {rig.width} x "
+          f"{rig.height}, f = {rig.focal_length} px, baseline {rig.baseline} m; "
+          f"{len(results[0]['knn_params'])} k-NN and "
+          f"{len(results[0]['octo_params'])} OctoMap combinations\n")
+    error_table(results)
+    per_dataset_table(results)
+    fig5_table(results)
+    summary_table(results)
+    defaults_table(results, choose_defaults(results))
+    times_table(results)
+    targets_table(results)
     print(f"(bench run time {time.perf_counter() - t_start:.0f} s)")
 
 

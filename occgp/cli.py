@@ -3,8 +3,8 @@
 ``occgp demo`` (:func:`demo`, in ``occgp/_demo.py``) maps the synthetic
 structured room with every mapping method (:func:`mapping_methods`: the octree
 and the grid in scan and ray mode, BGK, AKIMap in both variants and the k-NN
-map), a noisy version of the same scans with the octree and the k-NN map
-(:func:`noisy_mapping_methods`), and the 2D room with the GP maps
+map), clouds of a small stereo scene rendered and matched by OpenCV's StereoSGBM
+with the octree and the k-NN map (:func:`noisy_mapping_methods`), and the 2D room with the GP maps
 (:func:`gp_mapping_methods`), scores every map against the scene's exact ground
 truth (:func:`occgp.evaluation.exact_test_set`), prints a table for each and
 writes ``map.bt`` and figures. ``occgp map`` (:func:`map_scans`) builds a map

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from occgp import AKIMap, BGKMap, KNNMap, OccupancyOctree
-from occgp._demo import noisy_scans
+from occgp._demo import STEREO_HISTORY, STEREO_KNN, STEREO_OCTREE, STEREO_RANGE
 from occgp.maps import make_map
 from occgp.cli import main, map_scans, mapping_methods, noisy_mapping_methods
 from occgp.datasets import Scan, read_scans, structured_room, write_pcd
 
 KERNEL_METHODS = {"BGK", "AKIMap", "AKIMap (published)"}
-NOISY_METHODS = {"octree (scan), noisy", "k-NN, noisy"}
+STEREO_METHODS = {"octree, stereo", "k-NN, stereo", f"k-NN {STEREO_HISTORY} scans, stereo"}
 
 
 def _build(spec):
@@ -39,54 +39,28 @@ def test_mapping_methods_include_the_kernel_maps():
     assert isinstance(knn, KNNMap) and knn.sensor_range == 8.0
 
 
-def test_noisy_methods_cut_rays_alike():
-    """The noisy table's octree and k-NN map both cut rays at the scanner's 8 m."""
+def test_stereo_methods_cut_rays_alike_with_the_chosen_parameters():
+    """The stereo table's octree and k-NN maps both cut rays at 4 m and take the
+    parameters chosen on the tuning data sets."""
     methods = noisy_mapping_methods(0.2)
-    assert set(methods) == NOISY_METHODS
-    (octree, options), (knn, _) = _build(methods["octree (scan), noisy"]), \
-        _build(methods["k-NN, noisy"])
-    assert isinstance(knn, KNNMap) and knn.sensor_range == 8.0 and knn.resolution == 0.2
+    assert set(methods) == STEREO_METHODS
+    (octree, options), (knn, _) = _build(methods["octree, stereo"]), \
+        _build(methods["k-NN, stereo"])
+    multi = _build(methods[f"k-NN {STEREO_HISTORY} scans, stereo"])[0]
+    assert isinstance(knn, KNNMap) and knn.sensor_range == STEREO_RANGE == 4.0
+    assert knn.resolution == 0.2 and knn.history == 0 and multi.history == STEREO_HISTORY
+    assert {k: knn.get_params()[k] for k in STEREO_KNN} == STEREO_KNN
     assert type(octree) is not KNNMap and octree.resolution == 0.2
-    far = np.array([[12.0, 0.05, 0.05]])        # a return 12 m away: free up to 8 m only
-    expected = OccupancyOctree(0.2).insert_scan(far, [0.05, 0.05, 0.05], max_range=8.0)
+    assert {k: octree.get_params()[k] for k in STEREO_OCTREE} == STEREO_OCTREE
+    far = np.array([[6.0, 0.05, 0.05]])        # a return 6 m away: free up to 4 m only
+    expected = OccupancyOctree(0.2, **STEREO_OCTREE).insert_scan(far, [0.05, 0.05, 0.05],
+                                                                  max_range=4.0)
     octree.insert_scan(far, [0.05, 0.05, 0.05], **options)
     assert octree.num_leaves == expected.num_leaves > 0
-    assert np.isnan(octree.occupancy([[10.0, 0.05, 0.05]]))[0]
+    assert np.isnan(octree.occupancy([[5.0, 0.05, 0.05]]))[0]
     knn.insert_scan(far, [0.05, 0.05, 0.05])
-    assert np.isnan(knn.occupancy([[10.0, 0.05, 0.05]]))[0]
-    assert knn.occupancy([[7.0, 0.05, 0.05]])[0] < 0.5
-
-
-def test_noisy_scans_move_points_along_their_rays():
-    rng = np.random.default_rng(0)
-    origin = np.array([0.5, -0.5, 1.0])
-    scans = [Scan(origin + rng.uniform(2, 6, (4000, 3)), origin) for _ in range(2)]
-
-    def scales(noisy):
-        out = []
-        for clean, moved in zip(scans, noisy):
-            assert isinstance(moved, Scan) and moved.points.shape == (4000, 3)
-            np.testing.assert_array_equal(moved.origin, clean.origin)
-            ray, got = clean.points - origin, moved.points - origin
-            scale = np.linalg.norm(got, axis=1) / np.linalg.norm(ray, axis=1)
-            np.testing.assert_allclose(got, scale[:, None] * ray, atol=1e-9)   # on the ray
-            out.append(scale)
-        return np.concatenate(out)
-
-    speckled = scales(noisy_scans(scans, depth_noise=0.0, speckle=0.1, seed=3))
-    moved = speckled != 1.0              # outliers: uniform between sensor and end point
-    assert 0.085 < moved.mean() < 0.115 and (speckled[moved] < 1).all()
-    assert abs(speckled[moved].mean() - 0.5) < 0.05
-    noisy = noisy_scans(scans, depth_noise=0.01, speckle=0.0, seed=3)
-    dist = np.concatenate([np.linalg.norm(s.points - origin, axis=1) for s in scans])
-    rel = (scales(noisy) - 1) / (0.01 * dist)     # range error / (0.01 d^2) ~ N(0, 1)
-    assert abs(rel.mean()) < 0.1 and 0.9 < rel.std() < 1.1
-    again = noisy_scans(scans, depth_noise=0.01, speckle=0.0, seed=3)
-    np.testing.assert_array_equal(again[1].points, noisy[1].points)        # seeded
-    other = noisy_scans(scans, depth_noise=0.01, speckle=0.0, seed=4)
-    assert not np.array_equal(other[1].points, noisy[1].points)
-    same = noisy_scans(scans, depth_noise=0.0, speckle=0.0, seed=3)
-    np.testing.assert_allclose(same[0].points, scans[0].points, rtol=0, atol=1e-12)
+    assert np.isnan(knn.occupancy([[5.0, 0.05, 0.05]]))[0]
+    assert knn.occupancy([[3.0, 0.05, 0.05]])[0] < 0.5
 
 
 def test_map_command_builds_tree_from_pcd_files(tmp_path, capsys):

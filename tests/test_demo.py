@@ -25,7 +25,7 @@ def quick_demo(tmp_path_factory):
         mp.setattr(demo_module, "mapping_methods", _subset(
             cli.mapping_methods, {"octree (scan)", "grid (scan)", "AKIMap"}))
         mp.setattr(demo_module, "noisy_mapping_methods", _subset(
-            cli.noisy_mapping_methods, {"octree (scan), noisy"}))
+            cli.noisy_mapping_methods, {"octree, stereo"}))
         mp.setattr(demo_module, "gp_mapping_methods", _subset(
             cli.gp_mapping_methods, {"GPOM", "log-odds grid"}))
         out = io.StringIO()
@@ -36,17 +36,17 @@ def quick_demo(tmp_path_factory):
 def test_demo_prints_three_tables_on_exact_ground_truth(quick_demo):
     rows, text, _ = quick_demo
     assert [r.method for r in rows] == ["octree (scan)", "grid (scan)", "AKIMap",
-                                        "octree (scan), noisy", "GPOM", "log-odds grid"]
+                                        "octree, stereo", "GPOM", "log-odds grid"]
     assert "exact ground truth" in text and "cells the scans could see" in text
     header = [line for line in text.splitlines() if line.startswith(TABLE_HEADER)]
     assert len(header) == 3 and all("unknown" in h and "AUC" in h for h in header)
-    # the tables in order: 3D, noisy, 2D
-    assert text.index("AKIMap") < text.index("noisy scans:") < text.index("2D: room")
+    # the tables in order: 3D, stereo, 2D
+    assert text.index("AKIMap") < text.index("stereo: plain boxes") < text.index("2D: room")
     assert text.index("2D: room") < text.index("log-odds grid")
     by_name = {r.method: r for r in rows}
-    three_d = [by_name[n] for n in ("octree (scan)", "grid (scan)", "AKIMap",
-                                    "octree (scan), noisy")]
+    three_d = [by_name[n] for n in ("octree (scan)", "grid (scan)", "AKIMap")]
     assert len({r.n_test for r in three_d}) == 1           # one 3D test set
+    assert by_name["octree, stereo"].n_test % 2 == 0        # its own, balanced
     assert by_name["grid (scan)"].auc == by_name["octree (scan)"].auc
     # the protocol tells methods apart: AKIMap fills the gaps between rays, the octree not
     assert by_name["AKIMap"].auc > by_name["octree (scan)"].auc + 0.1

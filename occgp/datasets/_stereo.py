@@ -327,7 +327,7 @@ class StereoCamera:
         >>> bool(np.abs(scene.signed_distance(points)).max() < 1e-9)   # on the surfaces
         True
         """
-        _check_scene(scene)
+        check_scene(scene)
         position = as_point(position, "position")
         look_at = as_point(look_at, "look_at")
         if scene.occupancy(position[None])[0]:
@@ -378,7 +378,8 @@ def _top(field, candidates, fraction):
     return mask
 
 
-def _check_scene(scene):
+def check_scene(scene):
+    """Raise TypeError unless `scene` is a :class:`~occgp.datasets.Scene`."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
 
@@ -449,6 +450,26 @@ def _voxel_filter(points, voxel):
     return centroids
 
 
+def orbit_positions(scene, n_frames, orbits, radius, height):
+    """Camera centres of the orbit of :func:`simulate_stereo` (checked arguments) and the
+    point they look at: ``(positions of shape (n_frames * orbits, 3), center)``."""
+    center = getattr(scene, "target_center", None)
+    if center is None:
+        lo, hi = scene.interior_bounds
+        center = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2] + 0.5])
+    frame = np.arange(n_frames * orbits)
+    azimuth = 2 * np.pi * (frame % n_frames + (frame // n_frames) / orbits) / n_frames
+    positions = np.column_stack([center[0] + radius * np.cos(azimuth),
+                                 center[1] + radius * np.sin(azimuth),
+                                 np.full(len(frame), height)])
+    inside = scene.occupancy(positions)
+    if inside.any():
+        i = int(np.flatnonzero(inside)[0])
+        raise ValueError(f"the camera position of frame {i}, {positions[i].tolist()}, lies "
+                         "inside a solid; choose radius and height in free space")
+    return positions, np.asarray(center, dtype=np.float64)
+
+
 def simulate_stereo(scene: Scene, camera: StereoCamera = StereoCamera(), *, n_frames: int = 40,
                     orbits: int = 2, radius: float = 4.0, height: float = 1.5,
                     voxel: float | None = 0.1, seed: int = 0,
@@ -515,7 +536,7 @@ def simulate_stereo(scene: Scene, camera: StereoCamera = StereoCamera(), *, n_fr
     >>> len(np.unique(keys, axis=0)) == len(keys)     # one point per voxel
     True
     """
-    _check_scene(scene)
+    check_scene(scene)
     if not isinstance(camera, StereoCamera):
         raise TypeError(f"camera must be a StereoCamera, got {type(camera).__name__}")
     n_frames = check_int(n_frames, "n_frames", low=1, high=10_000)
@@ -526,20 +547,7 @@ def simulate_stereo(scene: Scene, camera: StereoCamera = StereoCamera(), *, n_fr
     if voxel is not None:
         voxel = _check_voxel(voxel)
     seed = check_int(seed, "seed", low=0)
-    center = getattr(scene, "target_center", None)
-    if center is None:
-        lo, hi = scene.interior_bounds
-        center = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2] + 0.5])
-    frame = np.arange(n_frames * orbits)
-    azimuth = 2 * np.pi * (frame % n_frames + (frame // n_frames) / orbits) / n_frames
-    positions = np.column_stack([center[0] + radius * np.cos(azimuth),
-                                 center[1] + radius * np.sin(azimuth),
-                                 np.full(len(frame), height)])
-    inside = scene.occupancy(positions)
-    if inside.any():
-        i = int(np.flatnonzero(inside)[0])
-        raise ValueError(f"the camera position of frame {i}, {positions[i].tolist()}, lies "
-                         "inside a solid; choose radius and height in free space")
+    positions, center = orbit_positions(scene, n_frames, orbits, radius, height)
     scans = []
     for f, position in enumerate(tqdm(positions, unit="frame", desc="simulating stereo",
                                       disable=None if progress is None else not progress)):
