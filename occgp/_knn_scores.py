@@ -12,7 +12,12 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree  # type: ignore[import-untyped]
 from scipy.special import ndtr  # type: ignore[import-untyped]
 
-__all__ = ["mean_knn_distances", "point_log_odds", "fixed_log_odds"]
+__all__ = ["mean_knn_distances", "point_log_odds", "fixed_log_odds", "logodds32"]
+
+
+def logodds32(p: float) -> float:
+    """liboctomap's ``logodds``: ``(float) log(p / (1 - p))`` (libm's log, float32)."""
+    return float(np.float32(math.log(p / (1.0 - p))))
 
 
 def mean_knn_distances(points: NDArray[np.float64], ks: Sequence[int],
