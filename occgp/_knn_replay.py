@@ -18,13 +18,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._knn_scores import logodds32, mean_knn_distances, point_log_odds
+from ._knn_scores import history_knn_distances, logodds32, mean_knn_distances, point_log_odds
 from ._octree import _welford
 from ._status import Status
 from ._validation import (
     check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
 )
-from .knn import CDFS, MAX_K, MAX_RANGE, STATS, KNNMap, check_knn_params
+from .knn import CDFS, MAX_HISTORY, MAX_K, MAX_RANGE, STATS, KNNMap, check_knn_params
 from .octree import unpack_keys
 
 __all__ = ["ScanReplay", "check_octomap_params"]
@@ -74,6 +74,10 @@ class ScanReplay:
         (the final Welford statistics over every finite score of every scan,
         :meth:`score_stats`), as ``KNNMap(score_stats=replay.score_stats(k))``
         uses them.
+    history : int, default=0
+        The previous scans each point is scored against, as
+        ``KNNMap(history=)`` takes them (0: its own scan, the paper's score),
+        in [0, 64].
     n_jobs : int or None, default=None
         Threads for the k-NN queries and the rays' traversal (the replay is the
         same for every `n_jobs`).
@@ -91,7 +95,8 @@ class ScanReplay:
 
     def __init__(self, scans: Iterable[Sequence[Any]], resolution: float = 0.1, *,
                  sensor_range: float = 4.0, ks: Sequence[int] = (1,), cdf: str = "normal",
-                 stats: str = "online", n_jobs: int | None = None) -> None:
+                 stats: str = "online", history: int = 0,
+                 n_jobs: int | None = None) -> None:
         k_values = (ks,) if isinstance(ks, (int, np.integer)) else ks
         self.ks = tuple(check_int(k, "ks", low=1, high=MAX_K) for k in k_values)
         if not self.ks:
@@ -101,11 +106,13 @@ class ScanReplay:
                                        high=MAX_RANGE, high_open=False)
         self.cdf = check_choice(cdf, "cdf", CDFS)
         self.stats = check_choice(stats, "stats", STATS)
+        self.history = check_int(history, "history", low=0, high=MAX_HISTORY)
         workers = n_threads(check_n_jobs(n_jobs))
         probe = KNNMap(self.resolution, sensor_range=self.sensor_range)
         local = []
         self.n_points = self.n_near = 0
         running = [(0, 0.0, 0.0)] * len(self.ks)
+        previous: list[NDArray[np.float64]] = []     # the last `history` near clouds
         for i, scan in enumerate(scans):
             try:
                 points, origin = scan
@@ -125,7 +132,11 @@ class ScanReplay:
                     raise ValueError(f"scans[{i}]: {exc}") from None
                 raise AssertionError("unreachable")
             near, keys, kinds, point_cell, _ = out
-            s = mean_knn_distances(near.astype(np.float64), self.ks, workers)
+            near = near.astype(np.float64)
+            s = (history_knn_distances(near, previous, self.ks, workers) if self.history
+                 else mean_knn_distances(near, self.ks, workers))
+            if self.history:
+                previous = (previous + [near])[-self.history:]
             per_k = []
             for j in range(len(self.ks)):
                 running[j] = _welford(np.ascontiguousarray(s[:, j]), *running[j])

@@ -4,7 +4,9 @@ OctoMap gives every cell that holds a point the same ``prob_hit``. The k-NN
 model scores each point of a scan by the mean distance ``s`` to its ``k``
 nearest neighbours in the same scan and turns the score into an occupancy
 probability through the CDF of ``s``: isolated points (stereo speckle, far
-outliers) get a low probability, and can lower a cell's occupancy.
+outliers) get a low probability, and can lower a cell's occupancy. With
+``history=W`` (beyond the paper) the neighbours are those of the W previous
+scans instead, which isolates errors that move with the viewpoint.
 
 :class:`KNNMap` is the map; :class:`ScanReplay` holds what a data set's maps
 share under every parameter value (the cells of each scan, the k-NN distances),
@@ -22,7 +24,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._knn_scores import fixed_log_odds, logodds32, mean_knn_distances, point_log_odds
+from ._knn_scores import (
+    fixed_log_odds, history_knn_distances, logodds32, mean_knn_distances, point_log_odds,
+)
 from ._octree import _welford
 from ._status import Status
 from ._validation import (
@@ -32,7 +36,8 @@ from .maps import register
 from .octree import OccupancyOctree
 
 __all__ = ["KNNMap", "ScanReplay", "check_knn_params", "check_octomap_params",
-           "check_score_stats", "mean_knn_distances", "point_log_odds", "fixed_log_odds"]
+           "check_score_stats", "mean_knn_distances", "history_knn_distances",
+           "point_log_odds", "fixed_log_odds"]
 
 #: The parameters of the k-NN model, as :class:`KNNMap` takes them (``cdf`` and
 #: ``n_jobs`` aside).
@@ -42,6 +47,8 @@ CDFS = ("normal", "truncated")
 #: statistics, or the whole data set's (fixed for the run).
 STATS = ("online", "dataset")
 MAX_K = 1000
+#: The most previous scans a point may be scored against (``KNNMap(history=)``).
+MAX_HISTORY = 64
 MAX_RANGE = 1e15
 # the underlying tree's own sensor model: used only to tell end cells (l_hit > 0)
 # from crossed cells (l_miss < 0) in the traversal, never to update the map
@@ -125,6 +132,7 @@ def _check_all(params: dict[str, Any]) -> dict[str, Any]:
     return {"resolution": check_resolution(params["resolution"]), **model,
             "cdf": check_choice(params["cdf"], "cdf", CDFS),
             "score_stats": check_score_stats(params["score_stats"]),
+            "history": check_int(params["history"], "history", low=0, high=MAX_HISTORY),
             "n_jobs": check_n_jobs(params["n_jobs"])}
 
 
@@ -193,6 +201,18 @@ class KNNMap(OccupancyOctree):
         :meth:`ScanReplay.score_stats`, or :attr:`score_mean_` and
         :attr:`score_std_` of a map built from every scan); finite, ``std >=
         0``. Welford's statistics are still kept (the attributes below).
+    history : int, default=0
+        0: the paper's score, over the point's own scan. ``W >= 1`` (at most
+        64): the score over scans, an extension beyond the paper: ``s`` is the
+        mean distance to the `k` nearest near points (world frame) of the `W`
+        previous scans inserted into this map, not of the point's own scan
+        (:func:`~occgp.knn.history_knn_distances`). A stereo matching error is
+        dense within its scan but seen at another place from each viewpoint,
+        while a surface is seen at the same place from many: over scans the
+        error is isolated. While the history holds no point (the first scan),
+        the points are scored against their own scan; fewer than `k` points
+        in it give the score inf. The map keeps the last `W` near clouds
+        (float64, ``24 * W * n_near`` bytes).
     n_jobs : int or None, default=None
         Threads for the k-NN queries (``cKDTree.query(workers=)``) and for
         walking a scan's rays (as ``OccupancyOctree.insert_scan(n_jobs=)``:
@@ -217,6 +237,14 @@ class KNNMap(OccupancyOctree):
     (``p = p_l``) and do not enter the statistics. The statistics follow the
     scans in insertion order, with the current scan's scores included before
     its points are scored.
+
+    With ``history >= 1`` the clouds of the previous scans are part of the
+    map's state like the statistics: pickles and copies keep them, ``.bt`` /
+    ``.ot`` files (:meth:`save`, :meth:`to_bytes`) keep only the tree, so a
+    loaded map starts with an empty history; :meth:`clear` removes the cells
+    and keeps both. :meth:`set_params` may change `history` on a map that has
+    scans: the last ``history`` clouds are kept (none with 0), a larger value
+    fills up with the next scans.
 
     References
     ----------
@@ -246,15 +274,17 @@ class KNNMap(OccupancyOctree):
                  p_l: float = 0.38, p_m: float = 0.26, p_m_out: float = 0.38,
                  p_min: float = 0.02, p_max: float = 0.98, p_t: float = 0.5,
                  sensor_range: float = 4.0, cdf: str = "normal",
-                 score_stats: tuple[float, float] | None = None,
+                 score_stats: tuple[float, float] | None = None, history: int = 0,
                  n_jobs: int | None = None) -> None:
         params = _check_all({"resolution": resolution, "k": k, "p_u": p_u, "p_l": p_l,
                               "p_m": p_m, "p_m_out": p_m_out, "p_min": p_min, "p_max": p_max,
                               "p_t": p_t, "sensor_range": sensor_range, "cdf": cdf,
-                              "score_stats": score_stats, "n_jobs": n_jobs})
+                              "score_stats": score_stats, "history": history,
+                              "n_jobs": n_jobs})
         self._build(params, _CLASS_HIT, _CLASS_MISS, params["p_min"], params["p_max"],
                     params["p_t"])
         self._scores = (0, 0.0, 0.0)       # Welford: count, mean, sum of squared deviations
+        self._history: list[NDArray[np.float64]] = []   # the last `history` near clouds
 
     def __repr__(self) -> str:
         return (f"KNNMap(resolution={self.resolution!r}, k={self.k}, "
@@ -269,7 +299,9 @@ class KNNMap(OccupancyOctree):
         constructor checks them. The cells keep their log-odds: new values apply
         to later scans, and ``p_min``, ``p_max`` and ``p_t`` also to later
         clamps and to the queries that compare with the threshold. The score
-        statistics (Welford's) are kept.
+        statistics (Welford's) are kept, and so are the previous scans' clouds
+        up to the new `history` (the latest ones; none with 0); a larger
+        `history` fills up with the next scans.
 
         Parameters
         ----------
@@ -306,6 +338,8 @@ class KNNMap(OccupancyOctree):
         new = _check_all({**self._params, **params})
         self._set_sensor_model(_CLASS_HIT, _CLASS_MISS, new["p_min"], new["p_max"], new["p_t"])
         self._params = new
+        if len(self._history) > new["history"]:
+            self._history = self._history[len(self._history) - new["history"]:]
         return self
 
     @property
@@ -347,6 +381,11 @@ class KNNMap(OccupancyOctree):
     def score_stats(self) -> tuple[float, float] | None:
         """The fixed (mean, std) of the scores, or None (Welford's, online)."""
         return self._params["score_stats"]
+
+    @property
+    def history(self) -> int:
+        """How many previous scans the points are scored against (0: their own scan)."""
+        return self._params["history"]
 
     @property
     def prob_hit(self) -> float:
@@ -432,8 +471,10 @@ default="auto"
             raise AssertionError("unreachable")
         near, keys, kinds, point_cell, stats = out
         t0 = time.perf_counter()
-        s = mean_knn_distances(near.astype(np.float64), [self.k],
-                               n_threads(self._params["n_jobs"]))[:, 0]
+        near = near.astype(np.float64)
+        workers = n_threads(self._params["n_jobs"])
+        s = (history_knn_distances(near, self._history, [self.k], workers) if self.history
+             else mean_knn_distances(near, [self.k], workers))[:, 0]
         scores = _welford(s, *self._scores)
         fixed = self._params["score_stats"]
         values = (point_log_odds(s, *scores, self.p_u, self.p_l, self.cdf) if fixed is None
@@ -443,6 +484,8 @@ default="auto"
         seconds = time.perf_counter() - t0
         self._apply_cells(keys, updates)
         self._scores = scores
+        if self.history:
+            self._history = (self._history + [near])[-self.history:]
         self._record_insert(stats, pts, org, rng, method, threshold)
         self.last_insert_["updated_cells"] = len(keys)
         self.last_insert_["near_points"] = len(s)
@@ -452,7 +495,7 @@ default="auto"
     # ------------------------------------------------------------------ state
     def __reduce__(self):
         return (_rebuild_knn, (type(self), self.get_params(), self.to_bytes("ot"),
-                               self._scores))
+                               self._scores, tuple(self._history)))
 
 
 def _cell_updates(kinds: NDArray[np.uint8], point_cell: NDArray[np.int64],
@@ -468,9 +511,11 @@ def _cell_updates(kinds: NDArray[np.uint8], point_cell: NDArray[np.int64],
     return updates
 
 
-def _rebuild_knn(cls, params: dict, data: bytes, scores: tuple) -> KNNMap:
+def _rebuild_knn(cls, params: dict, data: bytes, scores: tuple,
+                 history: tuple = ()) -> KNNMap:
     tree = cls.from_bytes(data, **{k: v for k, v in params.items() if k != "resolution"})
     tree._scores = tuple(scores)
+    tree._history = [np.array(c, dtype=np.float64).reshape(-1, 3) for c in history]
     return tree
 
 
