@@ -132,11 +132,11 @@ class ScanReplay:
                     raise ValueError(f"scans[{i}]: {exc}") from None
                 raise AssertionError("unreachable")
             near, keys, kinds, point_cell, _ = out
-            near = near.astype(np.float64)
-            s = (history_knn_distances(near, previous, self.ks, workers) if self.history
-                 else mean_knn_distances(near, self.ks, workers))
+            cloud = near.astype(np.float64)
+            s = (history_knn_distances(cloud, previous, self.ks, workers) if self.history
+                 else mean_knn_distances(cloud, self.ks, workers))
             if self.history:
-                previous = (previous + [near])[-self.history:]
+                previous = (previous + [cloud])[-self.history:]
             per_k = []
             for j in range(len(self.ks)):
                 running[j] = _welford(np.ascontiguousarray(s[:, j]), *running[j])

@@ -471,10 +471,10 @@ default="auto"
             raise AssertionError("unreachable")
         near, keys, kinds, point_cell, stats = out
         t0 = time.perf_counter()
-        near = near.astype(np.float64)
+        cloud = near.astype(np.float64)
         workers = n_threads(self._params["n_jobs"])
-        s = (history_knn_distances(near, self._history, [self.k], workers) if self.history
-             else mean_knn_distances(near, [self.k], workers))[:, 0]
+        s = (history_knn_distances(cloud, self._history, [self.k], workers) if self.history
+             else mean_knn_distances(cloud, [self.k], workers))[:, 0]
         scores = _welford(s, *self._scores)
         fixed = self._params["score_stats"]
         values = (point_log_odds(s, *scores, self.p_u, self.p_l, self.cdf) if fixed is None
@@ -485,7 +485,7 @@ default="auto"
         self._apply_cells(keys, updates)
         self._scores = scores
         if self.history:
-            self._history = (self._history + [near])[-self.history:]
+            self._history = (self._history + [cloud])[-self.history:]
         self._record_insert(stats, pts, org, rng, method, threshold)
         self.last_insert_["updated_cells"] = len(keys)
         self.last_insert_["near_points"] = len(s)
