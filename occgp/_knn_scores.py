@@ -12,7 +12,13 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree  # type: ignore[import-untyped]
 from scipy.special import ndtr  # type: ignore[import-untyped]
 
-__all__ = ["mean_knn_distances", "point_log_odds", "fixed_log_odds"]
+__all__ = ["mean_knn_distances", "history_knn_distances", "point_log_odds", "fixed_log_odds",
+           "logodds32"]
+
+
+def logodds32(p: float) -> float:
+    """liboctomap's ``logodds``: ``(float) log(p / (1 - p))`` (libm's log, float32)."""
+    return float(np.float32(math.log(p / (1.0 - p))))
 
 
 def mean_knn_distances(points: NDArray[np.float64], ks: Sequence[int],
@@ -33,6 +39,53 @@ def mean_knn_distances(points: NDArray[np.float64], ks: Sequence[int],
     csum = np.cumsum(dist[:, 1:], axis=1)
     for j, k in enumerate(ks):
         if k <= n - 1:
+            out[:, j] = csum[:, k - 1] / k
+    return out
+
+
+def history_knn_distances(points: NDArray[np.float64],
+                          history_clouds: Sequence[NDArray[np.float64]], ks: Sequence[int],
+                          workers: int = 1) -> NDArray[np.float64]:
+    """Mean distance of each point to its k nearest points of earlier scans, for each k.
+
+    The k-NN score over scans: the neighbours are searched among the points of
+    `history_clouds` (the near points of the previous scans, world frame), not
+    among `points` themselves. While the history holds no point at all (the
+    first scan), the points are scored against their own cloud instead, as
+    :func:`mean_knn_distances` scores them.
+
+    Parameters
+    ----------
+    points : ndarray of float64, shape (n_points, 3)
+        The points to score.
+    history_clouds : sequence of ndarray of float64, shape (n_i, 3)
+        The previous scans' near points, oldest first (their order does not
+        change the distances).
+    ks : sequence of int
+        The numbers of neighbours, each at least 1.
+    workers : int, default=1
+        Threads for the queries (``cKDTree.query(workers=)``).
+
+    Returns
+    -------
+    s : ndarray of float64, shape (n_points, len(ks))
+        inf where the history holds fewer than k points. As in
+        :func:`mean_knn_distances`, the means are running sums of the sorted
+        distances, so every k gives the same value whatever the other ks are.
+    """
+    clouds = [np.asarray(c, dtype=np.float64).reshape(-1, 3) for c in history_clouds]
+    n_hist = sum(len(c) for c in clouds)
+    if n_hist == 0:
+        return mean_knn_distances(points, ks, workers)
+    n = len(points)
+    out = np.full((n, len(ks)), np.inf)
+    if n == 0:
+        return out
+    kq = min(max(ks), n_hist)
+    dist, _ = cKDTree(np.concatenate(clouds)).query(points, k=kq, workers=workers)
+    csum = np.cumsum(np.reshape(dist, (n, kq)), axis=1)
+    for j, k in enumerate(ks):
+        if k <= n_hist:
             out[:, j] = csum[:, k - 1] / k
     return out
 

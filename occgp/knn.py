@@ -4,7 +4,9 @@ OctoMap gives every cell that holds a point the same ``prob_hit``. The k-NN
 model scores each point of a scan by the mean distance ``s`` to its ``k``
 nearest neighbours in the same scan and turns the score into an occupancy
 probability through the CDF of ``s``: isolated points (stereo speckle, far
-outliers) get a low probability, and can lower a cell's occupancy.
+outliers) get a low probability, and can lower a cell's occupancy. With
+``history=W`` (beyond the paper) the neighbours are those of the W previous
+scans instead, which isolates errors that move with the viewpoint.
 
 :class:`KNNMap` is the map; :class:`ScanReplay` holds what a data set's maps
 share under every parameter value (the cells of each scan, the k-NN distances),
@@ -17,24 +19,25 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
-from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._knn_scores import fixed_log_odds, mean_knn_distances, point_log_odds
+from ._knn_scores import (
+    fixed_log_odds, history_knn_distances, logodds32, mean_knn_distances, point_log_odds,
+)
 from ._octree import _welford
 from ._status import Status
 from ._validation import (
     check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
 )
 from .maps import register
-from .octree import OccupancyOctree, unpack_keys
+from .octree import OccupancyOctree
 
 __all__ = ["KNNMap", "ScanReplay", "check_knn_params", "check_octomap_params",
-           "check_score_stats", "mean_knn_distances", "point_log_odds", "fixed_log_odds"]
+           "check_score_stats", "mean_knn_distances", "history_knn_distances",
+           "point_log_odds", "fixed_log_odds"]
 
 #: The parameters of the k-NN model, as :class:`KNNMap` takes them (``cdf`` and
 #: ``n_jobs`` aside).
@@ -44,15 +47,12 @@ CDFS = ("normal", "truncated")
 #: statistics, or the whole data set's (fixed for the run).
 STATS = ("online", "dataset")
 MAX_K = 1000
-_MAX_RANGE = 1e15
+#: The most previous scans a point may be scored against (``KNNMap(history=)``).
+MAX_HISTORY = 64
+MAX_RANGE = 1e15
 # the underlying tree's own sensor model: used only to tell end cells (l_hit > 0)
 # from crossed cells (l_miss < 0) in the traversal, never to update the map
 _CLASS_HIT, _CLASS_MISS = 0.7, 0.4
-
-
-def _log_odds(p: float) -> float:
-    """liboctomap's ``logodds``: ``(float) log(p / (1 - p))`` (libm's log, float32)."""
-    return float(np.float32(math.log(p / (1.0 - p))))
 
 
 def check_knn_params(params: dict[str, Any]) -> dict[str, Any]:
@@ -74,7 +74,7 @@ def check_knn_params(params: dict[str, Any]) -> dict[str, Any]:
     for name in ("p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "p_t"):
         out[name] = check_real(params[name], name, low=0.0, high=1.0)
     out["sensor_range"] = check_real(params["sensor_range"], "sensor_range", low=0.0,
-                                     high=_MAX_RANGE, high_open=False)
+                                     high=MAX_RANGE, high_open=False)
     rules = [
         ("p_u", "p_l", "p_u >= p_l"),
         ("p_m", "p_min", "p_m >= p_min"),
@@ -132,19 +132,8 @@ def _check_all(params: dict[str, Any]) -> dict[str, Any]:
     return {"resolution": check_resolution(params["resolution"]), **model,
             "cdf": check_choice(params["cdf"], "cdf", CDFS),
             "score_stats": check_score_stats(params["score_stats"]),
+            "history": check_int(params["history"], "history", low=0, high=MAX_HISTORY),
             "n_jobs": check_n_jobs(params["n_jobs"])}
-
-
-def check_octomap_params(params: dict[str, Any]) -> dict[str, float]:
-    """OctoMap's ``prob_hit``, ``prob_miss``, ``clamping_min``, ``clamping_max`` checked
-    as :class:`~occgp.OccupancyOctree` checks them, except that ``prob_hit = 0.5`` (a hit
-    that carries no evidence, the first value of Miao et al.'s grid) is allowed."""
-    from ._logodds_map import check_params
-    hit = check_real(params["prob_hit"], "prob_hit", low=0.5, high=1.0, low_open=False)
-    q = check_params({"resolution": 1.0, "occupancy_threshold": 0.5, **params,
-                      "prob_hit": 0.7})
-    return {"prob_hit": hit, "prob_miss": q["prob_miss"], "clamping_min": q["clamping_min"],
-            "clamping_max": q["clamping_max"]}
 
 
 @register("knn", formats=(".bt", ".ot"),
@@ -212,6 +201,18 @@ class KNNMap(OccupancyOctree):
         :meth:`ScanReplay.score_stats`, or :attr:`score_mean_` and
         :attr:`score_std_` of a map built from every scan); finite, ``std >=
         0``. Welford's statistics are still kept (the attributes below).
+    history : int, default=0
+        0: the paper's score, over the point's own scan. ``W >= 1`` (at most
+        64): the score over scans, an extension beyond the paper: ``s`` is the
+        mean distance to the `k` nearest near points (world frame) of the `W`
+        previous scans inserted into this map, not of the point's own scan
+        (:func:`~occgp.knn.history_knn_distances`). A stereo matching error is
+        dense within its scan but seen at another place from each viewpoint,
+        while a surface is seen at the same place from many: over scans the
+        error is isolated. While the history holds no point (the first scan),
+        the points are scored against their own scan; fewer than `k` points
+        in it give the score inf. The map keeps the last `W` near clouds
+        (float64, ``24 * W * n_near`` bytes).
     n_jobs : int or None, default=None
         Threads for the k-NN queries (``cKDTree.query(workers=)``) and for
         walking a scan's rays (as ``OccupancyOctree.insert_scan(n_jobs=)``:
@@ -236,6 +237,14 @@ class KNNMap(OccupancyOctree):
     (``p = p_l``) and do not enter the statistics. The statistics follow the
     scans in insertion order, with the current scan's scores included before
     its points are scored.
+
+    With ``history >= 1`` the clouds of the previous scans are part of the
+    map's state like the statistics: pickles and copies keep them, ``.bt`` /
+    ``.ot`` files (:meth:`save`, :meth:`to_bytes`) keep only the tree, so a
+    loaded map starts with an empty history; :meth:`clear` removes the cells
+    and keeps both. :meth:`set_params` may change `history` on a map that has
+    scans: the last ``history`` clouds are kept (none with 0), a larger value
+    fills up with the next scans.
 
     References
     ----------
@@ -265,15 +274,17 @@ class KNNMap(OccupancyOctree):
                  p_l: float = 0.38, p_m: float = 0.26, p_m_out: float = 0.38,
                  p_min: float = 0.02, p_max: float = 0.98, p_t: float = 0.5,
                  sensor_range: float = 4.0, cdf: str = "normal",
-                 score_stats: tuple[float, float] | None = None,
+                 score_stats: tuple[float, float] | None = None, history: int = 0,
                  n_jobs: int | None = None) -> None:
         params = _check_all({"resolution": resolution, "k": k, "p_u": p_u, "p_l": p_l,
                               "p_m": p_m, "p_m_out": p_m_out, "p_min": p_min, "p_max": p_max,
                               "p_t": p_t, "sensor_range": sensor_range, "cdf": cdf,
-                              "score_stats": score_stats, "n_jobs": n_jobs})
+                              "score_stats": score_stats, "history": history,
+                              "n_jobs": n_jobs})
         self._build(params, _CLASS_HIT, _CLASS_MISS, params["p_min"], params["p_max"],
                     params["p_t"])
         self._scores = (0, 0.0, 0.0)       # Welford: count, mean, sum of squared deviations
+        self._history: list[NDArray[np.float64]] = []   # the last `history` near clouds
 
     def __repr__(self) -> str:
         return (f"KNNMap(resolution={self.resolution!r}, k={self.k}, "
@@ -288,7 +299,9 @@ class KNNMap(OccupancyOctree):
         constructor checks them. The cells keep their log-odds: new values apply
         to later scans, and ``p_min``, ``p_max`` and ``p_t`` also to later
         clamps and to the queries that compare with the threshold. The score
-        statistics (Welford's) are kept.
+        statistics (Welford's) are kept, and so are the previous scans' clouds
+        up to the new `history` (the latest ones; none with 0); a larger
+        `history` fills up with the next scans.
 
         Parameters
         ----------
@@ -325,6 +338,8 @@ class KNNMap(OccupancyOctree):
         new = _check_all({**self._params, **params})
         self._set_sensor_model(_CLASS_HIT, _CLASS_MISS, new["p_min"], new["p_max"], new["p_t"])
         self._params = new
+        if len(self._history) > new["history"]:
+            self._history = self._history[len(self._history) - new["history"]:]
         return self
 
     @property
@@ -366,6 +381,11 @@ class KNNMap(OccupancyOctree):
     def score_stats(self) -> tuple[float, float] | None:
         """The fixed (mean, std) of the scores, or None (Welford's, online)."""
         return self._params["score_stats"]
+
+    @property
+    def history(self) -> int:
+        """How many previous scans the points are scored against (0: their own scan)."""
+        return self._params["history"]
 
     @property
     def prob_hit(self) -> float:
@@ -451,17 +471,21 @@ default="auto"
             raise AssertionError("unreachable")
         near, keys, kinds, point_cell, stats = out
         t0 = time.perf_counter()
-        s = mean_knn_distances(near.astype(np.float64), [self.k],
-                               n_threads(self._params["n_jobs"]))[:, 0]
+        cloud = near.astype(np.float64)
+        workers = n_threads(self._params["n_jobs"])
+        s = (history_knn_distances(cloud, self._history, [self.k], workers) if self.history
+             else mean_knn_distances(cloud, [self.k], workers))[:, 0]
         scores = _welford(s, *self._scores)
         fixed = self._params["score_stats"]
         values = (point_log_odds(s, *scores, self.p_u, self.p_l, self.cdf) if fixed is None
                   else fixed_log_odds(s, fixed[0], fixed[1], self.p_u, self.p_l, self.cdf))
-        updates = _cell_updates(kinds, point_cell, values, _log_odds(self.p_m),
-                                _log_odds(self.p_m_out))
+        updates = _cell_updates(kinds, point_cell, values, logodds32(self.p_m),
+                                logodds32(self.p_m_out))
         seconds = time.perf_counter() - t0
         self._apply_cells(keys, updates)
         self._scores = scores
+        if self.history:
+            self._history = (self._history + [cloud])[-self.history:]
         self._record_insert(stats, pts, org, rng, method, threshold)
         self.last_insert_["updated_cells"] = len(keys)
         self.last_insert_["near_points"] = len(s)
@@ -471,7 +495,7 @@ default="auto"
     # ------------------------------------------------------------------ state
     def __reduce__(self):
         return (_rebuild_knn, (type(self), self.get_params(), self.to_bytes("ot"),
-                               self._scores))
+                               self._scores, tuple(self._history)))
 
 
 def _cell_updates(kinds: NDArray[np.uint8], point_cell: NDArray[np.int64],
@@ -487,266 +511,13 @@ def _cell_updates(kinds: NDArray[np.uint8], point_cell: NDArray[np.int64],
     return updates
 
 
-def _rebuild_knn(cls, params: dict, data: bytes, scores: tuple) -> KNNMap:
+def _rebuild_knn(cls, params: dict, data: bytes, scores: tuple,
+                 history: tuple = ()) -> KNNMap:
     tree = cls.from_bytes(data, **{k: v for k, v in params.items() if k != "resolution"})
     tree._scores = tuple(scores)
+    tree._history = [np.array(c, dtype=np.float64).reshape(-1, 3) for c in history]
     return tree
 
 
-class ScanReplay:
-    """What every map of a data set shares, for replaying many parameter values.
-
-    The cells each scan updates and their classes (holding near points,
-    crossed by rays to near points, crossed by cut rays only), which point
-    lies in which cell, the k-NN scores of the points and their running
-    Welford statistics do not depend on the probabilities: they are computed
-    once here (without the culling region, whose cells depend on the map), and
-    :meth:`knn_log_odds` / :meth:`octomap_log_odds` replay each scan as one
-    vectorised, clamped float32 update per cell, in scan order, for a batch of
-    parameter combinations. The result equals, cell for cell and bit for bit,
-    the map that :class:`KNNMap` (or :class:`~occgp.OccupancyOctree` with
-    ``max_range=sensor_range``, liboctomap's ``insertPointCloud``) builds from
-    the same scans.
-
-    Parameters
-    ----------
-    scans : iterable of (points, origin)
-        The data set, in insertion order.
-    resolution : float, default=0.1
-    sensor_range : float, default=4.0
-        The range s_c (OctoMap's ``max_range``), metres.
-    ks : sequence of int, default=(1,)
-        The values of k to score points for.
-    cdf : {"normal", "truncated"}, default="normal"
-    stats : {"online", "dataset"}, default="online"
-        μ and σ of the scores: Welford's running statistics, as
-        :class:`KNNMap` keeps them, or the whole data set's, fixed for the run
-        (the final Welford statistics over every finite score of every scan,
-        :meth:`score_stats`), as ``KNNMap(score_stats=replay.score_stats(k))``
-        uses them.
-    n_jobs : int or None, default=None
-        Threads for the k-NN queries and the rays' traversal (the replay is the
-        same for every `n_jobs`).
-
-    Attributes
-    ----------
-    keys : ndarray of uint64, shape (n_cells,)
-        Every cell the scans update (packed keys, x in the low 16 bits), sorted.
-    centers : ndarray of shape (n_cells, 3)
-        Their centres, metres.
-    n_scans : int
-    n_points : int
-        Points in the scans; ``n_near`` of them within range.
-    """
-
-    def __init__(self, scans: Iterable[Sequence[Any]], resolution: float = 0.1, *,
-                 sensor_range: float = 4.0, ks: Sequence[int] = (1,), cdf: str = "normal",
-                 stats: str = "online", n_jobs: int | None = None) -> None:
-        k_values = (ks,) if isinstance(ks, (int, np.integer)) else ks
-        self.ks = tuple(check_int(k, "ks", low=1, high=MAX_K) for k in k_values)
-        if not self.ks:
-            raise ValueError("ks must hold at least one k")
-        self.resolution = check_resolution(resolution)
-        self.sensor_range = check_real(sensor_range, "sensor_range", low=0.0,
-                                       high=_MAX_RANGE, high_open=False)
-        self.cdf = check_choice(cdf, "cdf", CDFS)
-        self.stats = check_choice(stats, "stats", STATS)
-        workers = n_threads(check_n_jobs(n_jobs))
-        probe = KNNMap(self.resolution, sensor_range=self.sensor_range)
-        local = []
-        self.n_points = self.n_near = 0
-        running = [(0, 0.0, 0.0)] * len(self.ks)
-        for i, scan in enumerate(scans):
-            try:
-                points, origin = scan
-            except (TypeError, ValueError):
-                raise TypeError(f"scans[{i}] must be a (points, origin) pair") from None
-            got = probe._validated_scan(points, origin, self.sensor_range, "scan",
-                                        check_ends=False)
-            if got is None:
-                continue
-            pts, org, rng, _ = got
-            out = probe._knn_cells(pts, org, rng, False, 20, probe._max_scan_cells(),
-                                   workers)
-            if isinstance(out, Status):
-                try:
-                    probe._record_insert(out, pts, org, rng, "superray", 20)
-                except ValueError as exc:
-                    raise ValueError(f"scans[{i}]: {exc}") from None
-                raise AssertionError("unreachable")
-            near, keys, kinds, point_cell, _ = out
-            s = mean_knn_distances(near.astype(np.float64), self.ks, workers)
-            per_k = []
-            for j in range(len(self.ks)):
-                running[j] = _welford(np.ascontiguousarray(s[:, j]), *running[j])
-                per_k.append(running[j])
-            local.append((keys, kinds, point_cell, s, per_k))
-            self.n_points += len(pts)
-            self.n_near += len(s)
-        self._final_stats = tuple(running)
-        if self.stats == "dataset":
-            local = [(keys, kinds, point_cell, s, list(self._final_stats))
-                     for keys, kinds, point_cell, s, _ in local]
-        self.n_scans = len(local)
-        all_keys = np.concatenate([x[0] for x in local]) if local else np.empty(0, np.uint64)
-        self.keys = np.unique(all_keys)
-        self._scans = [(np.searchsorted(self.keys, keys).astype(np.int64), kinds, point_cell,
-                        s, per_k) for keys, kinds, point_cell, s, per_k in local]
-        self.centers = probe.key_to_coord(unpack_keys(self.keys))
-
-    @property
-    def num_cells(self) -> int:
-        """Number of cells the scans update."""
-        return len(self.keys)
-
-    def score_stats(self, k: int) -> tuple[float, float]:
-        """The data set's mean and standard deviation of the scores for `k`.
-
-        Welford's statistics over every finite score of every scan (the values
-        :attr:`KNNMap.score_mean_` and :attr:`KNNMap.score_std_` reach after
-        the last scan); (0.0, 0.0) when there is none.
-
-        Parameters
-        ----------
-        k : int
-            One of :attr:`ks`.
-
-        Returns
-        -------
-        mean, std : float
-
-        Raises
-        ------
-        ValueError
-            If `k` was not scored.
-        """
-        if k not in self.ks:
-            raise ValueError(f"k={k!r} was not scored; this ScanReplay holds ks={self.ks}")
-        count, mean, m2 = self._final_stats[self.ks.index(k)]
-        return (mean, math.sqrt(m2 / count) if count > 0 else 0.0)
-
-    @property
-    def centres(self) -> NDArray[np.float64]:
-        """Deprecated name of :attr:`centers`."""
-        warnings.warn("ScanReplay.centres is deprecated; use centers", DeprecationWarning,
-                      stacklevel=2)
-        return self.centers
-
-    @property
-    def n_cells(self) -> int:
-        """Deprecated name of :attr:`num_cells`."""
-        warnings.warn("ScanReplay.n_cells is deprecated; use num_cells", DeprecationWarning,
-                      stacklevel=2)
-        return self.num_cells
-
-    def knn_log_odds(self, params: Sequence[dict[str, Any]]) -> NDArray[np.float32]:
-        """Final log-odds of every cell of the KNNMap each parameter dict builds.
-
-        Parameters
-        ----------
-        params : sequence of dict
-            One dict per combination, holding ``k`` (one of :attr:`ks`),
-            ``p_u``, ``p_l``, ``p_m``, ``p_m_out``, ``p_min`` and ``p_max``
-            (checked as :func:`check_knn_params` checks them, with ``p_t`` and
-            ``sensor_range`` left out: the threshold does not change log-odds).
-
-        Returns
-        -------
-        log_odds : ndarray of float32, shape (len(params), n_cells)
-            Rows: the combinations; columns: the cells of :attr:`keys`. Equal,
-            bit for bit, to the maps :class:`KNNMap` builds from the scans.
-
-        Raises
-        ------
-        TypeError, ValueError
-            If a parameter is of the wrong type (TypeError), or a dict lacks
-            one or one is out of range (ValueError); the message names the
-            dict's index (``params[i]``).
-        """
-        checked = [self._check_knn(p, i) for i, p in enumerate(params)]
-        kidx = np.array([self.ks.index(p["k"]) for p in checked])
-        l_in = np.array([_log_odds(p["p_m"]) for p in checked], dtype=np.float32)
-        l_out = np.array([_log_odds(p["p_m_out"]) for p in checked], dtype=np.float32)
-        triples = sorted({(int(kidx[b]), p["p_u"], p["p_l"]) for b, p in enumerate(checked)})
-        which = {t: i for i, t in enumerate(triples)}
-        rows = np.array([which[(int(kidx[b]), p["p_u"], p["p_l"])]
-                         for b, p in enumerate(checked)])
-
-        def updates(scan):
-            _, kinds, point_cell, s, per_k = scan
-            free = np.where(kinds[None, :] == 1, l_in[:, None], l_out[:, None])
-            held = np.flatnonzero(kinds == 0)
-            sums = np.empty((len(triples), len(held)), dtype=np.float32)
-            for i, (j, p_u, p_l) in enumerate(triples):
-                values = point_log_odds(s[:, j], *per_k[j], p_u, p_l, self.cdf)
-                sums[i] = np.bincount(point_cell, values, minlength=len(kinds))[held]
-            free[:, held] = sums[rows]
-            return free
-
-        return self._replay(checked, updates)
-
-    def octomap_log_odds(self, params: Sequence[dict[str, Any]]) -> NDArray[np.float32]:
-        """Like :meth:`knn_log_odds`, for OctoMap.
-
-        liboctomap's ``insertPointCloud`` with ``max_range=sensor_range``: one
-        update per cell and scan (a hit wins), clamped per scan.
-
-        Parameters
-        ----------
-        params : sequence of dict
-            One dict per combination, holding ``prob_hit``, ``prob_miss``,
-            ``clamping_min`` and ``clamping_max`` (checked as
-            :func:`check_octomap_params` checks them).
-
-        Returns
-        -------
-        log_odds : ndarray of float32, shape (len(params), n_cells)
-            Rows: the combinations; columns: the cells of :attr:`keys`.
-
-        Raises
-        ------
-        TypeError, ValueError
-            As :meth:`knn_log_odds`.
-        """
-        checked = []
-        for i, p in enumerate(params):
-            try:
-                q = check_octomap_params(p)
-            except KeyError as exc:
-                raise ValueError(f"params[{i}] lacks the OctoMap parameter {exc}") from None
-            except (TypeError, ValueError) as exc:
-                raise type(exc)(f"params[{i}]: {exc}") from None
-            checked.append({"p_min": q["clamping_min"], "p_max": q["clamping_max"],
-                            "l_hit": _log_odds(q["prob_hit"]),
-                            "l_miss": _log_odds(q["prob_miss"])})
-        l_hit = np.array([p["l_hit"] for p in checked], dtype=np.float32)
-        l_miss = np.array([p["l_miss"] for p in checked], dtype=np.float32)
-
-        def updates(scan):
-            kinds = scan[1]
-            return np.where(kinds[None, :] == 0, l_hit[:, None], l_miss[:, None])
-
-        return self._replay(checked, updates)
-
-    def _check_knn(self, p: dict[str, Any], i: int) -> dict[str, Any]:
-        try:
-            q = check_knn_params({"p_t": p.get("p_min", 0.5), "sensor_range": self.sensor_range,
-                                  **p})
-        except KeyError as exc:
-            raise ValueError(f"params[{i}] lacks the k-NN parameter {exc}") from None
-        except (TypeError, ValueError) as exc:
-            raise type(exc)(f"params[{i}]: {exc}") from None
-        if q["k"] not in self.ks:
-            raise ValueError(f"params[{i}]: k={q['k']} was not scored; this ScanReplay "
-                             f"holds ks={self.ks}")
-        return q
-
-    def _replay(self, checked, updates) -> NDArray[np.float32]:
-        lo = np.array([_log_odds(p["p_min"]) for p in checked], dtype=np.float32)[:, None]
-        hi = np.array([_log_odds(p["p_max"]) for p in checked], dtype=np.float32)[:, None]
-        values = np.zeros((len(checked), self.num_cells), dtype=np.float32)
-        for scan in self._scans:
-            cells = scan[0]
-            u = updates(scan).astype(np.float32, copy=False)
-            values[:, cells] = np.minimum(np.maximum(values[:, cells] + u, lo), hi)
-        return values
+# the replay builds KNNMap probes: imported once KNNMap exists, public here as ever
+from ._knn_replay import ScanReplay, check_octomap_params  # noqa: E402

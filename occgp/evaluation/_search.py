@@ -21,7 +21,9 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from .._validation import check_choice, check_int, check_n_jobs, check_real, n_threads
-from ..knn import CDFS, STATS, KNNMap, ScanReplay, check_knn_params, check_octomap_params
+from ..knn import (
+    CDFS, MAX_HISTORY, STATS, KNNMap, ScanReplay, check_knn_params, check_octomap_params,
+)
 from . import _matching
 from ._ground_truth import cell_labels
 from ._tpr_fdr import tpr_fdr_area, tpr_fdr_auc_unchecked
@@ -258,7 +260,8 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
                 *, method: str = "knn", resolution: float = 0.1, sensor_range: float = 4.0,
                 thresholds: Sequence[float] | None = THRESHOLDS, mask: Any = None,
                 scoring: str = "exact", cdf: str | None = None, stats: str | None = None,
-                batch_size: int = 32, n_jobs: int | None = None) -> GridSearchResult:
+                history: int | None = None, batch_size: int = 32,
+                n_jobs: int | None = None) -> GridSearchResult:
     """Score every combination of a parameter grid by its map's TPR–FDR AUC.
 
     Miao et al.'s search: each combination's map (:class:`occgp.KNNMap` for
@@ -322,6 +325,10 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
         The score statistics (:class:`occgp.knn.ScanReplay`): Welford's
         running ones or the whole data set's; None: the replay's
         (``"online"`` when the search builds it). As `cdf`.
+    history : int or None, default=None
+        The previous scans each point is scored against
+        (:class:`occgp.KNNMap`'s ``history``; 0: its own scan, the paper's
+        score); None: the replay's (0 when the search builds it). As `cdf`.
     batch_size : int, default=32
         Combinations replayed at once (memory: ``batch_size * n_cells * 8``
         bytes).
@@ -340,12 +347,12 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
         For an unknown parameter, an empty grid or one with no combination
         left by the constraints, labels of the wrong shape or without an
         occupied cell, a `mask` of the wrong shape or without an occupied
-        cell, a bad `method`, `thresholds`, `scoring`, `cdf`, `stats` or
-        `batch_size`, or a `cdf` or `stats` that differs from the given
-        ScanReplay's.
+        cell, a bad `method`, `thresholds`, `scoring`, `cdf`, `stats`,
+        `history` or `batch_size`, or a `cdf`, `stats` or `history` that
+        differs from the given ScanReplay's.
     TypeError
-        If `truth` or `mask` is not of booleans, or `thresholds` not a
-        sequence.
+        If `truth` or `mask` is not of booleans, `thresholds` not a
+        sequence, or `history` not an int.
 
     Examples
     --------
@@ -363,6 +370,8 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
         cdf = check_choice(cdf, "cdf", CDFS)
     if stats is not None:
         stats = check_choice(stats, "stats", STATS)
+    if history is not None:
+        history = check_int(history, "history", low=0, high=MAX_HISTORY)
     batch_size = check_int(batch_size, "batch_size", low=1, high=100_000)
     n_jobs = check_n_jobs(n_jobs)
     if thresholds is not None:
@@ -396,14 +405,15 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
                          f"({len(combos)} tried)")
     if isinstance(scans, ScanReplay):
         replay = scans
-        for name, value in (("cdf", cdf), ("stats", stats)):
+        for name, value in (("cdf", cdf), ("stats", stats), ("history", history)):
             if value is not None and value != getattr(replay, name):
                 raise ValueError(f"{name}={value!r} differs from the ScanReplay's "
                                  f"({getattr(replay, name)!r}): make the replay with it")
     else:
         ks = sorted({c["k"] for c in kept}) if method == "knn" else [1]
         replay = ScanReplay(scans, resolution, sensor_range=sensor_range, ks=ks,
-                            cdf=cdf or "normal", stats=stats or "online", n_jobs=n_jobs)
+                            cdf=cdf or "normal", stats=stats or "online",
+                            history=history or 0, n_jobs=n_jobs)
     if hasattr(truth, "occupancy"):
         labels = cell_labels(truth, replay.centers, replay.resolution)
     else:
