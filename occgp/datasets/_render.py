@@ -336,8 +336,8 @@ def render_stereo(scene: Scene, position: ArrayLike, look_at: ArrayLike,
     >>> pair = render_stereo(scene, [4.0, 0.0, 1.5], scene.target_center, rig, truth=True)
     >>> pair.left.shape, pair.left.dtype, pair.solid.dtype
     ((36, 64), dtype('uint8'), dtype('int16'))
-    >>> bool(np.isinf(pair.depth[0, 0])), scene.labels[pair.solid[18, 32]]   # sky; a box
-    (True, 'box_1_lower')
+    >>> bool(np.isinf(pair.depth[0, 40])), scene.labels[pair.solid[24, 30]]   # sky; a box
+    (True, 'box_2_lower')
     """
     _check_scene(scene)
     if not isinstance(rig, StereoRig):

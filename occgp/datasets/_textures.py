@@ -15,7 +15,7 @@ sample per pixel does not alias much.
 * ``"voronoi"``: cells of a jittered grid of sites (about 6 cm apart), each
   a random grey, with thin dark borders: the textured boxes.
 * ``"cardboard"``: a uniform light brown-grey with a very faint
-  low-frequency variation (about one grey level) and a faint tape strip:
+  low-frequency variation (under one grey level) and a faint tape strip:
   plain boxes, where a block matcher has almost nothing to match.
 * ``"asphalt"``: fine grain (value noise, several octaves), large stains and
   white parking-lot lines.
@@ -209,8 +209,8 @@ def _voronoi(uv, footprint, seed, size):
 
 def _cardboard(uv, footprint, seed, size):
     base = 0.56 + 0.02 * (lattice_hash(np.int64(0), np.int64(0), seed, 7) - 0.5)
-    # about +-1 grey level under full light: 0.004 * 255
-    faint = _fbm(uv[:, 0], uv[:, 1], footprint, ((0.35, 0.003), (0.15, 0.0015)), seed, 10)
+    # under a grey level of variation in full light (0.002 * 255 = 0.5)
+    faint = _fbm(uv[:, 0], uv[:, 1], footprint, ((0.35, 0.0015), (0.15, 0.0008)), seed, 10)
     tape = _band(uv[:, 0], size[0] / 2 - 0.024, size[0] / 2 + 0.024, footprint)
     return base + faint - 0.012 * tape
 
