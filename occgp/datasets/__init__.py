@@ -17,6 +17,11 @@ about 32 observations per pose, 20,000 at 619 poses.
 :class:`StereoCamera` (depth noise growing with depth squared, speckle,
 missing blobs on weak texture, :func:`voxel_filter` at 0.1 m);
 :func:`stereo_datasets` lists the 20 data sets at several noise levels.
+:func:`render_stereo` renders the rectified grey image pair a :class:`StereoRig`
+sees of any scene (exact ray casting, procedural textures from
+:data:`TEXTURES` chosen by :func:`scene_materials`, sun and cast shadows,
+sensor blur, noise and gain mismatch), for a real stereo matcher
+(:class:`StereoPair`).
 
 Readers
 -------
@@ -48,8 +53,24 @@ from ._readers import (
     read_xyz,
     write_scan_graph,
 )
+from ._render import TEXTURES, StereoPair, StereoRig, render_stereo, scene_materials
 from ._rosbag import RosbagScans, read_rosbag
 from ._scan import Scan
+from ._sgbm import (
+    disparity_to_points,
+    match_stereo,
+    naive_fdr,
+    point_errors,
+    PointErrors,
+    rank_sgbm_sets,
+    render_orbit,
+    rendered_stereo_datasets,
+    RenderedStereoDataset,
+    SGBM_DEFAULT,
+    SGBM_GRID,
+    sgbm_parameter_sets,
+    stereo_scans,
+)
 from ._scene2d import LaserScan2D, Scene2D, room_2d
 from ._scenes import Scene, make_scene, structured_room, unstructured_room
 from ._simulate import LidarSensor, free_path, simulate_scans
@@ -97,9 +118,27 @@ __all__ = [
     "StereoDataset",
     "stereo_datasets",
     "voxel_filter",
+    "StereoRig",
+    "StereoPair",
+    "render_stereo",
+    "scene_materials",
+    "TEXTURES",
     "read_rosbag",
     "RosbagScans",
     "read_kitti_poses",
     "read_tum_trajectory",
     "apply_poses",
+    "SGBM_GRID",
+    "SGBM_DEFAULT",
+    "sgbm_parameter_sets",
+    "match_stereo",
+    "disparity_to_points",
+    "render_orbit",
+    "stereo_scans",
+    "naive_fdr",
+    "rank_sgbm_sets",
+    "PointErrors",
+    "point_errors",
+    "RenderedStereoDataset",
+    "rendered_stereo_datasets",
 ]

@@ -275,7 +275,9 @@ def render_orbit(scene, rig: StereoRig | None = None, *, n_frames: int = 40, orb
 
     The orbit of :func:`~occgp.datasets.simulate_stereo` (`orbits` circles of
     `n_frames` keyframes at `radius` and `height` around the layout's centre,
-    looking at it); keyframe ``i`` renders with seed ``[seed, i]``.
+    looking at it); keyframe ``i`` renders with the ``i``-th word of
+    ``numpy.random.SeedSequence(seed).generate_state(n_frames * orbits)`` as
+    its seed.
 
     Parameters
     ----------
@@ -318,15 +320,15 @@ def render_orbit(scene, rig: StereoRig | None = None, *, n_frames: int = 40, orb
     truth = check_bool(truth, "truth")
     n_jobs = check_n_jobs(n_jobs)
     positions, center = orbit_positions(scene, n_frames, orbits, radius, height)
-    tasks = [delayed(_render_frame)(scene, rig, p, center, [seed, i], truth)
-             for i, p in enumerate(positions)]
+    seeds = np.random.SeedSequence(seed).generate_state(len(positions))
+    tasks = [delayed(_render_frame)(scene, rig, p, center, int(s), truth)
+             for p, s in zip(positions, seeds)]
     return Parallel(n_jobs=n_jobs)(tasks)
 
 
 def _render_frame(scene, rig, position, look_at, seed, truth):
     with threadpool_limits(1):
-        return render_stereo(scene, rig, position, look_at, seed=np.random.default_rng(seed),
-                             truth=truth)
+        return render_stereo(scene, position, look_at, rig, seed=seed, truth=truth)
 
 
 def _check_pose_noise(pose_noise):
