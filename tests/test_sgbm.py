@@ -92,7 +92,9 @@ def test_disparity_to_points_inverts_the_projection():
     np.testing.assert_allclose(v, vv, atol=1e-9)
     np.testing.assert_allclose(z, rig.focal_length * rig.baseline / d[keep], rtol=1e-12)
     near = disparity_to_points(d, rig, position, rotation, max_depth=1.0)
-    assert len(near) == np.sum(keep & (rig.focal_length * rig.baseline / d <= 1.0))
+    with np.errstate(divide="ignore"):
+        depth = rig.focal_length * rig.baseline / d
+    assert len(near) == np.sum(keep & (depth <= 1.0))
     with pytest.raises(ValueError, match="disparity"):
         disparity_to_points(d[:, :10], rig, position, rotation)
     with pytest.raises(ValueError, match="rotation"):
@@ -120,10 +122,14 @@ def test_stereo_scans_match_the_scene(scene, pairs):
         keys = np.floor(s.points / 0.1)
         assert len(np.unique(keys, axis=0)) == len(keys)
     errors = point_errors(scene, scans)
-    # textured boxes, asphalt and facades: most points lie near a surface
-    assert np.mean(errors.distance < 0.3) > 0.7
-    # the clouds are not the true surfaces: a matcher makes errors
-    assert np.mean(errors.distance > 0.1) > 0.005
+    ranges = np.concatenate([np.linalg.norm(s.points - s.origin, axis=1) for s in scans])
+    near = ranges < 4.0
+    # textured boxes, asphalt and facades: most points within the k-NN range lie near a
+    # surface (a mirrored or shifted triangulation puts them far off)
+    assert near.sum() > 1000
+    assert np.mean(errors.distance[near] < 0.3) > 0.8
+    # the clouds are not the true surfaces: the matcher makes errors
+    assert np.mean(errors.distance > 0.1) > 0.01
     again = stereo_scans(pairs, SMALL, SGBM_DEFAULT, n_jobs=2)
     for a, b in zip(scans, again):
         np.testing.assert_array_equal(a.points, b.points)
