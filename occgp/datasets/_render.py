@@ -347,6 +347,9 @@ def render_stereo(scene: Scene, position: ArrayLike, look_at: ArrayLike,
     seed = check_int(seed, "seed", low=0)
     truth = check_bool(truth, "truth")
     names = _resolve_materials(scene, materials)
+    if len(scene.solids) > np.iinfo(np.int16).max:
+        raise ValueError(f"scene must have at most {np.iinfo(np.int16).max} solids (the "
+                         f"solid indices are int16), got {len(scene.solids)}")
     rotation = camera_rotation(position, look_at)
     right_position = position + rig.baseline * rotation[:, 0]
     inside = scene.occupancy(np.array([position, right_position]))
