@@ -9,8 +9,10 @@ model's best TPR–FDR AUC over OctoMap's best against OctoMap's AUC (their
 Fig. 5). This example draws that figure for a sample of occgp's simulated
 stereo data sets: two layouts at each of the three noise levels, with a
 smaller camera than the bench's so that it runs in seconds.
-``bench/bench_knn.py`` computes the full figure: all 60 data sets at the
-default camera, with the table behind it.
+``bench/bench_knn_simulated.py`` computes the full figure: all 60 data sets at
+the default camera, with the table behind it; ``bench/bench_knn.py`` computes
+it on rendered stereo pairs matched by OpenCV's StereoSGBM
+(:ref:`sphx_glr_auto_examples_plot_rendered_stereo.py`).
 """
 
 # Author: the occgp developers

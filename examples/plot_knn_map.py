@@ -145,7 +145,8 @@ plt.show()
 # best curves lie close together: dense Gaussian depth noise gives every
 # point of the thick, noisy shell near neighbours after the voxel filter, so
 # only the isolated points (speckle, the shell's fringe) score as noise.
-# ``bench/bench_knn.py`` compares the two methods on all 60 data sets.
+# ``bench/bench_knn_simulated.py`` compares the two methods on all 60 data sets,
+# ``bench/bench_knn.py`` on clouds of rendered stereo pairs matched by StereoSGBM.
 fig, ax = plt.subplots(figsize=(5, 4.5), layout="constrained")
 for name, res, row in (("OctoMap", octo, best_octo), ("k-NN", knn, best_knn)):
     x = np.r_[0.0, row["fdr"], 1.0]
