@@ -80,6 +80,11 @@ RANKS = ("1st", "middle", "last")
 QUICK_SETS = ("I_plain_buildings", "I_textured_open", "T_plain_open", "T_textured_buildings")
 
 
+def signed(x, digits=4):
+    """``+0.0012``; blank for NaN (a search not run)."""
+    return "" if math.isnan(x) else f"{x:+.{digits}f}"
+
+
 def log(msg):
     print(msg, file=sys.stderr, flush=True)
 
@@ -216,8 +221,8 @@ def per_dataset_table(results):
             row = [r["name"], r["half"], rank, f"{e['naive_fdr']:.3f}", f"{e['points']}"]
             for protocol in ("strict", "authors"):
                 o = best(e, "octo", protocol)
-                row += [f"{o:.4f}", f"{best(e, 'knn', protocol) - o:+.4f}",
-                        f"{best(e, 'hist', protocol) - o:+.4f}"]
+                row += [f"{o:.4f}", signed(best(e, "knn", protocol) - o),
+                        signed(best(e, "hist", protocol) - o)]
             rows.append(row)
     table(rows, ["data set", "half", "rank", "naive FDR", "points", "OctoMap strict",
                  "k-NN gain", f"k-NN h={HISTORY} gain", "OctoMap authors'", "k-NN gain",
@@ -235,8 +240,8 @@ def fig5_table(results):
                 o = best(e, "octo", protocol)
                 g = best(e, "knn", protocol) - o
                 h = best(e, "hist", protocol) - o
-                rows.append((o, [r["name"], rank, f"{o:.4f}", f"{g:+.4f}",
-                                 f"{100 * g / o:+.1f}", f"{h:+.4f}", f"{100 * h / o:+.1f}"]))
+                rows.append((o, [r["name"], rank, f"{o:.4f}", signed(g),
+                                 signed(100 * g / o, 1), signed(h), signed(100 * h / o, 1)]))
         rows.sort(key=lambda x: x[0])
         print(f"-- {protocol} protocol --")
         table([row for _, row in rows], ["data set", "rank", "OctoMap best", "k-NN gain",
@@ -398,7 +403,8 @@ def main():
     print(f"{len(results)} data sets x {len(RANKS)} StereoSGBM ranks; rig {rig.width} x "
           f"{rig.height}, f = {rig.focal_length} px, baseline {rig.baseline} m; "
           f"{len(results[0]['knn_params'])} k-NN and "
-          f"{len(results[0]['octo_params'])} OctoMap combinations\n")
+          f"{len(results[0]['octo_params'])} OctoMap parameter combinations, each at the 9 "
+          f"thresholds\n")
     error_table(results)
     per_dataset_table(results)
     fig5_table(results)
