@@ -113,7 +113,7 @@ def resample_table(table, fov, rows):
     return tuple(float(x) for x in out)
 
 
-def scan_rings(azimuth, jump=180.0):
+def scan_rings(azimuth, jump=90.0):
     """Ring index of points in scan order: a new ring starts where the azimuth jumps by more
     than `jump` degrees (the sweep of one beam ends and the next beam's begins)."""
     d = np.diff(np.asarray(azimuth, dtype=np.float64))
