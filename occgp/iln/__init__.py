@@ -4,13 +4,17 @@ Range images and their training data need numpy alone and are imported here
 eagerly: :class:`LidarModel` (a spinning LiDAR's pixel grid, with the CARLA,
 HDL-64E and HDL-32E presets), :func:`points_to_range_image`,
 :func:`range_image_to_points`, :func:`range_image_from_points` (a real scan, by
-elevation or by its ring index), :func:`simulate_range_image` (exact ray casting
+elevation or by its ring index), :func:`read_lidar_frame`,
+:func:`frame_range_image` and :func:`scan_rings` (real frames, one row per
+beam, on a measured per-beam elevation table), :func:`simulate_range_image` (exact ray casting
 in the procedural outdoor scenes of :func:`occgp.datasets.outdoor_scene`),
 :func:`make_dataset` and :func:`load_shards` (the ``occgp iln make-dataset``
 shards), and the evaluation: :func:`range_mae` and :func:`voxel_scores`
 (dissertation §4.4), :func:`evaluate` / :func:`format_table` (Table 4.1),
 :func:`upsample` (sparse scan in, dense sensor-frame points out) and
-:func:`mapping_experiment` (§4.4.5: maps from up-sampled scans). These run
+:func:`mapping_experiment` (§4.4.5: maps from up-sampled scans),
+:func:`real_frame_scores` / :func:`format_real_table` (dropped beams of a real
+frame predicted at their true elevations) and :func:`kept_beams_model`. These run
 without torch and ask for it only when a learned model is used.
 
 The models and their training need PyTorch (the ``iln`` extra: ``pip install
@@ -30,7 +34,9 @@ from ._range import LidarModel, points_to_range_image, range_image_from_points, 
 from .data import load_shards, make_dataset, simulate_range_image
 from .evaluate import evaluate, format_table
 from .experiment import format_mapping_table, mapping_experiment
+from .frames import frame_range_image, read_lidar_frame, scan_rings
 from .metrics import range_mae, voxel_scores
+from .real import format_real_table, kept_beams_model, real_frame_scores
 from .upsample import upsample, upsample_range_image
 
 #: The torch parts of the package: public name -> submodule.
@@ -45,7 +51,9 @@ _TORCH_NAMES = {
 __all__ = ["LidarModel", "points_to_range_image", "range_image_to_points",
            "range_image_from_points", "simulate_range_image", "make_dataset", "load_shards",
            "upsample", "upsample_range_image", "evaluate", "format_table", "mapping_experiment",
-           "format_mapping_table", "range_mae", "voxel_scores", *_TORCH_NAMES]
+           "format_mapping_table", "range_mae", "voxel_scores", "read_lidar_frame",
+           "frame_range_image", "scan_rings", "real_frame_scores", "format_real_table",
+           "kept_beams_model", *_TORCH_NAMES]
 
 
 def __getattr__(name):

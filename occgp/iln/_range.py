@@ -12,6 +12,10 @@ metres; **0.0 means no return** (sky, beyond ``max_range``, outside a
 cropped field of view). Points are in the sensor frame (origin at the
 sensor, +z up, +x forward).
 
+With ``beam_elevations`` (a per-beam table, see :mod:`occgp.iln._beam_tables`), row
+``i`` looks at the table's entry ``i`` instead, and fractional rows map to
+elevations linearly between neighbouring entries.
+
 Continuous pixel coordinates ``(v, u)`` count in pixel units with pixel
 centres at integer + 0.5: pixel ``(i, j)`` covers ``i <= v < i + 1`` and
 ``j <= u < j + 1``.
@@ -26,8 +30,10 @@ import numbers
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._docfill import fill_doc, fill_text
+from .._docfill import fill_doc
 from .._validation import as_numeric, as_points, check_choice
+from . import _beam_tables as _beams
+from ._sensor_docs import SIZE_SECTIONS as _SIZE_SECTIONS, preset as _preset
 
 __all__ = [
     "LidarModel",
@@ -63,48 +69,6 @@ def _side(value, name):
     return value
 
 
-#: Docstring sections of the methods that take an image size (see :func:`occgp._docfill.fill_doc`).
-_SIZE_SECTIONS = {
-    "size_params": """rows : int
-    Beams (image rows), 1 to 65536.
-cols : int
-    Image columns, 1 to 65536; ``rows * cols`` at most
-    ``MAX_PIXELS`` (2**24).""",
-    "size_errors": """TypeError
-    If `rows` or `cols` is not an int.
-ValueError
-    If `rows` or `cols` is outside [1, 65536], or ``rows * cols``
-    exceeds ``MAX_PIXELS`` (2**24).""",
-}
-
-_PRESET_DOC = """{summary}
-
-        Parameters
-        ----------
-        rows : int, default={rows}
-            Beams (image rows), 1 to 65536.
-        cols : int, default=1024
-            Firings per revolution (image columns), 1 to 65536; ``rows * cols``
-            at most ``MAX_PIXELS`` (2**24).
-
-        Returns
-        -------
-        LidarModel
-
-        Raises
-        ------
-        {{size_errors}}
-        """
-
-
-def _preset(summary: str, rows: int):
-    """Give a preset constructor of :class:`LidarModel` its docstring."""
-    def decorate(fn):
-        fn.__doc__ = fill_text(_PRESET_DOC.format(summary=summary, rows=rows), _SIZE_SECTIONS)
-        return fn
-    return decorate
-
-
 @dataclasses.dataclass(frozen=True)
 class LidarModel:
     """A spinning LiDAR's beam layout: the geometry of its range images.
@@ -125,10 +89,17 @@ class LidarModel:
         centred on +x.
     max_range : float, default=80.0
         Farthest return, metres, in (0, 1e5].
+    beam_elevations : sequence of float, optional
+        Per-beam elevation table, degrees, one per row, top beam first,
+        strictly decreasing and strictly inside `vertical_fov`: row ``i``'s
+        centre looks at ``beam_elevations[i]``, and fractional rows map to
+        elevations linearly between entries (and between the end entries and
+        the field of view's edges). Stored as a tuple of floats. Default:
+        uniform rows.
 
     Attributes
     ----------
-    rows, cols, vertical_fov, horizontal_fov, max_range : as given
+    rows, cols, vertical_fov, horizontal_fov, max_range, beam_elevations : as given
 
     Raises
     ------
@@ -153,6 +124,7 @@ class LidarModel:
     vertical_fov: tuple = (-15.0, 15.0)
     horizontal_fov: float = 360.0
     max_range: float = 80.0
+    beam_elevations: tuple | None = None
 
     def __post_init__(self):
         rows = _side(self.rows, "rows")
@@ -175,8 +147,15 @@ class LidarModel:
         if not 0.0 < max_range <= MAX_RANGE_LIMIT:
             raise ValueError(f"max_range must lie in (0, {MAX_RANGE_LIMIT:g}] metres, "
                              f"got {max_range!r}")
+        table = self.beam_elevations
+        if table is not None:
+            table = _beams.check_table(table, rows)
+            if not (low < table[-1] and table[0] < high):
+                raise ValueError(f"beam_elevations must lie strictly inside vertical_fov "
+                                 f"({low!r}, {high!r}), got {table[-1]!r} to {table[0]!r}")
         for name, value in (("rows", rows), ("cols", cols), ("vertical_fov", (low, high)),
-                            ("horizontal_fov", hfov), ("max_range", max_range)):
+                            ("horizontal_fov", hfov), ("max_range", max_range),
+                            ("beam_elevations", table)):
             object.__setattr__(self, name, value)
 
     # ------------------------------------------------------------------ presets
@@ -186,18 +165,98 @@ class LidarModel:
         return cls(rows, cols, (-15.0, 15.0), 360.0, 80.0)
 
     @classmethod
-    @_preset("KITTI's Velodyne HDL-64E: -24.8 to 2.0 degrees, 360 degrees, 120 m.", 64)
-    def hdl64e(cls, rows: int = 64, cols: int = 1024) -> "LidarModel":
-        return cls(rows, cols, (-24.8, 2.0), 360.0, 120.0)
+    @_preset("KITTI's Velodyne HDL-64E: -24.8 to 2.0 degrees, 360 degrees, 120 m.\n\n"
+             "        With `table`, the real beams: upper block +2.0 to -8.33 degrees at 1/3\n"
+             "        degree, lower block -8.83 to -24.33 at 1/2 degree (field of view\n"
+             "        -24.58 to 2.17).", 64, table=True)
+    def hdl64e(cls, rows: int = 64, cols: int = 1024, *, table: bool = False) -> "LidarModel":
+        if not table:
+            return cls(rows, cols, (-24.8, 2.0), 360.0, 120.0)
+        return cls._table(_beams.HDL64E_TABLE, rows, cols, 120.0)
 
     @classmethod
-    @_preset("nuScenes' Velodyne HDL-32E: -30.67 to 10.67 degrees, 360 degrees, 100 m.", 32)
-    def hdl32e(cls, rows: int = 32, cols: int = 1024) -> "LidarModel":
-        return cls(rows, cols, (-30.67, 10.67), 360.0, 100.0)
+    @_preset("nuScenes' Velodyne HDL-32E: -30.67 to 10.67 degrees, 360 degrees, 100 m.\n\n"
+             "        With `table`, beam centres from +10.67 to -30.67 degrees, 4/3 degree\n"
+             "        apart (field of view -31.33 to 11.33).", 32, table=True)
+    def hdl32e(cls, rows: int = 32, cols: int = 1024, *, table: bool = False) -> "LidarModel":
+        if not table:
+            return cls(rows, cols, (-30.67, 10.67), 360.0, 100.0)
+        return cls._table(_beams.HDL32E_TABLE, rows, cols, 100.0)
+
+    @classmethod
+    @_preset("Velodyne VLP-16: 16 beams from +15 to -15 degrees, 2 degrees apart (field\n"
+             "        of view -16 to 16, uniform rows), 360 degrees, 100 m.", 16)
+    def vlp16(cls, rows: int = 16, cols: int = 1024) -> "LidarModel":
+        return cls(rows, cols, (-16.0, 16.0), 360.0, 100.0)
+
+    @classmethod
+    @_preset("Ouster OS1-64: the 64 beam elevations measured in a real frame (+17.02 to\n"
+             "        -16.44 degrees, 0.44 to 0.62 degree apart), 360 degrees, 120 m.", 64)
+    def os1_64(cls, rows: int = 64, cols: int = 1024) -> "LidarModel":
+        return cls._table(_beams.OS1_64_TABLE, rows, cols, 120.0)
+
+    @classmethod
+    def _table(cls, table, rows, cols, max_range):
+        model = cls(len(table), 1, _beams.table_fov(table), 360.0, max_range, table)
+        return model.with_size(rows, cols)
+
+    @classmethod
+    def from_points(cls, points: ArrayLike, rows: int, cols: int = 1024, *,
+                    ring: ArrayLike | None = None, horizontal_fov: float = 360.0,
+                    max_range: float = 120.0) -> "LidarModel":
+        """A model whose per-beam table is estimated from a real frame's points.
+
+        With `ring` (the beam or scan-order ring of each point), each ring's
+        median elevation is a beam, rings with the closest medians merged
+        until `rows` remain; without it, the points' elevations are clustered
+        into `rows` beams (1-D k-medians). The field of view extends the
+        table's ends by half their pitches.
+
+        Parameters
+        ----------
+        points : array-like of shape (n_points, 3)
+            Sensor-frame points, metres; points at the origin are ignored.
+        rows : int
+            Beams of the sensor, 2 to 65536.
+        cols : int, default=1024
+            Image columns.
+        ring : array-like of int, shape (n_points,), optional
+            Ring index of each point (any integers; at least `rows` distinct).
+        horizontal_fov : float, default=360.0
+            Degrees, in (0, 360].
+        max_range : float, default=120.0
+            Metres, in (0, 1e5].
+
+        Returns
+        -------
+        LidarModel
+            With ``beam_elevations`` set.
+
+        Raises
+        ------
+        ValueError
+            If `points` or `ring` has a wrong shape, or there are fewer
+            distinct rings (or elevations) than `rows`.
+        TypeError
+            If an argument has a wrong type.
+
+        Examples
+        --------
+        >>> pts = [[10.0, 0.0, z] for z in (1.0, 0.0, -1.0, -2.0)]
+        >>> [round(e, 2) for e in LidarModel.from_points(pts, rows=4).beam_elevations]
+        [5.71, 0.0, -5.71, -11.31]
+        """
+        _, elev, _ = _spherical(_check_points(points))
+        table = _beams.estimate_table(elev, _side(rows, "rows"), ring)
+        return cls(rows, cols, _beams.table_fov(table), horizontal_fov, max_range, table)
 
     @fill_doc(**_SIZE_SECTIONS)
     def with_size(self, rows: int, cols: int) -> "LidarModel":
         """The same fields of view and range at another image size.
+
+        A per-beam table is resampled: row ``k`` of the new model looks at
+        the elevation of fractional row ``(k + 0.5) * self.rows / rows`` of
+        this one (linear between the table's entries).
 
         Parameters
         ----------
@@ -212,7 +271,10 @@ class LidarModel:
         ------
         {size_errors}
         """
-        return dataclasses.replace(self, rows=rows, cols=cols)
+        if self.beam_elevations is None or _side(rows, "rows") == self.rows:
+            return dataclasses.replace(self, rows=rows, cols=cols)
+        table = _beams.resample_table(self.beam_elevations, self.vertical_fov, rows)
+        return dataclasses.replace(self, rows=rows, cols=cols, beam_elevations=table)
 
     @property
     def shape(self) -> tuple:
@@ -227,12 +289,15 @@ class LidarModel:
         -------
         str
             A JSON object with the keys ``horizontal_fov``, ``max_range`` and
-            ``vertical_fov`` (a list of two floats), sorted; read back by
+            ``vertical_fov`` (a list of two floats), and ``beam_elevations`` (a
+            list) for a model with a table, sorted; read back by
             :meth:`from_json`.
         """
-        return json.dumps({"vertical_fov": list(self.vertical_fov),
-                           "horizontal_fov": self.horizontal_fov, "max_range": self.max_range},
-                          sort_keys=True)
+        fields = {"vertical_fov": list(self.vertical_fov),
+                  "horizontal_fov": self.horizontal_fov, "max_range": self.max_range}
+        if self.beam_elevations is not None:
+            fields["beam_elevations"] = list(self.beam_elevations)
+        return json.dumps(fields, sort_keys=True)
 
     @classmethod
     @fill_doc(**_SIZE_SECTIONS)
@@ -243,7 +308,9 @@ class LidarModel:
         ----------
         text : str
             JSON of an object with exactly the keys ``vertical_fov`` (a list
-            of two numbers), ``horizontal_fov`` and ``max_range``, as
+            of two numbers), ``horizontal_fov`` and ``max_range``, and
+            optionally ``beam_elevations`` (a list, resampled as
+            :meth:`with_size` does when its length differs from `rows`), as
             :meth:`to_json` writes.
         {size_params}
 
@@ -268,12 +335,19 @@ class LidarModel:
         except ValueError as exc:
             raise ValueError(f"text is not valid JSON of a LidarModel: {exc}") from None
         keys = {"vertical_fov", "horizontal_fov", "max_range"}
-        if not isinstance(fields, dict) or set(fields) != keys:
+        if not isinstance(fields, dict) or set(fields) - {"beam_elevations"} != keys:
             got = sorted(fields) if isinstance(fields, dict) else type(fields).__name__
             raise ValueError(f"text must be a JSON object with the keys {sorted(keys)}, got {got}")
         fov = fields["vertical_fov"]
-        return cls(rows, cols, tuple(fov) if isinstance(fov, list) else fov,
-                   fields["horizontal_fov"], fields["max_range"])
+        fov = tuple(fov) if isinstance(fov, list) else fov
+        table = fields.get("beam_elevations")
+        if table is None:
+            return cls(rows, cols, fov, fields["horizontal_fov"], fields["max_range"])
+        if not isinstance(table, list):
+            raise TypeError(f"beam_elevations must be a JSON list, got {type(table).__name__}")
+        model = cls(len(table), cols, fov, fields["horizontal_fov"], fields["max_range"],
+                    tuple(table))
+        return model.with_size(rows, cols)
 
     # ------------------------------------------------------------------ angles
     @property
@@ -287,8 +361,11 @@ class LidarModel:
         Returns
         -------
         ndarray of float64, shape (rows,)
-            ``high - (i + 0.5) * (high - low) / rows`` for row ``i``.
+            ``high - (i + 0.5) * (high - low) / rows`` for row ``i``, or
+            ``beam_elevations``.
         """
+        if self.beam_elevations is not None:
+            return np.array(self.beam_elevations, dtype=np.float64)
         low, high = self.vertical_fov
         return high - (np.arange(self.rows) + 0.5) * (high - low) / self.rows
 
@@ -365,7 +442,10 @@ class LidarModel:
             raise ValueError(f"elevation and azimuth must broadcast together, got shapes "
                              f"{e.shape} and {a.shape}") from None
         low, high = self.vertical_fov
-        v = (high - e) * (self.rows / (high - low))
+        if self.beam_elevations is not None:
+            v = _beams.row_at(e, self.beam_elevations, self.vertical_fov)
+        else:
+            v = (high - e) * (self.rows / (high - low))
         h = self.horizontal_fov
         a = (a + 180.0) % 360.0 - 180.0
         u = (h / 2 - a) * (self.cols / h)
@@ -390,7 +470,8 @@ class LidarModel:
         Returns
         -------
         elevation : ndarray of float64, shape of `v`
-            Degrees, ``high - v * (high - low) / rows``.
+            Degrees, ``high - v * (high - low) / rows`` (with a table:
+            linear between its entries, see the class).
         azimuth : ndarray of float64, shape of `u`
             Degrees, ``hfov / 2 - u * hfov / cols`` (not wrapped). `v` and
             `u` are converted independently, so they need not broadcast.
@@ -406,7 +487,11 @@ class LidarModel:
         u = _finite(u, "u")
         low, high = self.vertical_fov
         h = self.horizontal_fov
-        return high - v * (high - low) / self.rows, h / 2 - u * h / self.cols
+        if self.beam_elevations is not None:
+            e = _beams.elevation_at(v, self.beam_elevations, self.vertical_fov)
+        else:
+            e = high - v * (high - low) / self.rows
+        return e, h / 2 - u * h / self.cols
 
 
 def pixel_angles(model) -> tuple[np.ndarray, np.ndarray]:

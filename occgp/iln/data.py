@@ -251,6 +251,8 @@ def simulate_range_image(scene, pose, model: LidarModel) -> NDArray[np.float32]:
             continue
         e_lo, e_hi, arc = _angular_box(lo, hi)
         i0, i1 = _interval(e_lo, e_hi, model.rows, high, -(high - low) / model.rows)
+        if model.beam_elevations is not None:  # rows not uniform: test them all
+            i0, i1 = 0, model.rows - 1
         i0, i1 = max(i0, 0), min(i1, model.rows - 1)
         if i0 > i1:
             continue
