@@ -17,7 +17,7 @@ The models and their training need PyTorch (the ``iln`` extra: ``pip install
 torch==2.13.0`` on CPU machines, then ``pip install 'occgp[iln]'``). Their names
 -- :func:`pretrained` (the shipped models), :func:`make`, :func:`register`,
 :func:`available_models`, :class:`ILN`, :class:`LIIF`, :class:`Bilinear`,
-:class:`InverseBilinear`, :func:`upsample_image`, :func:`train`,
+:class:`InverseBilinear`, :class:`EdgeAwareInterpolation`, :func:`upsample_image`, :func:`train`,
 :func:`train_from_yaml`, :func:`load_checkpoint` -- are imported from this
 package on first use, so that ``import occgp.iln`` works without torch and
 raises a clear ImportError only when a torch part is asked for.
@@ -37,7 +37,8 @@ from .upsample import upsample, upsample_range_image
 _TORCH_NAMES = {
     "make": "models", "register": "models", "available_models": "models",
     "EDSRBaseline": "models", "ILN": "models", "LIIF": "models", "Bilinear": "models",
-    "InverseBilinear": "models", "upsample_image": "models",
+    "InverseBilinear": "models", "EdgeAwareInterpolation": "models",
+    "upsample_image": "models",
     "train": "training", "train_from_yaml": "training", "load_checkpoint": "training",
     "pretrained": "_weights",
 }

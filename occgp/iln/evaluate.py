@@ -90,7 +90,7 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
     Parameters
     ----------
     models : dict of str to model, or list of str
-        Row names to models: ``"bilinear"``, ``"inverse-bilinear"``,
+        Row names to models: ``"bilinear"``, ``"inverse-bilinear"``, ``"edge-aware"``,
         ``"pretrained"`` or a model of :mod:`occgp.iln.models` (see
         :func:`occgp.iln.upsample.resolve_model`).
         A list of names uses each name as its row's name.
