@@ -25,7 +25,7 @@ def _queries(n, rows, cols, seed=1):
     return np.random.default_rng(seed).uniform([0, 0], [rows, cols], (n, 2)).astype(np.float32)
 
 
-def _reference(img, q, tol=0.05, wrap=True):
+def _reference(img, q, tol=0.05, wrap=True, copy_no_returns=False):
     """The rule of the class docstring, query by query (slow, plain numpy)."""
     rows, cols = img.shape
     out = np.zeros(len(q))
@@ -60,7 +60,10 @@ def _reference(img, q, tol=0.05, wrap=True):
         if exts and not any(abs(e - p) <= tol * p for e in exts):
             k = ic if t <= 0.5 else ic1
             value = inv_interp([(1 - b, img[k, j0]), (b, img[k, j1])])
-            out[n] = 0.0 if value is None else 1.0 / value
+            if value is None:
+                out[n] = 0.0 if copy_no_returns else 1.0 / p
+            else:
+                out[n] = 1.0 / value
         else:
             out[n] = 1.0 / p
     return out
@@ -128,7 +131,10 @@ def test_no_return_rows_and_neighbours():
     assert near_lower[0] == pytest.approx(img[2, 3:5].mean(), rel=1e-3)
     steep = img.copy()
     steep[3:] *= 3.0                                 # rows 2 and 3 no longer on one plane
-    assert m.predict(steep, [[1.6, 4.0]])[0] == 0.0  # t = 0.1: the nearer row has no return
+    # t = 0.1: the nearer row has no return: kept inverse bilinear, or copied with the option
+    assert m.predict(steep, [[1.6, 4.0]])[0] == pytest.approx(steep[2, 3:5].mean(), rel=1e-3)
+    copier = EdgeAwareInterpolation(copy_no_returns=True)
+    assert copier.predict(steep, [[1.6, 4.0]])[0] == 0.0
     assert m.predict(steep, [[2.4, 4.0]])[0] == pytest.approx(steep[2, 3:5].mean(), rel=1e-3)
     # all 4 neighbours without a return: no return
     assert m.predict(img, [[1.0, 4.0]])[0] == 0.0
@@ -154,22 +160,24 @@ def test_borders_use_the_one_side_available():
     np.testing.assert_allclose(m.predict(two, q), InverseBilinear().predict(two, q), rtol=1e-6)
 
 
-@pytest.mark.parametrize("wrap", [True, False])
-def test_matches_reference_on_random_images_with_holes(wrap):
+@pytest.mark.parametrize("wrap, copy_no_returns", [(True, False), (False, False), (True, True)])
+def test_matches_reference_on_random_images_with_holes(wrap, copy_no_returns):
     rng = np.random.default_rng(3)
     img = rng.uniform(2.0, 60.0, (7, 12)).astype(np.float32)
     img[rng.random(img.shape) < 0.2] = 0.0
     smooth = _plane(7, 12)
     img[:3] = smooth[:3]                             # planar rows where the extensions agree
     q = _queries(2000, 7, 12, seed=4)
-    m = EdgeAwareInterpolation(wrap=wrap)
+    m = EdgeAwareInterpolation(wrap=wrap, copy_no_returns=copy_no_returns)
     ours = m.predict(img, q)
-    np.testing.assert_allclose(ours, _reference(img, q, wrap=wrap), rtol=2e-5, atol=1e-5)
+    ref = _reference(img, q, wrap=wrap, copy_no_returns=copy_no_returns)
+    np.testing.assert_allclose(ours, ref, rtol=2e-5, atol=1e-5)
+    dropped = (ours == 0) & (InverseBilinear(wrap=wrap).predict(img, q) > 0)
+    assert dropped.any() == copy_no_returns          # returns turned into no-returns only on ask
     w = m.weights(img, q)
-    r = np.stack([m.predict(img, q)], 0)[0]
     sums = w.sum(-1)
     assert np.all((np.abs(sums - 1) < 1e-5) | (sums == 0))
-    assert np.all((sums == 0) == (r == 0))
+    assert np.all((sums == 0) == (ours == 0))
 
 
 def test_dtypes_shapes_and_batches():
@@ -208,6 +216,7 @@ def test_names_work_in_the_front_ends():
     ({"tolerance": "5%"}, TypeError, "tolerance must be a real number"),
     ({"tolerance": True}, TypeError, "tolerance must be a real number"),
     ({"wrap": 1}, TypeError, "wrap must be a bool"),
+    ({"copy_no_returns": "no"}, TypeError, "copy_no_returns must be a bool"),
     ({"max_range": 0.0}, ValueError, "max_range must be a finite number > 0"),
     ({"rows": 2}, ValueError, r"unknown argument\(s\) \['rows'\]"),
 ])

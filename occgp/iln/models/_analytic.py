@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from ..._validation import check_real
+from ..._validation import check_bool, check_real
 from ._base import RangeModel, neighbourhood, query_doc, renormalise
 from ._registry import register
 
@@ -78,9 +78,10 @@ class EdgeAwareInterpolation(RangeModel):
     bottom only the upper one; where neither exists (an image of 2 rows, or no-returns on both
     sides) the query keeps ``P``. Queries outside the outermost row centres read that row
     alone, as :class:`InverseBilinear` does. No-return neighbours are dropped as in
-    :class:`InverseBilinear`; a query whose ``P`` is no return stays no return, and a copied
-    row with no return at the query's column gives no return (range 0): across the edge of a
-    no-return region the nearer side wins, return or not.
+    :class:`InverseBilinear`, and a query whose ``P`` is no return stays no return. Where the
+    nearer row has no return at the query's column (the edge of a no-return region, e.g. the
+    sky above a roof), the query keeps ``P`` by default, so the rule never turns a return into
+    a no-return; with ``copy_no_returns=True`` it copies that no-return (range 0) instead.
 
     Parameters
     ----------
@@ -92,11 +93,15 @@ class EdgeAwareInterpolation(RangeModel):
         Relative agreement, in ``1 / r``, of an extension with the inverse bilinear value that
         keeps the latter; > 0. ``inf`` is not allowed; a large value (e.g. 1e9) gives
         :class:`InverseBilinear`.
+    copy_no_returns : bool, default=False
+        On a depth edge whose nearer row has no return at the query's column, copy the
+        no-return (True) or keep the inverse bilinear value (False).
 
     Raises
     ------
     TypeError
-        If `max_range` or `tolerance` is not a real number or `wrap` is not a bool.
+        If `max_range` or `tolerance` is not a real number, or `wrap` or `copy_no_returns` is
+        not a bool.
     ValueError
         If `max_range` or `tolerance` is not finite and positive.
 
@@ -109,14 +114,15 @@ class EdgeAwareInterpolation(RangeModel):
     [20.0, 10.0]
     """
 
-    arg_names = ("max_range", "wrap", "tolerance")
+    arg_names = ("max_range", "wrap", "tolerance", "copy_no_returns")
 
     def __init__(self, max_range: float = 80.0, wrap: bool = True,
-                 tolerance: float = DEFAULT_TOLERANCE):
+                 tolerance: float = DEFAULT_TOLERANCE, copy_no_returns: bool = False):
         super().__init__(max_range, wrap)
         self.tolerance = check_real(tolerance, "tolerance", low=0.0, state_bounds=True)
+        self.copy_no_returns = check_bool(copy_no_returns, "copy_no_returns")
         self._spec_args = {"max_range": self.max_range, "wrap": self.wrap,
-                           "tolerance": self.tolerance}
+                           "tolerance": self.tolerance, "copy_no_returns": self.copy_no_returns}
 
     @query_doc(features="None\n    What :meth:`encode` returned (ignored).")
     def query(self, features, images, queries, wrap):
@@ -167,5 +173,7 @@ class EdgeAwareInterpolation(RangeModel):
         w_rows = torch.stack([1 - b, b, zero, zero], dim=-1)
         w_rows = torch.where(upper, w_rows, w_rows.roll(2, dims=-1))
         w_copy = _inverse_weights(w_rows, r)
+        if not self.copy_no_returns:
+            edge = edge & (w_copy.sum(-1) > 0)
         w = torch.where(edge.unsqueeze(-1), w_copy, w_prior)
         return (w * r).sum(-1), w
