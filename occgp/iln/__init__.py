@@ -8,7 +8,9 @@ elevation or by its ring index), :func:`simulate_range_image` (exact ray casting
 in the procedural outdoor scenes of :func:`occgp.datasets.outdoor_scene`),
 :func:`make_dataset` and :func:`load_shards` (the ``occgp iln make-dataset``
 shards), and the evaluation: :func:`range_mae` and :func:`voxel_scores`
-(dissertation §4.4), :func:`evaluate` / :func:`format_table` (Table 4.1),
+(dissertation §4.4), :func:`region_masks` (planar pixels, depth edges,
+no-return boundaries), :func:`evaluate` / :func:`format_table` (Table 4.1) /
+:func:`format_region_table` (its per-region scores),
 :func:`upsample` (sparse scan in, dense sensor-frame points out) and
 :func:`mapping_experiment` (§4.4.5: maps from up-sampled scans). These run
 without torch and ask for it only when a learned model is used.
@@ -28,9 +30,9 @@ import importlib
 from ._range import LidarModel, points_to_range_image, range_image_from_points, \
     range_image_to_points
 from .data import load_shards, make_dataset, simulate_range_image
-from .evaluate import evaluate, format_table
+from .evaluate import evaluate, format_region_table, format_table
 from .experiment import format_mapping_table, mapping_experiment
-from .metrics import range_mae, voxel_scores
+from .metrics import range_mae, region_masks, voxel_scores
 from .upsample import upsample, upsample_range_image
 
 #: The torch parts of the package: public name -> submodule.
@@ -45,8 +47,9 @@ _TORCH_NAMES = {
 
 __all__ = ["LidarModel", "points_to_range_image", "range_image_to_points",
            "range_image_from_points", "simulate_range_image", "make_dataset", "load_shards",
-           "upsample", "upsample_range_image", "evaluate", "format_table", "mapping_experiment",
-           "format_mapping_table", "range_mae", "voxel_scores", *_TORCH_NAMES]
+           "upsample", "upsample_range_image", "evaluate", "format_table", "format_region_table",
+           "mapping_experiment", "format_mapping_table", "range_mae", "voxel_scores",
+           "region_masks", *_TORCH_NAMES]
 
 
 def __getattr__(name):
