@@ -42,10 +42,10 @@ bench says why; ``--untrained`` fills them with untrained models of the
 shipped small configuration (a smoke run of the code, not a result).
 
 Run: ``python bench/bench_iln.py`` (32 test images at 64 x 1024 and
-128 x 2048, 4 of them at 256 x 4096, 4 mapping scans; about 17 minutes on 2
-cores, mostly ILN at 128 x 2048 and LIIF and ILN at 256 x 4096);
-``--quick`` (4 test images, 2 at 256 x 4096, 3 scans, fewer test cells:
-about 5 minutes) for a smoke run.
+128 x 2048, 4 of them at 256 x 4096, 4 mapping scans; about 9 minutes on 2
+otherwise idle cores, mostly ILN at 128 x 2048 and LIIF and ILN at
+256 x 4096); ``--quick`` (4 test images, 2 at 256 x 4096, 3 scans, fewer
+test cells: a few minutes) for a smoke run.
 """
 
 from __future__ import annotations
