@@ -5,13 +5,23 @@ Prints, all measured in this run:
 1. The hardware: CPU model, cores, torch threads, torch version, device.
 2. **Table 4.1's layout**: bilinear, inverse bilinear (bilinear interpolation
    of 1 / r, ILN's untrained weight prior: what the training adds is ILN's
-   row against it), LIIF and ILN up-sampling 16 x 1024 range
-   images to 64 x 1024, 128 x 2048 and 256 x 4096 (the last out of the
-   training distribution) on held-out simulated outdoor scenes (test seeds
-   ``100000 + ...`` of ``occgp.iln.data.make_dataset``): MAE of the ranges
-   over the true returns, IoU / precision / recall / F1 of the 3D points on a
-   0.1 m voxel grid, each averaged over the images
-   (:func:`occgp.iln.evaluate.evaluate`), with the up-sampling time per image.
+   row against it), edge-aware interpolation (inverse bilinear that copies
+   the nearer row across depth edges, no training:
+   :class:`occgp.iln.models.EdgeAwareInterpolation`), LIIF and ILN
+   up-sampling 16 x 1024 range images to 64 x 1024, 128 x 2048 and
+   256 x 4096 (the last out of the training distribution, on the first
+   ``--n-large`` images only) on held-out simulated outdoor scenes (test
+   seeds ``100000 + ...`` of ``occgp.iln.data.make_dataset``, 2 road poses
+   per scene): MAE of the ranges over the true returns, IoU / precision /
+   recall / F1 of the 3D points on a 0.1 m voxel grid, each averaged over
+   the images (:func:`occgp.iln.evaluate.evaluate`), with the up-sampling
+   time per image.
+   **The per-region table** of the same runs
+   (``evaluate(..., regions=True)``): the MAE on planar pixels (inverse
+   bilinear within 0.5 m of a true return), on depth edges (inverse bilinear
+   off by more than 0.5 m) and on no-return boundaries (the true pixel or an
+   input pixel its query reads has no return), and each region's share of
+   the pixels, pooled over the images.
 3. **The mapping table** (Fig. 4.10 as a table): 0.2 m octrees
    (``method="auto"``) from the 16-beam scans of a trajectory in a held-out
    scene, from their up-sampling to 64 x 1024 and 128 x 2048 by each model,
@@ -31,9 +41,11 @@ that model). Rows of a model without a checkpoint are left out, and the
 bench says why; ``--untrained`` fills them with untrained models of the
 shipped small configuration (a smoke run of the code, not a result).
 
-Run: ``python bench/bench_iln.py`` (8 test images, 10 mapping scans: about
-an hour on 2 cores, mostly LIIF and ILN at 256 x 4096); ``--quick`` (2 test
-images, 4 scans, fewer test cells: a few minutes) for a smoke run.
+Run: ``python bench/bench_iln.py`` (32 test images at 64 x 1024 and
+128 x 2048, 4 of them at 256 x 4096, 4 mapping scans; about 9 minutes on 2
+otherwise idle cores, mostly ILN at 128 x 2048 and LIIF and ILN at
+256 x 4096); ``--quick`` (4 test images, 2 at 256 x 4096, 3 scans, fewer
+test cells: a few minutes) for a smoke run.
 """
 
 from __future__ import annotations
@@ -140,7 +152,8 @@ def resolve_models(args):
     from occgp.iln.models import make
 
     models = {"Bilinear": make({"name": "bilinear"}),
-              "Inverse bilinear": make({"name": "inverse-bilinear"})}
+              "Inverse bilinear": make({"name": "inverse-bilinear"}),
+              "Edge-aware": make({"name": "edge-aware"})}
     ckpts, notes = {}, []
     for label, name, path in (("LIIF", "liif", args.liif), ("ILN", "iln", args.iln)):
         path = path or _find_checkpoint(name)
@@ -207,18 +220,18 @@ def cpu_inference_time(model, *, repeats=5, in_size=(16, 1024), out_size=(64, 10
     from occgp.datasets import outdoor_scene
     from occgp.iln._range import LidarModel
     from occgp.iln.data import TEST_SEED_OFFSET, simulate_range_image
-    from occgp.iln.upsample import _predict
+    from occgp.iln._common import predict_image
 
     scene = outdoor_scene(TEST_SEED_OFFSET + seed)
     lidar = LidarModel.carla()
     image = simulate_range_image(scene, scene.trajectory(1)[0], lidar.with_size(*in_size))
     net = copy.deepcopy(model).to("cpu").eval()
     args = (net, image, lidar.with_size(*in_size), lidar.with_size(*out_size))
-    _predict(*args)
+    predict_image(*args)
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        _predict(*args)
+        predict_image(*args)
         times.append(time.perf_counter() - t0)
     return float(np.median(times))
 
@@ -330,6 +343,11 @@ def targets(rows, mapping_rows, inference, models):
         out.append(f"(not a target) ILN against inverse bilinear, its untrained weight prior, at "
                    f"64x1024: IoU {i['iou']:.3f} vs {v['iou']:.3f}, MAE {i['mae']:.3f} vs "
                    f"{v['mae']:.3f}")
+    e = _row(rows, "Edge-aware", "64x1024")
+    if e is not None:
+        out.append(f"(not a target) ILN against edge-aware interpolation (no training) at "
+                   f"64x1024: IoU {i['iou']:.3f} vs {e['iou']:.3f}, MAE {i['mae']:.3f} vs "
+                   f"{e['mae']:.3f}")
     if "untrained" in iln:
         out.append("(untrained models: these verdicts say nothing about ILN)")
     return out
@@ -341,22 +359,25 @@ def main(argv=None):
     parser.add_argument("--liif", help="LIIF checkpoint (default: the shipped one)")
     parser.add_argument("--data", help="dataset folder of make_dataset (its test/ shards, all "
                                        "four sizes); default: simulate held-out scenes here")
-    parser.add_argument("--n-images", type=int, default=None, help="test images (default 8; "
-                                                                   "quick: 2)")
-    parser.add_argument("--n-scans", type=int, default=None, help="mapping scans (default 10; "
-                                                                  "quick: 4)")
+    parser.add_argument("--n-images", type=int, default=None, help="test images (default 32; "
+                                                                   "quick: 4)")
+    parser.add_argument("--n-large", type=int, default=None,
+                        help="of them, those also scored at 256x4096 (default 4; quick: 2)")
+    parser.add_argument("--n-scans", type=int, default=None, help="mapping scans (default 4; "
+                                                                  "quick: 3)")
     parser.add_argument("--n-jobs", type=int, default=None, help="joblib workers simulating")
     parser.add_argument("--quick", action="store_true", help="a smoke run of a few minutes")
     parser.add_argument("--untrained", action="store_true",
                         help="untrained small models in place of missing checkpoints")
     parser.add_argument("--no-gpu", action="store_true", help="skip the GPU section")
     args = parser.parse_args(argv)
-    args.n_images = args.n_images or (2 if args.quick else 8)
-    args.n_scans = args.n_scans or (4 if args.quick else 10)
+    args.n_images = args.n_images or (4 if args.quick else 32)
+    args.n_large = min(args.n_large or (2 if args.quick else 4), args.n_images)
+    args.n_scans = args.n_scans or (3 if args.quick else 4)
 
     import torch
 
-    from occgp.iln.evaluate import evaluate, format_table
+    from occgp.iln.evaluate import evaluate, format_region_table, format_table
     from occgp.iln.experiment import format_mapping_table, mapping_experiment
 
     print(f"occgp ILN bench{' (quick)' if args.quick else ''}\nhardware: {hardware()}\n")
@@ -370,14 +391,24 @@ def main(argv=None):
     t0 = time.perf_counter()
     images, lidar, source = test_images(args)
     log(f"  {time.perf_counter() - t0:.1f} s")
+    n = len(images[(16, 1024)])
+    n_large = min(args.n_large, n)
     print(f"Table 4.1 layout: 16x1024 inputs up-sampled to each test resolution; {source}; "
-          f"MAE in metres over the true returns, voxel scores on a 0.1 m grid; means over "
-          f"images; time: up-sampling seconds per image on the CPU")
+          f"256x4096 on the first {n_large} of them; MAE in metres over the true returns, "
+          f"voxel scores on a 0.1 m grid; means over images; time: up-sampling seconds per "
+          f"image on the CPU")
     t0 = time.perf_counter()
-    rows = evaluate(models, images, in_size=(16, 1024), out_sizes=OUT_SIZES, lidar=lidar,
-                    progress=None)
+    rows = evaluate(models, images, in_size=(16, 1024), out_sizes=OUT_SIZES[:2], lidar=lidar,
+                    progress=None, regions=True)
+    rows += evaluate(models, {k: v[:n_large] for k, v in images.items()}, in_size=(16, 1024),
+                     out_sizes=OUT_SIZES[2:], lidar=lidar, progress=None, regions=True)
     log(f"  evaluated in {time.perf_counter() - t0:.1f} s")
     print(format_table(rows, with_time=True))
+    print("\nPer region (the same runs): MAE in metres over the true returns of planar pixels "
+          "(inverse bilinear within 0.5 m),\ndepth edges (inverse bilinear off by > 0.5 m) and "
+          "no-return boundaries (the true pixel or one of the 4 input pixels its query reads has "
+          "no return);\nshare: the region's fraction of all pixels; both pooled over the images")
+    print(format_region_table(rows))
 
     up_models = {k: v for k, v in models.items()}
     n_cells = 30_000 if args.quick else 100_000

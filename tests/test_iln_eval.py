@@ -85,9 +85,11 @@ def test_upsample_range_image_cuts_ranges_at_max_range():
 def test_resolve_model_names_and_models():
     assert resolve_model("bilinear").registry_name == "bilinear"
     assert resolve_model("inverse-bilinear").registry_name == "inverse-bilinear"
+    assert resolve_model("edge-aware").registry_name == "edge-aware"
     net = _tiny_iln()
     assert resolve_model(net) is net
-    with pytest.raises(ValueError, match=r"model must be one of \('bilinear', 'inverse-bilinear', 'pretrained'\)"):
+    with pytest.raises(ValueError, match=r"model must be one of \('bilinear', 'inverse-bilinear', 'edge-aware', "
+                       r"'pretrained'\)"):
         resolve_model("cubic")
     with pytest.raises(TypeError, match="model must be one of .* got int"):
         resolve_model(3)

@@ -10,7 +10,9 @@ beam, on a measured per-beam elevation table), :func:`simulate_range_image` (exa
 in the procedural outdoor scenes of :func:`occgp.datasets.outdoor_scene`),
 :func:`make_dataset` and :func:`load_shards` (the ``occgp iln make-dataset``
 shards), and the evaluation: :func:`range_mae` and :func:`voxel_scores`
-(dissertation §4.4), :func:`evaluate` / :func:`format_table` (Table 4.1),
+(dissertation §4.4), :func:`region_masks` (planar pixels, depth edges,
+no-return boundaries), :func:`evaluate` / :func:`format_table` (Table 4.1) /
+:func:`format_region_table` (its per-region scores),
 :func:`upsample` (sparse scan in, dense sensor-frame points out) and
 :func:`mapping_experiment` (§4.4.5: maps from up-sampled scans),
 :func:`real_frame_scores` / :func:`format_real_table` (dropped beams of a real
@@ -21,7 +23,7 @@ The models and their training need PyTorch (the ``iln`` extra: ``pip install
 torch==2.13.0`` on CPU machines, then ``pip install 'occgp[iln]'``). Their names
 -- :func:`pretrained` (the shipped models), :func:`make`, :func:`register`,
 :func:`available_models`, :class:`ILN`, :class:`LIIF`, :class:`Bilinear`,
-:class:`InverseBilinear`, :func:`upsample_image`, :func:`train`,
+:class:`InverseBilinear`, :class:`EdgeAwareInterpolation`, :func:`upsample_image`, :func:`train`,
 :func:`train_from_yaml`, :func:`load_checkpoint` -- are imported from this
 package on first use, so that ``import occgp.iln`` works without torch and
 raises a clear ImportError only when a torch part is asked for.
@@ -32,10 +34,10 @@ import importlib
 from ._range import LidarModel, points_to_range_image, range_image_from_points, \
     range_image_to_points
 from .data import load_shards, make_dataset, simulate_range_image
-from .evaluate import evaluate, format_table
+from .evaluate import evaluate, format_region_table, format_table
 from .experiment import format_mapping_table, mapping_experiment
 from .frames import frame_range_image, read_lidar_frame, scan_rings
-from .metrics import range_mae, voxel_scores
+from .metrics import range_mae, region_masks, voxel_scores
 from .real import format_real_table, kept_beams_model, real_frame_scores
 from .upsample import upsample, upsample_range_image
 
@@ -43,17 +45,18 @@ from .upsample import upsample, upsample_range_image
 _TORCH_NAMES = {
     "make": "models", "register": "models", "available_models": "models",
     "EDSRBaseline": "models", "ILN": "models", "LIIF": "models", "Bilinear": "models",
-    "InverseBilinear": "models", "upsample_image": "models",
+    "InverseBilinear": "models", "EdgeAwareInterpolation": "models",
+    "upsample_image": "models",
     "train": "training", "train_from_yaml": "training", "load_checkpoint": "training",
     "pretrained": "_weights",
 }
 
 __all__ = ["LidarModel", "points_to_range_image", "range_image_to_points",
            "range_image_from_points", "simulate_range_image", "make_dataset", "load_shards",
-           "upsample", "upsample_range_image", "evaluate", "format_table", "mapping_experiment",
-           "format_mapping_table", "range_mae", "voxel_scores", "read_lidar_frame",
-           "frame_range_image", "scan_rings", "real_frame_scores", "format_real_table",
-           "kept_beams_model", *_TORCH_NAMES]
+           "upsample", "upsample_range_image", "evaluate", "format_table", "format_region_table",
+           "mapping_experiment", "format_mapping_table", "range_mae", "voxel_scores",
+           "region_masks", "read_lidar_frame", "frame_range_image", "scan_rings",
+           "real_frame_scores", "format_real_table", "kept_beams_model", *_TORCH_NAMES]
 
 
 def __getattr__(name):

@@ -22,7 +22,7 @@ __all__ = ["MAX_OUTPUT_PIXELS", "MODEL_NAMES", "torch_models", "pretrained_model
 #: Largest up-sampled image, pixels (e.g. 512 x 8192): bounds the memory of one call.
 MAX_OUTPUT_PIXELS = 2 ** 22
 #: Model names :func:`occgp.iln.upsample.resolve_model` accepts.
-MODEL_NAMES = ("bilinear", "inverse-bilinear", "pretrained")
+MODEL_NAMES = ("bilinear", "inverse-bilinear", "edge-aware", "pretrained")
 #: Largest deviation of a pose's rotation from orthonormal (``R R^T - I``).
 _ORTHO_TOL = 1e-6
 #: Docstring sections of the front ends (fragments for :func:`occgp._docfill.fill_doc`):
@@ -80,7 +80,7 @@ def resolve(model, lidar, device, caller):
     """
     RangeModel, make = torch_models(caller)
     if isinstance(model, str):
-        if model in ("bilinear", "inverse-bilinear"):
+        if model in ("bilinear", "inverse-bilinear", "edge-aware"):
             args = {} if lidar is None else {"max_range": float(lidar.max_range)}
             built = make({"name": model, "args": args})
         elif model == "pretrained":

@@ -6,7 +6,10 @@ Both are plain numpy and need no torch:
   pixels where the true image has a return;
 * :func:`voxel_scores` -- IoU, precision, recall and F1 of a reconstructed
   point cloud against the true one, on the occupied voxels of a grid
-  (0.1 m by default, as in Table 4.1).
+  (0.1 m by default, as in Table 4.1);
+* :func:`region_masks` -- the pixels of an up-sampled image split into
+  planar ones, depth edges and no-return boundaries (the per-region scores
+  of :func:`occgp.iln.evaluate.evaluate`).
 
 :mod:`occgp.iln.evaluate` applies them to whole test sets, image by image,
 and averages the per-image values (as the published evaluation does).
@@ -19,7 +22,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_numeric, check_real
 
-__all__ = ["range_mae", "voxel_keys", "voxel_scores", "VOXEL_INDEX_LIMIT"]
+__all__ = ["range_mae", "voxel_keys", "voxel_scores", "region_masks", "REGIONS",
+           "VOXEL_INDEX_LIMIT"]
 
 #: Points must lie within this many voxels of the origin along every axis (each
 #: voxel index is packed into 21 bits of one int64 key): 104.8 km at 0.1 m.
@@ -191,3 +195,68 @@ def voxel_scores(pred_points: ArrayLike, true_points: ArrayLike,
     recall = inter / truth.size
     f1 = 2 * precision * recall / (precision + recall) if inter else 0.0
     return {"iou": inter / union, "precision": precision, "recall": recall, "f1": f1}
+
+
+def region_masks(truth: ArrayLike, prior: ArrayLike, near_no_return: ArrayLike, *,
+                 edge_threshold: float = 0.5) -> dict[str, NDArray[np.bool_]]:
+    """The pixels of an up-sampled image by region: planar, depth edge, no-return boundary.
+
+    The three regions split every pixel, in this order of precedence:
+
+    * ``"boundary"`` (no-return boundary): the true pixel has no return, or one of the
+      input pixels it is interpolated from (`near_no_return`) has none;
+    * ``"edge"`` (depth edge): the inverse bilinear prediction `prior` is off the true range by
+      more than `edge_threshold`;
+    * ``"planar"``: the rest -- true returns that inverse bilinear, exact on planes, already
+      gets within `edge_threshold`.
+
+    Parameters
+    ----------
+    truth : array-like of shape (rows, cols) or (n_images, rows, cols)
+        True ranges in metres, >= 0; 0.0 means no return.
+    prior : array-like of the same shape
+        The inverse bilinear prediction of the same pixels
+        (:class:`occgp.iln.models.InverseBilinear`), metres.
+    near_no_return : array-like of bool, the same shape
+        True where one of the input pixels around the pixel's query has no return.
+    edge_threshold : float, default=0.5
+        Error of `prior` in metres above which a pixel is a depth edge, > 0.
+
+    Returns
+    -------
+    masks : dict
+        ``{"planar", "edge", "boundary"}`` -> bool arrays of `truth`'s shape; every pixel lies
+        in exactly one.
+
+    Raises
+    ------
+    ValueError
+        If the shapes differ, an array is empty, a range array holds NaN, inf or a negative
+        range, or `edge_threshold` is not positive and finite.
+    TypeError
+        If an array does not hold real numbers (`near_no_return`: booleans) or
+        `edge_threshold` is not a real.
+
+    Examples
+    --------
+    >>> m = region_masks([[10.0, 10.0, 0.0, 10.0]], [[10.1, 12.0, 5.0, 10.0]],
+    ...                  [[False, False, False, True]])
+    >>> [m[k].nonzero()[1].tolist() for k in REGIONS]
+    [[0], [1], [2, 3]]
+    """
+    edge_threshold = check_real(edge_threshold, "edge_threshold", low=0.0, state_bounds=True)
+    truth = _as_ranges(truth, "truth")
+    prior = _as_ranges(prior, "prior")
+    near = np.asarray(near_no_return)
+    if near.dtype != np.bool_:
+        raise TypeError(f"near_no_return must hold booleans, got dtype {near.dtype}")
+    if not (truth.shape == prior.shape == near.shape):
+        raise ValueError(f"truth, prior and near_no_return must have the same shape, got "
+                         f"{truth.shape}, {prior.shape} and {near.shape}")
+    boundary = (truth <= 0) | near
+    edge = ~boundary & (np.abs(prior - truth) > edge_threshold)
+    return {"planar": ~boundary & ~edge, "edge": edge, "boundary": boundary}
+
+
+#: The regions of :func:`region_masks`, in table order.
+REGIONS = ("planar", "edge", "boundary")

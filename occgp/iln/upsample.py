@@ -31,10 +31,13 @@ def resolve_model(model: Any, lidar: LidarModel | None = None, device: Any = Non
 
     Parameters
     ----------
-    model : {"bilinear", "inverse-bilinear", "pretrained"} or RangeModel
+    model : {"bilinear", "inverse-bilinear", "edge-aware", "pretrained"} or RangeModel
         ``"bilinear"``: bilinear interpolation of the 4 neighbours (no
         training); ``"inverse-bilinear"``: bilinear interpolation of their
-        inverse ranges (no training); ``"pretrained"``: the ILN shipped with occgp
+        inverse ranges (no training); ``"edge-aware"``: inverse bilinear that
+        copies the nearer row across depth edges (no training,
+        :class:`~occgp.iln.models.EdgeAwareInterpolation`); ``"pretrained"``: the ILN
+        shipped with occgp
         (``occgp.iln.pretrained()``); or a model of
         :mod:`occgp.iln.models` (used as it is, on its own device).
     lidar : LidarModel, optional
@@ -108,7 +111,7 @@ def upsample_range_image(range_image: ArrayLike, *, rows: int = 64, cols: int = 
         Ranges in metres in ``[0, lidar.max_range]``; 0.0 means no return.
     rows, cols : int, default=64, 1024
         Output size, ``rows * cols <= MAX_OUTPUT_PIXELS`` (4,194,304).
-    model : {"bilinear", "inverse-bilinear", "pretrained"} or RangeModel, default="bilinear"
+    model : {"bilinear", "inverse-bilinear", "edge-aware", "pretrained"} or RangeModel, default="bilinear"
         See :func:`resolve_model`.
     lidar : LidarModel, optional
         The input image's sensor; default ``LidarModel.carla(*shape)``.
@@ -173,7 +176,7 @@ def upsample(points_or_range_image: ArrayLike, *, rows: int = 64, cols: int = 10
     rows, cols : int, default=64, 1024
         Size of the up-sampled range image, ``rows * cols <=
         MAX_OUTPUT_PIXELS``.
-    model : {"bilinear", "inverse-bilinear", "pretrained"} or RangeModel, default="bilinear"
+    model : {"bilinear", "inverse-bilinear", "edge-aware", "pretrained"} or RangeModel, default="bilinear"
         ``"pretrained"`` is the shipped ILN (``occgp.iln.pretrained()``); see
         :func:`resolve_model`.
     lidar : LidarModel, optional

@@ -1,4 +1,4 @@
-"""Range-image up-sampling models: ILN, a LIIF-style value predictor and bilinear interpolation.
+"""Range-image up-sampling models: ILN, a LIIF-style value predictor, bilinear and edge-aware rules.
 
 Every model maps a range image and continuous queries ``(v, u)`` in the input image's pixel
 coordinates (pixel centres at integer + 0.5, row 0 at the highest elevation) to ranges. A query
@@ -15,10 +15,11 @@ and new models join the registry with :func:`register` (the LIIF convention).
 
 The registry and the spec round trip live in ``_registry``, the input checks, the
 neighbourhood lookup and :class:`RangeModel` in ``_base``, the shared EDSR-baseline encoder
-in ``_encoder``, one model per module (``_iln``, ``_liif``, ``_bilinear``), and the
+in ``_encoder``, one model per module (``_iln``, ``_liif``, ``_bilinear``, ``_analytic``: the edge-aware rule), and the
 full-image up-sampling in ``_image``.
 """
 
+from ._analytic import EdgeAwareInterpolation
 from ._base import DEFAULT_CHUNK, MAX_RANGE, RangeModel
 from ._bilinear import Bilinear, InverseBilinear
 from ._encoder import EDSRBaseline
@@ -36,5 +37,6 @@ __all__ = [
     "LIIF",
     "Bilinear",
     "InverseBilinear",
+    "EdgeAwareInterpolation",
     "upsample_image",
 ]

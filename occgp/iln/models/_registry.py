@@ -59,8 +59,8 @@ def available_models() -> list[str]:
     -------
     names : list of str
         The names :func:`make` accepts as ``spec["name"]`` (``"bilinear"``,
-        ``"edsr-baseline"``, ``"iln"``, ``"liif"`` and any added with
-        :func:`register`).
+        ``"edge-aware"``, ``"edsr-baseline"``, ``"iln"``, ``"inverse-bilinear"``,
+        ``"liif"`` and any added with :func:`register`).
     """
     return sorted(_MODELS)
 
