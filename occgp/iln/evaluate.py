@@ -310,6 +310,11 @@ def format_table(rows: Any, *, floatfmt: str = ".3f", with_time: bool = False) -
     header = ["Method"] + [_LABELS.get(c, "time [s]") for c in columns]
     cells = [[str(r["method"])] + [format(float(r[c]), floatfmt) for c in columns]
              for r in records]
+    return _grouped_table(header, cells, records)
+
+
+def _grouped_table(header, cells, records):
+    """The lines of a table, a ``Test resolution: ...`` line before each resolution's rows."""
     line, _ = column_line(header, cells)
     lines = [line(header)]
     current = None
@@ -353,12 +358,4 @@ def format_region_table(rows: Any, *, floatfmt: str = ".3f") -> str:
                            for c in REGION_COLUMNS]
     cells = [[str(r["method"])] + [format(float(r[c]), floatfmt) for c in REGION_COLUMNS]
              for r in records]
-    line, _ = column_line(header, cells)
-    lines = [line(header)]
-    current = None
-    for rec, cell in zip(records, cells):
-        if rec["resolution"] != current:
-            current = rec["resolution"]
-            lines.append(f"Test resolution: {current}")
-        lines.append(line(cell))
-    return "\n".join(lines)
+    return _grouped_table(header, cells, records)

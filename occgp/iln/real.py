@@ -200,6 +200,7 @@ def real_frame_scores(models: Any, image: ArrayLike, lidar: LidarModel, *,
     return out
 
 
+@fill_doc(**DOC_SECTIONS)
 def format_real_table(rows: list, baseline: str = "bilinear") -> str:
     """The rows of :func:`real_frame_scores` as a table, with IoU ratios to `baseline`'s.
 
@@ -211,16 +212,7 @@ def format_real_table(rows: list, baseline: str = "bilinear") -> str:
         The label whose IoU the ``IoU / base`` column divides by; the column
         is left blank when no row has that label.
 
-    Returns
-    -------
-    table : str
-
-    Raises
-    ------
-    ValueError
-        If a row lacks a field.
-    TypeError
-        If a row is not a mapping.
+    {table_sections}
 
     Examples
     --------
