@@ -109,8 +109,7 @@ def noisy_mapping_methods(resolution: float) -> dict:
     methods : dict of str to dict
         Each method as :func:`mapping_methods` gives them.
     """
-    knn = {"map": "knn", "resolution": resolution, "sensor_range": STEREO_RANGE, **STEREO_KNN,
-           "p_t": 0.5}
+    knn = {"map": "knn", "resolution": resolution, "sensor_range": STEREO_RANGE, **STEREO_KNN}
     return {
         "octree, stereo": {"map": "octree", "resolution": resolution, **STEREO_OCTREE,
                            "insert": {"max_range": STEREO_RANGE}},

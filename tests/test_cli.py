@@ -11,7 +11,7 @@ from occgp import AKIMap, BGKMap, KNNMap, OccupancyOctree
 from occgp._demo import STEREO_HISTORY, STEREO_KNN, STEREO_OCTREE, STEREO_RANGE
 from occgp.maps import make_map
 from occgp.cli import main, map_scans, mapping_methods, noisy_mapping_methods
-from occgp.datasets import Scan, read_scans, structured_room, write_pcd
+from occgp.datasets import read_scans, structured_room, write_pcd
 
 KERNEL_METHODS = {"BGK", "AKIMap", "AKIMap (published)"}
 STEREO_METHODS = {"octree, stereo", "k-NN, stereo", f"k-NN {STEREO_HISTORY} scans, stereo"}

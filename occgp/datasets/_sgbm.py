@@ -20,9 +20,11 @@ from typing import Any, NamedTuple
 import numpy as np
 from joblib import Parallel, delayed
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
 from threadpoolctl import threadpool_limits
 
-from .._validation import as_points, check_bool, check_choice, check_int, check_n_jobs, check_real
+from .._validation import (as_point, as_points, check_bool, check_int,
+                           check_n_jobs, check_real)
 from ._render import StereoPair, StereoRig, render_stereo
 from ._scan import Scan
 from ._stereo import ENVIRONMENTS, TETROMINOES, TetrominoScene, check_scene, orbit_positions
@@ -251,8 +253,7 @@ def disparity_to_points(disparity: ArrayLike, rig: StereoRig, position: ArrayLik
     if d.shape != (rig.height, rig.width):
         raise ValueError(f"disparity must be of shape {(rig.height, rig.width)} (the rig's "
                          f"image), got {d.shape}")
-    position = as_points(np.reshape(np.asarray(position, dtype=np.float64), (1, -1)),
-                         "position")[0]
+    position = as_point(position, "position")
     rotation = np.asarray(rotation, dtype=np.float64)
     if rotation.shape != (3, 3) or not np.isfinite(rotation).all():
         raise ValueError(f"rotation must be a finite (3, 3) matrix, got shape {rotation.shape}")
@@ -345,15 +346,8 @@ def _check_pose_noise(pose_noise):
 
 
 def _small_rotation(rng, sigma_deg):
-    """A rotation about a random axis by an angle of standard deviation `sigma_deg` per axis
-    (Rodrigues' formula of a Gaussian rotation vector)."""
-    w = np.radians(sigma_deg) * rng.standard_normal(3)
-    angle = float(np.linalg.norm(w))
-    if angle == 0.0:
-        return np.eye(3)
-    k = w / angle
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * kx @ kx
+    """A rotation by a Gaussian rotation vector of standard deviation `sigma_deg` per axis."""
+    return Rotation.from_rotvec(np.radians(sigma_deg) * rng.standard_normal(3)).as_matrix()
 
 
 def _frame_points(pair, rig, params, voxel, pose_noise, seed):
@@ -596,8 +590,7 @@ def point_errors(scene, scans: Sequence[Scan]) -> PointErrors:
     kinds = np.array([label.split("_")[0] for label in scene.labels] + ["none"])
     for i, scan in enumerate(scans):
         points = as_points(scan[0], f"scans[{i}].points")
-        origin = as_points(np.reshape(np.asarray(scan[1], dtype=np.float64), (1, -1)),
-                           f"scans[{i}].origin")[0]
+        origin = as_point(scan[1], f"scans[{i}].origin")
         if len(points) == 0:
             continue
         ray = points - origin
