@@ -8,6 +8,8 @@ elevation or by its ring index), :func:`read_lidar_frame`,
 :func:`frame_range_image` and :func:`scan_rings` (real frames, one row per
 beam, on a measured per-beam elevation table), :func:`simulate_range_image` (exact ray casting
 in the procedural outdoor scenes of :func:`occgp.datasets.outdoor_scene`),
+:class:`SensorEffects`, :func:`apply_sensor_effects` and :func:`solid_reflectivity`
+(range noise and dropped returns of a real sensor on the exact images),
 :func:`make_dataset` and :func:`load_shards` (the ``occgp iln make-dataset``
 shards), and the evaluation: :func:`range_mae` and :func:`voxel_scores`
 (dissertation §4.4), :func:`region_masks` (planar pixels, depth edges,
@@ -31,6 +33,7 @@ raises a clear ImportError only when a torch part is asked for.
 
 import importlib
 
+from ._effects import SensorEffects, apply_sensor_effects, solid_reflectivity
 from ._range import LidarModel, points_to_range_image, range_image_from_points, \
     range_image_to_points
 from .data import load_shards, make_dataset, simulate_range_image
@@ -52,7 +55,8 @@ _TORCH_NAMES = {
 }
 
 __all__ = ["LidarModel", "points_to_range_image", "range_image_to_points",
-           "range_image_from_points", "simulate_range_image", "make_dataset", "load_shards",
+           "range_image_from_points", "simulate_range_image", "SensorEffects",
+           "apply_sensor_effects", "solid_reflectivity", "make_dataset", "load_shards",
            "upsample", "upsample_range_image", "evaluate", "format_table", "format_region_table",
            "mapping_experiment", "format_mapping_table", "range_mae", "voxel_scores",
            "region_masks", "read_lidar_frame", "frame_range_image", "scan_rings",

@@ -4,7 +4,11 @@ Subcommands:
 
 ``occgp iln make-dataset FOLDER --n-train N --n-test N --sizes 16x1024 64x1024 ... --seed S``
     Simulate range images in procedural outdoor scenes and write them as
-    compressed shards (:func:`occgp.iln.data.make_dataset`).
+    compressed shards (:func:`occgp.iln.data.make_dataset`); ``--effects``
+    adds the default sensor effects (:class:`occgp.iln.SensorEffects`),
+    ``--vegetation`` vegetation clutter, ``--sensor hdl64e`` simulates
+    KITTI's HDL-64E with its real beam table (64 rows: every beam, 16 rows:
+    every 4th beam).
 ``occgp iln train CONFIG.yaml``
     Train a model from a YAML configuration (``occgp.iln.train``; needs
     PyTorch).
@@ -81,6 +85,17 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
                       help="seed of the sensor poses (default: 0)")
     make.add_argument("--n-jobs", type=int, default=None, metavar="N",
                       help="scenes simulated in parallel (joblib; -1: every core; default: 1)")
+    make.add_argument("--effects", action="store_true",
+                      help="apply the default sensor effects to each image: 2 cm range noise, "
+                      "dropouts at grazing incidence, on dark surfaces and near the maximum "
+                      "range (default: exact images)")
+    make.add_argument("--vegetation", action="store_true",
+                      help="add vegetation clutter to the scenes: porous tree crowns, hedges, "
+                      "bushes, grass")
+    make.add_argument("--sensor", choices=("carla", "hdl64e"), default="carla",
+                      help="the simulated sensor: carla (-15 to 15 degrees, uniform rows, 80 m; "
+                      "the default) or hdl64e (KITTI's HDL-64E beam table, 120 m: a 64-row size "
+                      "holds every beam, a 16-row size every 4th beam)")
     make.add_argument("--overwrite", action="store_true",
                       help="replace the shards of an earlier run in FOLDER")
     make.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -106,14 +121,20 @@ def run(args) -> int:
     """
     try:
         if args.iln_command == "make-dataset":
+            from ._effects import SensorEffects  # noqa: PLC0415
+            from ._range import LidarModel  # noqa: PLC0415
             from .data import make_dataset  # noqa: PLC0415
 
             sizes = args.sizes if args.sizes is not None else ["16x1024", "64x1024"]
+            sensor = getattr(args, "sensor", "carla")
+            model = LidarModel.hdl64e(table=True) if sensor == "hdl64e" else None
             counts = make_dataset(args.folder, args.n_train, args.n_test, sizes,
                                   images_per_scene=args.images_per_scene,
                                   images_per_shard=args.images_per_shard, seed=args.seed,
-                                  overwrite=args.overwrite, n_jobs=args.n_jobs,
-                                  progress=False if args.no_progress else None)
+                                  model=model, overwrite=args.overwrite, n_jobs=args.n_jobs,
+                                  progress=False if args.no_progress else None,
+                                  effects=SensorEffects() if getattr(args, "effects", False)
+                                  else None, vegetation=getattr(args, "vegetation", False))
             print(f"wrote {counts['train']} train and {counts['test']} test images "
                   f"({counts['shards']} shards) to {args.folder}")
         else:

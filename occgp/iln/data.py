@@ -18,17 +18,22 @@ key              value
 ``poses``        float64 ``(n, 4, 4)``: sensor-to-world poses
 ``format``       0-d str ``"occgp.iln.shard"``
 ``version``      0-d int64, 1
+``simulation``   optional 0-d str: JSON ``{"effects": ..., "vegetation":
+                 ..., "beams": ...}``, written only by a non-default
+                 simulation (see :func:`make_dataset`); a shard without
+                 it holds exact images of scenes without vegetation
 ===============  ====================================================
 
 Train scenes have seeds ``0 .. n_train - 1``, test scenes ``100000 ..
 100000 + n_test - 1``: the two never share a scene (``n_test`` is at most
 100000 scenes). The `seed` of :func:`make_dataset` seeds the sensor poses
-drawn in each scene.
+drawn in each scene, and the sensor effects of each image.
 """
 
 from __future__ import annotations
 
 import functools
+import json
 import logging
 import os
 import re
@@ -36,13 +41,13 @@ import zipfile
 import zlib
 
 import numpy as np
-from numpy.typing import NDArray
 
 from .._npz_io import read_npy_header
 from .._validation import as_path, check_bool, check_int, check_n_jobs
-from ..datasets._geometry import Box, Ellipsoid, Frustum, first_hit
-from ._common import as_pose
+from . import _effects
 from ._range import LidarModel
+from ._raycast import simulate_range_image
+from .real import kept_beams_model
 
 __all__ = ["simulate_range_image", "make_dataset", "load_shards", "parse_size", "ShardImages",
            "SIZES", "FORMAT", "VERSION", "TEST_SEED_OFFSET"]
@@ -59,6 +64,9 @@ TEST_SEED_OFFSET = 100_000
 _MAX_IMAGES = 1_000_000  # per shard
 _MAX_SCENES = TEST_SEED_OFFSET
 _SHARD_KEYS = ("lidar", "seeds", "poses", "format", "version")
+_RECORD_KEYS = ("effects", "vegetation", "beams")
+#: The simulation record of a shard without one (exact images, no vegetation).
+_PLAIN = {"effects": None, "vegetation": False}
 _CHUNK = 8  # poses simulated per task of make_dataset
 #: Most bytes of images one shard of make_dataset holds (uncompressed).
 MAX_SHARD_BYTES = 2**31
@@ -120,200 +128,84 @@ def _parse_sizes(sizes, name="sizes"):
 
 
 # --------------------------------------------------------------------------- #
-# ray casting
-# --------------------------------------------------------------------------- #
-def _interval(lo, hi, n, start, step):
-    """Indices k in [0, n) with ``start + (k + 0.5) * step`` in [lo, hi] (step may be < 0)."""
-    a = (lo - start) / step - 0.5
-    b = (hi - start) / step - 0.5
-    a, b = min(a, b), max(a, b)
-    return int(np.ceil(a - 1e-9)), int(np.floor(b + 1e-9))
-
-
-def _angular_box(lo, hi):
-    """Conservative elevation range and azimuth arc (degrees) of a sensor-frame AABB.
-
-    Returns (elev_lo, elev_hi, az_lo, az_hi) with az_hi - az_lo <= 360, or
-    None for the azimuth arc when the box surrounds the z axis.
-    """
-    dx = np.array([lo[0], hi[0]])
-    dy = np.array([lo[1], hi[1]])
-    near = np.hypot(np.clip(0.0, lo[0], hi[0]), np.clip(0.0, lo[1], hi[1]))
-    far = np.hypot(np.abs(dx).max(), np.abs(dy).max())
-    e_hi = np.degrees(np.arctan2(hi[2], near if hi[2] > 0 else far))
-    e_lo = np.degrees(np.arctan2(lo[2], far if lo[2] > 0 else near))
-    if lo[0] <= 0.0 <= hi[0] and lo[1] <= 0.0 <= hi[1]:
-        return e_lo, e_hi, None
-    cx, cy = (lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2
-    centre = np.degrees(np.arctan2(cy, cx))
-    corners = np.degrees(np.arctan2(np.repeat(dy, 2), np.tile(dx, 2)))
-    delta = (corners - centre + 180.0) % 360.0 - 180.0
-    return e_lo, e_hi, (centre + delta.min(), centre + delta.max())
-
-
-def _intersect(solid, origin, directions):
-    """``solid.intersect(origin, directions)`` for one origin; the occgp primitives take a
-    faster path (np.dot into their frame, none for an unrotated solid)."""
-    if not isinstance(solid, (Box, Ellipsoid, Frustum)):
-        return solid.intersect(origin[None], directions)
-    rot = solid.rotation
-    o = ((origin - solid.center) @ rot)[None]
-    d = directions if np.array_equal(rot, np.eye(3)) else np.dot(directions, rot)
-    t0, t1 = solid._interval(o, d)
-    return first_hit(t0, t1)
-
-
-def _cropped_columns(arc, model):
-    """Columns (j0, j1) of a cropped model whose centres may lie in the azimuth arc."""
-    a, b = arc
-    pieces = [(a, b)]
-    if a < -180.0:
-        pieces = [(a + 360.0, 180.0), (-180.0, b)]
-    elif b > 180.0:
-        pieces = [(a, 180.0), (-180.0, b - 360.0)]
-    h = model.horizontal_fov
-    j0, j1 = model.cols, -1
-    for lo, hi in pieces:
-        k0, k1 = _interval(lo, hi, model.cols, h / 2, -h / model.cols)
-        k0, k1 = max(k0, 0), min(k1, model.cols - 1)
-        if k0 <= k1:
-            j0, j1 = min(j0, k0), max(j1, k1)
-    return j0, j1
-
-
-def simulate_range_image(scene, pose, model: LidarModel) -> NDArray[np.float32]:
-    """Ray cast a range image of `scene` from `pose`, one ray per pixel centre, exactly.
-
-    Each solid is first culled to the block of pixels its (conservative)
-    angular extent covers as seen from the sensor, and only those rays are
-    intersected with it; the result equals ``scene.ray_cast`` over every
-    pixel-centre direction (first hit, up to ``model.max_range``).
-
-    Parameters
-    ----------
-    scene : Scene
-        A scene of analytic solids (``scene.solids``, each with ``aabb`` and
-        ``intersect``), e.g. :func:`occgp.datasets.outdoor_scene` or a room;
-        any other object with ``ray_cast(origins, directions, max_range)``
-        is ray cast without culling.
-    pose : array-like of shape (4, 4) or tuple (origin, heading)
-        Sensor-to-world transform (rigid), or a level sensor at `origin`
-        (3,) turned by `heading` radians about +z.
-    model : LidarModel
-
-    Returns
-    -------
-    image : ndarray of shape (model.rows, model.cols), dtype float32
-        Ranges in metres, 0.0 where the ray hits nothing within
-        ``model.max_range`` (a sensor inside a solid sees range 0 too).
-
-    Raises
-    ------
-    TypeError
-        If `model` is not a LidarModel, `scene` can neither list solids nor
-        cast rays, or `pose` does not hold real numbers.
-    ValueError
-        If `pose` is not (4, 4) nor an (origin, heading) pair, not finite,
-        not rigid, or translated by more than 1e7 m.
-
-    Examples
-    --------
-    >>> from occgp.datasets import outdoor_scene
-    >>> from occgp.iln._range import LidarModel
-    >>> scene = outdoor_scene(0, size=40)
-    >>> image = simulate_range_image(scene, scene.trajectory(1)[0], LidarModel.carla(16, 64))
-    >>> image.shape, image.dtype, bool((image[-1] > 0).all())   # the ground all around
-    ((16, 64), dtype('float32'), True)
-    """
-    if not isinstance(model, LidarModel):
-        raise TypeError(f"model must be a LidarModel, got {type(model).__name__}")
-    pose = as_pose(pose)
-    rot, origin = pose[:3, :3], pose[:3, 3]
-    # np.dot: numpy's matmul is several times slower for (n, 3) x (3, 3)
-    dirs = np.dot(model.directions(), rot.T)  # (rows, cols, 3) in the world frame
-    solids = getattr(scene, "solids", None)
-    if solids is None or not all(hasattr(s, "aabb") and hasattr(s, "intersect") for s in solids):
-        if not callable(getattr(scene, "ray_cast", None)):
-            raise TypeError(f"scene must list analytic solids or have a ray_cast method, got "
-                            f"{type(scene).__name__}")
-        dist, hit = scene.ray_cast(origin, dirs.reshape(-1, 3), model.max_range)
-        image = np.where(hit, dist, 0.0).reshape(model.shape)
-        return image.astype(np.float32)
-    t = np.full(model.shape, np.inf)
-    low, high = model.vertical_fov
-    h = model.horizontal_fov
-    for solid in solids:
-        lo_w, hi_w = solid.aabb
-        corners = np.array(np.meshgrid(*zip(lo_w, hi_w), indexing="ij")).reshape(3, -1).T
-        local = (corners - origin) @ rot  # sensor frame
-        lo, hi = local.min(axis=0), local.max(axis=0)
-        if np.linalg.norm(np.clip(0.0, lo, hi)) > model.max_range:
-            continue
-        e_lo, e_hi, arc = _angular_box(lo, hi)
-        i0, i1 = _interval(e_lo, e_hi, model.rows, high, -(high - low) / model.rows)
-        if model.beam_elevations is not None:  # rows not uniform: test them all
-            i0, i1 = 0, model.rows - 1
-        i0, i1 = max(i0, 0), min(i1, model.rows - 1)
-        if i0 > i1:
-            continue
-        if arc is None:
-            cols = slice(0, model.cols)
-        else:
-            j0, j1 = _interval(arc[0], arc[1], model.cols, h / 2, -h / model.cols)
-            if model.full_circle:
-                if j1 - j0 + 1 >= model.cols:
-                    cols = slice(0, model.cols)
-                else:
-                    cols = np.arange(j0, j1 + 1) % model.cols
-            else:
-                j0, j1 = _cropped_columns(arc, model)
-                if j0 > j1:
-                    continue
-                cols = slice(j0, j1 + 1)
-        rows = slice(i0, i1 + 1)
-        block = dirs[rows, cols] if isinstance(cols, slice) else dirs[rows][:, cols]
-        hit = _intersect(solid, origin, block.reshape(-1, 3)).reshape(block.shape[:2])
-        if isinstance(cols, slice):
-            np.minimum(t[rows, cols], hit, out=t[rows, cols])
-        else:
-            t[rows, cols] = np.minimum(t[rows, cols], hit)
-    image = np.where(t <= model.max_range, t, 0.0)
-    return image.astype(np.float32)
-
-
-# --------------------------------------------------------------------------- #
 # shards
 # --------------------------------------------------------------------------- #
 def _pose_seed(seed, scene_seed):
     return int(np.random.SeedSequence([seed, scene_seed, 7177]).generate_state(1)[0])
 
 
+def _effects_seed(seed, scene_seed, image, size):
+    """The seed of the sensor effects of image `image` (0-based in its scene) at `size`."""
+    return np.random.SeedSequence([seed, scene_seed, image, size[0], size[1], 60013])
+
+
 @functools.lru_cache(maxsize=4)
-def _scene_and_poses(scene_seed, n_images, pose_seed, scene_size):
+def _scene_and_poses(scene_seed, n_images, pose_seed, scene_size, vegetation=False):
     from ..datasets import outdoor_scene  # noqa: PLC0415 - datasets imports nothing of iln
 
-    scene = outdoor_scene(scene_seed, size=scene_size)
+    if vegetation:
+        scene = outdoor_scene(scene_seed, size=scene_size, vegetation=True)
+    else:
+        scene = outdoor_scene(scene_seed, size=scene_size)
     return scene, scene.random_poses(n_images, seed=pose_seed)
 
 
-def _chunk_images(scene_seed, start, stop, n_images, seed, sizes, model, scene_size):
+def _size_models(model, sizes):
+    """The sensor of each size, and the rows of `model`'s table each holds (None: no table).
+
+    Without a per-beam table, each size is ``model.with_size``. With one, a size must have
+    the table's rows (the full sensor) or ``table rows / k`` rows for an integer k >= 2
+    (every k-th beam, :func:`~occgp.iln.kept_beams_model`)."""
+    if model.beam_elevations is None:
+        return [(model.with_size(*sz), None) for sz in sizes]
+    out = []
+    for rows, cols in sizes:
+        full = model.with_size(model.rows, cols)
+        if rows == model.rows:
+            out.append((full, list(range(rows))))
+        elif rows < model.rows and model.rows % rows == 0:
+            kept_model, kept = kept_beams_model(full, model.rows // rows)
+            out.append((kept_model, kept.tolist()))
+        else:
+            raise ValueError(f"sizes: {rows}x{cols} does not fit the model's {model.rows}-beam "
+                             f"table: use {model.rows} rows (every beam) or {model.rows} / k "
+                             f"rows for an integer k >= 2 (every k-th beam)")
+    return out
+
+
+def _chunk_images(scene_seed, start, stop, n_images, seed, sizes, models, scene_size,
+                  effects=None, vegetation=False):
     """Images ``start:stop`` of the `n_images` poses of one scene: (key -> (k, rows, cols)
-    float32, poses (k, 4, 4))."""
+    float32, poses (k, 4, 4)); each size's clean image gets its own draw of `effects`."""
     scene, poses = _scene_and_poses(scene_seed, n_images, _pose_seed(seed, scene_seed),
-                                    scene_size)
+                                    scene_size, vegetation)
     poses = poses[start:stop]
-    images = {_key(sz): np.stack([simulate_range_image(scene, p, model.with_size(*sz))
-                                  for p in poses]) for sz in sizes}
+    if effects is None:
+        images = {_key(sz): np.stack([simulate_range_image(scene, p, m) for p in poses])
+                  for sz, m in zip(sizes, models)}
+        return images, poses
+    albedo = np.append(_effects.solid_reflectivity(scene.labels, scene_seed), 0.0)
+    images = {}
+    for sz, m in zip(sizes, models):
+        out = []
+        for k, p in enumerate(poses):
+            clean, ids = simulate_range_image(scene, p, m, return_ids=True)
+            rng = np.random.default_rng(_effects_seed(seed, scene_seed, start + k, sz))
+            out.append(_effects.apply_sensor_effects(clean, m, effects, rng,
+                                                     reflectivity=albedo[ids]))
+        images[_key(sz)] = np.stack(out)
     return images, poses
 
 
-def _write_shard(path, images, seeds, poses, model):
+def _write_shard(path, images, seeds, poses, model, record=None):
     """Write one shard atomically (a temporary file renamed into place)."""
     tmp = path.with_name(path.name + ".tmp")
     payload = dict(images)
     payload.update(lidar=np.array(model.to_json()), seeds=np.asarray(seeds, dtype=np.int64),
                    poses=np.asarray(poses, dtype=np.float64), format=np.array(FORMAT),
                    version=np.array(VERSION, dtype=np.int64))
+    if record is not None:
+        payload["simulation"] = np.array(json.dumps(record, sort_keys=True))
     with open(tmp, "wb") as fh:
         np.savez_compressed(fh, **payload)
     os.replace(tmp, path)
@@ -329,7 +221,8 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
                  images_per_scene: int = 4, images_per_shard: int = 32, seed: int = 0,
                  model: LidarModel | None = None, scene_size: float = 80.0,
                  overwrite: bool = False, n_jobs: int | None = None,
-                 progress: bool | None = True) -> dict:
+                 progress: bool | None = True, effects: _effects.SensorEffects | None = None,
+                 vegetation: bool = False) -> dict:
     """Simulate range images in procedural outdoor scenes and write them as shards.
 
     For each scene (train seeds ``0 .. n_train - 1``, test seeds ``100000 +
@@ -343,6 +236,20 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
     format of the module docs. Each shard is written to a temporary file
     and renamed into place, so an interrupted run leaves no half-written
     shard. Nothing is downloaded.
+
+    The images are exact by default. With `effects` each size's clean
+    image of each pose gets its own draw of the sensor effects
+    (:func:`~occgp.iln.apply_sensor_effects`, with the reflectivity of the
+    solid hit, :func:`~occgp.iln.solid_reflectivity` seeded by the scene),
+    seeded by `seed`, the scene seed, the pose's index in its scene and the
+    size: the shards are the same whatever `n_jobs`. With `vegetation`
+    the scenes have vegetation clutter. A sensor with a per-beam table
+    (e.g. ``LidarModel.hdl64e(table=True)``) gives the full table's rows
+    for a size of its rows (64x1024) and every k-th beam for a size of
+    ``rows / k`` rows (16x1024: every 4th beam, the real-frame protocol of
+    :func:`~occgp.iln.kept_beams_model`), each at its beams' elevations.
+    Such a simulation (effects, vegetation or a table) is recorded in each
+    shard's ``simulation`` entry (:func:`load_shards` returns it).
 
     Parameters
     ----------
@@ -363,8 +270,8 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
         Seeds the poses; the scenes are fixed by their seeds.
     model : LidarModel, optional
         The sensor's fields of view and range (its rows and cols are
-        ignored); default :meth:`LidarModel.carla` (-15 to 15 degrees,
-        360 degrees, 80 m).
+        ignored, but for a per-beam table: see above); default
+        :meth:`LidarModel.carla` (-15 to 15 degrees, 360 degrees, 80 m).
     scene_size : float, default=80.0
         Side of each scene, metres (see :func:`occgp.datasets.outdoor_scene`).
     overwrite : bool, default=False
@@ -376,6 +283,12 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
         core). The shards are the same whatever `n_jobs`.
     progress : bool or None, default=True
         Show a progress bar (tqdm; None: only on a terminal).
+    effects : SensorEffects, optional
+        Sensor effects (range noise, dropped returns) applied to each image;
+        default None: exact images.
+    vegetation : bool, default=False
+        Scenes with vegetation clutter (``outdoor_scene(...,
+        vegetation=True)``).
 
     Returns
     -------
@@ -388,8 +301,8 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
         If an argument has a wrong type.
     ValueError
         If a count or size is out of range (a shard above 2 GiB included),
-        a size is repeated or unknown, or `folder` already holds shards and
-        `overwrite` is False.
+        a size is repeated or unknown or does not fit `model`'s per-beam
+        table, or `folder` already holds shards and `overwrite` is False.
     OSError
         If `folder` cannot be created or written.
 
@@ -419,6 +332,17 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
     model = LidarModel.carla() if model is None else model
     if not isinstance(model, LidarModel):
         raise TypeError(f"model must be a LidarModel or None, got {type(model).__name__}")
+    if effects is not None and not isinstance(effects, _effects.SensorEffects):
+        raise TypeError(f"effects must be a SensorEffects or None, got {type(effects).__name__}")
+    vegetation = check_bool(vegetation, "vegetation")
+    size_models = _size_models(model, sizes)
+    record = None
+    if effects is not None or vegetation or model.beam_elevations is not None:
+        record = {"effects": None if effects is None else effects.as_dict(),
+                  "vegetation": vegetation}
+        if model.beam_elevations is not None:
+            record["beams"] = {_key(sz)[1:]: beams
+                               for sz, (_, beams) in zip(sizes, size_models)}
     scene_size = check_real(scene_size, "scene_size", low=30.0, high=400.0, low_open=False,
                             high_open=False)
     per_image = 4 * sum(r * c for r, c in sizes)
@@ -453,7 +377,8 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
                     return
                 images = {k: np.concatenate(v) for k, v in buf_images.items()}
                 _write_shard(out / f"shard_{index:05d}.npz", images,
-                             np.concatenate(buf_seeds), np.concatenate(buf_poses), model)
+                             np.concatenate(buf_seeds), np.concatenate(buf_poses), model,
+                             record)
                 written[split] += len(np.concatenate(buf_seeds))
                 written["shards"] += 1
                 index += 1
@@ -464,8 +389,9 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
             tasks = [(scene_seed, a, min(a + _CHUNK, images_per_scene))
                      for scene_seed in scene_seeds for a in range(0, images_per_scene, _CHUNK)]
             results = Parallel(n_jobs=n_jobs, return_as="generator")(
-                delayed(_chunk_images)(scene_seed, a, b, images_per_scene, seed, sizes, model,
-                                       scene_size) for scene_seed, a, b in tasks)
+                delayed(_chunk_images)(scene_seed, a, b, images_per_scene, seed, sizes,
+                                       [m for m, _ in size_models], scene_size, effects, vegetation)
+                for scene_seed, a, b in tasks)
             for (images, poses), (scene_seed, _, _) in zip(results, tasks):  # results first
                 left, start = len(poses), 0
                 while left:
@@ -596,16 +522,74 @@ def _read_shard(path, sizes):
             arr = _read_member(zf, key, path,
                                _expect(key, lambda s, size=size: s == (n, *size), "<f4"))
             images[size] = arr
+        record = None
+        if "simulation" in members:
+            record = str(_read_member(zf, "simulation", path,
+                                      is_str("simulation", 1 << 16)).item())
     try:
         model = LidarModel.from_json(lidar, 1, 1)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{path}: not a valid occgp.iln shard: lidar: {exc}") from None
+    try:
+        record = _parse_record(record, _table_rows(lidar), sizes)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: not a valid occgp.iln shard: simulation: {exc}") from None
     limit = np.float32(model.max_range)
     for size, arr in images.items():
         if not (np.isfinite(arr).all() and (arr >= 0).all() and (arr <= limit).all()):
             raise ValueError(f"{path}: not a valid occgp.iln shard: {_key(size)[1:]} images "
                              f"must be finite ranges in [0, {model.max_range}]")
-    return images, seeds, poses, lidar, model
+    return images, seeds, poses, lidar, model, record
+
+
+def _table_rows(lidar):
+    """Beams of the per-beam table of the shard's ``lidar`` JSON (0: none)."""
+    return len(json.loads(lidar).get("beam_elevations") or ())
+
+
+def _parse_record(text, n_beams, sizes):
+    """The simulation record of a shard (its JSON `text`, or None) as a dict with
+    ``effects`` (SensorEffects or None), ``vegetation`` and ``beams`` (size key -> rows
+    of the table, or None)."""
+    if text is None:
+        return {**_PLAIN, "beams": None}
+    record = json.loads(text)
+    if not isinstance(record, dict) or set(record) - set(_RECORD_KEYS) or \
+            not {"effects", "vegetation"} <= set(record):
+        raise ValueError(f"must be a JSON object with the keys effects, vegetation and "
+                         f"optionally beams, got {text[:200]!r}")
+    effects = record["effects"]
+    effects = None if effects is None else _effects.SensorEffects.from_dict(effects)
+    if not isinstance(record["vegetation"], bool):
+        raise ValueError(f"vegetation must be true or false, got {record['vegetation']!r}")
+    beams = record.get("beams")
+    if beams is not None:
+        if not n_beams or not isinstance(beams, dict):
+            raise ValueError("beams must be an object of a sensor with a per-beam table")
+        for key, rows in beams.items():
+            if not (isinstance(rows, list) and rows and all(type(r) is int for r in rows)
+                    and rows == sorted(set(rows)) and 0 <= rows[0]
+                    and rows[-1] < n_beams):
+                raise ValueError(f"beams[{key!r}] must list increasing rows of the "
+                                 f"{n_beams}-beam table")
+        for size in sizes:
+            rows = beams.get(_key(size)[1:])
+            if rows is None or len(rows) != size[0]:
+                raise ValueError(f"beams must list the {size[0]} rows of the "
+                                 f"{_key(size)[1:]} images")
+    return {"effects": effects, "vegetation": record["vegetation"], "beams": beams}
+
+
+def _size_model(lidar, size, beams):
+    """The sensor of the images of `size` in shards of sensor JSON `lidar` and record
+    ``beams``."""
+    if beams is None:
+        return LidarModel.from_json(lidar, *size)
+    full = LidarModel.from_json(lidar, _table_rows(lidar), size[1])
+    rows = beams[_key(size)[1:]]
+    table = tuple(float(e) for e in full.elevations()[rows])
+    return LidarModel(len(rows), size[1], full.vertical_fov, full.horizontal_fov,
+                      full.max_range, table)
 
 
 def load_shards(folder, sizes, *, return_meta: bool = False):
@@ -629,8 +613,11 @@ def load_shards(folder, sizes, *, return_meta: bool = False):
         shard order; also indexed by ``"16x1024"``-style strings.
     meta : dict
         Only if `return_meta`: ``"seeds"`` int64 (n,), ``"poses"`` float64
-        (n, 4, 4), ``"model"`` the :class:`LidarModel` (rows and cols those
-        of the first size).
+        (n, 4, 4), ``"model"`` the :class:`LidarModel` of the first size,
+        ``"models"`` size -> LidarModel of each size (for a sensor with a
+        per-beam table, the beams each size holds, see
+        :func:`make_dataset`), ``"effects"`` the :class:`SensorEffects` of
+        the images (None: exact images) and ``"vegetation"`` (bool).
 
     Raises
     ------
@@ -638,8 +625,9 @@ def load_shards(folder, sizes, *, return_meta: bool = False):
         Naming the file, for a file that is not an occgp.iln shard (not a
         zip, a missing or wrongly typed or shaped entry, a foreign
         ``format``, another ``version``, ranges that are NaN, negative or
-        beyond the sensor's range), a shard lacking a requested size,
-        shards of different sensors; and for a folder without ``.npz``
+        beyond the sensor's range, a malformed ``simulation`` record), a
+        shard lacking a requested size, shards of different sensors or
+        simulations; and for a folder without ``.npz``
         files (naming its ``train`` / ``test`` subfolders if it has them),
         or bad `sizes`.
     OSError
@@ -669,14 +657,17 @@ def load_shards(folder, sizes, *, return_meta: bool = False):
         hint = f"; read {' or '.join(str(folder / s) for s in subs)}" if subs else ""
         raise ValueError(f"{folder}: no .npz shards in the folder{hint}")
     parts = {size: [] for size in sizes}
-    seeds, poses, lidar0, model0 = [], [], None, None
+    seeds, poses, lidar0, model0, record0 = [], [], None, None, None
     for path in files:
-        images, s, p, lidar, model = _read_shard(path, sizes)
+        images, s, p, lidar, model, record = _read_shard(path, sizes)
         if lidar0 is None:
-            lidar0, model0 = lidar, model
+            lidar0, model0, record0 = lidar, model, record
         elif model != model0:
             raise ValueError(f"{path}: its sensor {lidar} differs from that of {files[0]} "
                              f"({lidar0})")
+        elif record != record0:
+            raise ValueError(f"{path}: its simulation {record} differs from that of "
+                             f"{files[0]} ({record0})")
         for size in sizes:
             parts[size].append(images[size])
         seeds.append(s)
@@ -684,6 +675,8 @@ def load_shards(folder, sizes, *, return_meta: bool = False):
     out = ShardImages({size: np.concatenate(parts[size]) for size in sizes})
     if not return_meta:
         return out
+    models = {size: _size_model(lidar0, size, record0["beams"]) for size in sizes}
     meta = {"seeds": np.concatenate(seeds), "poses": np.concatenate(poses),
-            "model": model0.with_size(*sizes[0])}
+            "model": models[sizes[0]], "models": models, "effects": record0["effects"],
+            "vegetation": record0["vegetation"]}
     return out, meta
