@@ -102,6 +102,7 @@ def test_random_poses(scene):
     (lambda: outdoor_scene(0, size=np.nan), ValueError, r"size must lie in"),
     (lambda: outdoor_scene(0, size="80"), TypeError, r"size must be a real number"),
     (lambda: outdoor_scene(0, ground_margin=-1), ValueError, r"ground_margin must lie in"),
+    (lambda: outdoor_scene(0, vegetation="yes"), TypeError, r"vegetation must be a bool"),
     (lambda: outdoor_scene(0, size=40).trajectory(0), ValueError,
      r"n_poses must lie in \[1, 10000\], got 0"),
     (lambda: outdoor_scene(0, size=40).trajectory(3, height=0.0), ValueError,
@@ -123,3 +124,54 @@ def test_every_seed_of_the_first_hundreds_builds_a_scene():
     # in the random draw of its height (seeds 50, 113, 120, 154, 175, 198)
     for seed in (50, 113, 120, 154, 175, 198, *range(0, 300, 29)):
         assert len(outdoor_scene(seed).solids) > 50
+
+
+@pytest.fixture(scope="module")
+def green():
+    return outdoor_scene(seed=1, vegetation=True)
+
+
+def test_vegetation_adds_clutter_and_keeps_the_rest(scene, green):
+    kinds = list(green.labels)
+    for kind, least in (("hedge", 4), ("bush", 20), ("grass", 30)):
+        assert kinds.count(kind) >= least, kind
+    assert green.vegetation and not scene.vegetation
+    assert len(green.solids) <= 500
+    # each tree crown became several small ellipsoids
+    assert kinds.count("tree_crown") >= 5 * scene.labels.count("tree_crown")
+    # everything but the crowns is the same solid as without vegetation
+    plain = [(label, s) for s, label in zip(scene.solids, scene.labels) if label != "tree_crown"]
+    same = [(label, s) for s, label in zip(green.solids, green.labels)
+            if label not in ("tree_crown", "hedge", "bush", "grass")]
+    assert [label for label, _ in plain] == [label for label, _ in same]
+    assert all(np.array_equal(a.center, b.center) for (_, a), (_, b) in zip(plain, same))
+    # vegetation stands off the roads (and off the sidewalks but for hedges)
+    for s, label in zip(green.solids, green.labels):
+        if label in ("hedge", "bush", "grass"):
+            x, y = s.center[:2]
+            reach = 4.0 + (0.5 if label == "hedge" else 3.0)
+            assert abs(y) > reach or abs(x - green.cross_x) > reach
+            lo, hi = s.aabb
+            assert hi[2] < 2.5 and lo[2] > -1.0
+
+
+def test_vegetation_is_exact_and_seeded(green):
+    again = outdoor_scene(seed=1, vegetation=True)
+    assert again.labels == green.labels
+    assert all(np.array_equal(a.center, b.center) for a, b in zip(again.solids, green.solids))
+    for kind in ("bush", "hedge", "grass", "tree_crown"):
+        solid = green.solids[green.labels.index(kind)]
+        assert green.occupancy(solid.center[None])[0]          # exact occupancy
+        top, down = solid.center + [0.0, 0.0, 10.0], np.array([[0.0, 0.0, -1.0]])
+        d, hit = green.ray_cast(top, down)
+        # a ray straight down onto the solid stops on it, or on a solid above it
+        first = min(s.intersect(top[None], down)[0] for s in green.solids)
+        assert hit[0] and d[0] == pytest.approx(first)
+        assert d[0] <= solid.intersect(top[None], down)[0] < 10.0
+
+
+def test_vegetation_scene_poses_stay_clear(green):
+    poses = green.random_poses(40, seed=3)
+    origins = poses[:, :3, 3]
+    assert (green.signed_distance(origins) >= 0.5 - 1e-9).all()
+    assert (green.signed_distance(green.trajectory(15)[:, :3, 3]) > 0.3).all()

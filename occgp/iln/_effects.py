@@ -29,13 +29,24 @@ The defaults were matched to the real frames of ``shared/data/lidar_frames``
 read by :func:`occgp.iln.read_lidar_frame` (KITTI's HDL-64E, front 170
 degrees; an Ouster OS1-64 in RELLIS-3D), at 1024 columns:
 
-* no-return fraction of the rows that see the flat ground at 6 to 13 m
-  (KITTI's upper block below -7 degrees): about 2 %, and of those at 15 to
-  25 m: 6 to 9 %; the simulator gives none without effects;
-* range noise on flat ground, estimated from the second differences of the
-  ranges along a row (robust: ``1.4826 * MAD / sqrt(6)``): 0.65 cm
-  (KITTI) and 1.0 cm (OS1-64, over grass); the default 2 cm is the
-  HDL-64E's specified accuracy, an upper bound on both.
+* single missing returns on the flat ground (a pixel without a return
+  between ground returns at the range of the flat ground, within 3 pixels
+  on both sides): none up to 36 m (incidence 87.2 degrees) in the KITTI
+  frame; in the OS1-64 frame (sensor 1.26 m high) about 1 % at 5 to 6 m,
+  none from 6 to 20 m, 3 % at 28 m (87.4 degrees) and 26 % at 36 m (88
+  degrees): hence grazing dropouts only beyond 86 degrees, rising fast;
+* the no-return fraction of the rows that see the ground at 4 to 13 m:
+  0.5 to 2 % (KITTI's upper block, the OS1-64), which these defaults give
+  the simulated scenes (from none without effects), with the dark
+  surfaces (windows, dark cars) and the far falloff;
+* range noise on the flat ground, estimated from the second differences of
+  the ranges along a row (robust: ``1.4826 * MAD / sqrt(6)``): 0.65 cm
+  (KITTI) and 1.0 cm (OS1-64, over grass) at 1024 columns; the default 2
+  cm is the HDL-64E's specified accuracy, an upper bound on both.
+
+Most other missing returns of the real frames lie in gaps wider than 3
+pixels (sky, windows, dark cars) or at depth edges (mixed pixels), which
+these effects do not model beyond the dark surfaces.
 """
 
 from __future__ import annotations
@@ -55,7 +66,7 @@ __all__ = ["SensorEffects", "apply_sensor_effects", "solid_reflectivity", "REFLE
 #: :func:`occgp.datasets.outdoor_scene`) at a near-infrared LiDAR's wavelength:
 #: asphalt and glass are dark, vegetation and light facades bright.
 REFLECTIVITY = {
-    "ground": (0.08, 0.2), "curb": (0.25, 0.45), "hill": (0.2, 0.45),
+    "ground": (0.1, 0.25), "curb": (0.25, 0.45), "hill": (0.2, 0.45),
     "building": (0.1, 0.7), "wall": (0.2, 0.6),
     "pole": (0.15, 0.5), "pole_arm": (0.15, 0.5),
     "tree_trunk": (0.1, 0.3), "tree_crown": (0.35, 0.6),
@@ -78,19 +89,19 @@ class SensorEffects:
     ----------
     range_noise : float, default=0.02
         Standard deviation of the Gaussian range error, metres, in [0, 1].
-    grazing_dropout : float, default=0.3
+    grazing_dropout : float, default=0.8
         Probability of losing a return at an incidence angle of 90 degrees,
         in [0, 1].
-    grazing_angle : float, default=70.0
+    grazing_angle : float, default=86.0
         Incidence angle (degrees, in [0, 90)) where grazing dropouts start:
         the probability rises as ``grazing_dropout * s**2``, ``s = (angle -
         grazing_angle) / (90 - grazing_angle)`` clipped to [0, 1].
-    dark_dropout : float, default=0.5
+    dark_dropout : float, default=1.0
         Probability of losing a return of reflectivity 0 at ``max_range``,
         in [0, 1]: a return of reflectivity ``rho`` at range ``r`` is lost
         with probability ``dark_dropout * max(0, 1 - rho /
         dark_reflectivity) * r / max_range``.
-    dark_reflectivity : float, default=0.2
+    dark_reflectivity : float, default=0.15
         Reflectivity (in (0, 1]) at and above which a surface is not dark.
     range_dropout : float, default=0.5
         Probability of losing a return at ``max_range``, in [0, 1]: it rises
@@ -115,10 +126,10 @@ class SensorEffects:
     """
 
     range_noise: float = 0.02
-    grazing_dropout: float = 0.3
-    grazing_angle: float = 70.0
-    dark_dropout: float = 0.5
-    dark_reflectivity: float = 0.2
+    grazing_dropout: float = 0.8
+    grazing_angle: float = 86.0
+    dark_dropout: float = 1.0
+    dark_reflectivity: float = 0.15
     range_dropout: float = 0.5
     range_falloff: float = 0.75
 
