@@ -28,25 +28,22 @@ def _interval(lo, hi, n, start, step):
     return int(np.ceil(a - 1e-9)), int(np.floor(b + 1e-9))
 
 
-def _angular_box(lo, hi):
-    """Conservative elevation range and azimuth arc (degrees) of a sensor-frame AABB.
+def _angular_boxes(lo, hi):
+    """Conservative elevation ranges and azimuth arcs (degrees) of sensor-frame AABBs.
 
-    Returns (elev_lo, elev_hi, az_lo, az_hi) with az_hi - az_lo <= 360, or
-    None for the azimuth arc when the box surrounds the z axis.
+    `lo`, `hi`: (n, 3). Returns elev_lo, elev_hi, az_lo, az_hi (each (n,), az_hi - az_lo
+    <= 360) and `around` (n,), True where the box surrounds the z axis (no arc).
     """
-    dx = np.array([lo[0], hi[0]])
-    dy = np.array([lo[1], hi[1]])
-    near = np.hypot(np.clip(0.0, lo[0], hi[0]), np.clip(0.0, lo[1], hi[1]))
-    far = np.hypot(np.abs(dx).max(), np.abs(dy).max())
-    e_hi = np.degrees(np.arctan2(hi[2], near if hi[2] > 0 else far))
-    e_lo = np.degrees(np.arctan2(lo[2], far if lo[2] > 0 else near))
-    if lo[0] <= 0.0 <= hi[0] and lo[1] <= 0.0 <= hi[1]:
-        return e_lo, e_hi, None
-    cx, cy = (lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2
-    centre = np.degrees(np.arctan2(cy, cx))
-    corners = np.degrees(np.arctan2(np.repeat(dy, 2), np.tile(dx, 2)))
-    delta = (corners - centre + 180.0) % 360.0 - 180.0
-    return e_lo, e_hi, (centre + delta.min(), centre + delta.max())
+    x, y = np.stack([lo[:, 0], hi[:, 0]], 1), np.stack([lo[:, 1], hi[:, 1]], 1)
+    near = np.hypot(np.clip(0.0, lo[:, 0], hi[:, 0]), np.clip(0.0, lo[:, 1], hi[:, 1]))
+    far = np.hypot(np.abs(x).max(axis=1), np.abs(y).max(axis=1))
+    e_hi = np.degrees(np.arctan2(hi[:, 2], np.where(hi[:, 2] > 0, near, far)))
+    e_lo = np.degrees(np.arctan2(lo[:, 2], np.where(lo[:, 2] > 0, far, near)))
+    around = (lo[:, 0] <= 0.0) & (hi[:, 0] >= 0.0) & (lo[:, 1] <= 0.0) & (hi[:, 1] >= 0.0)
+    centre = np.degrees(np.arctan2((lo[:, 1] + hi[:, 1]) / 2, (lo[:, 0] + hi[:, 0]) / 2))
+    corners = np.degrees(np.arctan2(np.repeat(y, 2, axis=1), np.tile(x, 2)))
+    delta = (corners - centre[:, None] + 180.0) % 360.0 - 180.0
+    return e_lo, e_hi, centre + delta.min(axis=1), centre + delta.max(axis=1), around
 
 
 def _intersect(solid, origin, directions):
@@ -190,16 +187,23 @@ def simulate_range_image(scene, pose, model: LidarModel, *, return_ids: bool = F
     low, high = model.vertical_fov
     h = model.horizontal_fov
     boxes_lo, boxes_hi = _world_boxes(solids)
+    # a per-beam table, negated to increase with the row
+    table = None if model.beam_elevations is None else -np.asarray(model.beam_elevations)
+    corners = np.where(_HIGH[None], boxes_hi[:, None], boxes_lo[:, None])  # (n, 8, 3)
+    local = np.dot(corners - origin, rot)  # sensor frame
+    lo, hi = local.min(axis=1), local.max(axis=1)
+    in_range = np.linalg.norm(np.clip(0.0, lo, hi), axis=1) <= model.max_range
+    elev_lo, elev_hi, az_lo, az_hi, around = _angular_boxes(lo, hi)
     for index, solid in enumerate(solids):
-        corners = np.where(_HIGH, boxes_hi[index], boxes_lo[index])
-        local = (corners - origin) @ rot  # sensor frame
-        lo, hi = local.min(axis=0), local.max(axis=0)
-        if np.linalg.norm(np.clip(0.0, lo, hi)) > model.max_range:
+        if not in_range[index]:
             continue
-        e_lo, e_hi, arc = _angular_box(lo, hi)
-        i0, i1 = _interval(e_lo, e_hi, model.rows, high, -(high - low) / model.rows)
-        if model.beam_elevations is not None:  # rows not uniform: test them all
-            i0, i1 = 0, model.rows - 1
+        e_lo, e_hi = elev_lo[index], elev_hi[index]
+        arc = None if around[index] else (az_lo[index], az_hi[index])
+        if table is None:
+            i0, i1 = _interval(e_lo, e_hi, model.rows, high, -(high - low) / model.rows)
+        else:  # the rows whose beams' elevations lie in [e_lo, e_hi] (1e-9 degree margin)
+            i0 = int(np.searchsorted(table, -(e_hi + 1e-9), side="left"))
+            i1 = int(np.searchsorted(table, -(e_lo - 1e-9), side="right")) - 1
         i0, i1 = max(i0, 0), min(i1, model.rows - 1)
         if i0 > i1:
             continue
