@@ -25,7 +25,9 @@ The models and their training need PyTorch (the ``iln`` extra: ``pip install
 torch==2.13.0`` on CPU machines, then ``pip install 'occgp[iln]'``). Their names
 -- :func:`pretrained` (the shipped models), :func:`make`, :func:`register`,
 :func:`available_models`, :class:`ILN`, :class:`LIIF`, :class:`Bilinear`,
-:class:`InverseBilinear`, :class:`EdgeAwareInterpolation`, :func:`upsample_image`, :func:`train`,
+:class:`InverseBilinear`, :class:`EdgeAwareInterpolation`, :class:`CandidateSelector` (a learnt
+choice among analytic candidates, with :func:`hard_queries`, :func:`selector_labels`,
+:func:`tune_threshold` and :func:`tune_checkpoint`), :func:`upsample_image`, :func:`train`,
 :func:`train_from_yaml`, :func:`load_checkpoint` -- are imported from this
 package on first use, so that ``import occgp.iln`` works without torch and
 raises a clear ImportError only when a torch part is asked for.
@@ -49,7 +51,8 @@ _TORCH_NAMES = {
     "make": "models", "register": "models", "available_models": "models",
     "EDSRBaseline": "models", "ILN": "models", "LIIF": "models", "Bilinear": "models",
     "InverseBilinear": "models", "EdgeAwareInterpolation": "models",
-    "upsample_image": "models",
+    "CandidateSelector": "models", "hard_queries": "models", "selector_labels": "models",
+    "upsample_image": "models", "tune_threshold": "tuning", "tune_checkpoint": "tuning",
     "train": "training", "train_from_yaml": "training", "load_checkpoint": "training",
     "pretrained": "_weights",
 }

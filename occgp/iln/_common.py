@@ -16,6 +16,7 @@ from .._validation import as_numeric, check_int
 from ._range import LidarModel
 
 __all__ = ["MAX_OUTPUT_PIXELS", "MODEL_NAMES", "torch_models", "pretrained_model", "resolve",
+           "check_images",
            "resolve_models", "out_model", "predict_image", "as_size", "as_size_list", "as_lidar",
            "as_pose", "check_rows", "column_line", "DOC_SECTIONS"]
 
@@ -246,4 +247,38 @@ def as_pose(pose):
     if np.abs(out[:3, 3]).max() > 1e7:
         raise ValueError(f"pose translation must have coordinates of magnitude at most 1e7 m, "
                          f"got {out[:3, 3].tolist()}")
+    return out
+
+
+def check_images(test_images, sizes):
+    """Checked ``{(rows, cols): float32 array (n, rows, cols)}`` for each of `sizes`."""
+    if not isinstance(test_images, Mapping):
+        raise TypeError(f"test_images must be a dict of size -> images (n, rows, cols), e.g. "
+                        f"load_shards' result, got {type(test_images).__name__}")
+    by_size = {}
+    for key, value in test_images.items():
+        size = as_size(key, f"test_images key {key!r}")
+        if size in by_size:
+            raise ValueError(f"test_images holds size {size[0]}x{size[1]} twice")
+        by_size[size] = value
+    out, n = {}, None
+    for size in sizes:
+        if size not in by_size:
+            have = ", ".join(f"{r}x{c}" for r, c in by_size) or "none"
+            raise ValueError(f"test_images lacks size {size[0]}x{size[1]} (has {have})")
+        name = f"test_images[{size[0]}x{size[1]}]"
+        arr = as_numeric(by_size[size], name)
+        if arr.ndim != 3 or arr.shape[1:] != size or arr.shape[0] == 0:
+            raise ValueError(f"{name} must have shape (n_images, {size[0]}, {size[1]}) with "
+                             f"n_images >= 1, got {arr.shape}")
+        if n is not None and arr.shape[0] != n:
+            raise ValueError(f"test_images must hold as many images of every size, got {n} "
+                             f"and {arr.shape[0]} ({name})")
+        n = arr.shape[0]
+        arr = np.asarray(arr, dtype=np.float32)
+        if not np.isfinite(arr).all():
+            raise ValueError(f"{name} must be finite (0.0 marks no return)")
+        if (arr < 0).any():
+            raise ValueError(f"{name} must hold ranges >= 0 (0.0 marks no return)")
+        out[size] = arr
     return out

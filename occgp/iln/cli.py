@@ -12,6 +12,11 @@ Subcommands:
 ``occgp iln train CONFIG.yaml``
     Train a model from a YAML configuration (``occgp.iln.train``; needs
     PyTorch).
+``occgp iln tune-threshold CHECKPOINT FOLDER OUTPUT --skip N``
+    Choose a trained :class:`~occgp.iln.models.CandidateSelector`'s
+    confidence threshold on held-out training images (those after the first
+    N of FOLDER's train split) and write the checkpoint with it
+    (:func:`occgp.iln.tuning.tune_checkpoint`; needs PyTorch).
 
 :func:`main` takes the arguments after ``iln`` and returns the exit status:
 0 on success, 1 for a failed command (its message on stderr), 2 for bad
@@ -52,7 +57,7 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     Parameters
     ----------
     parser : argparse.ArgumentParser, optional
-        Parser to add the ``make-dataset`` and ``train`` subcommands to (as
+        Parser to add the ``make-dataset``, ``train`` and ``tune-threshold`` subcommands to (as
         ``args.iln_command``); default: a new parser with ``prog="occgp iln"``.
 
     Returns
@@ -102,6 +107,24 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     train = sub.add_parser("train", help="train a model from a YAML configuration (PyTorch)",
                            description="Train an occgp.iln model from a YAML configuration.")
     train.add_argument("config", metavar="CONFIG.yaml", help="the training configuration")
+    tune = sub.add_parser(
+        "tune-threshold", help="choose a selector's confidence threshold on held-out images",
+        description="Score a trained candidate selector at several confidence thresholds on "
+        "held-out training images (FOLDER's train split after the first --skip images), pick "
+        "the pair of best mean IoU at 64x1024 and 128x2048 among those whose range MAE stays "
+        "at most inverse bilinear's, and write the checkpoint with it.")
+    tune.add_argument("checkpoint", metavar="CHECKPOINT", help="model.pt of `occgp iln train`")
+    tune.add_argument("folder", metavar="FOLDER", help="the dataset folder")
+    tune.add_argument("output", metavar="OUTPUT", help="the checkpoint to write")
+    tune.add_argument("--skip", type=_positive_int, default=0, metavar="N",
+                      help="leave out the first N images (those trained on; default: 0)")
+    tune.add_argument("--max-images", type=_positive_int, default=None, metavar="N",
+                      help="use at most N images after the skipped ones")
+    tune.add_argument("--thresholds", type=float, nargs="+", default=None, metavar="T",
+                      help="the thresholds tried (default: 0.2 0.3 ... 0.7)")
+    tune.add_argument("--no-return-thresholds", type=float, nargs="+", default=None,
+                      metavar="T", help="the no-return thresholds tried "
+                      "(default: 0.8 0.9 0.95 1)")
     return parser
 
 
@@ -137,6 +160,19 @@ def run(args) -> int:
                                   else None, vegetation=getattr(args, "vegetation", False))
             print(f"wrote {counts['train']} train and {counts['test']} test images "
                   f"({counts['shards']} shards) to {args.folder}")
+        elif args.iln_command == "tune-threshold":
+            from .tuning import (  # noqa: PLC0415
+                DEFAULT_NO_RETURN_THRESHOLDS, DEFAULT_THRESHOLDS, tune_checkpoint,
+            )
+
+            record = tune_checkpoint(
+                args.checkpoint, args.folder, args.output, skip=args.skip,
+                max_images=args.max_images or None,
+                thresholds=args.thresholds or DEFAULT_THRESHOLDS,
+                no_return_thresholds=args.no_return_thresholds or DEFAULT_NO_RETURN_THRESHOLDS)
+            print(f"threshold {record['threshold']:g}, no-return threshold "
+                  f"{record['no_return_threshold']:g} (chosen on {record['images']} images) "
+                  f"written to {args.output}")
         else:
             from .training import train_from_yaml  # noqa: PLC0415 - needs torch
 

@@ -22,7 +22,8 @@ import numpy as np
 from .._docfill import fill_doc
 from .._validation import as_numeric, check_bool, check_real
 from ._common import (
-    DOC_SECTIONS, as_lidar, as_size, as_size_list, check_rows, column_line, out_model,
+    DOC_SECTIONS, as_lidar, as_size, as_size_list, check_images, check_rows, column_line,
+    out_model,
     predict_image, resolve, resolve_models,
 )
 from ._range import LidarModel, range_image_to_points
@@ -68,40 +69,6 @@ def _near_no_return(low, in_lidar, out_lidar):
             near |= empty[:, i, j]
     near |= ~inside
     return near.reshape(len(low), out_lidar.rows, out_lidar.cols)
-
-
-def _images(test_images, sizes):
-    """Checked ``{(rows, cols): float32 array (n, rows, cols)}`` for each of `sizes`."""
-    if not isinstance(test_images, Mapping):
-        raise TypeError(f"test_images must be a dict of size -> images (n, rows, cols), e.g. "
-                        f"load_shards' result, got {type(test_images).__name__}")
-    by_size = {}
-    for key, value in test_images.items():
-        size = as_size(key, f"test_images key {key!r}")
-        if size in by_size:
-            raise ValueError(f"test_images holds size {size[0]}x{size[1]} twice")
-        by_size[size] = value
-    out, n = {}, None
-    for size in sizes:
-        if size not in by_size:
-            have = ", ".join(f"{r}x{c}" for r, c in by_size) or "none"
-            raise ValueError(f"test_images lacks size {size[0]}x{size[1]} (has {have})")
-        name = f"test_images[{size[0]}x{size[1]}]"
-        arr = as_numeric(by_size[size], name)
-        if arr.ndim != 3 or arr.shape[1:] != size or arr.shape[0] == 0:
-            raise ValueError(f"{name} must have shape (n_images, {size[0]}, {size[1]}) with "
-                             f"n_images >= 1, got {arr.shape}")
-        if n is not None and arr.shape[0] != n:
-            raise ValueError(f"test_images must hold as many images of every size, got {n} "
-                             f"and {arr.shape[0]} ({name})")
-        n = arr.shape[0]
-        arr = np.asarray(arr, dtype=np.float32)
-        if not np.isfinite(arr).all():
-            raise ValueError(f"{name} must be finite (0.0 marks no return)")
-        if (arr < 0).any():
-            raise ValueError(f"{name} must hold ranges >= 0 (0.0 marks no return)")
-        out[size] = arr
-    return out
 
 
 @fill_doc(**DOC_SECTIONS)
@@ -211,7 +178,7 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
     regions = check_bool(regions, "regions")
     edge_threshold = check_real(edge_threshold, "edge_threshold", low=0.0)
     lidar = as_lidar(lidar)
-    images = _images(test_images, [in_size] + [s for s in out_sizes if s != in_size])
+    images = check_images(test_images, [in_size] + [s for s in out_sizes if s != in_size])
     in_lidar = lidar.with_size(*in_size)
     for size, arr in images.items():
         if arr.max() > lidar.max_range:

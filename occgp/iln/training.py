@@ -10,13 +10,16 @@
       folder: ~/.cache/occgp/iln   # shards (.npz), or a folder holding split/
       split: train
       input: 16x1024
-      target: 64x1024
+      target: 64x1024              # or a list, e.g. [64x1024, 128x2048]
       max_images: null             # use only the first N images
     train:
       epochs: 1
       batch_size: 4                # at most 4096
       queries_per_image: 16384     # at most 2**22
       lr: 1.0e-4
+      schedule: constant           # or cosine: lr * (1 + cos(pi * step / steps)) / 2
+      warmup: 0                    # steps of linear warm-up before the schedule
+      hard_fraction: 0.0           # share of the queries drawn at hard pixels (below)
       max_steps: null              # stop after this many steps in all
     output:
       dir: null                    # checkpoints here (last.pt, model.pt); null: none
@@ -24,10 +27,17 @@
     resume: null                   # a checkpoint (last.pt) to continue from
 
 Each step draws a batch of images (a seeded, per-epoch shuffle, split across processes by a
-``DistributedSampler``), samples ``queries_per_image`` random pixel centres of each target
-(high-resolution) image, converts them to the input image's pixel coordinates through the two
-LidarModels, and minimises the L1 loss between predicted and true normalised ranges over the
-queries whose target has a return (Adam). On the CPU a run is reproducible, and a run resumed from
+``DistributedSampler``), samples ``queries_per_image`` random pixel centres of each image's
+targets (high-resolution images of the same pose; with several target sizes the queries are
+split evenly between them, so that the model sees the vertical and horizontal offsets of every
+size), converts them to the input image's pixel coordinates through the LidarModels, and
+minimises the model's loss (:meth:`~occgp.iln.models.RangeModel.loss`: the L1 loss between
+predicted and true normalised ranges over the queries whose target has a return, or the
+cross-entropy of :class:`~occgp.iln.models.CandidateSelector`) with Adam. With
+``hard_fraction`` > 0 that share of the queries is drawn among the *hard* pixels, where the
+planar test of inverse bilinear interpolation fails or a neighbour has no return
+(:func:`sample_hard_queries`), the rest uniformly. The learning rate follows ``schedule`` after
+``warmup`` steps of linear warm-up. On the CPU a run is reproducible, and a run resumed from
 a checkpoint continues exactly as the uninterrupted run.
 
 Multi-process training uses ``torch.distributed`` when ``WORLD_SIZE`` > 1 is set (``torchrun``
@@ -61,8 +71,10 @@ from torch.utils.data import DistributedSampler
 from .._validation import check_int
 from ._range import angles_to_pixels, pixel_angles
 from .models import RangeModel, make
+from .models._base import masked_l1
 
-__all__ = ["train", "train_from_yaml", "load_checkpoint", "sample_queries", "masked_l1"]
+__all__ = ["train", "train_from_yaml", "load_checkpoint", "sample_queries", "sample_hard_queries",
+           "masked_l1", "SCHEDULES"]
 
 logger = logging.getLogger("occgp")
 logger.addHandler(logging.NullHandler())
@@ -72,6 +84,10 @@ CHECKPOINT_VERSION = 1
 _SHARD_FORMAT = "occgp.iln.shard"
 #: Upper bound of ``queries_per_image`` (memory of one step).
 MAX_QUERIES = 2**22
+#: The learning-rate schedules of ``config['train']['schedule']``.
+SCHEDULES = ("constant", "cosine")
+#: Pool of uniform draws per hard query wanted (``hard_fraction``).
+_HARD_POOL = 4
 
 DEFAULTS: dict[str, Any] = {
     "seed": 0,
@@ -81,7 +97,7 @@ DEFAULTS: dict[str, Any] = {
     "data": {"folder": None, "split": "train", "input": "16x1024", "target": "64x1024",
              "max_images": None},
     "train": {"epochs": 1, "batch_size": 4, "queries_per_image": 16384, "lr": 1e-4,
-              "max_steps": None},
+              "schedule": "constant", "warmup": 0, "hard_fraction": 0.0, "max_steps": None},
     "output": {"dir": None, "checkpoint_every": 0},
     "resume": None,
 }
@@ -132,6 +148,18 @@ def _size(value, name):
     raise ValueError(f"{name} must be a size like '64x1024' or [64, 1024], got {value!r}")
 
 
+def _targets(value) -> list:
+    """The target sizes: one size, or a non-empty list of distinct sizes."""
+    name = "config['data']['target']"
+    if isinstance(value, (list, tuple)) and value and not all(isinstance(v, numbers.Integral)
+                                                               for v in value):
+        sizes = [_size(v, f"{name}[{k}]") for k, v in enumerate(value)]
+        if len(set(sizes)) != len(sizes):
+            raise ValueError(f"{name} must not repeat a size, got {value!r}")
+        return sizes
+    return [_size(value, name)]
+
+
 def _device(value) -> torch.device:
     if value is None or value == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -162,8 +190,17 @@ def _check_config(cfg: dict) -> dict:
         "max_images": _int(d["max_images"], "config['data']['max_images']", 1, allow_none=True),
         "checkpoint_every": _int(o["checkpoint_every"], "config['output']['checkpoint_every']", 0),
         "input": _size(d["input"], "config['data']['input']"),
-        "target": _size(d["target"], "config['data']['target']"),
+        "targets": _targets(d["target"]),
+        "warmup": _int(t["warmup"], "config['train']['warmup']", 0, high=10**9),
     }
+    if t["schedule"] not in SCHEDULES:
+        raise ValueError(f"config['train']['schedule'] must be one of {list(SCHEDULES)}, got "
+                         f"{t['schedule']!r}")
+    out["schedule"] = t["schedule"]
+    frac = t["hard_fraction"]
+    if isinstance(frac, bool) or not isinstance(frac, numbers.Real) or not 0 <= frac <= 1:
+        raise ValueError(f"config['train']['hard_fraction'] must be a number in [0, 1], got {frac!r}")
+    out["hard_fraction"] = float(frac)
     lr = t["lr"]
     if isinstance(lr, bool) or not isinstance(lr, numbers.Real) or not (math.isfinite(lr) and lr > 0):
         raise ValueError(f"config['train']['lr'] must be a finite number > 0, got {lr!r}")
@@ -260,19 +297,19 @@ def _load_data(cfg: dict, chk: dict):
     d = cfg["data"]
     folder = Path(os.path.expanduser(str(d["folder"])))
     files = _shard_files(folder, d["split"])
-    keys = [f"r{s[0]}x{s[1]}" for s in (chk["input"], chk["target"])]
-    if keys[0] == keys[1]:
-        raise ValueError(f"config['data']['input'] and ['target'] must differ, both are {keys[0][1:]}")
+    keys = [f"r{s[0]}x{s[1]}" for s in (chk["input"], *chk["targets"])]
+    if keys[0] in keys[1:]:
+        raise ValueError(f"config['data']['input'] and ['target'] must differ, both hold {keys[0][1:]}")
     arrays, lidar = _read_shards(files, keys)
-    inputs, targets = arrays[keys[0]], arrays[keys[1]]
+    images = [arrays[k] for k in keys]
     if chk["max_images"] is not None:
-        inputs, targets = inputs[: chk["max_images"]], targets[: chk["max_images"]]
-    for name, a in (("input", inputs), ("target", targets)):
+        images = [a[: chk["max_images"]] for a in images]
+    for name, a in zip(("input",) + ("target",) * len(chk["targets"]), images):
         if len(a) == 0:
             raise ValueError(f"the shards in {str(folder)!r} hold no {name} images")
         if not np.isfinite(a).all() or (a < 0).any():
             raise ValueError(f"the {name} images of the shards in {str(folder)!r} must be finite and >= 0")
-    return inputs, targets, lidar
+    return images[0], images[1:], lidar
 
 
 def _query_table(in_model, out_model) -> torch.Tensor:
@@ -310,23 +347,65 @@ def sample_queries(targets: torch.Tensor, table: torch.Tensor, n: int, generator
     return queries, ranges
 
 
-def masked_l1(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Mean ``|pred - target|`` over the entries whose target has a return (target > 0).
+def sample_hard_queries(images: torch.Tensor, targets: torch.Tensor, table: torch.Tensor, n: int,
+                        hard_fraction: float, generator: torch.Generator, wrap: bool):
+    """Like :func:`sample_queries`, with a share of the queries drawn at hard pixels.
+
+    ``round(hard_fraction * n)`` queries of each image are the first hard ones of a pool of
+    uniform draws (``4 n`` of them; topped up with other pool draws where the pool holds
+    fewer), the rest uniform draws. A pixel is hard where the planar test of inverse bilinear
+    interpolation fails or a neighbour has no return
+    (:func:`occgp.iln.models.hard_queries`).
 
     Parameters
     ----------
-    pred : torch.Tensor
-        Predicted (normalised) ranges.
-    target : torch.Tensor
-        True ranges, same shape as `pred` (or broadcastable to it); 0 marks no return.
+    images : torch.Tensor of shape (batch, in_rows, in_cols)
+        The normalised input images.
+    targets : torch.Tensor of shape (batch, rows, cols)
+        Target images.
+    table : torch.Tensor of shape (rows * cols, 2)
+        Input-pixel coordinates (v, u) of each target pixel centre.
+    n : int
+        Queries per image.
+    hard_fraction : float
+        Share of hard queries, in [0, 1].
+    generator : torch.Generator
+        Source of the draws (on the CPU).
+    wrap : bool
+        Horizontal wrap-around of the input images.
 
     Returns
     -------
-    loss : torch.Tensor
-        0-d tensor of `pred`'s dtype; 0 when no target has a return.
+    queries : torch.Tensor of shape (batch, n, 2)
+    ranges : torch.Tensor of shape (batch, n)
     """
-    mask = (target > 0).to(pred.dtype)
-    return (torch.abs(pred - target) * mask).sum() / mask.sum().clamp_min(1.0)
+    from .models._candidates import candidates
+    from .models._selector import hard_queries
+
+    k = int(round(hard_fraction * n))
+    if k == 0:
+        return sample_queries(targets, table, n, generator)
+    b = targets.shape[0]
+    device = targets.device
+    pool = torch.randint(0, table.shape[0], (b, _HARD_POOL * k), generator=generator).to(device)
+    with torch.no_grad():
+        hard = hard_queries(*candidates(images, table.to(device)[pool], wrap))
+    order = torch.argsort((~hard).to(torch.int8), dim=1, stable=True)[:, :k]
+    idx = torch.gather(pool, 1, order)
+    if k < n:
+        rest = torch.randint(0, table.shape[0], (b, n - k), generator=generator).to(device)
+        idx = torch.cat([idx, rest], dim=1)
+    return table.to(device)[idx], torch.gather(targets.reshape(b, -1), 1, idx)
+
+
+def _lr_factor(step: int, total: int, warmup: int, schedule: str) -> float:
+    """The learning rate of `step` (0-based) as a share of the configured one."""
+    if step < warmup:
+        return (step + 1) / (warmup + 1)
+    if schedule == "cosine":
+        span = max(total - warmup, 1)
+        return 0.5 * (1.0 + math.cos(math.pi * min(step - warmup, span) / span))
+    return 1.0
 
 
 def _step_generator(seed: int, step: int, rank: int) -> torch.Generator:
@@ -455,17 +534,17 @@ def train(config: dict) -> dict:
         resume = load_checkpoint(cfg["resume"])
     inputs, targets, lidar = _load_data(cfg, chk)
     in_model = _lidar_model(lidar, chk["input"])
-    out_model = _lidar_model(lidar, chk["target"])
+    out_models = [_lidar_model(lidar, size) for size in chk["targets"]]
 
     rank, world, device, created = _setup_distributed(device)
     try:
-        return _run(cfg, chk, device, rank, world, resume, inputs, targets, in_model, out_model)
+        return _run(cfg, chk, device, rank, world, resume, inputs, targets, in_model, out_models)
     finally:
         if created:
             dist.destroy_process_group()
 
 
-def _run(cfg, chk, device, rank, world, resume, inputs, targets, in_model, out_model):
+def _run(cfg, chk, device, rank, world, resume, inputs, targets, in_model, out_models):
     seed = chk["seed"]
     torch.manual_seed(seed)
     if resume is not None:
@@ -492,8 +571,11 @@ def _run(cfg, chk, device, rank, world, resume, inputs, targets, in_model, out_m
         net = DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
 
     x_all = torch.from_numpy(inputs) / max_range
-    y_all = torch.from_numpy(targets) / max_range
-    table = _query_table(in_model, out_model)
+    y_all = [torch.from_numpy(t) / max_range for t in targets]
+    tables = [_query_table(in_model, m) for m in out_models]
+    # queries per image and target size: split evenly, the remainder to the first sizes
+    split = [chk["queries"] // len(tables) + (k < chk["queries"] % len(tables))
+             for k in range(len(tables))]
     sampler = DistributedSampler(range(len(x_all)), num_replicas=world, rank=rank, shuffle=True,
                                  seed=seed, drop_last=False)
     bs = chk["batch_size"]
@@ -547,9 +629,15 @@ def _run(cfg, chk, device, rank, world, resume, inputs, targets, in_model, out_m
                     break
                 idx = torch.tensor(order[s:s + bs])
                 x = x_all[idx].to(device)
-                y = y_all[idx].to(device)
-                q, t = sample_queries(y, table, chk["queries"], _step_generator(seed, step, rank))
-                loss = masked_l1(net(x, q), t)
+                gen = _step_generator(seed, step, rank)
+                drawn = [sample_hard_queries(x, y[idx].to(device), table, n, chk["hard_fraction"],
+                                             gen, model.wrap)
+                         for y, table, n in zip(y_all, tables, split) if n > 0]
+                q = torch.cat([d[0] for d in drawn], dim=1)
+                t = torch.cat([d[1] for d in drawn], dim=1)
+                for group in optimizer.param_groups:
+                    group["lr"] = chk["lr"] * _lr_factor(step, total, chk["warmup"], chk["schedule"])
+                loss = net(x, q, target=t)
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 optimizer.step()

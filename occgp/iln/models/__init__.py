@@ -26,6 +26,8 @@ from ._encoder import EDSRBaseline
 from ._iln import ILN, PRIOR_EPS, WEIGHT_PRIORS
 from ._image import upsample_image
 from ._liif import LIIF
+from ._candidates import CANDIDATES
+from ._selector import CandidateSelector, choose_candidates, hard_queries, selector_labels
 from ._registry import available_models, make, register
 
 __all__ = [
@@ -38,5 +40,10 @@ __all__ = [
     "Bilinear",
     "InverseBilinear",
     "EdgeAwareInterpolation",
+    "CandidateSelector",
+    "CANDIDATES",
+    "hard_queries",
+    "choose_candidates",
+    "selector_labels",
     "upsample_image",
 ]

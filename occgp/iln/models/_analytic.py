@@ -5,42 +5,14 @@ from __future__ import annotations
 import torch
 
 from ..._validation import check_bool, check_real
-from ._base import RangeModel, neighbourhood, query_doc, renormalise
+from ._base import RangeModel, neighbourhood, query_doc
+from ._candidates import inverse, inverse_weights, lines
 from ._registry import register
 
 __all__ = ["EdgeAwareInterpolation", "DEFAULT_TOLERANCE"]
 
 #: Relative agreement of a planar extension with inverse bilinear that keeps the latter.
 DEFAULT_TOLERANCE = 0.05
-
-
-def _inverse_weights(wb: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
-    """Inverse-range interpolation weights ``wb / r`` renormalised over the returns."""
-    valid = r > 0
-    return renormalise(torch.where(valid, wb / torch.where(valid, r, torch.ones_like(r)), 0.0))
-
-
-def _row_inverse(images, rows, j0, j1, b):
-    """Inverse range of input `rows` (B, N) at the queries' column, and whether it exists.
-
-    The value is ``((1 - b) / r_left + b / r_right)`` renormalised over the columns with a
-    return; it does not exist where the row lies outside the image or the horizontal weight
-    lies entirely on pixels without a return.
-    """
-    bsz, height, width = images.shape
-    inside = (rows >= 0) & (rows < height)
-    k = rows.clamp(0, height - 1)
-    flat = images.reshape(bsz, -1)
-    r_l = torch.gather(flat, 1, k * width + j0)
-    r_r = torch.gather(flat, 1, k * width + j1)
-    w_l = (1 - b) * (r_l > 0)
-    w_r = b * (r_r > 0)
-    total = w_l + w_r
-    ok = inside & (total > 1e-12)
-    inv_l = torch.where(r_l > 0, 1.0 / torch.where(r_l > 0, r_l, torch.ones_like(r_l)), 0.0)
-    inv_r = torch.where(r_r > 0, 1.0 / torch.where(r_r > 0, r_r, torch.ones_like(r_r)), 0.0)
-    value = (w_l * inv_l + w_r * inv_r) / torch.where(ok, total, torch.ones_like(total))
-    return torch.where(ok, value, torch.zeros_like(value)), ok
 
 
 @register("edge-aware")
@@ -135,30 +107,14 @@ class EdgeAwareInterpolation(RangeModel):
             neighbours; all 0 when the range is 0.
         """
         _, _, wb, r = neighbourhood(images, queries, wrap)
-        w_prior = _inverse_weights(wb, r)
+        w_prior = inverse_weights(wb, r)
         prior = (w_prior * r).sum(-1)
 
-        width = images.shape[-1]
-        v = queries[..., 0] - 0.5
-        u = queries[..., 1] - 0.5
-        i0f = torch.floor(v)
-        j0f = torch.floor(u)
-        t = v - i0f
-        b = u - j0f
-        i0 = i0f.long()
-        j0 = j0f.long()
-        if wrap:
-            j1 = (j0 + 1).remainder(width)
-            j0 = j0.remainder(width)
-        else:
-            j1 = (j0 + 1).clamp(0, width - 1)
-            j0 = j0.clamp(0, width - 1)
-        s = [_row_inverse(images, i0 + d, j0, j1, b) for d in (-1, 0, 1, 2)]
+        s, _, t, b, _ = lines(images, queries, wrap)
         (s_up2, ok_up2), (s_up, ok_up), (s_dn, ok_dn), (s_dn2, ok_dn2) = s
 
         has_prior = prior > 0
-        inv_prior = torch.where(has_prior, 1.0 / torch.where(has_prior, prior,
-                                                             torch.ones_like(prior)), 0.0)
+        inv_prior = inverse(prior)
         limit = self.tolerance * inv_prior
         ext_up = s_up + t * (s_up - s_up2)
         ext_dn = s_dn + (1 - t) * (s_dn - s_dn2)
@@ -172,7 +128,7 @@ class EdgeAwareInterpolation(RangeModel):
         zero = torch.zeros_like(b)
         w_rows = torch.stack([1 - b, b, zero, zero], dim=-1)
         w_rows = torch.where(upper, w_rows, w_rows.roll(2, dims=-1))
-        w_copy = _inverse_weights(w_rows, r)
+        w_copy = inverse_weights(w_rows, r)
         if not self.copy_no_returns:
             edge = edge & (w_copy.sum(-1) > 0)
         w = torch.where(edge.unsqueeze(-1), w_copy, w_prior)

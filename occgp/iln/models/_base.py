@@ -18,7 +18,7 @@ from ..._docfill import fill_doc
 from ..._validation import check_bool, check_int, check_real
 
 __all__ = ["MAX_RANGE", "DEFAULT_CHUNK", "as_tensor", "check_image", "check_queries",
-           "neighbourhood", "gather", "renormalise", "query_doc", "RangeModel"]
+           "neighbourhood", "gather", "renormalise", "masked_l1", "query_doc", "RangeModel"]
 
 #: Largest range accepted in an input image, in metres (larger values are bad input).
 MAX_RANGE = 1e6
@@ -176,6 +176,25 @@ def query_doc(features: str = _ENCODED_FEATURES) -> Callable:
     return fill_doc(query_sections=_QUERY_SECTIONS.format(features=features))
 
 
+def masked_l1(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean ``|pred - target|`` over the entries whose target has a return (target > 0).
+
+    Parameters
+    ----------
+    pred : torch.Tensor
+        Predicted (normalised) ranges.
+    target : torch.Tensor
+        True ranges, same shape as `pred` (or broadcastable to it); 0 marks no return.
+
+    Returns
+    -------
+    loss : torch.Tensor
+        0-d tensor of `pred`'s dtype; 0 when no target has a return.
+    """
+    mask = (target > 0).to(pred.dtype)
+    return (torch.abs(pred - target) * mask).sum() / mask.sum().clamp_min(1.0)
+
+
 def renormalise(w: torch.Tensor) -> torch.Tensor:
     """`w` (..., 4) divided by its sum over the last axis; all 0 where that sum is ~0."""
     total = w.sum(-1, keepdim=True)
@@ -241,10 +260,13 @@ class RangeModel(nn.Module):
     def query(self, features, images, queries, wrap):  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def forward(self, images: torch.Tensor, queries: torch.Tensor, wrap: bool | None = None) -> torch.Tensor:
-        """Normalised ranges at `queries` of normalised images (the training path).
+    def forward(self, images: torch.Tensor, queries: torch.Tensor, wrap: bool | None = None,
+                target: torch.Tensor | None = None) -> torch.Tensor:
+        """Normalised ranges at `queries` of normalised images, or the training loss.
 
-        No input checks; :meth:`predict` checks its input and un-normalises.
+        No input checks; :meth:`predict` checks its input and un-normalises. With `target`,
+        the training loss of :meth:`loss` (through ``forward``, so that
+        ``DistributedDataParallel`` synchronises its gradients).
 
         Parameters
         ----------
@@ -255,16 +277,42 @@ class RangeModel(nn.Module):
             ``0 <= v <= H``, ``0 <= u <= W``.
         wrap : bool, optional
             Horizontal wrap-around; default: the model's `wrap`.
+        target : torch.Tensor of shape (B, N), optional
+            True normalised ranges at the queries (0 for no return).
 
         Returns
         -------
         ranges : torch.Tensor of shape (B, N)
             Normalised ranges (metres / `max_range`), 0 for no return; not clamped
-            (the LIIF model may predict below 0).
+            (the LIIF model may predict below 0). The 0-d loss instead where `target` is given.
         """
         wrap = self.wrap if wrap is None else bool(wrap)
+        if target is not None:
+            return self.loss(images, queries, target, wrap)
         features = self.encode(images, wrap)
         return self.query(features, images, queries, wrap)[0]
+
+    def loss(self, images: torch.Tensor, queries: torch.Tensor, target: torch.Tensor,
+             wrap: bool) -> torch.Tensor:
+        """The training loss: :func:`masked_l1` of the predicted and true normalised ranges.
+
+        Parameters
+        ----------
+        images : torch.Tensor of shape (B, H, W)
+            Normalised range images.
+        queries : torch.Tensor of shape (B, N, 2)
+            ``(v, u)`` in the images' pixel units.
+        target : torch.Tensor of shape (B, N)
+            True normalised ranges at the queries (0 for no return).
+        wrap : bool
+            Horizontal wrap-around.
+
+        Returns
+        -------
+        loss : torch.Tensor
+            0-d.
+        """
+        return masked_l1(self.query(self.encode(images, wrap), images, queries, wrap)[0], target)
 
     def _device(self) -> torch.device:
         return self._probe.device

@@ -6,6 +6,7 @@ import torch
 
 from ..._docfill import fill_doc
 from ._base import RangeModel, neighbourhood, query_doc, renormalise
+from ._candidates import inverse_weights
 from ._registry import register
 
 __all__ = ["Bilinear", "InverseBilinear"]
@@ -74,5 +75,4 @@ class InverseBilinear(Bilinear):
 
     @staticmethod
     def _neighbour_weights(wb: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
-        valid = r > 0
-        return renormalise(torch.where(valid, wb / torch.where(valid, r, torch.ones_like(r)), 0.0))
+        return inverse_weights(wb, r)

@@ -10,13 +10,33 @@ import torch
 from .._range import angles_to_pixels, pixel_angles
 from ._base import DEFAULT_CHUNK, RangeModel, as_tensor, check_image
 
-__all__ = ["upsample_image"]
+__all__ = ["upsample_image", "image_queries"]
 
 
 def _check_lidar_model(m: Any, name: str) -> None:
     for attr in ("rows", "cols", "vertical_fov", "horizontal_fov"):
         if not hasattr(m, attr):
             raise TypeError(f"{name} must be a LidarModel (occgp.iln), got {type(m).__name__}")
+
+
+def image_queries(in_model, out_model):
+    """The queries of :func:`upsample_image`: `out_model`'s pixel centres in `in_model`'s pixels.
+
+    Returns
+    -------
+    queries : numpy.ndarray of float32, shape (n, 2)
+        ``(v, u)`` of the output pixels inside `in_model`'s field of view, in row-major order.
+    inside : numpy.ndarray of bool, shape (out_model.rows * out_model.cols,)
+        Which output pixels those are (the others get no return).
+    wrap : bool
+        Whether `in_model` covers 360 degrees.
+    """
+    elev, azim = pixel_angles(out_model)
+    v, u = angles_to_pixels(in_model, elev.ravel(), azim.ravel())
+    eps = 1e-4
+    inside = (v >= -eps) & (v <= in_model.rows + eps) & (u >= -eps) & (u <= in_model.cols + eps)
+    q = np.stack([np.clip(v, 0, in_model.rows), np.clip(u, 0, in_model.cols)], axis=-1)[inside]
+    return q.astype(np.float32), inside, float(in_model.horizontal_fov) >= 360.0
 
 
 def upsample_image(model: RangeModel, image, in_model, out_model, chunk: int = DEFAULT_CHUNK):
@@ -70,13 +90,8 @@ def upsample_image(model: RangeModel, image, in_model, out_model, chunk: int = D
             f"image must have shape ({in_model.rows}, {in_model.cols}) of in_model "
             f"(optionally with a leading batch axis), got {tuple(images.shape)}"
         )
-    elev, azim = pixel_angles(out_model)
-    v, u = angles_to_pixels(in_model, elev.ravel(), azim.ravel())
-    eps = 1e-4
-    inside = (v >= -eps) & (v <= in_model.rows + eps) & (u >= -eps) & (u <= in_model.cols + eps)
-    q = np.stack([np.clip(v, 0, in_model.rows), np.clip(u, 0, in_model.cols)], axis=-1)[inside]
-    wrap = float(in_model.horizontal_fov) >= 360.0
-    pred = model.predict(images, q.astype(np.float32), wrap=wrap, chunk=chunk)
+    q, inside, wrap = image_queries(in_model, out_model)
+    pred = model.predict(images, q, wrap=wrap, chunk=chunk)
     shape = tuple(images.shape[:-2]) + (out_model.rows * out_model.cols,)
     out = torch.zeros(shape, dtype=torch.float32, device=pred.device)
     out[..., torch.from_numpy(inside).to(pred.device)] = pred
