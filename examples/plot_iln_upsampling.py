@@ -13,8 +13,8 @@ which neighbour.
 
 This example simulates a 16 x 1024 scan in one of occgp's procedural street
 scenes (a held-out one: no model was trained on it), up-samples it to
-64 x 1024 with bilinear interpolation and with the ILN shipped with occgp
-(:func:`occgp.iln.pretrained`), compares both with the true 64-beam scan,
+64 x 1024 with bilinear interpolation and with the small ILN shipped with
+occgp (``occgp.iln.pretrained("iln")``), compares both with the true 64-beam scan,
 and maps each along a short drive with an :class:`occgp.OccupancyOctree`.
 """
 
@@ -56,7 +56,7 @@ print(f"16 x 1024 scan: {np.count_nonzero(image_16):,} returns; "
 # also gives the new range image. We score each against the truth: the range
 # error over the true returns, and the IoU of the points on a 0.1 m voxel
 # grid (the metrics of the dissertation's Table 4.1).
-iln = occgp.iln.pretrained()
+iln = occgp.iln.pretrained("iln")
 points_16 = range_image_to_points(image_16, sparse)
 results = {}
 for name, model in (("bilinear", "bilinear"), ("ILN", iln)):

@@ -36,6 +36,20 @@ def test_shipped_model_loads_and_up_samples_a_simulated_scan(name):
         assert (out[has] >= lo - 1e-4).all() and (out[has] <= hi + 1e-4).all()
 
 
+def test_the_default_shipped_model_is_the_tuned_selector():
+    from occgp.iln.training import load_checkpoint
+
+    model = iln.pretrained()
+    assert isinstance(model, iln.CandidateSelector)
+    ckpt = load_checkpoint(FOLDER / WEIGHTS["selector"])
+    tuning = ckpt["threshold_tuning"]
+    assert model.threshold == tuning["threshold"]
+    assert model.no_return_threshold == tuning["no_return_threshold"]
+    assert tuning["scene_seeds"][0] >= ckpt["config"]["data"]["max_images"] // 4
+    assert ckpt["train_seconds"] <= 30 * 60 and "cores" in ckpt["hardware"]
+
+
 def test_pretrained_rejects_an_unknown_name():
-    with pytest.raises(ValueError, match=r"name must be one of \['iln', 'liif'\], got 'edsr'"):
+    with pytest.raises(ValueError,
+                       match=r"name must be one of \['iln', 'liif', 'selector'\], got 'edsr'"):
         iln.pretrained("edsr")

@@ -259,11 +259,12 @@ def test_tune_threshold_picks_from_the_grid(street):
     expected = evaluate_one("inverse-bilinear", images)
     assert prior["iou"] == pytest.approx(expected["iou"], abs=1e-6)
     assert prior["mae"] == pytest.approx(expected["mae"], rel=1e-5)
-    # an untrained selector is the prior: every pair qualifies, the first of best IoU wins
+    # an untrained selector is the prior: no pair gains anything, the prior is returned
     t, n, rows = tune_threshold(CandidateSelector(), images, thresholds=[0.2, 0.5],
                                 no_return_thresholds=[0.9], out_sizes=["64x1024"],
                                 progress=False)
-    assert (t, n) == (0.2, 0.9)
+    assert (t, n) == (1.0, 1.0)
+    assert rows[0]["iou"] == rows[-1]["iou"] and rows[0]["mae"] == rows[-1]["mae"]
     with pytest.raises(TypeError, match="CandidateSelector"):
         tune_threshold(make({"name": "inverse-bilinear"}), images, out_sizes=["64x1024"])
     with pytest.raises(ValueError, match="thresholds"):

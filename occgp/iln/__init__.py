@@ -26,8 +26,9 @@ torch==2.13.0`` on CPU machines, then ``pip install 'occgp[iln]'``). Their names
 -- :func:`pretrained` (the shipped models), :func:`make`, :func:`register`,
 :func:`available_models`, :class:`ILN`, :class:`LIIF`, :class:`Bilinear`,
 :class:`InverseBilinear`, :class:`EdgeAwareInterpolation`, :class:`CandidateSelector` (a learnt
-choice among analytic candidates, with :func:`hard_queries`, :func:`selector_labels`,
-:func:`tune_threshold` and :func:`tune_checkpoint`), :func:`upsample_image`, :func:`train`,
+choice among the analytic candidates :data:`CANDIDATES`, with :func:`choose_candidates`,
+:func:`hard_queries`, :func:`selector_labels`, :func:`tune_threshold` and
+:func:`tune_checkpoint`), :func:`upsample_image`, :func:`image_queries`, :func:`train`,
 :func:`train_from_yaml`, :func:`load_checkpoint` -- are imported from this
 package on first use, so that ``import occgp.iln`` works without torch and
 raises a clear ImportError only when a torch part is asked for.
@@ -52,6 +53,7 @@ _TORCH_NAMES = {
     "EDSRBaseline": "models", "ILN": "models", "LIIF": "models", "Bilinear": "models",
     "InverseBilinear": "models", "EdgeAwareInterpolation": "models",
     "CandidateSelector": "models", "hard_queries": "models", "selector_labels": "models",
+    "choose_candidates": "models", "CANDIDATES": "models", "image_queries": "models",
     "upsample_image": "models", "tune_threshold": "tuning", "tune_checkpoint": "tuning",
     "train": "training", "train_from_yaml": "training", "load_checkpoint": "training",
     "pretrained": "_weights",

@@ -6,23 +6,30 @@ from pathlib import Path
 
 #: The shipped checkpoints, by model name; each is ``model.pt`` of an ``occgp iln train`` run
 #: (its spec and state_dict, its configuration, training seconds and hardware).
-WEIGHTS = {"iln": "iln_small.pt", "liif": "liif_small.pt"}
+WEIGHTS = {"selector": "selector.pt", "iln": "iln_small.pt", "liif": "liif_small.pt"}
 FOLDER = Path(__file__).resolve().parent / "weights"
 
 
-def pretrained(name: str = "iln", *, device="cpu"):
+def pretrained(name: str = "selector", *, device="cpu"):
     """A model trained by occgp's own command and shipped with the package.
 
-    ``iln`` is the small ILN of ``occgp/iln/configs/small.yaml`` and ``liif``
-    the LIIF-style baseline of ``small_liif.yaml``, trained with the same
-    budget (500 steps of 4 images x 16,384 queries) on 500 simulated
-    16x1024 -> 64x1024 range-image pairs (``occgp iln make-dataset``, train
-    seeds 0-124); ``occgp/iln/weights/README.md`` records the commands, the
-    seed, the training time and the hardware.
+    ``selector`` (the default, and the model ``"pretrained"`` names elsewhere
+    in :mod:`occgp.iln`) is the candidate selector of
+    ``occgp/iln/configs/selector.yaml``
+    (:class:`~occgp.iln.models.CandidateSelector`: inverse bilinear
+    interpolation, replaced by a copy or a planar extension of a neighbouring
+    row or column, or by no return, where a small network is confident),
+    trained on simulated 16x1024 inputs with 64x1024 and 128x2048 targets,
+    its thresholds chosen on held-out training scenes. ``iln`` is the small
+    ILN of ``occgp/iln/configs/small.yaml`` and ``liif`` the LIIF-style
+    baseline of ``small_liif.yaml``, trained with the same budget (500 steps
+    of 4 images x 16,384 queries) on 500 simulated 16x1024 -> 64x1024
+    range-image pairs. ``occgp/iln/weights/README.md`` records the commands,
+    the seeds, the training times and the hardware.
 
     Parameters
     ----------
-    name : {"iln", "liif"}, default="iln"
+    name : {"selector", "iln", "liif"}, default="selector"
         Which model.
     device : str or torch.device, default="cpu"
         Where to put it.

@@ -14,7 +14,7 @@ Subcommands:
     PyTorch).
 ``occgp iln tune-threshold CHECKPOINT FOLDER OUTPUT --skip N``
     Choose a trained :class:`~occgp.iln.models.CandidateSelector`'s
-    confidence threshold on held-out training images (those after the first
+    confidence thresholds on held-out training images (those after the first
     N of FOLDER's train split) and write the checkpoint with it
     (:func:`occgp.iln.tuning.tune_checkpoint`; needs PyTorch).
 
@@ -111,8 +111,8 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
         "tune-threshold", help="choose a selector's confidence threshold on held-out images",
         description="Score a trained candidate selector at several confidence thresholds on "
         "held-out training images (FOLDER's train split after the first --skip images), pick "
-        "the pair of best mean IoU at 64x1024 and 128x2048 among those whose range MAE stays "
-        "at most inverse bilinear's, and write the checkpoint with it.")
+        "the pair of largest relative gain over inverse bilinear in IoU and range MAE at "
+        "64x1024 and 128x2048, and write the checkpoint with it.")
     tune.add_argument("checkpoint", metavar="CHECKPOINT", help="model.pt of `occgp iln train`")
     tune.add_argument("folder", metavar="FOLDER", help="the dataset folder")
     tune.add_argument("output", metavar="OUTPUT", help="the checkpoint to write")
@@ -121,7 +121,7 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     tune.add_argument("--max-images", type=_positive_int, default=None, metavar="N",
                       help="use at most N images after the skipped ones")
     tune.add_argument("--thresholds", type=float, nargs="+", default=None, metavar="T",
-                      help="the thresholds tried (default: 0.2 0.3 ... 0.7)")
+                      help="the thresholds tried (default: 0.1 0.15 0.2 0.3 ... 0.7)")
     tune.add_argument("--no-return-thresholds", type=float, nargs="+", default=None,
                       metavar="T", help="the no-return thresholds tried "
                       "(default: 0.8 0.9 0.95 1)")

@@ -138,8 +138,8 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
     ----------
     models : dict of str to model, or list of str, optional
         Models that up-sample the sparse scans (see
-        :func:`occgp.iln.evaluate.evaluate`); default ``{"ILN":
-        "pretrained"}``. An empty dict maps only the sparse and true scans.
+        :func:`occgp.iln.evaluate.evaluate`); default ``{"selector":
+        "pretrained"}`` (the shipped candidate selector). An empty dict maps only the sparse and true scans.
     scene : Scene, optional
         Default ``outdoor_scene(TEST_SEED_OFFSET)``, a held-out test scene.
     poses : array-like of shape (n_scans, 4, 4), optional
@@ -205,7 +205,7 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
     from ..evaluation import evaluate_map
     from .data import simulate_range_image
 
-    models = {"ILN": "pretrained"} if models is None else models
+    models = {"selector": "pretrained"} if models is None else models
     n_scans = check_int(n_scans, "n_scans", low=1, high=1000)
     lidar = as_lidar(lidar)
     in_size = as_size(in_size, "in_size")

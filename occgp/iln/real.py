@@ -135,7 +135,7 @@ def real_frame_scores(models: Any, image: ArrayLike, lidar: LidarModel, *,
     ----------
     models : str, list or dict
         A model or several: ``"bilinear"``, ``"inverse-bilinear"``,
-        ``"pretrained"`` (the shipped ILN), any name of
+        ``"pretrained"`` (the shipped candidate selector), any name of
         :func:`occgp.iln.available_models` (built with its default arguments
         and `lidar`'s ``max_range``), a spec dict for :func:`occgp.iln.make`,
         or a model; a dict maps row labels to any of these.

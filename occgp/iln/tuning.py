@@ -24,7 +24,7 @@ from .metrics import range_mae, voxel_scores
 __all__ = ["tune_threshold", "tune_checkpoint", "DEFAULT_THRESHOLDS", "DEFAULT_NO_RETURN_THRESHOLDS"]
 
 #: The thresholds :func:`tune_threshold` tries by default.
-DEFAULT_THRESHOLDS = (0.2, 0.3, 0.4, 0.5, 0.6, 0.7)
+DEFAULT_THRESHOLDS = (0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7)
 #: The no-return thresholds :func:`tune_threshold` tries by default.
 DEFAULT_NO_RETURN_THRESHOLDS = (0.8, 0.9, 0.95, 1.0)
 
@@ -48,9 +48,11 @@ def tune_threshold(model: Any, images: Any, *, thresholds: Any = DEFAULT_THRESHO
 
     Every pair of `thresholds` x `no_return_thresholds` is scored on every image at every
     resolution of `out_sizes` (range MAE and 0.1 m voxel IoU, as :func:`evaluate`), and so is
-    the prior (inverse bilinear interpolation, the selector that never switches). The pair
-    chosen has the highest IoU averaged over the resolutions among the pairs whose MAE is at
-    most the prior's at every resolution; where no pair qualifies, ``(1.0, 1.0)``, the prior.
+    the prior (inverse bilinear interpolation, the selector that never switches). Among the
+    pairs whose MAE is at most the prior's at every resolution, the one chosen has the largest
+    gain over the prior in both scores, ``IoU / IoU_prior - MAE / MAE_prior`` averaged over
+    the resolutions (a relative IoU gain and a relative MAE drop weigh the same); where no
+    pair gains, ``(1.0, 1.0)``, the prior.
     The network runs once per image and resolution; each pair then chooses among the
     candidates' ranges (:meth:`CandidateSelector.candidate_table`).
 
@@ -151,15 +153,16 @@ def tune_threshold(model: Any, images: Any, *, thresholds: Any = DEFAULT_THRESHO
                          "resolution": f"{size[0]}x{size[1]}",
                          "iou": iou / count if count else float("nan"),
                          "mae": mae / count if count else float("nan")})
-    prior_mae = {r["resolution"]: r["mae"] for r in rows if r["no_return_threshold"] is None}
-    best, best_iou = (1.0, 1.0), -1.0
+    prior = {r["resolution"]: r for r in rows if r["no_return_threshold"] is None}
+    best, best_gain = (1.0, 1.0), 0.0
     for key in pairs:
         mine = [r for r in rows if (r["threshold"], r["no_return_threshold"]) == key]
-        if any(r["mae"] > prior_mae[r["resolution"]] for r in mine):
+        if any(r["mae"] > prior[r["resolution"]]["mae"] for r in mine):
             continue
-        iou = float(np.mean([r["iou"] for r in mine]))
-        if iou > best_iou:
-            best, best_iou = key, iou
+        gain = float(np.mean([r["iou"] / prior[r["resolution"]]["iou"]
+                              - r["mae"] / prior[r["resolution"]]["mae"] for r in mine]))
+        if gain > best_gain:
+            best, best_gain = key, gain
     return best[0], best[1], rows
 
 

@@ -2,7 +2,7 @@
 
 :func:`upsample` takes a scan as sensor-frame points or as a range image,
 up-samples its range image to any resolution of the same fields of view
-with a model (bilinear, the shipped ILN, or any model of
+with a model (bilinear, the shipped candidate selector, or any model of
 :mod:`occgp.iln.models`) and returns the new points in the sensor frame,
 ready for :meth:`occgp.OccupancyOctree.insert_scan` (after the sensor-to-world
 pose). :func:`upsample_range_image` returns the up-sampled image itself.
@@ -36,9 +36,9 @@ def resolve_model(model: Any, lidar: LidarModel | None = None, device: Any = Non
         training); ``"inverse-bilinear"``: bilinear interpolation of their
         inverse ranges (no training); ``"edge-aware"``: inverse bilinear that
         copies the nearer row across depth edges (no training,
-        :class:`~occgp.iln.models.EdgeAwareInterpolation`); ``"pretrained"``: the ILN
-        shipped with occgp
-        (``occgp.iln.pretrained()``); or a model of
+        :class:`~occgp.iln.models.EdgeAwareInterpolation`); ``"pretrained"``: the
+        candidate selector shipped with occgp (``occgp.iln.pretrained()``,
+        :class:`~occgp.iln.models.CandidateSelector`); or a model of
         :mod:`occgp.iln.models` (used as it is, on its own device).
     lidar : LidarModel, optional
         Its ``max_range`` normalises the bilinear model (no effect on the
@@ -177,7 +177,7 @@ def upsample(points_or_range_image: ArrayLike, *, rows: int = 64, cols: int = 10
         Size of the up-sampled range image, ``rows * cols <=
         MAX_OUTPUT_PIXELS``.
     model : {"bilinear", "inverse-bilinear", "edge-aware", "pretrained"} or RangeModel, default="bilinear"
-        ``"pretrained"`` is the shipped ILN (``occgp.iln.pretrained()``); see
+        ``"pretrained"`` is the shipped candidate selector (``occgp.iln.pretrained()``); see
         :func:`resolve_model`.
     lidar : LidarModel, optional
         The input scan's sensor. Default: ``LidarModel.carla()`` (16 x

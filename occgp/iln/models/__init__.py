@@ -24,7 +24,7 @@ from ._base import DEFAULT_CHUNK, MAX_RANGE, RangeModel
 from ._bilinear import Bilinear, InverseBilinear
 from ._encoder import EDSRBaseline
 from ._iln import ILN, PRIOR_EPS, WEIGHT_PRIORS
-from ._image import upsample_image
+from ._image import image_queries, upsample_image
 from ._liif import LIIF
 from ._candidates import CANDIDATES
 from ._selector import CandidateSelector, choose_candidates, hard_queries, selector_labels
@@ -46,4 +46,5 @@ __all__ = [
     "choose_candidates",
     "selector_labels",
     "upsample_image",
+    "image_queries",
 ]

@@ -20,9 +20,9 @@ __all__ = ["CandidateSelector", "N_FEATURES", "DEFAULT_THRESHOLD", "selector_lab
 #: Clip of the log ratios of the features (a factor e**4 = 55 in range).
 _CLIP = 4.0
 #: Features of a query: 16 pixel log ratios and 16 return flags of the 4 x 4 pixels, 8 candidate
-#: log ratios (up .. ext-right), 10 existence flags, t - 1/2, b - 1/2, the query's height in the
-#: image and the prior's log range.
-N_FEATURES = 16 + 16 + 8 + 10 + 4
+#: log ratios (up .. ext-right), 10 existence flags, t - 1/2, b - 1/2 and the prior's log range
+#: (nothing tied to a sensor's geometry, such as the row's height in the image).
+N_FEATURES = 16 + 16 + 8 + 10 + 3
 #: Default confidence a non-prior candidate needs to replace the prior.
 DEFAULT_THRESHOLD = 0.5
 #: Default confidence the no-return candidate needs (a wrong no-return costs the whole range).
@@ -41,7 +41,7 @@ def _log_ratio(x: torch.Tensor, ref: torch.Tensor) -> torch.Tensor:
     return torch.where(ok, torch.log(ratio).clamp(-_CLIP, _CLIP), torch.zeros_like(x))
 
 
-def _features(ranges, exists, px, queries, height):
+def _features(ranges, exists, px, queries):
     """(B, N, N_FEATURES) features of queries from their candidates and 4 x 4 pixels."""
     prior = ranges[..., PRIOR]
     ref = torch.where(prior > 0, prior, torch.ones_like(prior))  # max range without a prior
@@ -54,8 +54,7 @@ def _features(ranges, exists, px, queries, height):
     u = queries[..., 1] - 0.5
     t = v - torch.floor(v)
     b = u - torch.floor(u)
-    extra = torch.stack([t - 0.5, b - 0.5, queries[..., 0] / height - 0.5,
-                         torch.log(ref).clamp_min(-8.0) / 4.0], dim=-1)
+    extra = torch.stack([t - 0.5, b - 0.5, torch.log(ref).clamp_min(-8.0) / 4.0], dim=-1)
     return torch.cat([f_pix, (pix > 0).to(pix.dtype), f_cand, exists.to(pix.dtype), extra], -1)
 
 
@@ -106,8 +105,8 @@ class CandidateSelector(RangeModel):
     column, the planar extensions of ``1 / r`` from the two rows above, the two below, the two
     columns to the left or to the right, and no return. A multi-layer perceptron reads the
     query's 4 x 4 input pixels (log ratios of their ranges to the prior's, and which have a
-    return), the candidates' log ratios and existence, the query's fractional position and
-    height in the image and the prior's range, and gives a probability to each candidate
+    return), the candidates' log ratios and existence, the query's fractional position between
+    its neighbours and the prior's range, and gives a probability to each candidate
     (missing ones get 0). The query takes the most probable candidate other than the prior
     when its probability is at least `threshold` (`no_return_threshold` for no return) and
     above the prior's; else the prior.
@@ -191,7 +190,7 @@ class CandidateSelector(RangeModel):
         exists : torch.Tensor of bool, shape (B, N, 10)
         """
         ranges, exists, px = candidates(images, queries, wrap)
-        z = self.net(_features(ranges, exists, px, queries, images.shape[-2]))
+        z = self.net(_features(ranges, exists, px, queries))
         return z.masked_fill(~exists, torch.finfo(z.dtype).min), ranges, exists
 
     @query_doc(features="None\n    What :meth:`encode` returned (ignored).")
