@@ -381,3 +381,23 @@ def test_shipped_selector_config_is_valid():
     assert chk["targets"] == [(64, 1024), (128, 2048)] and chk["hard_fraction"] == 0.5
     assert chk["schedule"] == "cosine" and chk["max_images"] == 600
     assert isinstance(make(cfg["model"]), CandidateSelector)
+
+
+def test_max_farther_never_lengthens_the_prior():
+    img = np.zeros((4, 8), np.float32)
+    img[:2] = 10.0
+    img[2:] = 30.0
+    q = np.array([[2.25, 4.0], [1.8, 4.0]], np.float32)
+    prior = make({"name": "inverse-bilinear"}).predict(img, q)
+    far = _forcing("down")
+    assert far.predict(img, q).tolist() == [30.0, 30.0]
+    far.max_farther = 0.02
+    np.testing.assert_array_equal(far.predict(img, q), prior)  # the copy would lengthen it
+    near = _forcing("up")
+    near.max_farther = 0.02
+    assert near.predict(img, q).tolist() == [10.0, 10.0]       # shortening stays allowed
+    ranges, probs = far.candidate_table(img, q)
+    assert (probs[ranges > prior[:, None] * 1.02] == 0).all()
+    assert make(far.spec(), load_sd=True).max_farther == 0.02
+    with pytest.raises(ValueError, match="max_farther"):
+        CandidateSelector(max_farther=-1.0)

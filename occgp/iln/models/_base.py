@@ -18,7 +18,7 @@ from ..._docfill import fill_doc
 from ..._validation import check_bool, check_int, check_real
 
 __all__ = ["MAX_RANGE", "DEFAULT_CHUNK", "as_tensor", "check_image", "check_queries",
-           "neighbourhood", "gather", "renormalise", "masked_l1", "query_doc", "RangeModel"]
+           "neighbourhood", "gather", "renormalise", "masked_l1", "LOSS_PARAMS", "query_doc", "RangeModel"]
 
 #: Largest range accepted in an input image, in metres (larger values are bad input).
 MAX_RANGE = 1e6
@@ -171,6 +171,19 @@ wrap : bool, optional
     model's `wrap`."""
 
 
+#: The Parameters section of the training losses (``RangeModel.loss`` and its overrides).
+LOSS_PARAMS = """Parameters
+----------
+images : torch.Tensor of shape (B, H, W)
+    Normalised range images.
+queries : torch.Tensor of shape (B, N, 2)
+    ``(v, u)`` in the images' pixel units.
+target : torch.Tensor of shape (B, N)
+    True normalised ranges at the queries (0 for no return).
+wrap : bool
+    Horizontal wrap-around."""
+
+
 def query_doc(features: str = _ENCODED_FEATURES) -> Callable:
     """Decorator: fill the shared sections into a ``query`` docstring (``{query_sections}``)."""
     return fill_doc(query_sections=_QUERY_SECTIONS.format(features=features))
@@ -292,20 +305,12 @@ class RangeModel(nn.Module):
         features = self.encode(images, wrap)
         return self.query(features, images, queries, wrap)[0]
 
+    @fill_doc(loss_params=LOSS_PARAMS)
     def loss(self, images: torch.Tensor, queries: torch.Tensor, target: torch.Tensor,
              wrap: bool) -> torch.Tensor:
         """The training loss: :func:`masked_l1` of the predicted and true normalised ranges.
 
-        Parameters
-        ----------
-        images : torch.Tensor of shape (B, H, W)
-            Normalised range images.
-        queries : torch.Tensor of shape (B, N, 2)
-            ``(v, u)`` in the images' pixel units.
-        target : torch.Tensor of shape (B, N)
-            True normalised ranges at the queries (0 for no return).
-        wrap : bool
-            Horizontal wrap-around.
+        {loss_params}
 
         Returns
         -------

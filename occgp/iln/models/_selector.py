@@ -6,7 +6,8 @@ import torch
 from torch import nn
 
 from ..._validation import check_bool, check_int, check_real
-from ._base import RangeModel, neighbourhood, query_doc
+from ..._docfill import fill_doc
+from ._base import LOSS_PARAMS, RangeModel, neighbourhood, query_doc
 from ._candidates import (
     CANDIDATES, FIRST_EXTENSION, N_CANDIDATES, NO_RETURN, PRIOR, candidates, inverse,
     inverse_weights,
@@ -135,6 +136,13 @@ class CandidateSelector(RangeModel):
         Normalising range in metres.
     wrap : bool, default=True
         Horizontal wrap-around (360° sensors).
+    max_farther : float, optional
+        Never choose a candidate whose range exceeds the prior's by more than this fraction
+        (None: no limit). An occupancy map suffers most from ranges that are too long: the
+        ray then frees the cells of the surface it should have ended on. With 0.02 the
+        selector only ever shortens the prior's range (by a copy or an extension of the
+        nearer surface) or keeps it, which raises a map's AUC and lowers the range-image
+        scores (see the user guide). Prediction only; the training ignores it.
     tie : float, default=0.02
         Training only: the prior is the label of a query whose prior errs by at most `tie`
         metres more than the best candidate; >= 0.
@@ -148,11 +156,13 @@ class CandidateSelector(RangeModel):
     the row or column it extends (where its value comes from).
     """
 
-    arg_names = ("hidden", "threshold", "no_return_threshold", "max_range", "wrap", "tie")
+    arg_names = ("hidden", "threshold", "no_return_threshold", "max_farther", "max_range", "wrap",
+                 "tie")
 
     def __init__(self, hidden: int = 64, threshold: float = DEFAULT_THRESHOLD,
                  no_return_threshold: float = DEFAULT_NO_RETURN_THRESHOLD,
-                 max_range: float = 80.0, wrap: bool = True, tie: float = DEFAULT_TIE):
+                 max_farther: float | None = None, max_range: float = 80.0, wrap: bool = True,
+                 tie: float = DEFAULT_TIE):
         super().__init__(max_range, wrap)
         hidden = check_int(hidden, "hidden", low=1, high=4096, state_bounds=True)
         self.threshold = check_real(threshold, "threshold", low=0.0, high=1.0, low_open=False,
@@ -161,14 +171,21 @@ class CandidateSelector(RangeModel):
         self.no_return_threshold = check_real(
             no_return_threshold, "no_return_threshold", low=0.0, high=1.0, low_open=False,
             high_open=False, state_bounds=True)
-        self._spec_args = {"hidden": hidden, "threshold": self.threshold,
-                           "no_return_threshold": self.no_return_threshold,
-                           "max_range": self.max_range, "wrap": self.wrap, "tie": self.tie}
+        self.max_farther = None if max_farther is None else check_real(
+            max_farther, "max_farther", low=0.0, high=1e6, low_open=False, state_bounds=True)
+        self.hidden = hidden
         self.net = nn.Sequential(nn.Linear(N_FEATURES, hidden), nn.GELU(),
                                  nn.Linear(hidden, hidden), nn.GELU(),
                                  nn.Linear(hidden, N_CANDIDATES))
         nn.init.zeros_(self.net[-1].weight)
         nn.init.zeros_(self.net[-1].bias)
+
+    @property
+    def _spec_args(self):
+        # from the attributes, so that a threshold set after construction is in the spec
+        return {"hidden": self.hidden, "threshold": self.threshold,
+                "no_return_threshold": self.no_return_threshold, "max_farther": self.max_farther,
+                "max_range": self.max_range, "wrap": self.wrap, "tie": self.tie}
 
     def logits(self, images: torch.Tensor, queries: torch.Tensor, wrap: bool):
         """Candidate logits of queries (missing candidates at the dtype's minimum).
@@ -202,7 +219,7 @@ class CandidateSelector(RangeModel):
             class).
         """
         logits, ranges, exists = self.logits(images, queries, wrap)
-        choice = self.choose(logits)
+        choice = self.choose(self._limit(logits, ranges))
         w, r = _choice_weights(images, queries, wrap, choice)
         # a convex combination of the neighbours, in the arithmetic of InverseBilinear; the
         # extensions' own values
@@ -211,19 +228,11 @@ class CandidateSelector(RangeModel):
                            (w * r).sum(-1))
         return pred, w
 
+    @fill_doc(loss_params=LOSS_PARAMS)
     def loss(self, images, queries, target, wrap):
         """Cross-entropy of the candidate probabilities towards :func:`selector_labels`.
 
-        Parameters
-        ----------
-        images : torch.Tensor of shape (B, H, W)
-            Normalised range images.
-        queries : torch.Tensor of shape (B, N, 2)
-            ``(v, u)`` in the images' pixel units.
-        target : torch.Tensor of shape (B, N)
-            True normalised ranges at the queries (0 for no return).
-        wrap : bool
-            Horizontal wrap-around.
+        {loss_params}
 
         Returns
         -------
@@ -233,6 +242,14 @@ class CandidateSelector(RangeModel):
         logits, ranges, exists = self.logits(images, queries, wrap)
         labels = selector_labels(ranges, exists, target, self.tie / self.max_range)
         return nn.functional.cross_entropy(logits.flatten(0, -2), labels.flatten())
+
+    def _limit(self, logits, ranges):
+        """`logits` with the candidates farther than `max_farther` allows masked out."""
+        if self.max_farther is None:
+            return logits
+        far = ranges > ranges[..., PRIOR:PRIOR + 1] * (1.0 + self.max_farther)
+        far[..., PRIOR] = False
+        return logits.masked_fill(far, torch.finfo(logits.dtype).min)
 
     def choose(self, logits: torch.Tensor) -> torch.Tensor:
         """Index of the chosen candidate from logits (B, N, 10): (B, N) long.
@@ -267,7 +284,8 @@ class CandidateSelector(RangeModel):
             The candidates of :data:`~occgp.iln.models.CANDIDATES` in metres (0 for no return
             and for a candidate that does not exist).
         probabilities : numpy.ndarray of float32, shape (n_queries, 10)
-            The network's probabilities (0 for a candidate that does not exist).
+            The network's probabilities (0 for a candidate that does not exist or that
+            `max_farther` excludes).
 
         Raises
         ------
@@ -285,7 +303,7 @@ class CandidateSelector(RangeModel):
             logits, ranges, _ = self.logits(images.to(device) / self.max_range, q.to(device), wrap)
         finally:
             self.train(was_training)
-        p = torch.softmax(logits, dim=-1)
+        p = torch.softmax(self._limit(logits, ranges), dim=-1)
         return ((ranges[0] * self.max_range).cpu().numpy(), p[0].cpu().numpy())
 
 
