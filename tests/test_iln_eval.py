@@ -105,7 +105,7 @@ def test_pretrained_up_samples_with_the_shipped_model_and_says_when_it_is_missin
     np.testing.assert_array_equal(got, want)
     np.testing.assert_allclose(got[got > 0], 10.0, rtol=1e-6)   # convex: a flat wall stays
     monkeypatch.setattr(_weights, "FOLDER", tmp_path)
-    with pytest.raises(OSError, match="the shipped weights .*iln_small.pt are missing"):
+    with pytest.raises(OSError, match="the shipped weights .*selector.pt are missing"):
         upsample(image, model="pretrained")
 
 

@@ -22,6 +22,11 @@ def _check_lidar_model(m: Any, name: str) -> None:
 def image_queries(in_model, out_model):
     """The queries of :func:`upsample_image`: `out_model`'s pixel centres in `in_model`'s pixels.
 
+    Parameters
+    ----------
+    in_model, out_model : LidarModel
+        The sensor models of the input and of the output image.
+
     Returns
     -------
     queries : numpy.ndarray of float32, shape (n, 2)

@@ -61,11 +61,26 @@ def _features(ranges, exists, px, queries):
 
 def hard_queries(ranges: torch.Tensor, exists: torch.Tensor, px: torch.Tensor,
                  tolerance: float = PLANAR_TOLERANCE) -> torch.Tensor:
-    """Queries where the planar test fails or a neighbour has no return: (B, N) bool.
+    """Queries where the planar test fails or a neighbour has no return.
 
-    The planar test passes where the prior exists and a vertical extension (``ext-up`` or
-    ``ext-down``) lies within `tolerance` of it, relatively in ``1 / r`` (the edge test of
+    The planar test passes where the prior has a return and a vertical extension (``ext-up``
+    or ``ext-down``) lies within `tolerance` of it, relatively in ``1 / r`` (the edge test of
     :class:`EdgeAwareInterpolation`).
+
+    Parameters
+    ----------
+    ranges : torch.Tensor of shape (B, N, 10)
+        The candidates' normalised ranges (:func:`candidates`).
+    exists : torch.Tensor of bool, shape (B, N, 10)
+        Which candidates exist.
+    px : torch.Tensor of shape (B, N, 4, 4)
+        The 4 x 4 input pixels around each query (the inner 2 x 2 are its neighbours).
+    tolerance : float, default=0.05
+        Relative agreement in ``1 / r``.
+
+    Returns
+    -------
+    hard : torch.Tensor of bool, shape (B, N)
     """
     inv_prior = inverse(ranges[..., PRIOR])
     inv_ext = inverse(ranges[..., 5:7])
@@ -78,7 +93,7 @@ def hard_queries(ranges: torch.Tensor, exists: torch.Tensor, px: torch.Tensor,
 
 def selector_labels(ranges: torch.Tensor, exists: torch.Tensor, target: torch.Tensor,
                     tie: float) -> torch.Tensor:
-    """The best candidate of each query: (B, N) long, near-ties to the earlier candidate.
+    """The best candidate of each query, near-ties going to the earlier candidate.
 
     The error of a candidate is its absolute range error; a candidate with a return where the
     truth has none, and a no-return where the truth has one, err by 1 (the normalised maximum
@@ -86,6 +101,22 @@ def selector_labels(ranges: torch.Tensor, exists: torch.Tensor, target: torch.Te
     is within `tie` of the best: the prior whenever it is that close, else a copy before an
     extension (a copy is a convex combination of input pixels, an extension amplifies their
     noise).
+
+    Parameters
+    ----------
+    ranges : torch.Tensor of shape (B, N, 10)
+        The candidates' normalised ranges (:func:`candidates`).
+    exists : torch.Tensor of bool, shape (B, N, 10)
+        Which candidates exist (a missing one is never the label).
+    target : torch.Tensor of shape (B, N)
+        True normalised ranges (0 for no return).
+    tie : float
+        Margin in normalised range (metres / ``max_range``).
+
+    Returns
+    -------
+    labels : torch.Tensor of int64, shape (B, N)
+        Indices into :data:`CANDIDATES`.
     """
     truth = target[..., None]
     hit = truth > 0
