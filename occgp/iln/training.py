@@ -379,8 +379,8 @@ def sample_hard_queries(images: torch.Tensor, targets: torch.Tensor, table: torc
     queries : torch.Tensor of shape (batch, n, 2)
     ranges : torch.Tensor of shape (batch, n)
     """
+    from .models import hard_queries
     from .models._candidates import candidates
-    from .models._selector import hard_queries
 
     k = int(round(hard_fraction * n))
     if k == 0:

@@ -98,8 +98,7 @@ def tune_threshold(model: Any, images: Any, *, thresholds: Any = DEFAULT_THRESHO
     """
     from tqdm.auto import tqdm
 
-    from .models import CandidateSelector, choose_candidates
-    from .models._image import image_queries
+    from .models import CandidateSelector, choose_candidates, image_queries
 
     if not isinstance(model, CandidateSelector):
         raise TypeError(f"model must be a CandidateSelector, got {type(model).__name__}")

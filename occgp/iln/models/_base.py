@@ -18,7 +18,7 @@ from ..._docfill import fill_doc
 from ..._validation import check_bool, check_int, check_real
 
 __all__ = ["MAX_RANGE", "DEFAULT_CHUNK", "as_tensor", "check_image", "check_queries",
-           "neighbourhood", "gather", "renormalise", "masked_l1", "LOSS_PARAMS", "query_doc", "RangeModel"]
+           "query_frame", "neighbourhood", "gather", "renormalise", "masked_l1", "LOSS_PARAMS", "query_doc", "RangeModel"]
 
 #: Largest range accepted in an input image, in metres (larger values are bad input).
 MAX_RANGE = 1e6
@@ -82,6 +82,16 @@ def check_queries(queries: torch.Tensor, rows: int, cols: int, name: str = "quer
         )
 
 
+def query_frame(queries: torch.Tensor):
+    """Upper row ``i0``, left column ``j0`` (long, unclamped, unwrapped) and the fractions
+    ``t`` (towards the lower row) and ``b`` (towards the right column) of queries (..., 2)."""
+    v = queries[..., 0] - 0.5
+    u = queries[..., 1] - 0.5
+    i0 = torch.floor(v)
+    j0 = torch.floor(u)
+    return i0.long(), j0.long(), v - i0, u - j0
+
+
 def _neighbours(queries: torch.Tensor, rows: int, cols: int, wrap: bool):
     """The 4 input pixels around each query.
 
@@ -89,14 +99,7 @@ def _neighbours(queries: torch.Tensor, rows: int, cols: int, wrap: bool):
     (B, N, 4, 2), and the bilinear weights (B, N, 4). Token order: (top, left), (top, right),
     (bottom, left), (bottom, right).
     """
-    v = queries[..., 0] - 0.5
-    u = queries[..., 1] - 0.5
-    i0 = torch.floor(v)
-    j0 = torch.floor(u)
-    a = v - i0  # fraction towards the lower row
-    b = u - j0  # fraction towards the right column
-    i0 = i0.long()
-    j0 = j0.long()
+    i0, j0, a, b = query_frame(queries)
     ii = torch.stack([i0, i0, i0 + 1, i0 + 1], dim=-1).clamp_(0, rows - 1)
     jj = torch.stack([j0, j0 + 1, j0, j0 + 1], dim=-1)
     if wrap:

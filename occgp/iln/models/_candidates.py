@@ -34,10 +34,10 @@ from __future__ import annotations
 
 import torch
 
-from ._base import neighbourhood, renormalise
+from ._base import neighbourhood, query_frame, renormalise
 
 __all__ = ["CANDIDATES", "N_CANDIDATES", "PRIOR", "NO_RETURN", "FIRST_EXTENSION", "inverse", "line_inverse",
-           "query_frame", "lines", "candidates", "inverse_weights"]
+           "lines", "candidates", "inverse_weights"]
 
 #: Names of the candidates, in their order along the last axis of :func:`candidates`.
 CANDIDATES = ("prior", "up", "down", "left", "right", "ext-up", "ext-down", "ext-left",
@@ -68,18 +68,6 @@ def line_inverse(r_a: torch.Tensor, r_b: torch.Tensor, f: torch.Tensor):
     return torch.where(ok, value, torch.zeros_like(value)), ok
 
 
-def query_frame(queries: torch.Tensor, width: int, wrap: bool):
-    """Upper row ``i0``, left column ``j0``, fractions ``t`` and ``b`` of queries (B, N, 2).
-
-    ``j0`` is not wrapped (it may be -1 or `width` - 1 at the seam); :func:`_column` wraps.
-    """
-    v = queries[..., 0] - 0.5
-    u = queries[..., 1] - 0.5
-    i0f = torch.floor(v)
-    j0f = torch.floor(u)
-    return i0f.long(), j0f.long(), v - i0f, u - j0f
-
-
 def _column(j: torch.Tensor, width: int, wrap: bool) -> torch.Tensor:
     return j.remainder(width) if wrap else j.clamp(0, width - 1)
 
@@ -100,7 +88,7 @@ def lines(images: torch.Tensor, queries: torch.Tensor, wrap: bool):
         return and outside the image).
     """
     bsz, height, width = images.shape
-    i0, j0, t, b = query_frame(queries, width, wrap)
+    i0, j0, t, b = query_frame(queries)
     offsets = torch.arange(-1, 3, device=queries.device)
     rows = i0[..., None] + offsets  # (B, N, 4)
     cols = _column(j0[..., None] + offsets, width, wrap)

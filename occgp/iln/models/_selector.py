@@ -7,7 +7,7 @@ from torch import nn
 
 from ..._validation import check_bool, check_int, check_real
 from ..._docfill import fill_doc
-from ._base import LOSS_PARAMS, RangeModel, neighbourhood, query_doc
+from ._base import LOSS_PARAMS, RangeModel, neighbourhood, query_doc, query_frame
 from ._candidates import (
     CANDIDATES, FIRST_EXTENSION, N_CANDIDATES, NO_RETURN, PRIOR, candidates, inverse,
     inverse_weights,
@@ -51,10 +51,7 @@ def _features(ranges, exists, px, queries):
     # ratios of inverse ranges, i.e. ref / r: 0 for no return
     f_pix = _log_ratio(inverse(pix), inv_ref)
     f_cand = _log_ratio(inverse(ranges[..., 1:NO_RETURN]), inv_ref)
-    v = queries[..., 0] - 0.5
-    u = queries[..., 1] - 0.5
-    t = v - torch.floor(v)
-    b = u - torch.floor(u)
+    _, _, t, b = query_frame(queries)
     extra = torch.stack([t - 0.5, b - 0.5, torch.log(ref).clamp_min(-8.0) / 4.0], dim=-1)
     return torch.cat([f_pix, (pix > 0).to(pix.dtype), f_cand, exists.to(pix.dtype), extra], -1)
 
@@ -83,8 +80,9 @@ def hard_queries(ranges: torch.Tensor, exists: torch.Tensor, px: torch.Tensor,
     hard : torch.Tensor of bool, shape (B, N)
     """
     inv_prior = inverse(ranges[..., PRIOR])
-    inv_ext = inverse(ranges[..., 5:7])
-    agree = exists[..., 5:7] & ((inv_ext - inv_prior[..., None]).abs()
+    vertical = slice(FIRST_EXTENSION, FIRST_EXTENSION + 2)  # ext-up, ext-down
+    inv_ext = inverse(ranges[..., vertical])
+    agree = exists[..., vertical] & ((inv_ext - inv_prior[..., None]).abs()
                                 <= tolerance * inv_prior[..., None])
     planar = (inv_prior > 0) & agree.any(-1)
     missing = (px[..., 1:3, 1:3] <= 0).flatten(-2).any(-1)
@@ -374,10 +372,7 @@ _WEIGHT_SOURCE = {"ext-up": "up", "ext-down": "down", "ext-left": "left", "ext-r
 def _choice_weights(images, queries, wrap, choice):
     """(B, N, 4) weights of the chosen candidates over the 4 neighbours, and their ranges."""
     _, _, wb, r = neighbourhood(images, queries, wrap)
-    v = queries[..., 0] - 0.5
-    u = queries[..., 1] - 0.5
-    t = (v - torch.floor(v))
-    b = (u - torch.floor(u))
+    _, _, t, b = query_frame(queries)
     zero = torch.zeros_like(t)
     rows = {"up": torch.stack([1 - b, b, zero, zero], -1),
             "down": torch.stack([zero, zero, 1 - b, b], -1),
