@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 from sklearn.base import clone
-from threadpoolctl import threadpool_limits
 
 from ._beams import row_index
 from ._integral_kernel import covariance
+from ._limits import one_blas_thread
 from ._observations import Observations
 
-__all__ = ["Reach", "hit_origins", "fit_expert", "predict_expert", "predict_dense",
+__all__ = ["Reach", "QueryIndex", "hit_origins", "fit_expert", "predict_expert", "predict_dense",
            "split_observations", "hits_first", "concat_observations", "order_positions",
            "downdated"]
 
@@ -94,21 +94,56 @@ class Reach:
         return (self.lo - r) / self.inv, (self.hi + r) / self.inv
 
     def queries(self, X, eps):
-        """Indices of the queries `X` (world coordinates) within reach."""
-        Xs = X * self.inv
+        """Indices (ascending) of the queries within reach.
+
+        `X`: the queries in world coordinates, or a :class:`QueryIndex` of
+        them (faster when several experts look at the same queries).
+        """
+        index = X if isinstance(X, QueryIndex) else QueryIndex(X)
         r = self.radius(eps) + _SAMPLE_STEP / 2
-        cand = np.flatnonzero(np.all((Xs >= self.lo - r) & (Xs <= self.hi + r), axis=1))
+        lo, hi = self.lo - r, self.hi + r
+        # the world box, widened past rounding, picks a slice; the test in
+        # length-scale units then decides as if every query were tested
+        pad = 1e-9 * (1.0 + np.maximum(np.abs(lo), np.abs(hi)))
+        cand = index.in_box((lo - pad) / self.inv, (hi + pad) / self.inv)
+        Xs = index.X[cand] * self.inv
+        cand = cand[np.all((Xs >= lo) & (Xs <= hi), axis=1)]
         if not len(cand):
             return cand
-        d, _ = self.tree.query(Xs[cand], distance_upper_bound=r)
+        d, _ = self.tree.query(index.X[cand] * self.inv, distance_upper_bound=r)
         return cand[np.isfinite(d)]
+
+
+class QueryIndex:
+    """Queries sorted along their first axis, for the experts' box look-ups.
+
+    Parameters
+    ----------
+    X : ndarray of shape (n, D)
+        Queries, world coordinates.
+    """
+
+    def __init__(self, X):
+        self.X = X
+        self._order = np.argsort(X[:, 0], kind="stable")
+        self._first = X[self._order, 0]
+
+    def in_box(self, lo, hi):
+        """Indices (ascending) of the queries in the closed box ``[lo, hi]``."""
+        a = np.searchsorted(self._first, lo[0], side="left")
+        b = np.searchsorted(self._first, hi[0], side="right")
+        idx = self._order[a:b]
+        if self.X.shape[1] > 1 and len(idx):
+            rest = self.X[idx, 1:]
+            idx = idx[np.all((rest >= lo[1:]) & (rest <= hi[1:]), axis=1)]
+        return np.sort(idx)
 
 
 def fit_expert(template, obs, seed):
     """A clone of `template` fitted on `obs`, with one BLAS thread (the same in any worker)."""
     expert = clone(template).set_params(random_state=seed)
     n_hits = int(np.count_nonzero(obs.labels > 0))
-    with threadpool_limits(1):
+    with one_blas_thread():
         return expert.fit(obs.starts[:n_hits], obs.starts[n_hits:], obs.ends[n_hits:])
 
 
@@ -121,7 +156,7 @@ def predict_expert(expert, X):
     bookkeeping. BLAS
     runs on one thread, so the values do not depend on the joblib backend.
     """
-    with threadpool_limits(1):
+    with one_blas_thread():
         return predict_dense(expert, X)
 
 

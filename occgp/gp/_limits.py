@@ -15,12 +15,13 @@
 from __future__ import annotations
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from .._validation import check_n_jobs, n_threads
 
 __all__ = ["MAX_SCALED_COORDINATE", "MAX_SCALED_SEGMENT", "MAX_DENSE_BYTES",
            "MAX_RESTARTS", "check_coordinates", "check_segments", "check_dense", "threads",
-           "generator"]
+           "generator", "one_blas_thread"]
 
 MAX_SCALED_COORDINATE = 1e10
 MAX_SCALED_SEGMENT = 1e4
@@ -71,6 +72,22 @@ def check_dense(n_rows, n_cols, n_matrices, what, fix):
 def threads(n_jobs):
     """Threads for `n_jobs` (None: 1; -1: every core), at most the number of cores."""
     return n_threads(check_n_jobs(n_jobs))
+
+
+_CONTROLLER: list = []
+
+
+def one_blas_thread():
+    """Context manager limiting BLAS and OpenMP to one thread.
+
+    ``threadpoolctl.threadpool_limits(1)`` finds the loaded libraries anew on
+    every call (a few milliseconds, which adds up over hundreds of experts);
+    this reuses one controller, made on first use, when numpy's and scipy's
+    libraries are loaded.
+    """
+    if not _CONTROLLER:
+        _CONTROLLER.append(ThreadpoolController())
+    return _CONTROLLER[0].limit(limits=1)
 
 
 def generator(random_state, name="random_state"):

@@ -28,8 +28,9 @@ from ._beams import assign_beams, merge_small_clusters
 from ._cells import spatial_groups
 from ._clustering import DirichletProcessClustering
 from ._committee import COMBINE_RULES, Committee
-from ._experts import (Reach, concat_observations, downdated, fit_expert, hit_origins,
-                       hits_first, order_positions, predict_expert, split_observations)
+from ._experts import (QueryIndex, Reach, concat_observations, downdated, fit_expert,
+                       hit_origins, hits_first, order_positions, predict_expert,
+                       split_observations)
 from ._gpomik import GPOMIK
 from ._gpr import optimize_shared_hyperparameters
 from ._integral_kernel import check_quadrature
@@ -81,10 +82,11 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
        BCM and ``"gpoe"`` the generalised product of experts (see
        :func:`combine_predictions`). An expert is evaluated only at the
        queries where it may differ from its prior by more than
-       ``prior_tol / n_experts`` (in prior variances and standard deviations;
-       a bound from the distance to its observations); elsewhere it counts
-       as its prior, exactly known. Merged means and variances then differ
-       from evaluating every expert everywhere by about `prior_tol` at most.
+       ``prior_tol / m`` (in prior variances and standard deviations; a
+       bound from the distance to its observations), ``m`` the number of
+       experts whose reach overlaps its own; elsewhere it counts as its
+       prior, exactly known. Merged means and variances then differ from
+       evaluating every expert everywhere by about `prior_tol` at most.
     5. **PLSC** (``a``, ``b``) is fitted on the committee's leave-one-out
        predictions: at each hit, and at a random point of each beam, every
        expert predicts and the observation's own expert predicts without it
@@ -170,7 +172,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     a sequence of scans gives the model of ``fit`` on the first and
     ``update`` with each next. **Unknown space**: :meth:`occupancy` is NaN
     where no expert is evaluated, i.e. where every expert is within
-    ``prior_tol / n_experts`` of its prior (see 4. above): there the
+    ``prior_tol / m`` of its prior (see 4. above): there the
     committee merges priors only. :attr:`bounds` is the box of the experts'
     reach, :attr:`num_cells` the number of observations in the experts, and
     :meth:`to_octree` evaluates the model on 0.1 m cells by default.
@@ -386,15 +388,14 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         return hasattr(self, "experts_")
 
     def _known(self, X):
-        eps = float(self.prior_tol) / len(self.experts_)
         known = np.zeros(len(X), dtype=bool)
-        for reach in self._reaches():
-            known[reach.queries(X, eps)] = True
+        index = QueryIndex(X)
+        for reach, eps in zip(self._reaches(), self._tolerances()):
+            known[reach.queries(index, eps)] = True
         return known
 
     def _known_bounds(self):
-        eps = float(self.prior_tol) / len(self.experts_)
-        boxes = [reach.box(eps) for reach in self._reaches()]
+        boxes = [reach.box(eps) for reach, eps in zip(self._reaches(), self._tolerances())]
         return np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
 
     def _num_cells(self):
@@ -504,6 +505,26 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
                 self._reach[e] = Reach(gp)
         return self._reach
 
+    def _tolerances(self):
+        """How far from its prior each expert may be where it is skipped.
+
+        Expert ``e`` gets ``prior_tol / m_e``, with ``m_e`` the number of
+        experts (itself included) whose cutoff boxes (where they may differ
+        from their prior at all) overlap its own. At any query, the experts
+        not at their prior are some ``m`` experts whose boxes all hold the
+        query, so they overlap each other's, and each of them has
+        ``m_e >= m``: the skipped ones add up to at most `prior_tol`.
+        """
+        boxes = [reach.box(0.0) for reach in self._reaches()]
+        lo = np.array([b[0] for b in boxes])
+        hi = np.array([b[1] for b in boxes])
+        count = np.empty(len(boxes), dtype=np.int64)
+        for a in range(0, len(boxes), 256):
+            overlap = np.all((lo[a:a + 256, None] <= hi[None]) & (lo[None] <= hi[a:a + 256, None]),
+                             axis=2)
+            count[a:a + 256] = overlap.sum(axis=1)
+        return float(self.prior_tol) / count
+
     def _committee(self, X, skip=None):
         """The committee at `X` with every expert evaluated where it is within reach.
 
@@ -513,9 +534,9 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         priors = np.array([float(gp.kernel_.variance) for gp in self.experts_])
         committee = Committee(self.combine, priors, len(X))
         tasks = []
-        eps = float(self.prior_tol) / len(self.experts_)
-        for e, reach in enumerate(self._reaches()):
-            idx = reach.queries(X, eps)
+        index = QueryIndex(X)
+        for e, (reach, eps) in enumerate(zip(self._reaches(), self._tolerances())):
+            idx = reach.queries(index, eps)
             if skip is not None:
                 idx = idx[skip[idx] != e]
             if len(idx):
