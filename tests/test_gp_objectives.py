@@ -1,0 +1,74 @@
+"""The leave-one-out objective of the GP hyper-parameter fit (R&W §5.4.2)."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy.optimize import approx_fprime
+from scipy.stats import norm
+
+from occgp.gp import ClenshawCurtis, Matern32, SparseKernel, SquaredExponential, integral_kernel
+from occgp.gp._gpr import loo_log_predictive, optimize_hyperparameters
+
+KERNELS = {
+    "se": lambda d: SquaredExponential(1.3, 0.9),
+    "se-ard": lambda d: SquaredExponential(0.8, np.linspace(0.7, 1.4, d)),
+    "matern32": lambda d: Matern32(1.1, 1.2),
+    "sparse": lambda d: SparseKernel(1.0, 2.5),
+}
+
+
+def _data(dim, seed=0):
+    rng = np.random.default_rng(seed)
+    hits = rng.uniform(-1.0, 1.0, (5, dim))
+    starts = rng.uniform(-1.0, 1.0, (6, dim))
+    ends = starts + rng.normal(0.0, 0.8, (6, dim))
+    y = np.r_[np.ones(5), -np.linalg.norm(ends - starts, axis=1)]
+    return np.vstack([hits, starts]), np.vstack([hits, ends]), y
+
+
+@pytest.mark.parametrize("name", ["se", "se-ard", "matern32", "sparse"])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_loo_gradient(name, dim):
+    kernel = KERNELS[name](dim)
+    S, E, y = _data(dim)
+    theta = np.r_[kernel.theta, np.log(0.05)]
+    quadrature = ClenshawCurtis()
+
+    def value(t):
+        return loo_log_predictive(t, kernel, quadrature, S, E, y)[0]
+
+    v, grad = loo_log_predictive(theta, kernel, quadrature, S, E, y)
+    assert grad.shape == theta.shape
+    assert_allclose(grad, approx_fprime(theta, value, 1e-7), rtol=1e-4, atol=1e-5)
+
+
+def test_loo_value_is_the_sum_of_left_out_predictions():
+    """Against refitting the GP without each observation in turn."""
+    kernel = KERNELS["se-ard"](2)
+    S, E, y = _data(2, seed=3)
+    noise = 0.05
+    v, _ = loo_log_predictive(np.r_[kernel.theta, np.log(noise)], kernel, ClenshawCurtis(),
+                              S, E, y)
+    K = integral_kernel(kernel, S, E)
+    C = K + (noise + 1e-10 * np.mean(np.diag(K))) * np.eye(len(y))
+    total = 0.0
+    for i in range(len(y)):
+        rest = np.delete(np.arange(len(y)), i)
+        w = np.linalg.solve(C[np.ix_(rest, rest)], C[rest, i])
+        mean = w @ y[rest]
+        var = C[i, i] - w @ C[rest, i]
+        total += norm(mean, np.sqrt(var)).logpdf(y[i])
+    assert_allclose(v, total, rtol=1e-9)
+
+
+def test_loo_fit_raises_its_objective():
+    S, E, y = _data(2, seed=1)
+    kernel = SquaredExponential(1.0, 1.0)
+    start = loo_log_predictive(np.r_[kernel.theta, np.log(0.01)], kernel, ClenshawCurtis(),
+                               S, E, y)[0]
+    fitted, noise, value = optimize_hyperparameters(
+        kernel, 0.01, (1e-4, 1.0), S, E, y, ClenshawCurtis(), n_restarts=0, objective="loo")
+    assert value > start
+    again = loo_log_predictive(np.r_[fitted.theta, np.log(noise)], fitted, ClenshawCurtis(),
+                               S, E, y)[0]
+    assert_allclose(again, value, rtol=1e-10)
