@@ -55,6 +55,12 @@ _CLASSES = {c.__name__: c for c in (GPOMIK, LineTracking, DirichletProcessCluste
 @register("gp-mixture", dims=(2,), formats=(".npz",),
           description="Mixture of GPOMIK experts merged by a committee (2D)")
 @fill_doc()
+def _evaluate(e, expert, idx, X):
+    """Expert `e`'s latent mean and variance at its queries `X` (indices `idx`)."""
+    mean, var = predict_expert(expert, X)
+    return e, idx, mean, var
+
+
 class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     """Mixture of Gaussian-process experts merged by a committee (Kim & Kim).
 
@@ -533,17 +539,22 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         """
         priors = np.array([float(gp.kernel_.variance) for gp in self.experts_])
         committee = Committee(self.combine, priors, len(X))
-        tasks = []
         index = QueryIndex(X)
-        for e, (reach, eps) in enumerate(zip(self._reaches(), self._tolerances())):
-            idx = reach.queries(index, eps)
-            if skip is not None:
-                idx = idx[skip[idx] != e]
-            if len(idx):
-                tasks.append((e, idx))
-        results = self._parallel()(delayed(predict_expert)(self.experts_[e], X[idx])
-                                   for e, idx in tasks)
-        for (e, idx), (mean, var) in zip(tasks, results):
+        reaches, tolerances = self._reaches(), self._tolerances()
+
+        def tasks():  # made as the workers take them: a few queries' lists at a time
+            for e in range(len(reaches)):
+                idx = reaches[e].queries(index, tolerances[e])
+                if skip is not None:
+                    idx = idx[skip[idx] != e]
+                if len(idx):
+                    yield delayed(_evaluate)(e, self.experts_[e], idx, X[idx])
+
+        # results merge as they arrive, in the experts' order (the same sums for any
+        # backend), and are freed: memory stays a few experts' predictions
+        parallel = Parallel(n_jobs=check_n_jobs(self.n_jobs), prefer="threads",
+                            return_as="generator")
+        for e, idx, mean, var in parallel(tasks()):
             committee.add(idx, mean, var, priors[e])
         return committee, priors
 
