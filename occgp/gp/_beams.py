@@ -4,6 +4,9 @@ Hits are clustered first (:mod:`occgp.gp._clustering`); :func:`assign_beams`
 then gives each beam a cluster (its hit's, or that of the most similar
 returning beam under the line integral kernel) and :func:`merge_small_clusters`
 folds clusters that could not train a classifier into their nearest neighbour.
+:func:`match_beams` finds the hit of each beam, in either convention: beams
+ending at their hits (occgp's) or stopping short of them (the integral-kernel
+paper's).
 """
 
 from __future__ import annotations
@@ -13,13 +16,25 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 from scipy.special import erf, erfc
 
-from .._validation import as_numeric, as_points, check_int
+from .._validation import as_numeric, as_points, check_int, check_real
 from ._clustering import best_per_row, segment_distance
 from ._integral_kernel import check_kernel, check_quadrature, covariance, as_segments
 from ._kernels import SquaredExponential
 from ._limits import check_coordinates, check_segments, threads
+from ._observations import check_beam_hits
 
-__all__ = ["assign_beams", "merge_small_clusters"]
+__all__ = ["assign_beams", "merge_small_clusters", "match_beams", "no_return_error",
+           "HIT_TOLERANCE"]
+
+#: Default of how far (metres) beyond a beam's end its hit may lie
+#: (:func:`match_beams`): a beam that stops short of its return by up to one
+#: 0.1 m map cell still finds it. The hit must also lie on the beam's ray
+#: (up to rounding), so a wider window rarely matches a wrong hit.
+HIT_TOLERANCE = 0.1
+#: Relative rounding allowed in "the hit lies on the beam's ray": a distance
+#: off the ray (and a step back from the end) of at most
+#: ``_ON_RAY * (1 + |coordinates| + distance from the sensor)``.
+_ON_RAY = 1e-6
 
 #: Free beams per kernel evaluation (one ``covariance`` call against the union
 #: of their candidates); consecutive beams share most candidates.
@@ -59,6 +74,120 @@ def row_index(rows, table):
     return out
 
 
+def match_beams(hits: ArrayLike, segment_starts: ArrayLike, segment_ends: ArrayLike, *,
+                hit_tolerance: float = HIT_TOLERANCE,
+                beam_hits: ArrayLike | None = None) -> NDArray[np.int64]:
+    """The hit of each beam (its return), or -1 for a beam without one.
+
+    Two conventions are recognised, beam by beam:
+
+    * **exact** (occgp's, :func:`observations_from_scans` by default): the
+      beam ends exactly on its hit (row equality; of coinciding hits, the
+      first counts);
+    * **stopped short** (the integral-kernel paper's: the free segment ends
+      before the return, so that the hit's cell is not observed free): a
+      beam that ends on no hit takes the hit that lies on its ray, from the
+      start through the end, at most `hit_tolerance` beyond its end. "On the
+      ray" allows for rounding: a distance off the ray, or a step back from
+      the end, of at most ``1e-6 * (1 + |coordinates| + distance from the
+      start)``. Of several such hits the nearest along the ray counts, then
+      the lowest index. A hit that is exactly some beam's end is taken by
+      that beam and is no candidate here, so data in the exact convention
+      matches exactly as before; a zero-length beam (a return closer than
+      the margin) matches only exactly.
+
+    The search is vectorised: a k-d tree of the hits is queried around the
+    beams' ends.
+
+    Parameters
+    ----------
+    hits : array-like of shape (n_hits, D)
+        The hits, D in 1..3.
+    segment_starts, segment_ends : array-like of shape (n_beams, D)
+        The beams, from the sensor to (or short of) the return, or to the
+        maximum range.
+    hit_tolerance : float, default=0.1
+        Farthest (metres, >= 0) a hit may lie beyond the end of its beam;
+        0 matches only beams ending on their hits (up to rounding).
+    beam_hits : array-like of int of shape (n_beams,), default=None
+        The answer, given: each beam's hit index, or -1 for no return. It
+        replaces the search (and is returned, checked). Several beams may
+        name one hit.
+
+    Returns
+    -------
+    beam_hits : ndarray of shape (n_beams,), dtype int64
+        Index into `hits` of each beam's hit, -1 where it has none.
+
+    Raises
+    ------
+    ValueError
+        On NaN or inf, wrong shapes, a negative or infinite `hit_tolerance`,
+        or `beam_hits` of the wrong shape or with an entry outside
+        ``-1..n_hits-1``.
+    TypeError
+        On non-numeric data, a `hit_tolerance` that is not a real number, or
+        `beam_hits` that are not integers.
+
+    Examples
+    --------
+    Beam 0 ends on hit 1, beam 1 stops 5 cm short of hit 0, beam 2 has no
+    return:
+
+    >>> import numpy as np
+    >>> hits = np.array([[2.0, 0.0], [0.0, 2.0]])
+    >>> starts = np.zeros((3, 2))
+    >>> ends = np.array([[0.0, 2.0], [1.95, 0.0], [-3.0, 0.0]])
+    >>> match_beams(hits, starts, ends).tolist()
+    [1, 0, -1]
+    """
+    hit_tolerance = check_real(hit_tolerance, "hit_tolerance", low=0.0, low_open=False)
+    arr = as_numeric(hits, "hits")
+    if arr.ndim != 2 or not 1 <= arr.shape[1] <= 3:
+        raise ValueError(f"hits must have shape (n_hits, D) with D in 1..3, got {arr.shape}")
+    hits = as_points(arr, "hits", arr.shape[1])
+    starts, ends = as_segments(segment_starts, segment_ends, "segment", dim=hits.shape[1])
+    if beam_hits is not None:
+        return check_beam_hits(beam_hits, len(ends), len(hits))
+    return _match(hits, starts, ends, hit_tolerance)
+
+
+def _match(hits, starts, ends, tolerance):
+    """:func:`match_beams` on checked arrays, without `beam_hits`."""
+    out = row_index(ends, hits)
+    free = np.flatnonzero(out < 0)
+    taken = row_index(hits, ends) >= 0             # hits that end some beam exactly
+    if not len(free) or taken.all():
+        return out
+    spare = np.flatnonzero(~taken)
+    s, e = starts[free], ends[free]
+    delta = e - s
+    length = np.linalg.norm(delta, axis=1)
+    scale = 1.0 + np.maximum(np.abs(s).max(axis=1), np.abs(e).max(axis=1)) + length
+    slack = _ON_RAY * (scale + tolerance)
+    i, j = _pairs(cKDTree(hits[spare]), e, tolerance + 2.0 * slack)
+    keep = length[i] > 0
+    i, j = i[keep], j[keep]
+    u = delta[i] / length[i, None]
+    w = hits[spare[j]] - e[i]
+    t = np.einsum("ij,ij->i", w, u)                   # distance beyond the end, along the ray
+    off = np.linalg.norm(w - t[:, None] * u, axis=1)  # distance off the ray
+    keep = (off <= slack[i]) & (t >= -slack[i]) & (t <= tolerance + slack[i])
+    rows, picks, _ = best_per_row(i[keep], spare[j[keep]], t[keep])
+    out[free[rows]] = picks
+    return out
+
+
+def no_return_error(n_beams, hit_tolerance, given):
+    """The ValueError for `n_beams` beams of which none has a return (`given`: by beam_hits)."""
+    how = ("beam_hits names no hit" if given else
+           f"no beam ends on a hit or stops short of one by at most hit_tolerance="
+           f"{hit_tolerance:g} along its ray")
+    return ValueError(f"{n_beams} beams have no return ({how}) and no beam has one: a free "
+                      "beam takes the cluster of a returning beam, so give the beams that end "
+                      "at (or just short of) the hits, a larger hit_tolerance, or beam_hits")
+
+
 def _reach_table(kernel):
     """(s, f(s)): the kernel's profile on squared scaled distances up to its cutoff."""
     cutoff2 = float(type(kernel).cutoff2)
@@ -85,12 +214,16 @@ def _pairs(tree, centres, radii):
 
 def assign_beams(hit_labels: ArrayLike, hits: ArrayLike, segment_starts: ArrayLike,
                  segment_ends: ArrayLike, *, kernel=None, quadrature=None,
-                 n_jobs: int | None = None) -> NDArray[np.int64]:
+                 n_jobs: int | None = None, hit_tolerance: float = HIT_TOLERANCE,
+                 beam_hits: ArrayLike | None = None) -> NDArray[np.int64]:
     """Cluster of each beam, from the clusters of the hits (Kim & Kim, §3.1.1).
 
-    * A beam **with a return** is one whose end equals a hit exactly (row
-      equality; of coinciding hits, the first counts): it takes that hit's
-      label.
+    * A beam **with a return** takes its hit's label. Its hit is given by
+      `beam_hits`, or else found by :func:`match_beams`: the hit its end
+      equals exactly (occgp's convention, beams ending at their hits; of
+      coinciding hits, the first counts), or else the hit on its ray at most
+      `hit_tolerance` beyond its end (the integral-kernel paper's
+      convention, free segments stopping short of the return).
     * A beam **without a return** takes the label of the most similar
       returning beam, the similarity being the line–line integral kernel in
       the paper's form (Eq. 11, parameters ``u, v`` in [0, 1]): occgp's
@@ -125,7 +258,8 @@ def assign_beams(hit_labels: ArrayLike, hits: ArrayLike, segment_starts: ArrayLi
     hits : array-like of shape (n_hits, D)
         The hits, D in 1..3.
     segment_starts, segment_ends : array-like of shape (n_beams, D)
-        The beams, from the sensor to the return or to the maximum range.
+        The beams, from the sensor to the return (or short of it) or to the
+        maximum range.
     kernel : SquaredExponential, Matern32 or SparseKernel, default=None
         The point kernel whose integral measures similarity; None means
         ``SquaredExponential(1.0, 1.0)``.
@@ -135,6 +269,12 @@ def assign_beams(hit_labels: ArrayLike, hits: ArrayLike, segment_starts: ArrayLi
     n_jobs : int, default=None
         Threads of the kernel evaluation (None: 1; -1: every core); the
         result does not depend on it.
+    hit_tolerance : float, default=0.1
+        Farthest (metres) a hit may lie beyond the end of its beam, on its
+        ray (see :func:`match_beams`); 0: beams end at their hits.
+    beam_hits : array-like of int of shape (n_beams,), default=None
+        Each beam's hit index, or -1 for a beam without a return; replaces
+        the matching (`hit_tolerance` is then unused).
 
     Returns
     -------
@@ -145,11 +285,12 @@ def assign_beams(hit_labels: ArrayLike, hits: ArrayLike, segment_starts: ArrayLi
     ValueError
         On NaN or inf, wrong shapes or lengths, negative labels, data beyond
         the integral kernel's limits (coordinates past 1e10 length scales,
-        beams longer than 1e4 length scales), or beams without a return
-        when no beam has one.
+        beams longer than 1e4 length scales), a bad `hit_tolerance` or
+        `beam_hits` (shape, an entry outside ``-1..n_hits-1``), or beams
+        without a return when no beam has one.
     TypeError
-        On non-numeric data, non-integer labels, or a kernel or quadrature
-        of another kind.
+        On non-numeric data, non-integer labels or `beam_hits`, or a kernel
+        or quadrature of another kind.
 
     Examples
     --------
@@ -178,7 +319,11 @@ def assign_beams(hit_labels: ArrayLike, hits: ArrayLike, segment_starts: ArrayLi
     check_coordinates({"hits": hits, "segment_starts": starts, "segment_ends": ends}, inv,
                       fix="shift the data towards the origin or use a longer length scale")
     check_segments(starts, ends, inv)
-    hit_of = row_index(ends, hits)
+    hit_tolerance = check_real(hit_tolerance, "hit_tolerance", low=0.0, low_open=False)
+    if beam_hits is not None:
+        hit_of = check_beam_hits(beam_hits, len(ends), len(hits))
+    else:
+        hit_of = _match(hits, starts, ends, hit_tolerance)
     out = np.full(len(ends), -1, dtype=np.int64)
     out[hit_of >= 0] = labels[hit_of[hit_of >= 0]]
     free = np.flatnonzero(hit_of < 0)
@@ -186,9 +331,7 @@ def assign_beams(hit_labels: ArrayLike, hits: ArrayLike, segment_starts: ArrayLi
     if not len(free):
         return out
     if not len(ret):
-        raise ValueError(f"{len(free)} beams have no return (their ends equal no hit) and no "
-                         "beam has one: a free beam takes the cluster of a returning beam, so "
-                         "give the beams that end at the hits")
+        raise no_return_error(len(free), hit_tolerance, beam_hits is not None)
     best = _most_similar(kernel, quadrature, starts[free], ends[free], starts[ret], ends[ret],
                          n_threads)
     out[free] = out[ret[best]]

@@ -25,13 +25,20 @@ _DENSE_SIZE = 400
 _BLOCK = 4096
 
 
-def hit_origins(hits, segment_starts, segment_ends):
-    """The sensor position of each hit: the start of the first beam ending exactly on it.
+def hit_origins(hits, segment_starts, segment_ends, beam_hits=None):
+    """The sensor position of each hit: the start of its beam.
 
-    A hit that ends no beam is its own origin (a scan of one hit).
+    Its beam is the first whose `beam_hits` entry (:func:`match_beams`: the
+    hit of each beam, -1 for none) names it; without one (or without
+    `beam_hits`), the first beam ending exactly on it. A hit with no beam is
+    its own origin (a scan of one hit).
     """
     origins = hits.copy()
     beam = row_index(hits, segment_ends)
+    if beam_hits is not None:
+        named = np.flatnonzero(beam_hits >= 0)
+        hit, first = np.unique(beam_hits[named], return_index=True)   # first beam per hit
+        beam[hit] = named[first]
     origins[beam >= 0] = segment_starts[beam[beam >= 0]]
     return origins
 

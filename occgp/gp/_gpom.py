@@ -31,6 +31,7 @@ from ._io import check_gp_fitted, fitted_scalars, gp_fitted, read_gp, set_fitted
 from ._kernels import SquaredExponential, check_bounds
 from ._limits import MAX_DENSE_BYTES, MAX_RESTARTS, check_coordinates, check_dense, threads
 from ._map_protocol import MapProtocol
+from ._observations import check_beam_hits
 from ._plsc import PLSCProba, fit_plsc, loo_predictions
 
 __all__ = ["GPOM"]
@@ -236,7 +237,8 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
                             f"{self.random_state!r}") from None
         return copy.deepcopy(kernel)
 
-    def fit(self, hits: ArrayLike, segment_starts: ArrayLike, segment_ends: ArrayLike):
+    def fit(self, hits: ArrayLike, segment_starts: ArrayLike, segment_ends: ArrayLike, *,
+            beam_hits: ArrayLike | None = None):
         """Fit the map to laser returns and beams.
 
         Parameters
@@ -245,7 +247,15 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
             Laser returns (occupied points); D is 1, 2 or 3.
         segment_starts, segment_ends : array-like of shape (n_segments, D)
             Each beam's sensor origin and end; they are discretised into free
-            points (see `free_step`).
+            points (see `free_step`). A returning beam may end at its hit
+            (occgp's convention) or stop short of it (the integral-kernel
+            paper's): the free points then stop short too, and the maps
+            differ slightly near the hits.
+        beam_hits : array-like of int of shape (n_segments,), default=None
+            Each beam's hit (an index into `hits`), or -1 for a beam without
+            a return, as :meth:`GPMixture.fit <occgp.gp.GPMixture.fit>`
+            takes it. Checked, otherwise unused: this map needs no link
+            between a beam and its hit.
 
         Returns
         -------
@@ -256,13 +266,16 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
         ------
         ValueError
             If a parameter or an input has a bad value or shape, if the inputs
-            disagree in dimension, if there are no hits or no free points, or
-            if the data is beyond the limits (see the class docstring).
+            disagree in dimension, if there are no hits or no free points,
+            if the data is beyond the limits (see the class docstring), or if
+            `beam_hits` has the wrong shape or an entry outside
+            ``-1..n_hits-1``.
         numpy.linalg.LinAlgError
             (a ValueError) If the covariance of the optimisation subset
             cannot be factorised (the message says what to change).
         TypeError
-            If a parameter or an input has a bad type.
+            If a parameter or an input has a bad type (`beam_hits` not
+            integers).
         """
         kernel = self._check_params()
         hits = as_numeric(hits, "hits")
@@ -271,6 +284,8 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
             raise ValueError(f"hits must have shape (n_hits, D) with D in 1..3, got {hits.shape}")
         hits = as_points(hits, "hits", dim)
         starts, ends = as_segments(segment_starts, segment_ends, "segment", dim)
+        if beam_hits is not None:
+            check_beam_hits(beam_hits, len(starts), len(hits))
         inv_ls = kernel.inverse_length_scales(dim)  # ARD length scales must match D
         check_coordinates({"hits": hits, "segment_starts": starts, "segment_ends": ends}, inv_ls,
                           fix="shift the data towards the origin or use a longer length scale")

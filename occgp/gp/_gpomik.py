@@ -22,7 +22,7 @@ from ._io import check_gp_fitted, fitted_scalars, gp_fitted, gpomik_cells, read_
 from ._kernels import SquaredExponential
 from ._limits import MAX_RESTARTS, check_coordinates, check_dense, check_segments, generator, threads
 from ._map_protocol import MapProtocol
-from ._observations import Observations, make_observations
+from ._observations import Observations, check_beam_hits, make_observations
 from ._plsc import PLSCProba, fit_plsc, loo_predictions
 
 __all__ = ["GPOMIK"]
@@ -191,7 +191,7 @@ default="clenshaw-curtis"
 
     # ------------------------------------------------------------------- fit
     def fit(self, hits: ArrayLike | None, segment_starts: ArrayLike | None,
-            segment_ends: ArrayLike | None) -> "GPOMIK":
+            segment_ends: ArrayLike | None, *, beam_hits: ArrayLike | None = None) -> "GPOMIK":
         """Fit the hyper-parameters and PLSC, and factorise the model.
 
         Parameters
@@ -200,7 +200,16 @@ default="clenshaw-curtis"
             Laser returns (occupied), D in 1..3.
         segment_starts, segment_ends : array-like of shape (n_beams, D) or None
             Beams, from the sensor to the return or to the maximum range
-            (free). A zero-length beam counts as one free point.
+            (free). A zero-length beam counts as one free point. Every beam
+            is a free segment, so both conventions serve: beams ending at
+            their hits (occgp's), or stopping short of them (the
+            integral-kernel paper's, which leaves the hit's surroundings
+            unobserved: the maps then differ slightly near the hits).
+        beam_hits : array-like of int of shape (n_beams,), default=None
+            Each beam's hit (an index into `hits`), or -1 for a beam without
+            a return, as :meth:`GPMixture.fit <occgp.gp.GPMixture.fit>`
+            takes it. Checked, otherwise unused: this map needs no link
+            between a beam and its hit.
 
         Returns
         -------
@@ -212,18 +221,24 @@ default="clenshaw-curtis"
             On NaN or inf, wrong shapes, inconsistent dimensions, missing
             class (PLSC needs hits and beams), invalid parameters, or data
             beyond the limits (coordinates past 1e10 length scales, beams
-            longer than 1e4 length scales, dense matrices past 4 GiB).
+            longer than 1e4 length scales, dense matrices past 4 GiB), or
+            `beam_hits` of the wrong shape or with an entry outside
+            ``-1..n_hits-1``.
         numpy.linalg.LinAlgError
             (a ValueError) If a covariance matrix cannot be factorised (the
             message says what to change, usually a larger noise).
         TypeError
-            On non-numeric input or a kernel that is not one of occgp.gp's.
+            On non-numeric input or `beam_hits`, or a kernel that is not one
+            of occgp.gp's.
         """
         kernel, noise, noise_bounds = self._check_params()
         quadrature = check_quadrature(self.quadrature)
         n_threads = threads(self.n_jobs)
         rng = generator(self.random_state)
         obs = make_observations(hits, segment_starts, segment_ends)
+        if beam_hits is not None:
+            n_hits = int(np.count_nonzero(obs.labels > 0))
+            check_beam_hits(beam_hits, len(obs.y) - n_hits, n_hits)
         if not ((obs.labels > 0).any() and (obs.labels < 0).any()):
             raise ValueError("GPOMIK needs both hits and beams to fit its classifier, got "
                              f"{int((obs.labels > 0).sum())} hits and "
@@ -410,7 +425,8 @@ default="clenshaw-curtis"
         return kl, K12_newest, K22
 
     def update(self, hits: ArrayLike | None = None, segment_starts: ArrayLike | None = None,
-               segment_ends: ArrayLike | None = None) -> "GPOMIK":
+               segment_ends: ArrayLike | None = None, *,
+               beam_hits: ArrayLike | None = None) -> "GPOMIK":
         """Add observations by Cholesky updates, with active sampling.
 
         With `kl_threshold` set, observations whose KL divergence (see
@@ -419,9 +435,13 @@ default="clenshaw-curtis"
         cell, its factor grown by Eq. 11–13 of the paper (``O(n^2)`` instead
         of ``O(n^3)``); past `max_cell_size` the rest start new cells (split
         spatially when more than one cell's worth). Hyper-parameters and PLSC
-        stay as fitted.
+        stay as fitted. Beams may end at their hits or stop short of them,
+        as in :meth:`fit`.
 
         {update_parameters}
+        beam_hits : array-like of int of shape (n_beams,), default=None
+            Each new beam's hit (an index into this call's `hits`), or -1;
+            checked, otherwise unused (see :meth:`fit`).
 
         Returns
         -------
@@ -439,6 +459,9 @@ default="clenshaw-curtis"
         """
         new = self._new_observations(hits, segment_starts, segment_ends,
                                      kl=self.kl_threshold is not None)
+        if beam_hits is not None:
+            n_hits = int(np.count_nonzero(new.labels > 0))
+            check_beam_hits(beam_hits, len(new.y) - n_hits, n_hits)
         keep = np.arange(len(new.y))
         K12 = K22 = None
         if self.kl_threshold is not None and len(new.y):

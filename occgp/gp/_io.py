@@ -32,7 +32,7 @@ GP_CLASSES = {c.__name__: c for c in (SquaredExponential, Matern32, SparseKernel
                                       ClenshawCurtis, Simpson)}
 #: Parameters added after the first files were written: a file without them gets
 #: the constructor's default.
-ADDED_PARAMS = frozenset({"occupancy_threshold"})
+ADDED_PARAMS = frozenset({"occupancy_threshold", "hit_tolerance"})
 
 
 def gp_params(model, classes=None, params=None) -> dict:
@@ -64,10 +64,11 @@ def write_gp(model, path, arrays: dict, params: dict | None = None):
     return model
 
 
-def read_gp(cls, path, spec, classes=None):
+def read_gp(cls, path, spec, classes=None, optional=()):
     """(source, unfitted model of the saved parameters, arrays, fitted dict or None).
 
-    `classes` (name -> class) extends :data:`GP_CLASSES` for the parameters.
+    `classes` (name -> class) extends :data:`GP_CLASSES` for the parameters;
+    the arrays of `spec` named in `optional` may be absent from a fitted model.
     """
     source = os.fspath(_npz_io.as_path(path))
     spec = {"fitted": (np.str_, ()), **spec}
@@ -86,9 +87,10 @@ def read_gp(cls, path, spec, classes=None):
         model._check_params()
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{source}: bad parameters of a {name}: {exc}") from None
-    present = [k for k in spec if k in arrays]
-    if present and len(present) != len(spec):
-        raise ValueError(f"{source}: a fitted {name} needs all of {list(spec)}, got only "
+    needed = [k for k in spec if k not in optional]
+    present = [k for k in needed if k in arrays]
+    if present and len(present) != len(needed):
+        raise ValueError(f"{source}: a fitted {name} needs all of {needed}, got only "
                          f"{present}")
     fitted = None
     if present:

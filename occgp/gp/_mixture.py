@@ -24,7 +24,8 @@ from .._docfill import fill_doc
 from .._validation import (as_points, check_bool, check_choice, check_int, check_n_jobs,
                            check_probability, check_real)
 from ..maps import register
-from ._beams import assign_beams, merge_small_clusters
+from ._beams import (HIT_TOLERANCE, assign_beams, match_beams, merge_small_clusters,
+                     no_return_error)
 from ._cells import spatial_groups
 from ._clustering import DirichletProcessClustering
 from ._committee import COMBINE_RULES, Committee
@@ -38,7 +39,7 @@ from ._io import gp_fitted, gp_params, read_gp, write_gp
 from ._limits import generator, threads
 from ._lines import LineTracking
 from ._map_protocol import MapProtocol
-from ._observations import Observations, make_observations
+from ._observations import Observations, check_beam_hits, make_observations
 from ._planes import PlaneClustering
 from ._plsc import PLSCProba, fit_plsc
 
@@ -75,10 +76,14 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
        lines, merged across scans), a Dirichlet-process Gaussian mixture
        (``"dp"``, any dimension) or plane growing (``"plane"``, 3D, with the
        Dirichlet process for what is not planar).
-    2. **Beams**: a beam with a return (its end is a hit) joins its hit's
-       cluster; one without joins the cluster of the most similar returning
-       beam under the line–line integral kernel (the paper's Eq. 11, with
-       the expert kernel's starting hyper-parameters).
+    2. **Beams**: a beam with a return joins its hit's cluster; one without
+       joins the cluster of the most similar returning beam under the
+       line–line integral kernel (the paper's Eq. 11, with the expert
+       kernel's starting hyper-parameters). A beam's return is the hit its
+       end equals (occgp's convention, :func:`observations_from_scans`'s
+       default), or the hit on its ray at most `hit_tolerance` beyond its end
+       (the integral-kernel paper's: free segments stopping short of the
+       return), or the one `beam_hits` names (see :meth:`fit`).
     3. **Tiny clusters**: a cluster with fewer than `min_hits` hits, or
        without any beam, is merged into the nearest other cluster (every
        expert needs both classes for its classifier); clusters of more than
@@ -146,6 +151,11 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     occupancy_threshold : float, default=0.5
         :meth:`is_occupied`'s threshold: a point is occupied when its
         probability is at least this; in (0, 1).
+    hit_tolerance : float, default=0.1
+        Farthest (metres, >= 0) a beam's hit may lie beyond the beam's end,
+        on its ray, for beams that stop short of their returns (see
+        :func:`occgp.gp._beams.match_beams`); 0 accepts only beams ending
+        at their hits. Unused for the beams of a call given `beam_hits`.
 
     Attributes
     ----------
@@ -201,7 +211,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     def __init__(self, expert=None, *, clustering="line", combine="gpoe",
                  hyperparameters="shared", min_hits=5, max_cluster_size=1000, prior_tol=1e-3,
                  update_experts="cholesky", max_optimize=1000, n_jobs=None, random_state=None,
-                 occupancy_threshold=0.5):
+                 occupancy_threshold=0.5, hit_tolerance=HIT_TOLERANCE):
         self.expert = expert
         self.clustering = clustering
         self.combine = combine
@@ -214,6 +224,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         self.n_jobs = n_jobs
         self.random_state = random_state
         self.occupancy_threshold = occupancy_threshold
+        self.hit_tolerance = hit_tolerance
 
     # ------------------------------------------------------------ parameters
     def _check_params(self):
@@ -232,6 +243,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         check_real(self.prior_tol, "prior_tol", low=0.0, high=1.0, low_open=False)
         check_n_jobs(self.n_jobs)
         check_probability(self.occupancy_threshold, "occupancy_threshold")
+        check_real(self.hit_tolerance, "hit_tolerance", low=0.0, low_open=False)
         c = self.clustering
         if isinstance(c, str):
             check_choice(c, "clustering", _CLUSTERINGS)
@@ -259,11 +271,40 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         return int(np.random.SeedSequence([self._seed, e]).generate_state(1)[0])
 
     # ------------------------------------------------------------- clusters
-    def _cluster_labels(self, clustering, obs, n_hits, partial):
-        """Cluster labels (of `clustering`) of the hits and of the beams of `obs`."""
+    def _match(self, obs, n_hits, beam_hits, matched, partial):
+        """The hit of each beam of `obs`, indexing the hits of every call so far (-1: none).
+
+        `beam_hits` (given to :meth:`fit` / :meth:`update`) indexes the hits
+        of `obs`; `matched` (a saved model's) is the answer already. Without
+        either, the beams of every call are matched to all the hits (an
+        earlier call's returning beams keep theirs).
+        """
         hits = obs.starts[:n_hits]
         starts, ends = obs.starts[n_hits:], obs.ends[n_hits:]
-        origins = hit_origins(hits, starts, ends)
+        n_old = int(np.count_nonzero(self._observations.labels > 0)) if partial else 0
+        if matched is not None:
+            return check_beam_hits(matched, len(starts), n_old + n_hits)
+        if beam_hits is not None:
+            local = check_beam_hits(beam_hits, len(starts), n_hits)
+            return np.where(local >= 0, local + n_old, -1)
+        if not partial:
+            return match_beams(hits, starts, ends, hit_tolerance=self.hit_tolerance)
+        old = self._observations
+        old_hit = old.labels > 0
+        return match_beams(np.vstack([old.starts[old_hit], hits]),
+                           np.vstack([old.starts[~old_hit], starts]),
+                           np.vstack([old.ends[~old_hit], ends]),
+                           hit_tolerance=self.hit_tolerance)[len(self._beam_hits):]
+
+    def _cluster_labels(self, clustering, obs, n_hits, partial, matched):
+        """Cluster labels (of `clustering`) of the hits and of the beams of `obs`.
+
+        `matched` is :meth:`_match`'s answer for the beams of `obs`.
+        """
+        hits = obs.starts[:n_hits]
+        starts, ends = obs.starts[n_hits:], obs.ends[n_hits:]
+        n_old = len(self._hit_clusters) if partial else 0
+        origins = hit_origins(hits, starts, ends, np.where(matched >= n_old, matched - n_old, -1))
         fit = clustering.partial_fit if partial else clustering.fit_predict
         if partial and not len(hits):  # beams only: they join the clusters of earlier beams
             hit_labels = np.empty(0, dtype=np.int64)
@@ -279,15 +320,18 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
             beam_labels = assign_beams(
                 all_labels, all_hits, np.vstack([old.starts[~old_hit], starts]),
                 np.vstack([old.ends[~old_hit], ends]), kernel=kernel, quadrature=quadrature,
-                n_jobs=self.n_jobs)[int(np.count_nonzero(~old_hit)):]
+                n_jobs=self.n_jobs, beam_hits=np.r_[self._beam_hits, matched]
+            )[int(np.count_nonzero(~old_hit)):]
         else:
             beam_labels = assign_beams(hit_labels, hits, starts, ends, kernel=kernel,
-                                       quadrature=quadrature, n_jobs=self.n_jobs)
+                                       quadrature=quadrature, n_jobs=self.n_jobs,
+                                       beam_hits=matched)
         return hit_labels, np.asarray(beam_labels, dtype=np.int64)
 
     # ------------------------------------------------------------------- fit
     def fit(self, hits: ArrayLike | None, segment_starts: ArrayLike | None,
-            segment_ends: ArrayLike | None) -> "GPMixture":
+            segment_ends: ArrayLike | None, *,
+            beam_hits: ArrayLike | None = None) -> "GPMixture":
         """Cluster the observations, fit one expert per cluster and the committee's PLSC.
 
         Parameters
@@ -296,8 +340,18 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
             Laser returns (occupied), D in 1..3 (2 for line tracking, 3 for
             plane clustering), in scan order.
         segment_starts, segment_ends : array-like of shape (n_beams, D) or None
-            Beams from the sensor to the return or the maximum range; a beam
-            whose end equals a hit is that hit's beam.
+            Beams from the sensor to the maximum range (no return) or to the
+            return, in either convention: ending at the hit (occgp's: a beam
+            whose end equals a hit is that hit's beam) or stopping short of
+            it (the integral-kernel paper's: the hit on the beam's ray at
+            most `hit_tolerance` beyond its end is its hit). The hit's
+            origin (the beam's start) also tells the clustering which scan
+            it belongs to.
+        beam_hits : array-like of int of shape (n_beams,), default=None
+            Each beam's hit, as an index into `hits`, or -1 for a beam
+            without a return (e.g. from ``observations_from_scans(...,
+            return_beam_hits=True)``); replaces the matching above. Several
+            beams may name one hit.
 
         Returns
         -------
@@ -307,16 +361,20 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         ------
         ValueError
             On NaN or inf, wrong shapes, no hits or no beams, invalid
-            parameters, a clustering that does not fit the dimension, or an
+            parameters, `beam_hits` of the wrong shape or with an entry
+            outside ``-1..n_hits-1``, beams without a return when no beam
+            has one, a clustering that does not fit the dimension, or an
             expert's fit failing (see :meth:`GPOMIK.fit`).
         TypeError
-            On non-numeric input or parameters of the wrong type.
+            On non-numeric input, `beam_hits` that are not integers, or
+            parameters of the wrong type.
         """
         with threadpool_limits(1):  # one BLAS thread: the same values in every worker
-            return self._fit(hits, segment_starts, segment_ends)
+            return self._fit(hits, segment_starts, segment_ends, beam_hits=beam_hits)
 
-    def _fit(self, hits, segment_starts, segment_ends, seed=None):
-        """:meth:`fit`; `seed` (what `random_state` draws) is given when a file is read."""
+    def _fit(self, hits, segment_starts, segment_ends, seed=None, beam_hits=None, matched=None):
+        """:meth:`fit`; `seed` (what `random_state` draws) and `matched` (the beams'
+        hits) are given when a file is read."""
         template = self._check_params()
         if seed is None:
             seed = int(generator(self.random_state).integers(2 ** 32))
@@ -325,10 +383,14 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         if not (n_hits and n_hits < len(obs.y)):
             raise ValueError(f"GPMixture needs both hits and beams, got {n_hits} hits and "
                              f"{len(obs.y) - n_hits} beams")
+        matched = self._match(obs, n_hits, beam_hits, matched, partial=False)
+        if not (matched >= 0).any():
+            raise no_return_error(len(matched), self.hit_tolerance, beam_hits is not None)
         self._template, self._seed = template, seed
         self.kernel_, self.noise_ = None, None
         clustering = self._make_clustering(seed)
-        hit_labels, beam_labels = self._cluster_labels(clustering, obs, n_hits, partial=False)
+        hit_labels, beam_labels = self._cluster_labels(clustering, obs, n_hits, partial=False,
+                                                       matched=matched)
         clusters = np.r_[hit_labels, beam_labels]
         merged = merge_small_clusters(clusters, obs.anchors, obs.labels > 0,
                                       min_hits=self.min_hits)
@@ -353,6 +415,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         self._observations = obs
         self._calls = [len(obs.y)]   # observations of each fit / update call, for save()
         self._hit_clusters = hit_labels
+        self._beam_hits = matched    # the hit of every beam so far (all calls' hits), or -1
         # clustering label -> the experts that hold its observations
         self._cluster_experts = {}
         for c, e in zip(clusters.tolist(), expert_of.tolist()):
@@ -413,7 +476,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
 
     # ----------------------------------------------------------------- files
     _SPEC = {"starts": (np.float64, ("n_obs", "n_dims")), "ends": (np.float64, ("n_obs", "n_dims")),
-             "labels": (np.float64, ("n_obs",)), "call_sizes": (np.int64, ("n_calls",))}
+             "labels": (np.float64, ("n_obs",)), "call_sizes": (np.int64, ("n_calls",)),
+             "beam_hits": (np.int64, ("n_beams",))}
 
     def save(self, path) -> "GPMixture":
         """Write the model (parameters and, once fitted, its evidence) to an ``.npz``.
@@ -426,7 +490,10 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         (float64 (n_obs, D), (n_obs, D) and (n_obs,): the observations of
         every :meth:`fit` and :meth:`update` call in turn, each call's hits
         first) and ``call_sizes`` (int64 (n_calls,): the observations of each
-        call). :meth:`load` replays the calls with the seed, which gives the
+        call), and ``beam_hits`` (int64 (n_beams,): the hit of each beam,
+        indexing the hits of every call in turn, or -1; absent from files
+        written before it existed, whose beams are matched again).
+        :meth:`load` replays the calls with the seed, which gives the
         same model (the experts are fitted again: loading takes the time of
         those calls).
 
@@ -454,7 +521,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
             obs = self._observations
             arrays["fitted"] = gp_fitted({"seed": int(self._seed)})
             arrays.update(starts=obs.starts, ends=obs.ends, labels=obs.labels,
-                          call_sizes=np.array(self._calls, dtype=np.int64))
+                          call_sizes=np.array(self._calls, dtype=np.int64),
+                          beam_hits=self._beam_hits)
         return write_gp(self, path, arrays, params)
 
     @classmethod
@@ -472,7 +540,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
             Also if its observations are not valid (labels other than +1 and
             -1, call sizes that do not add up), or replaying them fails.
         """
-        source, model, arrays, fitted = read_gp(cls, path, cls._SPEC, _CLASSES)
+        source, model, arrays, fitted = read_gp(cls, path, cls._SPEC, _CLASSES,
+                                                optional=("beam_hits",))
         if fitted is None:
             return model
         labels, sizes = arrays["labels"], arrays["call_sizes"]
@@ -486,19 +555,25 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
             bad = "'labels' must be +1 (hit) or -1 (beam)"
         elif len(sizes) == 0 or (sizes < 1).any() or int(sizes.sum()) != len(labels):
             bad = f"'call_sizes' must be positive and sum to {len(labels)}"
+        elif "beam_hits" in arrays and len(arrays["beam_hits"]) != int((labels < 0).sum()):
+            bad = f"'beam_hits' must have one entry per beam ({int((labels < 0).sum())})"
         if bad:
             raise ValueError(f"{source}: corrupt fitted state of a GPMixture: {bad}")
         ends = np.cumsum(sizes)
+        saved = arrays.get("beam_hits")
+        n_beams = np.cumsum([int((labels[lo:hi] < 0).sum())
+                             for lo, hi in zip(ends - sizes, ends)])
         try:
             for i, (lo, hi) in enumerate(zip(ends - sizes, ends)):
                 hit = labels[lo:hi] > 0
                 starts, stops = arrays["starts"][lo:hi], arrays["ends"][lo:hi]
                 data = (starts[hit], starts[~hit], stops[~hit])
-                if i == 0:
-                    with threadpool_limits(1):
-                        model._fit(*data, seed=seed)
-                else:
-                    model.update(*data)
+                matched = None if saved is None else saved[n_beams[i] - len(data[1]):n_beams[i]]
+                with threadpool_limits(1):
+                    if i == 0:
+                        model._fit(*data, seed=seed, matched=matched)
+                    else:
+                        model._update(*data, matched=matched)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{source}: cannot rebuild the GPMixture from its observations: "
                              f"{exc}") from None
@@ -603,7 +678,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
 
     # --------------------------------------------------------------- update
     def update(self, hits: ArrayLike | None = None, segment_starts: ArrayLike | None = None,
-               segment_ends: ArrayLike | None = None) -> "GPMixture":
+               segment_ends: ArrayLike | None = None, *,
+               beam_hits: ArrayLike | None = None) -> "GPMixture":
         """Add observations: cluster them and update only the experts they reach.
 
         New hits are clustered incrementally (``clustering_.partial_fit``:
@@ -616,8 +692,14 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         refitted on all its observations (``"refit"``); every other expert
         is left untouched (the same object, unchanged). The PLSC stays as
         fitted. :attr:`updated_experts_` lists the experts changed or created.
+        Beams end at their hits or stop short of them, as in :meth:`fit`;
+        without `beam_hits` their hits are sought among the hits of every
+        call so far.
 
         {update_parameters}
+        beam_hits : array-like of int of shape (n_beams,), default=None
+            Each new beam's hit, as an index into this call's `hits`, or -1
+            for a beam without a return; replaces the matching.
 
         Returns
         -------
@@ -630,17 +712,19 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         """
         check_is_fitted(self, "experts_")
         with threadpool_limits(1):
-            return self._update(hits, segment_starts, segment_ends)
+            return self._update(hits, segment_starts, segment_ends, beam_hits=beam_hits)
 
-    def _update(self, hits, segment_starts, segment_ends):
+    def _update(self, hits, segment_starts, segment_ends, beam_hits=None, matched=None):
         self._check_params()
         template = self._expert_template
         new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
         n_hits = int(np.count_nonzero(new.labels > 0))
+        matched = self._match(new, n_hits, beam_hits, matched, partial=True)
         if not len(new.y):
             return self
         clustering = copy.deepcopy(self.clustering_)  # the fitted one stays as it is on failure
-        hit_labels, beam_labels = self._cluster_labels(clustering, new, n_hits, partial=True)
+        hit_labels, beam_labels = self._cluster_labels(clustering, new, n_hits, partial=True,
+                                                       matched=matched)
         clusters = np.r_[hit_labels, beam_labels]
         expert_of = np.empty(len(new.y), dtype=np.int64)
         experts, next_id = list(self.experts_), len(self.experts_)
@@ -706,6 +790,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         self._observations = all_obs
         self._calls = self._calls + [len(new.y)]
         self._hit_clusters = np.r_[self._hit_clusters, hit_labels]
+        self._beam_hits = np.r_[self._beam_hits, matched]
         self._cluster_experts = cluster_experts
         self.n_clusters_ = int(getattr(self.clustering_, "n_clusters_", self.n_clusters_))
         self.updated_experts_ = changed

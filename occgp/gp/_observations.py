@@ -7,10 +7,10 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import as_numeric, as_point, as_points
+from .._validation import as_numeric, as_point, as_points, check_bool, check_real
 from ._integral_kernel import as_segments
 
-__all__ = ["Observations", "observations_from_scans", "make_observations"]
+__all__ = ["Observations", "observations_from_scans", "make_observations", "check_beam_hits"]
 
 
 class Observations(NamedTuple):
@@ -96,9 +96,41 @@ def make_observations(hits, segment_starts, segment_ends, dim=None) -> Observati
         np.r_[np.zeros(n_hits), lengths])
 
 
-def observations_from_scans(scans) -> tuple[NDArray[np.float64], NDArray[np.float64],
-                                            NDArray[np.float64]]:
+def check_beam_hits(beam_hits, n_beams: int, n_hits: int) -> NDArray[np.int64]:
+    """`beam_hits` checked: int array of shape (n_beams,), each -1 or a hit index.
+
+    Several beams may name the same hit (repeated beams of one return).
+    Raises TypeError (not integers) or ValueError (shape, range), naming
+    `beam_hits`.
+    """
+    arr = as_numeric(beam_hits, "beam_hits", kinds="iufb")
+    if arr.dtype.kind not in "iu":
+        raise TypeError(f"beam_hits must hold integers (a hit index, or -1 for a beam without "
+                        f"a return), got dtype {arr.dtype}")
+    if arr.shape != (n_beams,):
+        raise ValueError(f"beam_hits must have shape ({n_beams},) (one entry per beam), got "
+                         f"{arr.shape}")
+    if len(arr) and (arr.min() < -1 or arr.max() >= n_hits):
+        bad = arr[(arr < -1) | (arr >= n_hits)][0]
+        raise ValueError(f"beam_hits must hold -1 (no return) or a hit index in 0..{n_hits - 1} "
+                         f"(there are {n_hits} hits), got {int(bad)}")
+    return arr.astype(np.int64)
+
+
+def observations_from_scans(scans, *, stop_short: float = 0.0,
+                            return_beam_hits: bool = False) -> tuple[NDArray[np.float64], ...]:
     """Hits and beams of a list of scans, ready for ``fit(hits, starts, ends)``.
+
+    Two conventions for a beam with a return: by default (``stop_short=0``,
+    occgp's) it ends exactly at its hit; with ``stop_short > 0`` (the
+    integral-kernel paper's) its free segment stops that far before the hit,
+    so that the hit's own surroundings are not observed free: the beam runs
+    from the sensor to ``max(range - stop_short, 0)`` along the ray (a
+    return closer than `stop_short` gives a zero-length beam at the sensor).
+    Beams without a return end at the maximum range either way. The maps
+    accept both: :class:`GPMixture` and :func:`assign_beams` find the hit of
+    a shortened beam on its ray (see :func:`occgp.gp._beams.match_beams`),
+    or take `beam_hits` from ``return_beam_hits=True``.
 
     Parameters
     ----------
@@ -106,19 +138,29 @@ def observations_from_scans(scans) -> tuple[NDArray[np.float64], NDArray[np.floa
         Planar laser scans (:meth:`occgp.datasets.Scene2D.scan`: beams without
         a return count as free segments to `max_range`) or 3D scans (every
         point is a hit at the end of its beam).
+    stop_short : float, default=0.0
+        How far (metres, >= 0) a returning beam's free segment stops before
+        its hit.
+    return_beam_hits : bool, default=False
+        Also return, for each beam, the index of its hit in `hits` (-1 for a
+        beam without a return): the ``beam_hits`` of the maps' ``fit``.
 
     Returns
     -------
     hits : ndarray of shape (n_hits, D)
     segment_starts, segment_ends : ndarray of shape (n_beams, D)
+    beam_hits : ndarray of shape (n_beams,), dtype int64
+        Only with ``return_beam_hits=True``.
 
     Raises
     ------
     ValueError
         If there is no scan, or a scan's points or origin have a bad shape,
-        differ in dimension from the first scan's, or hold NaN or inf.
+        differ in dimension from the first scan's, or hold NaN or inf, or
+        `stop_short` is negative or not finite.
     TypeError
-        If `scans` is not a list of scans or the arrays are not numeric.
+        If `scans` is not a list of scans or the arrays are not numeric, or
+        `stop_short` is not a real number or `return_beam_hits` not a bool.
 
     Examples
     --------
@@ -126,10 +168,22 @@ def observations_from_scans(scans) -> tuple[NDArray[np.float64], NDArray[np.floa
     >>> hits, starts, ends = observations_from_scans(room_2d().scan(n_poses=2))
     >>> starts.shape, ends.shape, hits.shape[1]
     ((34, 2), (34, 2), 2)
+
+    The paper's convention, beams stopping 5 cm short of their hits:
+
+    >>> import numpy as np
+    >>> h, s, e, beam_hits = observations_from_scans(
+    ...     room_2d().scan(n_poses=2), stop_short=0.05, return_beam_hits=True)
+    >>> back = np.linalg.norm(h[beam_hits[beam_hits >= 0]] - e[beam_hits >= 0], axis=1)
+    >>> bool(np.allclose(back, 0.05)), int((beam_hits < 0).sum()) == len(e) - len(h)
+    (True, True)
     """
     if isinstance(scans, (str, bytes)) or not hasattr(scans, "__iter__"):
         raise TypeError(f"scans must be a list of scans, got {type(scans).__name__}")
-    hits, starts, ends = [], [], []
+    stop_short = check_real(stop_short, "stop_short", low=0.0, low_open=False)
+    return_beam_hits = check_bool(return_beam_hits, "return_beam_hits")
+    hits, starts, ends, beam_hits = [], [], [], []
+    n_hits = 0
     dim = None
     for i, scan in enumerate(scans):
         laser = hasattr(scan, "hit") and hasattr(scan, "end_points")
@@ -150,9 +204,29 @@ def observations_from_scans(scans) -> tuple[NDArray[np.float64], NDArray[np.floa
             if hit.dtype != bool or hit.shape != (len(end),):
                 raise ValueError(f"scans[{i}].hit must be a bool array of shape ({len(end)},), "
                                  f"got dtype {hit.dtype} and shape {hit.shape}")
-        hits.append(end[hit] if laser else end)
+        else:
+            hit = np.ones(len(end), dtype=bool)
+        hits.append(end[hit])
         starts.append(np.broadcast_to(origin, end.shape))
+        index = np.full(len(end), -1, dtype=np.int64)
+        index[hit] = n_hits + np.arange(int(np.count_nonzero(hit)))
+        n_hits += int(np.count_nonzero(hit))
+        beam_hits.append(index)
+        if stop_short > 0:
+            end = _stop_short(origin, end, hit, stop_short)
         ends.append(end)
     if not ends:
         raise ValueError("scans must hold at least one scan")
-    return np.vstack(hits), np.vstack(starts), np.vstack(ends)
+    out = (np.vstack(hits), np.vstack(starts), np.vstack(ends))
+    return out + (np.concatenate(beam_hits),) if return_beam_hits else out
+
+
+def _stop_short(origin, end, hit, margin):
+    """`end` with each returning beam (`hit`) ending `margin` before it (clamped at the origin)."""
+    delta = end[hit] - origin
+    length = np.linalg.norm(delta, axis=1)
+    scale = np.divide(np.maximum(length - margin, 0.0), length, out=np.zeros_like(length),
+                      where=length > 0)
+    out = end.copy()
+    out[hit] = origin + scale[:, None] * delta
+    return out
