@@ -53,15 +53,15 @@ _CLASSES = {c.__name__: c for c in (GPOMIK, LineTracking, DirichletProcessCluste
                                     PlaneClustering)}
 
 
-@register("gp-mixture", dims=(2,), formats=(".npz",),
-          description="Mixture of GPOMIK experts merged by a committee (2D)")
-@fill_doc()
 def _evaluate(e, expert, idx, X):
     """Expert `e`'s latent mean and variance at its queries `X` (indices `idx`)."""
     mean, var = predict_expert(expert, X)
     return e, idx, mean, var
 
 
+@register("gp-mixture", dims=(2,), formats=(".npz",),
+          description="Mixture of GPOMIK experts merged by a committee (2D)")
+@fill_doc()
 class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     """Mixture of Gaussian-process experts merged by a committee (Kim & Kim).
 
