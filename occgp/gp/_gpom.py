@@ -21,10 +21,11 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from .._docfill import fill_doc
-from .._validation import as_numeric, as_points, check_bool, check_probability, check_real
+from .._validation import (as_numeric, as_points, check_bool, check_choice, check_probability,
+                           check_real)
 from ..maps import register
 from ._checks import check_at_least
-from ._gpr import JITTER, factorise, optimize_hyperparameters
+from ._gpr import JITTER, OBJECTIVES, factorise, optimize_hyperparameters
 from ._integral_kernel import as_segments, check_kernel
 from ._io import check_gp_fitted, fitted_scalars, gp_fitted, read_gp, set_fitted_scalars, \
     write_gp
@@ -137,6 +138,11 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
     n_restarts : int, default=2
         Extra optimiser starts, drawn log-uniformly within the bounds; at
         most 1000.
+    objective : {"lml", "loo"}, default="lml"
+        What the hyper-parameter fit maximises: the log marginal likelihood,
+        or the leave-one-out log predictive probability of the observations
+        (Rasmussen & Williams, §5.4.2), which scores the predictions the
+        map makes and is less sensitive to a misspecified kernel.
     max_optimize : int, default=1000
         Most training points (a random subset) used to fit the
         hyper-parameters and PLSC.
@@ -201,8 +207,8 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
 
     def __init__(self, kernel=None, *, noise=0.01, noise_bounds=(1e-4, 1.0), free_step=0.5,
                  n_hit_neighbors=10, n_free_neighbors=20, optimizer=True, n_restarts=2,
-                 max_optimize=1000, random_state=None, batch_size=4096, n_jobs=None,
-                 occupancy_threshold=0.5):
+                 objective="lml", max_optimize=1000, random_state=None, batch_size=4096,
+                 n_jobs=None, occupancy_threshold=0.5):
         self.kernel = kernel
         self.noise = noise
         self.noise_bounds = noise_bounds
@@ -211,6 +217,7 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
         self.n_free_neighbors = n_free_neighbors
         self.optimizer = optimizer
         self.n_restarts = n_restarts
+        self.objective = objective
         self.max_optimize = max_optimize
         self.random_state = random_state
         self.batch_size = batch_size
@@ -227,6 +234,7 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
             check_at_least(getattr(self, name), name, low)
         if self.n_restarts > MAX_RESTARTS:
             raise ValueError(f"n_restarts must be at most {MAX_RESTARTS}, got {self.n_restarts!r}")
+        check_choice(self.objective, "objective", OBJECTIVES)
         check_bool(self.optimizer, "optimizer")
         check_probability(self.occupancy_threshold, "occupancy_threshold")
         threads(self.n_jobs)
@@ -322,7 +330,8 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
         if self.optimizer:
             kernel, noise, _ = optimize_hyperparameters(
                 kernel, noise, self.noise_bounds, Xs, Xs, ys, quadrature,
-                n_restarts=self.n_restarts, rng=rng, n_threads=n_threads)
+                n_restarts=self.n_restarts, rng=rng, n_threads=n_threads,
+                objective=self.objective)
         L, alpha = factorise(kernel, quadrature, noise, Xs, Xs, ys, n_threads,
                              what="the optimisation subset")
         plsc = fit_plsc(*loo_predictions(L, ys), ys)

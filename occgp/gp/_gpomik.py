@@ -11,11 +11,12 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from .._docfill import fill_doc
-from .._validation import as_points, check_bool, check_probability, check_real
+from .._validation import as_points, check_bool, check_choice, check_probability, check_real
 from ..maps import register
 from ._cells import Cell, kl_gain, predict_cell, spatial_groups
 from ._checks import check_at_least
-from ._gpr import cholesky, jitter_for, optimize_hyperparameters, solve_lower, with_noise
+from ._gpr import (OBJECTIVES, cholesky, jitter_for, optimize_hyperparameters, solve_lower,
+                   with_noise)
 from ._integral_kernel import check_kernel, check_quadrature, covariance
 from ._io import check_gp_fitted, fitted_scalars, gp_fitted, gpomik_cells, read_gp, \
     set_fitted_scalars, write_gp
@@ -71,6 +72,11 @@ default="clenshaw-curtis"
     n_restarts : int, default=2
         Extra optimiser starts, drawn log-uniformly within the bounds; at
         most 1000.
+    objective : {"lml", "loo"}, default="lml"
+        What the hyper-parameter fit maximises: the log marginal likelihood,
+        or the leave-one-out log predictive probability of the observations
+        (Rasmussen & Williams, §5.4.2), which scores the predictions the
+        map makes and is less sensitive to a misspecified kernel.
     max_optimize : int, default=1000
         Hyper-parameters and PLSC are fitted on a random subset of at most
         this many observations.
@@ -148,15 +154,16 @@ default="clenshaw-curtis"
     """
 
     def __init__(self, kernel=None, *, noise=0.01, noise_bounds=(1e-4, 1.0),
-                 quadrature="clenshaw-curtis", optimizer=True, n_restarts=2, max_optimize=1000,
-                 max_cell_size=2000, kl_threshold=None, random_state=None, n_jobs=None,
-                 occupancy_threshold=0.5):
+                 quadrature="clenshaw-curtis", optimizer=True, n_restarts=2, objective="lml",
+                 max_optimize=1000, max_cell_size=2000, kl_threshold=None, random_state=None,
+                 n_jobs=None, occupancy_threshold=0.5):
         self.kernel = kernel
         self.noise = noise
         self.noise_bounds = noise_bounds
         self.quadrature = quadrature
         self.optimizer = optimizer
         self.n_restarts = n_restarts
+        self.objective = objective
         self.max_optimize = max_optimize
         self.max_cell_size = max_cell_size
         self.kl_threshold = kl_threshold
@@ -180,6 +187,7 @@ default="clenshaw-curtis"
         check_at_least(self.n_restarts, "n_restarts", 0)
         if self.n_restarts > MAX_RESTARTS:
             raise ValueError(f"n_restarts must be at most {MAX_RESTARTS}, got {self.n_restarts!r}")
+        check_choice(self.objective, "objective", OBJECTIVES)
         check_at_least(self.max_optimize, "max_optimize", 2)
         if self.max_cell_size is not None:
             check_at_least(self.max_cell_size, "max_cell_size", 1)
@@ -257,7 +265,8 @@ default="clenshaw-curtis"
         if self.optimizer:
             kernel, noise, lml = optimize_hyperparameters(
                 kernel, noise, noise_bounds, subset.starts, subset.ends, subset.y, quadrature,
-                n_restarts=self.n_restarts, rng=rng, n_threads=n_threads)
+                n_restarts=self.n_restarts, rng=rng, n_threads=n_threads,
+                objective=self.objective)
         K_sub = covariance(kernel, quadrature, subset.starts, subset.ends, n_threads=n_threads)
         jitter = jitter_for(K_sub)
         L = cholesky(with_noise(K_sub, noise, jitter), kernel, noise,

@@ -441,7 +441,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
                      (obs.take(groups[e]) for e in np.sort(order[:n_parts]))]
             kernel, noise, _ = optimize_shared_hyperparameters(
                 kernel, noise, noise_bounds, parts, check_quadrature(template.quadrature),
-                n_restarts=template.n_restarts, rng=rng,
+                n_restarts=template.n_restarts, rng=rng, objective=template.objective,
                 n_threads=threads(template.n_jobs))
         self.kernel_, self.noise_ = kernel, noise
         return clone(template).set_params(kernel=kernel, noise=noise, optimizer=False)
