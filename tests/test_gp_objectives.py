@@ -88,3 +88,15 @@ def test_estimators_take_the_objective(cls):
     assert np.all(np.isfinite(p)) and p.mean() > 0.5
     with pytest.raises(ValueError, match="objective"):
         make(objective="likelihood").fit(*data)
+
+
+def test_min_size_merges_small_clusters():
+    from occgp.gp import merge_small_clusters
+    labels = [0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1]
+    points = np.array([[0, 0], [0, 1], [0, 2], [1, 1], [0, 4], [0, 5], [0, 6], [0, 7],
+                       [0, 8], [1, 5], [1, 6]], dtype=float)
+    is_hit = [True, True, True, False] + [True] * 5 + [False] * 2
+    assert merge_small_clusters(labels, points, is_hit).tolist() == labels
+    assert merge_small_clusters(labels, points, is_hit, min_size=5).tolist() == [0] * 11
+    with pytest.raises(ValueError, match="min_size"):
+        merge_small_clusters(labels, points, is_hit, min_size=0)

@@ -532,12 +532,13 @@ def _nearest_segment(fs, fe, rs, re):
 
 
 def merge_small_clusters(labels: ArrayLike, points: ArrayLike, is_hit: ArrayLike,
-                         min_hits: int = 3) -> NDArray[np.int64]:
+                         min_hits: int = 3, min_size: int = 1) -> NDArray[np.int64]:
     """Fold clusters that cannot train a classifier into their nearest neighbour.
 
     A cluster is *kept* when it holds at least `min_hits` hits and at least
     one beam (an observation with `is_hit` False): a GP classifier needs both
-    classes. Every other cluster (too few hits, hits only, or beams only) is
+    classes; and at least `min_size` observations. Every other cluster (too
+    few hits or observations, hits only, or beams only) is
     merged whole into the kept cluster nearest to it: the one holding the
     point nearest to any of its points (k-d tree; ties go to the lower
     label). The kept clusters are then numbered 0..k-1 in the order of their
@@ -554,6 +555,9 @@ def merge_small_clusters(labels: ArrayLike, points: ArrayLike, is_hit: ArrayLike
         True for hits, False for beams.
     min_hits : int, default=3
         Fewest hits of a kept cluster (at least 1).
+    min_size : int, default=1
+        Fewest observations of a kept cluster (at least 1): larger values
+        give fewer, larger clusters on fragmented data.
 
     Returns
     -------
@@ -595,13 +599,14 @@ def merge_small_clusters(labels: ArrayLike, points: ArrayLike, is_hit: ArrayLike
     if hit.shape != (n,):
         raise ValueError(f"is_hit must have shape ({n},), got {hit.shape}")
     min_hits = check_int(min_hits, "min_hits", low=1)
+    min_size = check_int(min_size, "min_size", low=1)
     if not n:
         return np.zeros(0, dtype=np.int64)
     old, cluster = np.unique(labels, return_inverse=True)
     k = len(old)
     n_hits = np.bincount(cluster[hit], minlength=k)
     n_beams = np.bincount(cluster[~hit], minlength=k)
-    kept = (n_hits >= min_hits) & (n_beams >= 1)
+    kept = (n_hits >= min_hits) & (n_beams >= 1) & (n_hits + n_beams >= min_size)
     if not kept.any():
         return np.zeros(n, dtype=np.int64)
     rank = np.cumsum(kept) - 1

@@ -12,7 +12,7 @@ from ._integral_kernel import covariance
 from ._limits import one_blas_thread
 from ._observations import Observations
 
-__all__ = ["Reach", "QueryIndex", "hit_origins", "fit_expert", "predict_expert", "predict_dense",
+__all__ = ["Reach", "QueryIndex", "skip_tolerances", "evaluate_expert", "hit_origins", "fit_expert", "predict_expert", "predict_dense",
            "split_observations", "hits_first", "concat_observations", "order_positions",
            "downdated"]
 
@@ -144,6 +144,33 @@ class QueryIndex:
             rest = self.X[idx, 1:]
             idx = idx[np.all((rest >= lo[1:]) & (rest <= hi[1:]), axis=1)]
         return np.sort(idx)
+
+
+def skip_tolerances(reaches, prior_tol):
+    """How far from its prior each expert may be where the committee skips it.
+
+    Expert ``e`` gets ``prior_tol / m_e``, with ``m_e`` the number of experts
+    (itself included) whose cutoff boxes (where they may differ from their
+    prior at all) overlap its own. At any query, the experts not at their
+    prior are some ``m`` experts whose boxes all hold the query, so they
+    overlap each other's, and each of them has ``m_e >= m``: the skipped ones
+    add up to at most `prior_tol`.
+    """
+    boxes = [reach.box(0.0) for reach in reaches]
+    lo = np.array([b[0] for b in boxes])
+    hi = np.array([b[1] for b in boxes])
+    count = np.empty(len(boxes), dtype=np.int64)
+    for a in range(0, len(boxes), 256):
+        overlap = np.all((lo[a:a + 256, None] <= hi[None]) & (lo[None] <= hi[a:a + 256, None]),
+                         axis=2)
+        count[a:a + 256] = overlap.sum(axis=1)
+    return prior_tol / count
+
+
+def evaluate_expert(e, expert, idx, X):
+    """Expert `e`'s latent mean and variance at its queries `X` (indices `idx`)."""
+    mean, var = predict_expert(expert, X)
+    return e, idx, mean, var
 
 
 def fit_expert(template, obs, seed):

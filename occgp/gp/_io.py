@@ -32,7 +32,7 @@ GP_CLASSES = {c.__name__: c for c in (SquaredExponential, Matern32, SparseKernel
                                       ClenshawCurtis, Simpson)}
 #: Parameters added after the first files were written: a file without them gets
 #: the constructor's default.
-ADDED_PARAMS = frozenset({"occupancy_threshold", "hit_tolerance", "objective"})
+ADDED_PARAMS = frozenset({"occupancy_threshold", "hit_tolerance", "objective", "min_size"})
 
 
 def gp_params(model, classes=None, params=None) -> dict:

@@ -29,8 +29,8 @@ from ._beams import (HIT_TOLERANCE, assign_beams, match_beams, merge_small_clust
 from ._cells import spatial_groups
 from ._clustering import DirichletProcessClustering
 from ._committee import COMBINE_RULES, Committee
-from ._experts import (QueryIndex, Reach, concat_observations, downdated, fit_expert,
-                       hit_origins, hits_first, order_positions, predict_expert,
+from ._experts import (QueryIndex, Reach, concat_observations, downdated, evaluate_expert,
+                       fit_expert, hit_origins, hits_first, order_positions, skip_tolerances,
                        split_observations)
 from ._gpomik import GPOMIK
 from ._gpr import optimize_shared_hyperparameters
@@ -51,12 +51,6 @@ _HYPERPARAMETERS = ("shared", "own")
 #: The objects a GPMixture's parameters may hold (besides the kernels and rules).
 _CLASSES = {c.__name__: c for c in (GPOMIK, LineTracking, DirichletProcessClustering,
                                     PlaneClustering)}
-
-
-def _evaluate(e, expert, idx, X):
-    """Expert `e`'s latent mean and variance at its queries `X` (indices `idx`)."""
-    mean, var = predict_expert(expert, X)
-    return e, idx, mean, var
 
 
 @register("gp-mixture", dims=(2,), formats=(".npz",),
@@ -84,10 +78,12 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
        default), or the hit on its ray at most `hit_tolerance` beyond its end
        (the integral-kernel paper's: free segments stopping short of the
        return), or the one `beam_hits` names (see :meth:`fit`).
-    3. **Tiny clusters**: a cluster with fewer than `min_hits` hits, or
-       without any beam, is merged into the nearest other cluster (every
-       expert needs both classes for its classifier); clusters of more than
-       `max_cluster_size` observations are split by median bisection.
+    3. **Tiny clusters**: a cluster with fewer than `min_hits` hits or
+       `min_size` observations, or without any beam, is merged into the
+       nearest other cluster (every expert needs both classes for its
+       classifier, and tiny experts cost more than they add); clusters of
+       more than `max_cluster_size` observations are split by median
+       bisection.
     4. **Merging** (``combine``): ``"bcm"`` is the paper's Eq. 13,
        ``"tresp"`` the BCM with its prior correction, ``"rbcm"`` the robust
        BCM and ``"gpoe"`` the generalised product of experts (see
@@ -128,6 +124,9 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         paper), which over-fits small clusters (see the user guide).
     min_hits : int, default=5
         Fewest hits of a cluster with its own expert.
+    min_size : int, default=1
+        Fewest observations (hits and beams) of a cluster with its own
+        expert.
     max_cluster_size : int, default=1000
         Most observations of one expert at :meth:`fit`; also the experts'
         `max_cell_size` in :meth:`update`.
@@ -209,14 +208,15 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     """
 
     def __init__(self, expert=None, *, clustering="line", combine="gpoe",
-                 hyperparameters="shared", min_hits=5, max_cluster_size=1000, prior_tol=1e-3,
-                 update_experts="cholesky", max_optimize=1000, n_jobs=None, random_state=None,
-                 occupancy_threshold=0.5, hit_tolerance=HIT_TOLERANCE):
+                 hyperparameters="shared", min_hits=5, min_size=1, max_cluster_size=1000,
+                 prior_tol=1e-3, update_experts="cholesky", max_optimize=1000, n_jobs=None,
+                 random_state=None, occupancy_threshold=0.5, hit_tolerance=HIT_TOLERANCE):
         self.expert = expert
         self.clustering = clustering
         self.combine = combine
         self.hyperparameters = hyperparameters
         self.min_hits = min_hits
+        self.min_size = min_size
         self.max_cluster_size = max_cluster_size
         self.prior_tol = prior_tol
         self.update_experts = update_experts
@@ -238,6 +238,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         check_choice(self.update_experts, "update_experts", _UPDATES)
         check_choice(self.hyperparameters, "hyperparameters", _HYPERPARAMETERS)
         check_int(self.min_hits, "min_hits", low=1)
+        check_int(self.min_size, "min_size", low=1)
         check_int(self.max_cluster_size, "max_cluster_size", low=2)
         check_int(self.max_optimize, "max_optimize", low=2)
         check_real(self.prior_tol, "prior_tol", low=0.0, high=1.0, low_open=False)
@@ -393,7 +394,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
                                                        matched=matched)
         clusters = np.r_[hit_labels, beam_labels]
         merged = merge_small_clusters(clusters, obs.anchors, obs.labels > 0,
-                                      min_hits=self.min_hits)
+                                      min_hits=self.min_hits, min_size=self.min_size)
         groups, expert_of = [], np.empty(len(obs.y), dtype=np.int64)
         for g in np.unique(merged):
             idx = np.flatnonzero(merged == g)
@@ -587,24 +588,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         return self._reach
 
     def _tolerances(self):
-        """How far from its prior each expert may be where it is skipped.
-
-        Expert ``e`` gets ``prior_tol / m_e``, with ``m_e`` the number of
-        experts (itself included) whose cutoff boxes (where they may differ
-        from their prior at all) overlap its own. At any query, the experts
-        not at their prior are some ``m`` experts whose boxes all hold the
-        query, so they overlap each other's, and each of them has
-        ``m_e >= m``: the skipped ones add up to at most `prior_tol`.
-        """
-        boxes = [reach.box(0.0) for reach in self._reaches()]
-        lo = np.array([b[0] for b in boxes])
-        hi = np.array([b[1] for b in boxes])
-        count = np.empty(len(boxes), dtype=np.int64)
-        for a in range(0, len(boxes), 256):
-            overlap = np.all((lo[a:a + 256, None] <= hi[None]) & (lo[None] <= hi[a:a + 256, None]),
-                             axis=2)
-            count[a:a + 256] = overlap.sum(axis=1)
-        return float(self.prior_tol) / count
+        """How far from its prior each expert may be where it is skipped."""
+        return skip_tolerances(self._reaches(), float(self.prior_tol))
 
     def _committee(self, X, skip=None):
         """The committee at `X` with every expert evaluated where it is within reach.
@@ -623,7 +608,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
                 if skip is not None:
                     idx = idx[skip[idx] != e]
                 if len(idx):
-                    yield delayed(_evaluate)(e, self.experts_[e], idx, X[idx])
+                    yield delayed(evaluate_expert)(e, self.experts_[e], idx, X[idx])
 
         # results merge as they arrive, in the experts' order (the same sums for any
         # backend), and are freed: memory stays a few experts' predictions
@@ -685,7 +670,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         New hits are clustered incrementally (``clustering_.partial_fit``:
         they join existing clusters or open new ones); beams follow as in
         :meth:`fit`, with the returning beams of earlier calls as candidates.
-        A new cluster with fewer than `min_hits` hits (or no beam) joins the
+        A new cluster with fewer than `min_hits` hits or `min_size`
+        observations (or no beam) joins the
         expert nearest to it; a new cluster of its own gets a new expert. An
         existing expert that received observations is Cholesky-updated
         (``update_experts="cholesky"``, its hyper-parameters as fitted) or
@@ -745,7 +731,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
                     expert_of[idx] = np.where(np.isin(owner, cand), owner, cand[0])
                 continue
             n_c_hits = int(np.count_nonzero(new.labels[idx] > 0))
-            if n_c_hits < self.min_hits or n_c_hits == len(idx):
+            if n_c_hits < self.min_hits or n_c_hits == len(idx) or len(idx) < self.min_size:
                 _, near = old_tree.query(new.anchors[idx])
                 dist = np.linalg.norm(new.anchors[idx] - self._observations.anchors[near],
                                       axis=1)
