@@ -340,11 +340,12 @@ def scene_family_2d(seed: int, kind: str | None = None, *,
       along every corridor, into every room and back out.
     * ``"warehouse"``: rows of racks (0.8-1.3 m deep, single-sided ones
       against a wall) along the longer side, aisles 1.5-3 m wide, cross aisles
-      2-3 m wide every 12-18 m, end bands (one a loading zone) and 2-6
+      2-3 m wide every 12-18 m, end bands (one a loading zone) and up to 6
       pillars; the path sweeps every aisle and returns through a cross aisle.
     * ``"hall"``: an open hall with round and square pillars on a jittered
-      4-7 m grid (some missing) and 2-5 free-standing walls; the path sweeps
-      the lanes between the pillar rows and returns along an end lane.
+      4-7 m grid (some missing) and up to 5 free-standing walls 2-6 m long;
+      the path sweeps the lanes between the pillar rows and returns along an
+      end lane. Pillars, walls and furniture keep 0.55 m from the path.
     * ``"cluttered"``: a building of rooms (as "office") whose rooms are
       filled with many discs, boxes and L-, T-, cross- and star-shaped pieces
       (unions of rotated rectangles).
