@@ -12,6 +12,10 @@ a 180-degree, 17-beam, 8 m laser along a 26-pose path
 rooms, corridors and furniture (60 x 40 m by default, :class:`FloorPlan2D`)
 with a path through every room, for scaling studies: the same laser gives
 about 32 observations per pose, 20,000 at 619 poses.
+:func:`scene_family_2d` draws a 2D scene (office, warehouse, hall or cluttered
+rooms, :data:`FAMILY_KINDS`) and its laser setting from a seed
+(:class:`FamilyScene2D`); defaults are chosen on :data:`TUNING_SEEDS` and
+reported on :data:`TEST_SEEDS`.
 :func:`tetromino_scene` builds the k-NN paper's tetromino layouts of box pairs
 (:class:`TetrominoScene`), which :func:`simulate_stereo` orbits with a noisy
 :class:`StereoCamera` (depth noise growing with depth squared, speckle,
@@ -41,6 +45,14 @@ Examples
 (50, 3)
 """
 
+from ._family2d import (
+    FAMILY_KINDS,
+    TEST_SEEDS,
+    TUNING_SEEDS,
+    FamilyScene2D,
+    SensorSetting2D,
+    scene_family_2d,
+)
 from ._floorplan import FloorPlan2D, floor_plan_2d
 from ._outdoor import OutdoorScene, outdoor_scene
 from ._pcd import lzf_decompress, read_pcd, write_pcd
@@ -98,6 +110,12 @@ __all__ = [
     "room_2d",
     "FloorPlan2D",
     "floor_plan_2d",
+    "scene_family_2d",
+    "FamilyScene2D",
+    "SensorSetting2D",
+    "FAMILY_KINDS",
+    "TUNING_SEEDS",
+    "TEST_SEEDS",
     "read_pcd",
     "write_pcd",
     "lzf_decompress",

@@ -99,7 +99,7 @@ def _wall(lo, hi, axis, line, t, gaps):
     return pieces
 
 
-def _outline(solid, step=0.1):
+def solid_outline(solid, step=0.1):
     """Points on the boundary of a furniture solid, at most `step` apart."""
     if isinstance(solid, Circle):
         n = max(int(np.ceil(2 * np.pi * solid.radius / step)), 8)
@@ -141,9 +141,9 @@ def _furnish(rng, room, path_points, doors, count, first_box, first_disc):
                 continue
             if len(doors) and np.any(cand.signed_distance(doors[:, :2]) < doors[:, 2] + 0.6):
                 continue
-            edge = _outline(cand)
+            edge = solid_outline(cand)
             if any(s.signed_distance(edge).min() < 0.3
-                   or cand.signed_distance(_outline(s)).min() < 0.3 for s in placed):
+                   or cand.signed_distance(solid_outline(s)).min() < 0.3 for s in placed):
                 continue
             placed.append(cand)
             if is_box:

@@ -17,6 +17,12 @@ The scores are those of :mod:`occgp.evaluation.metrics` (also importable as
 :mod:`occgp.metrics`). The parameters of the log-odds maps are searched with
 :func:`grid_search` against exact cell labels (:func:`cell_labels`), and
 ranked with :func:`nca_feature_weights`.
+
+The GP maps' defaults are chosen on a seeded family of 2D scenes
+(:func:`occgp.datasets.scene_family_2d`): :func:`evaluate_scene_set` fits
+every method on every seed and scores it on the exact grid,
+:func:`summarize_scene_set` and :func:`format_scene_set` give the mean, spread
+and worst case per method and kind.
 """
 
 from ._ground_truth import cell_labels, cells_in_view, exact_labels, exact_test_set
@@ -25,6 +31,9 @@ from ._nca import MAX_NCA_BYTES, NCAResult, nca_feature_weights
 from ._protocols import (
     MapResult, TestSet, compare_methods, equal_time_comparison, evaluate_map, grid_test_set,
     held_out_split, run_method,
+)
+from ._scene_sets import (
+    PeakRSS, evaluate_scene_set, format_scene_set, fpr_at_tpr, summarize_scene_set,
 )
 from ._search import (
     KNN_GRID, KNN_WEIGHT_GRID, OCTOMAP_GRID, THRESHOLDS, GridSearchResult, grid_search,
@@ -36,4 +45,6 @@ __all__ = ["TestSet", "MapResult", "held_out_split", "grid_test_set", "exact_tes
            "run_method", "compare_methods", "equal_time_comparison", "format_table",
            "rows_to_records", "nca_feature_weights", "NCAResult", "MAX_NCA_BYTES",
            "grid_search", "GridSearchResult", "cell_labels", "KNN_GRID", "OCTOMAP_GRID",
-           "KNN_WEIGHT_GRID", "THRESHOLDS", "matched_counts", "MatchedCounts"]
+           "KNN_WEIGHT_GRID", "THRESHOLDS", "matched_counts", "MatchedCounts",
+           "evaluate_scene_set", "summarize_scene_set", "format_scene_set", "fpr_at_tpr",
+           "PeakRSS"]
