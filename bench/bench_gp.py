@@ -11,9 +11,14 @@ Tables (all measured in this run, side by side):
 3. Kernel matrices for 2,000 mixed observations: build time per kernel and
    quadrature rule.
 4. Cholesky update vs refactorisation at n = 2,000 when adding 50.
+5. The 2D scene family (``scene_family_2d``) on its **test** seeds
+   (``--seeds tuning`` for the tuning seeds, where the defaults were
+   chosen): GPOMIK (spatial cells, its default) with either hyper-parameter
+   objective, GPOM and the 0.1 m occupancy grid, scene by scene and as mean,
+   std and worst per method and per scene kind.
 
-Run: ``python bench/bench_gp.py`` (about three minutes on 2 cores;
-``--quick`` skips the 3D room and the slow kernels).
+Run: ``python bench/bench_gp.py`` (``--quick`` skips the 3D room and the
+slow kernels; ``--only family`` runs the scene family alone).
 """
 
 from __future__ import annotations
@@ -25,18 +30,15 @@ import numpy as np
 import scipy.linalg as sl
 from scipy.spatial import cKDTree
 
-from occgp.datasets import LidarSensor, room_2d, simulate_scans, structured_room
+from occgp.datasets import (TEST_SEEDS, TUNING_SEEDS, LidarSensor, room_2d, simulate_scans,
+                            structured_room)
 from occgp.gp import (GPOM, GPOMIK, ClenshawCurtis, Matern32, OccupancyGrid, Simpson,
                       SparseKernel, SquaredExponential, grid_points, integral_kernel,
                       observations_from_scans)
 from occgp.gp._gpr import factorise
 from occgp.gp._integral_kernel import covariance
-from occgp.metrics import roc_auc, roc_curve
-
-
-def fpr_at_tpr(truth, prob, tpr_target=0.9):
-    fpr, tpr, _ = roc_curve(truth, prob, drop_intermediate=False)
-    return float(fpr[np.searchsorted(tpr, tpr_target)])
+from occgp.evaluation import evaluate_scene_set, format_scene_set, fpr_at_tpr
+from occgp.metrics import roc_auc
 
 
 def table(rows, columns):
@@ -204,16 +206,55 @@ def update_table(n_jobs):
           ["method", "time [ms]", "vs update", "max |L_upd - L| / max |L|"])
 
 
+def family_table(which, n_jobs):
+    seeds = TEST_SEEDS if which == "test" else TUNING_SEEDS
+    print(f"== scene family, {which} seeds {seeds.start}..{seeds.stop - 1}: defaults chosen "
+          "on the tuning seeds ==")
+    methods = {
+        "GPOMIK (defaults)": lambda: GPOMIK(random_state=0, n_jobs=n_jobs),
+        "GPOMIK, other objective": lambda: GPOMIK(
+            objective="lml" if GPOMIK().objective == "loo" else "loo", random_state=0,
+            n_jobs=n_jobs),
+        "GPOM (defaults)": lambda: GPOM(random_state=0, n_jobs=n_jobs),
+        "occupancy grid (0.1 m)": lambda: OccupancyGrid(0.1),
+    }
+    records = evaluate_scene_set(methods, seeds)
+    by = {(r["method"], r["seed"]): r for r in records}
+    rows = []
+    for seed in seeds:
+        r = [by[name, seed] for name in methods]
+        rows.append([f"{seed}", r[0]["kind"], f"{r[0]['n_observations']}"]
+                    + [f"{x['auc']:.4f}" for x in r]
+                    + [f"{r[0]['auc'] - r[2]['auc']:+.4f}"])
+    table(rows, ["seed", "kind", "observations", *(f"{m} AUC" for m in methods),
+                 "GPOMIK - GPOM"])
+    print(format_scene_set(records))
+    print(format_scene_set(records, by_kind=True))
+    gpomik = np.mean([by["GPOMIK (defaults)", s]["auc"] for s in seeds])
+    gpom = np.mean([by["GPOM (defaults)", s]["auc"] for s in seeds])
+    print(f"target ({which} seeds): GPOMIK >= GPOM on average: {gpomik >= gpom} "
+          f"({gpomik:.4f} vs {gpom:.4f})\n")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n-jobs", type=int, default=2)
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--only", choices=["room", "update", "kernels", "3d", "family"],
+                        default=None)
+    parser.add_argument("--seeds", choices=["test", "tuning"], default="test",
+                        help="seeds of the scene-family table")
     args = parser.parse_args()
-    room_2d_table(args.n_jobs, args.quick)
-    update_table(args.n_jobs)
-    kernel_matrix_table(args.n_jobs, args.quick)
-    if not args.quick:
+    if args.only in (None, "room"):
+        room_2d_table(args.n_jobs, args.quick)
+    if args.only in (None, "update"):
+        update_table(args.n_jobs)
+    if args.only in (None, "kernels"):
+        kernel_matrix_table(args.n_jobs, args.quick)
+    if args.only in (None, "3d") and not args.quick:
         room_3d_table(args.n_jobs)
+    if args.only in (None, "family"):
+        family_table(args.seeds, args.n_jobs)
 
 
 if __name__ == "__main__":
