@@ -177,11 +177,13 @@ def loo_log_predictive(theta, kernel, quadrature, starts, ends, y, n_threads=1):
     value = float(np.sum(-0.5 * np.log(2.0 * np.pi) + 0.5 * np.log(d) - 0.5 * alpha ** 2 / d))
     grad = np.empty_like(theta)
     factor = 0.5 * (1.0 + alpha ** 2 / d)
-    for j in range(len(theta)):
-        # noise: dC/dt = noise * I, so Z = noise * C^-1
-        Z = noise * Cinv if j == len(theta) - 1 else Cinv @ dK[j]
+    for j in range(len(theta) - 1):
+        Z = Cinv @ dK[j]
         ZC_diag = np.einsum("ij,ji->i", Z, Cinv)
         grad[j] = float(np.sum((alpha * (Z @ alpha) - factor * ZC_diag) / d))
+    # noise: dC/dt = noise * I, so Z = noise * C^-1 (and C^-1 is symmetric)
+    ZC_diag = noise * np.einsum("ij,ij->i", Cinv, Cinv)
+    grad[-1] = float(np.sum((alpha * noise * (Cinv @ alpha) - factor * ZC_diag) / d))
     return value, grad
 
 
