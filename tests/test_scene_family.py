@@ -257,7 +257,7 @@ def test_protocol_records(records, cases):
         case = cases[r["seed"]]
         assert r["kind"] == case.kind
         assert r["n_observations"] == case.n_observations
-        assert r["n_cells"] == len(case.grid()[0])
+        assert r["n_cells"] == int(case.view().sum())
         assert 0.5 < r["auc"] <= 1.0
         assert 0.0 <= r["fpr"] <= 1.0
         assert r["fit_seconds"] >= 0 and r["predict_seconds"] >= 0
@@ -271,8 +271,45 @@ def test_protocol_scores_against_exact_truth(records, cases):
     grid = OccupancyGrid(0.2).fit(*observations_from_scans(case.scans()))
     prob = grid.predict_proba(points)
     from occgp.metrics import roc_auc
-    assert records[0]["auc"] == roc_auc(truth, prob)
-    assert records[0]["fpr"] == fpr_at_tpr(truth, prob)
+    seen = case.view()
+    assert records[0]["auc"] == roc_auc(truth[seen], prob[seen])
+    assert records[0]["fpr"] == fpr_at_tpr(truth[seen], prob[seen])
+    assert records[0]["auc_grid"] == roc_auc(truth, prob)
+    assert records[0]["fpr_grid"] == fpr_at_tpr(truth, prob)
+
+
+@pytest.mark.parametrize("seed", [1, 3, 5])
+def test_view_holds_the_hits_and_the_beams(seed):
+    """Every cell a beam crossed, and every hit's cell, is in view; no cell out of range is."""
+    case = scene_family_2d(seed)
+    points, truth, shape = case.grid()
+    seen = case.view()
+    assert seen.shape == truth.shape and seen.dtype == bool
+    assert np.array_equal(seen, case.view())
+    lo = np.asarray(case.scene.bounds[0])
+    exact = case.scans(case.sensor._replace(range_noise=0.0, position_noise=0.0,
+                                            heading_noise=0.0))
+    hits, starts, ends = observations_from_scans(exact)
+    # points along the beams (short of their ends by a margin past rounding) and the hits
+    u = np.linspace(0.0, 1.0, 50)[:, None, None]
+    along = (starts + u * (ends - starts) * 0.999).reshape(-1, 2)
+    for p in (along, hits):
+        ij = np.floor((p - lo) / 0.1).astype(int)
+        ok = (ij >= 0).all(axis=1) & (ij < shape).all(axis=1)
+        assert seen[ij[ok, 0] * shape[1] + ij[ok, 1]].all()
+    origins, _ = case.poses()
+    far = np.min(np.linalg.norm(points[:, None] - origins[None], axis=2), axis=1) \
+        > case.sensor.max_range + 0.2
+    assert not (seen & far).any()
+    assert 0.0 < truth[seen].mean() < truth.mean() + 1e-12
+
+
+def test_protocol_region_grid_scores_every_cell(cases):
+    records = evaluate_scene_set({"grid": lambda: OccupancyGrid(0.2)}, [2], region="grid")
+    assert records[0]["n_cells"] == len(cases[2].grid()[0])
+    assert records[0]["auc"] == records[0]["auc_grid"]
+    with pytest.raises(ValueError, match="region"):
+        evaluate_scene_set({"grid": lambda: OccupancyGrid(0.2)}, [2], region="seen")
 
 
 def test_summary_and_table(records):

@@ -13,6 +13,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+from scipy import ndimage
 from numpy.typing import NDArray
 
 from .._validation import check_choice, check_int, check_real
@@ -232,13 +233,78 @@ class FamilyScene2D:
                             ranges[i].copy(), hit[i].copy(), float(s.max_range))
                 for i in range(n)]
 
+    def view(self, resolution: float = 0.1, sensor: SensorSetting2D | None = None):
+        """Which cells of :meth:`grid` the laser saw: free space it crossed and the surfaces.
+
+        From every true pose, rays finer than the laser's beams (at most half
+        a cell apart at the maximum range) are cast over its field of view;
+        a cell is in view when a point of a ray, sampled every half cell from
+        the sensor to half a cell past the first hit (or to the maximum
+        range), falls in it or in one of its 8 neighbours (a margin for
+        the corners the samples step past). Solid interiors behind the surfaces, and space
+        no ray reached, are out of view: no method can know them, and scoring
+        them rates the methods' guesses in unseen space rather than their
+        maps.
+
+        Parameters
+        ----------
+        resolution : float, default=0.1
+            Edge of the cells of :meth:`grid`, metres.
+        sensor : SensorSetting2D, optional
+            Default :attr:`sensor`.
+
+        Returns
+        -------
+        in_view : ndarray of shape (n_cells,), dtype bool
+            In the order of :meth:`grid`'s cells.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As for :meth:`grid` and :meth:`scans`.
+
+        Examples
+        --------
+        >>> case = scene_family_2d(2)
+        >>> in_view = case.view()
+        >>> bool(0.3 < in_view.mean() < 1.0)
+        True
+        """
+        s = self.sensor if sensor is None else _check_sensor(sensor)
+        points, _, shape = self.grid(resolution, truth=False)
+        resolution = float(resolution)
+        lo = np.asarray(self.scene.bounds[0], dtype=np.float64)
+        origins, headings = self.poses(s.n_poses)
+        step = 0.5 * resolution / s.max_range
+        n_rays = max(int(math.ceil(s.fov / step)) + 1, 2) if s.fov > 0 else 1
+        angles = np.linspace(-s.fov / 2, s.fov / 2, n_rays) if n_rays > 1 else np.zeros(1)
+        n_samples = int(math.ceil((s.max_range + resolution) / (0.5 * resolution))) + 1
+        t = np.arange(n_samples) * (0.5 * resolution)
+        mask = np.zeros(shape[0] * shape[1], dtype=bool)
+        per_chunk = max(1, 4_000_000 // (n_rays * n_samples))
+        for a in range(0, len(origins), per_chunk):
+            o, h = origins[a:a + per_chunk], headings[a:a + per_chunk]
+            world = (h[:, None] + angles).reshape(-1)
+            dirs = np.column_stack([np.cos(world), np.sin(world)])
+            start = np.repeat(o, n_rays, axis=0)
+            ranges, hit = self.scene.ray_cast(start, dirs, s.max_range)
+            reach = np.where(hit, ranges + 0.5 * resolution, s.max_range)
+            keep = t[None, :] <= reach[:, None]
+            ray, k = np.nonzero(keep)
+            p = start[ray] + t[k, None] * dirs[ray]
+            ij = np.floor((p - lo) / resolution).astype(np.int64)
+            ok = (ij[:, 0] >= 0) & (ij[:, 0] < shape[0]) & (ij[:, 1] >= 0) & (ij[:, 1] < shape[1])
+            mask[ij[ok, 0] * shape[1] + ij[ok, 1]] = True
+        # one cell of margin: the samples may step past a corner a ray clips
+        return ndimage.binary_dilation(mask.reshape(shape), np.ones((3, 3), bool)).reshape(-1)
+
     @property
     def n_observations(self) -> int:
         """GP observations of :meth:`scans`: 2 per returning beam, 1 per other beam."""
         scans = self.scans()
         return int(sum(len(s.hit) + int(s.hit.sum()) for s in scans))
 
-    def grid(self, resolution: float = 0.1):
+    def grid(self, resolution: float = 0.1, truth: bool = True):
         """The query grid over the scene's bounds and its exact occupancy.
 
         The cells are those of :func:`occgp.gp.grid_points` over
@@ -249,13 +315,16 @@ class FamilyScene2D:
         ----------
         resolution : float, default=0.1
             Edge of the cells, metres; positive.
+        truth : bool, default=True
+            Compute the truth; False gives None in its place.
 
         Returns
         -------
         points : ndarray of shape (n_cells, 2)
             Cell centres, x major (``truth.reshape(shape)`` is indexed ``[ix, iy]``).
         truth : ndarray of shape (n_cells,), dtype bool
-            Whether each centre lies in a solid (:meth:`Scene2D.occupancy`).
+            Whether each centre lies in a solid (:meth:`Scene2D.occupancy`);
+            :meth:`view` says which cells the laser saw.
         shape : tuple of int
             Cells along x and y.
 
@@ -277,7 +346,7 @@ class FamilyScene2D:
         axes = [a + (np.arange(k) + 0.5) * resolution for a, k in zip(lo, shape)]
         gx, gy = np.meshgrid(*axes, indexing="ij")
         points = np.column_stack([gx.reshape(-1), gy.reshape(-1)])
-        return points, self.scene.occupancy(points), shape
+        return points, self.scene.occupancy(points) if truth else None, shape
 
 
 def _check_size(size, kind):
