@@ -7,12 +7,11 @@ times with variances) on :data:`occgp.datasets.TUNING_SEEDS` only, through
 Groups of candidates vary one choice at a time around the defaults:
 
 * ``gpomik``: the hyper-parameter objective (log marginal likelihood or
-  leave-one-out) and the size of the spatial cells;
+  leave-one-out);
 * ``gpom``: the objective;
 * ``mixture``: the clustering (line tracking or Dirichlet process), the
   merging rule, the fewest observations of an expert (``min_size``), the
-  line tracker's gap, the DP's covariance prior, ``prior_tol`` and the
-  objective.
+  line tracker's gap, the DP's covariance prior and the objective.
 
 Run: ``PYTHONPATH=bench python bench/tune_gp.py --group mixture --out m.json``;
 ``--summary FILE ...`` prints the tables of saved records (mean, std and
@@ -33,12 +32,8 @@ def candidates(group):
     """Name -> factory of the candidates of `group`."""
     if group == "gpomik":
         return {
-            "GPOMIK cells<=1000 lml": lambda: GPOMIK(max_cell_size=1000, random_state=0),
-            "GPOMIK cells<=1000 loo": lambda: GPOMIK(max_cell_size=1000, objective="loo",
-                                                     random_state=0),
-            "GPOMIK cells<=2000 lml": lambda: GPOMIK(max_cell_size=2000, random_state=0),
-            "GPOMIK cells<=2000 loo": lambda: GPOMIK(max_cell_size=2000, objective="loo",
-                                                     random_state=0),
+            "GPOMIK lml": lambda: GPOMIK(random_state=0),
+            "GPOMIK loo": lambda: GPOMIK(objective="loo", random_state=0),
         }
     if group == "gpom":
         return {
@@ -51,17 +46,15 @@ def candidates(group):
         return {
             "mixture LT": mix(),
             "mixture LT rbcm": mix(combine="rbcm"),
-            "mixture LT bcm": mix(combine="bcm"),
-            "mixture LT min_size=50": mix(min_size=50),
-            "mixture LT min_size=200": mix(min_size=200),
             "mixture LT gap=1": mix(clustering=LineTracking(gap_threshold=1.0)),
-            "mixture LT gap=4": mix(clustering=LineTracking(gap_threshold=4.0)),
-            "mixture LT prior_tol=1e-2": mix(prior_tol=1e-2),
-            "mixture LT loo": mix(expert=GPOMIK(n_restarts=0, objective="loo")),
             "mixture DP": mix(clustering="dp"),
-            "mixture DP min_size=200": mix(clustering="dp", min_size=200),
+            "mixture DP rbcm": mix(clustering="dp", combine="rbcm"),
+            "mixture DP bcm": mix(clustering="dp", combine="bcm"),
+            "mixture DP min_size=50": mix(clustering="dp", min_size=50),
             "mixture DP prior=1": mix(clustering=DirichletProcessClustering(
                 covariance_prior=1.0)),
+            "mixture DP loo": mix(clustering="dp", expert=GPOMIK(n_restarts=0,
+                                                                 objective="loo")),
         }
     raise ValueError(f"unknown group {group!r}")
 
