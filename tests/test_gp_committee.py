@@ -17,6 +17,8 @@ def hand(rule):
     """The two-expert example of MU, VAR, PRIOR worked out by hand."""
     m1, m2, v1, v2, p1, p2 = 0.8, -0.2, 0.2, 0.5, 1.0, 2.0
     prior = 1.0 / ((1 / p1 + 1 / p2) / 2)                      # 4/3
+    if rule == "minvar":                                        # 0.2 / 1 < 0.5 / 2
+        return m1, v1
     if rule == "bcm":                                           # Eq. 13
         prec, wmean = 1 / v1 + 1 / v2, m1 / v1 + m2 / v2
     elif rule == "tresp":
@@ -85,7 +87,7 @@ def test_committee_add_equals_combine_and_adding_the_prior_is_neutral(rule):
 
 
 def test_one_expert_is_the_expert_for_exact_rules():
-    for rule in ("bcm", "tresp", "gpoe"):
+    for rule in ("bcm", "tresp", "gpoe", "minvar"):
         mean, var = combine_predictions([[0.3, -1.0]], [[0.4, 0.9]], [1.0], rule)
         assert_allclose(mean, [0.3, -1.0], rtol=1e-14)
         assert_allclose(var, [0.4, 0.9], rtol=1e-14)
@@ -109,3 +111,13 @@ def test_one_expert_is_the_expert_for_exact_rules():
 def test_bad_input(kwargs, exc, match):
     with pytest.raises(exc, match=match):
         combine_predictions(**kwargs)
+
+
+def test_minvar_takes_the_most_confident_expert():
+    means = np.array([[1.0, 2.0, 0.5], [3.0, -1.0, 0.7]])
+    variances = np.array([[0.5, 0.2, 1.0], [0.4, 0.9, 2.0]])
+    priors = np.array([1.0, 2.0])
+    mean, var = combine_predictions(means, variances, priors, "minvar")
+    # fractions of the prior: [0.5, 0.2, 1.0] and [0.2, 0.45, 1.0]
+    assert mean.tolist() == [3.0, 2.0, 0.0]
+    assert var.tolist() == [0.4, 0.2, 1.0 / np.mean(1.0 / priors)]

@@ -28,6 +28,13 @@ term known in closed form, and need not be evaluated there:
     ``1/var = sum_e w_e/var_e``, ``mu/var = sum_e w_e mu_e/var_e``,
     ``w_e = beta_e / sum_e beta_e``; the prior where no expert is informed.
 
+``"minvar"``
+    The most confident expert alone: at each query, the expert whose
+    variance is the smallest fraction of its prior gives the mean and
+    variance (ties: the first expert); the prior where no expert is below
+    its prior. This is how :class:`~occgp.gp.GPOMIK` answers a query from its
+    spatial cells.
+
 ``prior`` is the committee's prior variance, ``1 / mean_e(1 / prior_e)``
 (the experts' common prior when they share one).
 
@@ -51,7 +58,7 @@ from .._validation import as_numeric, check_choice
 __all__ = ["COMBINE_RULES", "Committee", "combine_predictions"]
 
 #: The merging rules, by name.
-COMBINE_RULES = ("bcm", "tresp", "rbcm", "gpoe")
+COMBINE_RULES = ("bcm", "tresp", "rbcm", "gpoe", "minvar")
 
 #: Variances are floored at this fraction of the prior (a zero variance would
 #: give an infinite precision).
@@ -82,6 +89,11 @@ class Committee:
         elif self.rule == "gpoe":
             self._precision = np.zeros(n)
             self._weights = np.zeros(n)
+        elif self.rule == "minvar":
+            self._ratio = np.ones(n)
+            self._mean = np.zeros(n)
+            self._var = self.prior.copy()
+            return
         else:
             self._precision = 1.0 / self.prior
         self._weighted_mean = np.zeros(n)
@@ -95,6 +107,13 @@ class Committee:
         """
         prior_var = np.broadcast_to(np.asarray(prior_var, dtype=np.float64), np.shape(var))
         var = np.clip(var, _VAR_FLOOR * prior_var, prior_var)
+        if self.rule == "minvar":
+            ratio = var / prior_var
+            better = ratio < self._ratio[index]
+            at = index[better]
+            self._ratio[at], self._mean[at], self._var[at] = ratio[better], mean[better], \
+                var[better]
+            return
         gain = 1.0 / var - 1.0 / prior_var
         if self.rule in ("bcm", "tresp"):
             self._precision[index] += gain
@@ -111,6 +130,8 @@ class Committee:
 
     def result(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The merged latent mean and variance at every query."""
+        if self.rule == "minvar":
+            return self._mean.copy(), self._var.copy()
         precision, weighted = self._precision, self._weighted_mean
         if self.rule == "gpoe":
             informed = self._weights > 0
@@ -131,10 +152,10 @@ def combine_predictions(means: ArrayLike, variances: ArrayLike, prior_variances:
         Each expert's latent mean and variance.
     prior_variances : array-like of shape (n_experts,) or (n_experts, n_queries)
         Each expert's prior variance (its kernel's variance at a point).
-    rule : {"bcm", "tresp", "rbcm", "gpoe"}, default="rbcm"
+    rule : {"bcm", "tresp", "rbcm", "gpoe", "minvar"}, default="rbcm"
         The merging rule (see :mod:`occgp.gp._committee`): the mixture paper's
-        Eq. 13, Tresp's BCM with the prior correction, the robust BCM, or the
-        generalised product of experts.
+        Eq. 13, Tresp's BCM with the prior correction, the robust BCM, the
+        generalised product of experts, or the most confident expert alone.
 
     Returns
     -------

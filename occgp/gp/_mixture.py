@@ -86,8 +86,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
        bisection.
     4. **Merging** (``combine``): ``"bcm"`` is the paper's Eq. 13,
        ``"tresp"`` the BCM with its prior correction, ``"rbcm"`` the robust
-       BCM and ``"gpoe"`` the generalised product of experts (see
-       :func:`combine_predictions`). An expert is evaluated only at the
+       BCM, ``"gpoe"`` the generalised product of experts and ``"minvar"``
+       the most confident expert alone (see :func:`combine_predictions`). An expert is evaluated only at the
        queries where it may differ from its prior by more than
        ``prior_tol / m`` (in prior variances and standard deviations; a
        bound from the distance to its observations), ``m`` the number of
@@ -114,7 +114,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         their defaults, or an instance of one of them (or any object with
         ``fit_predict(hits, origins)`` and ``partial_fit(hits, origins)``),
         which is cloned.
-    combine : {"bcm", "tresp", "rbcm", "gpoe"}, default="gpoe"
+    combine : {"bcm", "tresp", "rbcm", "gpoe", "minvar"}, default="gpoe"
         The committee rule.
     hyperparameters : {"shared", "own"}, default="shared"
         ``"shared"``: one set for every expert, maximising the sum of the
