@@ -55,6 +55,20 @@ def candidates(group):
                 covariance_prior=1.0)),
             "mixture DP loo": mix(clustering="dp", expert=GPOMIK(n_restarts=0,
                                                                  objective="loo")),
+            "mixture DP min_size=300": mix(clustering="dp", min_size=300),
+            "mixture DP min_size=600": mix(clustering="dp", min_size=600),
+            "mixture DP min_size=600 max=2000": mix(clustering="dp", min_size=600,
+                                                    max_cluster_size=2000),
+            "mixture LT min_size=300": mix(min_size=300),
+            "mixture LT min_size=600": mix(min_size=600),
+            "mixture LT global": mix(hyperparameters="global"),
+            "mixture LT global minvar": mix(hyperparameters="global", combine="minvar"),
+            "mixture LT global rbcm": mix(hyperparameters="global", combine="rbcm"),
+            "mixture LT global loo": mix(hyperparameters="global", expert=GPOMIK(
+                n_restarts=0, objective="loo")),
+            "mixture DP global": mix(clustering="dp", hyperparameters="global"),
+            "mixture DP global minvar": mix(clustering="dp", hyperparameters="global",
+                                            combine="minvar"),
         }
     raise ValueError(f"unknown group {group!r}")
 

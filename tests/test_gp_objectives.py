@@ -100,3 +100,24 @@ def test_min_size_merges_small_clusters():
     assert merge_small_clusters(labels, points, is_hit, min_size=5).tolist() == [0] * 11
     with pytest.raises(ValueError, match="min_size"):
         merge_small_clusters(labels, points, is_hit, min_size=0)
+
+
+def test_global_hyperparameters_are_a_gpomik_fit():
+    """hyperparameters='global': the kernel, noise and PLSC of GPOMIK on the same data."""
+    from occgp.datasets import room_2d
+    from occgp.gp import GPOMIK, GPMixture, observations_from_scans
+    data = observations_from_scans(room_2d().scan(n_poses=4))
+    mix = GPMixture(GPOMIK(n_restarts=0), hyperparameters="global", random_state=0).fit(*data)
+    gp = GPOMIK(n_restarts=0, max_cell_size=None).fit(*data)
+    assert_allclose(mix.kernel_.theta, gp.kernel_.theta, rtol=1e-8)
+    assert_allclose(mix.noise_, gp.noise_, rtol=1e-8)
+    assert_allclose(mix.plsc_, gp.plsc_, rtol=1e-6)
+    for expert in mix.experts_:
+        assert_allclose(expert.kernel_.theta, gp.kernel_.theta, rtol=1e-8)
+    # a subset of max_optimize observations when there are more
+    small = GPMixture(GPOMIK(n_restarts=0, max_optimize=50), hyperparameters="global",
+                      random_state=0).fit(*data)
+    assert not np.allclose(small.kernel_.theta, gp.kernel_.theta)
+    again = GPMixture(GPOMIK(n_restarts=0, max_optimize=50), hyperparameters="global",
+                      random_state=0).fit(*data)
+    assert_allclose(again.predict(data[0]), small.predict(data[0]), rtol=0, atol=0)

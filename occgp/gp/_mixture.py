@@ -47,7 +47,7 @@ __all__ = ["GPMixture"]
 
 _CLUSTERINGS = ("line", "dp", "plane")
 _UPDATES = ("cholesky", "refit")
-_HYPERPARAMETERS = ("shared", "own")
+_HYPERPARAMETERS = ("global", "shared", "own")
 #: The objects a GPMixture's parameters may hold (besides the kernels and rules).
 _CLASSES = {c.__name__: c for c in (GPOMIK, LineTracking, DirichletProcessClustering,
                                     PlaneClustering)}
@@ -116,12 +116,17 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         which is cloned.
     combine : {"bcm", "tresp", "rbcm", "gpoe", "minvar"}, default="gpoe"
         The committee rule.
-    hyperparameters : {"shared", "own"}, default="shared"
-        ``"shared"``: one set for every expert, maximising the sum of the
-        experts' log marginal likelihoods (Deisenroth & Ng 2015), fitted on
-        whole experts drawn at random until the template's `max_optimize`
-        observations; ``"own"``: each expert maximises its own (the mixture
-        paper), which over-fits small clusters (see the user guide).
+    hyperparameters : {"global", "shared", "own"}, default="shared"
+        ``"global"``: one set for every expert and the classifier (PLSC)
+        too, both fitted as :meth:`GPOMIK.fit` fits its own on a random
+        subset of the template's `max_optimize` observations of all the
+        data (the classifier on the subset's leave-one-out predictions per
+        unit length); ``"shared"``: one set for every expert, maximising the
+        sum of the experts' log marginal likelihoods (Deisenroth & Ng 2015),
+        fitted on whole experts drawn at random until the template's
+        `max_optimize` observations; ``"own"``: each expert maximises its own
+        (the mixture paper), which over-fits small clusters (see the user
+        guide).
     min_hits : int, default=5
         Fewest hits of a cluster with its own expert.
     min_size : int, default=1
@@ -402,8 +407,11 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
                                key=lambda p: int(p.min())):
                 expert_of[idx[part]] = len(groups)
                 groups.append(np.sort(idx[part]))
+        plsc = None
         if self.hyperparameters == "shared":
             template = self._shared_template(template, obs, groups, np.random.default_rng(seed))
+        elif self.hyperparameters == "global":
+            template, plsc = self._global_template(template, obs, seed)
         self._expert_template = template  # what update() fits new experts with
         experts = self._parallel()(
             delayed(fit_expert)(template, hits_first(obs.take(idx)), self._expert_seed(e))
@@ -423,8 +431,28 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
             self._cluster_experts.setdefault(c, set()).add(e)
         self._reach = [None] * len(self.experts_)
         self.updated_experts_ = np.arange(len(self.experts_))
-        self.plsc_ = self._fit_plsc(obs, expert_of, groups, np.random.default_rng(seed))
+        if plsc is None:
+            plsc = self._fit_plsc(obs, expert_of, groups, np.random.default_rng(seed))
+        self.plsc_ = plsc
         return self
+
+    def _global_template(self, template, obs, seed):
+        """`template` with a GPOMIK's hyper-parameters fitted on a random subset, and its PLSC.
+
+        The subset holds ``template.max_optimize`` observations of all the
+        data drawn at random (all of them when fewer), so the GPOMIK fits
+        both on the whole subset, as :meth:`GPOMIK.fit` would.
+        """
+        rng = np.random.default_rng(seed)
+        take = np.arange(len(obs.y))
+        if len(take) > template.max_optimize:
+            take = np.sort(rng.choice(len(take), template.max_optimize, replace=False))
+        gp = fit_expert(clone(template).set_params(max_cell_size=None),
+                        hits_first(obs.take(take)),
+                        int(np.random.SeedSequence([seed, 0, 1]).generate_state(1)[0]))
+        self.kernel_, self.noise_ = gp.kernel_, gp.noise_
+        return (clone(template).set_params(kernel=gp.kernel_, noise=gp.noise_, optimizer=False),
+                tuple(gp.plsc_))
 
     def _shared_template(self, template, obs, groups, rng):
         """`template` with the hyper-parameters that maximise the experts' summed LML.
