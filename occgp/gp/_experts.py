@@ -8,11 +8,13 @@ from scipy.spatial import cKDTree
 from sklearn.base import clone
 
 from ._beams import row_index
-from ._integral_kernel import covariance
-from ._limits import one_blas_thread
+from ._gpr import optimize_shared_hyperparameters
+from ._integral_kernel import check_quadrature, covariance
+from ._limits import one_blas_thread, threads
 from ._observations import Observations
 
-__all__ = ["Reach", "QueryIndex", "skip_tolerances", "evaluate_expert", "hit_origins", "fit_expert", "predict_expert", "predict_dense",
+__all__ = ["Reach", "QueryIndex", "skip_tolerances", "evaluate_expert", "global_template",
+           "shared_template", "hit_origins", "fit_expert", "predict_expert", "predict_dense",
            "split_observations", "hits_first", "concat_observations", "order_positions",
            "downdated"]
 
@@ -171,6 +173,45 @@ def evaluate_expert(e, expert, idx, X):
     """Expert `e`'s latent mean and variance at its queries `X` (indices `idx`)."""
     mean, var = predict_expert(expert, X)
     return e, idx, mean, var
+
+
+def global_template(template, obs, seed):
+    """`template` with a GPOMIK's hyper-parameters fitted on a random subset, and its PLSC.
+
+    The subset holds ``template.max_optimize`` observations of all of `obs`
+    drawn at random (all of them when fewer), so the GPOMIK fits both on the
+    whole subset, as :meth:`GPOMIK.fit` would. Returns ``(template, (a, b))``.
+    """
+    rng = np.random.default_rng(seed)
+    take = np.arange(len(obs.y))
+    if len(take) > template.max_optimize:
+        take = np.sort(rng.choice(len(take), template.max_optimize, replace=False))
+    gp = fit_expert(clone(template).set_params(max_cell_size=None), hits_first(obs.take(take)),
+                    int(np.random.SeedSequence([seed, 0, 1]).generate_state(1)[0]))
+    return (clone(template).set_params(kernel=gp.kernel_, noise=gp.noise_, optimizer=False),
+            tuple(gp.plsc_))
+
+
+def shared_template(template, obs, groups, rng):
+    """`template` with the hyper-parameters that maximise the experts' summed objective.
+
+    They are fitted on whole experts (`groups`: indices into `obs`) in random
+    order, as many as fit in `max_optimize` observations of the template (at
+    least one).
+    """
+    kernel, noise, noise_bounds = template._check_params()
+    if template.optimizer:
+        order = rng.permutation(len(groups))
+        sizes = np.array([len(groups[e]) for e in order])
+        n_parts = max(1, int(np.searchsorted(np.cumsum(sizes), template.max_optimize,
+                                             side="right")))
+        parts = [(o.starts, o.ends, o.y) for o in
+                 (obs.take(groups[e]) for e in np.sort(order[:n_parts]))]
+        kernel, noise, _ = optimize_shared_hyperparameters(
+            kernel, noise, noise_bounds, parts, check_quadrature(template.quadrature),
+            n_restarts=template.n_restarts, rng=rng, objective=template.objective,
+            n_threads=threads(template.n_jobs))
+    return clone(template).set_params(kernel=kernel, noise=noise, optimizer=False)
 
 
 def fit_expert(template, obs, seed):

@@ -30,13 +30,11 @@ from ._cells import spatial_groups
 from ._clustering import DirichletProcessClustering
 from ._committee import COMBINE_RULES, Committee
 from ._experts import (QueryIndex, Reach, concat_observations, downdated, evaluate_expert,
-                       fit_expert, hit_origins, hits_first, order_positions, skip_tolerances,
-                       split_observations)
+                       fit_expert, global_template, hit_origins, hits_first, order_positions,
+                       shared_template, skip_tolerances, split_observations)
 from ._gpomik import GPOMIK
-from ._gpr import optimize_shared_hyperparameters
-from ._integral_kernel import check_quadrature
 from ._io import gp_fitted, gp_params, read_gp, write_gp
-from ._limits import generator, threads
+from ._limits import generator
 from ._lines import LineTracking
 from ._map_protocol import MapProtocol
 from ._observations import Observations, check_beam_hits, make_observations
@@ -409,9 +407,11 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
                 groups.append(np.sort(idx[part]))
         plsc = None
         if self.hyperparameters == "shared":
-            template = self._shared_template(template, obs, groups, np.random.default_rng(seed))
+            template = shared_template(template, obs, groups, np.random.default_rng(seed))
         elif self.hyperparameters == "global":
-            template, plsc = self._global_template(template, obs, seed)
+            template, plsc = global_template(template, obs, seed)
+        if self.hyperparameters != "own":
+            self.kernel_, self.noise_ = template.kernel, template.noise
         self._expert_template = template  # what update() fits new experts with
         experts = self._parallel()(
             delayed(fit_expert)(template, hits_first(obs.take(idx)), self._expert_seed(e))
@@ -435,45 +435,6 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
             plsc = self._fit_plsc(obs, expert_of, groups, np.random.default_rng(seed))
         self.plsc_ = plsc
         return self
-
-    def _global_template(self, template, obs, seed):
-        """`template` with a GPOMIK's hyper-parameters fitted on a random subset, and its PLSC.
-
-        The subset holds ``template.max_optimize`` observations of all the
-        data drawn at random (all of them when fewer), so the GPOMIK fits
-        both on the whole subset, as :meth:`GPOMIK.fit` would.
-        """
-        rng = np.random.default_rng(seed)
-        take = np.arange(len(obs.y))
-        if len(take) > template.max_optimize:
-            take = np.sort(rng.choice(len(take), template.max_optimize, replace=False))
-        gp = fit_expert(clone(template).set_params(max_cell_size=None),
-                        hits_first(obs.take(take)),
-                        int(np.random.SeedSequence([seed, 0, 1]).generate_state(1)[0]))
-        self.kernel_, self.noise_ = gp.kernel_, gp.noise_
-        return (clone(template).set_params(kernel=gp.kernel_, noise=gp.noise_, optimizer=False),
-                tuple(gp.plsc_))
-
-    def _shared_template(self, template, obs, groups, rng):
-        """`template` with the hyper-parameters that maximise the experts' summed LML.
-
-        They are fitted on whole experts in random order, as many as fit in
-        `max_optimize` observations of the template (at least one).
-        """
-        kernel, noise, noise_bounds = template._check_params()
-        if template.optimizer:
-            order = rng.permutation(len(groups))
-            sizes = np.array([len(groups[e]) for e in order])
-            n_parts = max(1, int(np.searchsorted(np.cumsum(sizes), template.max_optimize,
-                                                 side="right")))
-            parts = [(o.starts, o.ends, o.y) for o in
-                     (obs.take(groups[e]) for e in np.sort(order[:n_parts]))]
-            kernel, noise, _ = optimize_shared_hyperparameters(
-                kernel, noise, noise_bounds, parts, check_quadrature(template.quadrature),
-                n_restarts=template.n_restarts, rng=rng, objective=template.objective,
-                n_threads=threads(template.n_jobs))
-        self.kernel_, self.noise_ = kernel, noise
-        return clone(template).set_params(kernel=kernel, noise=noise, optimizer=False)
 
     @property
     def n_experts_(self) -> int:
