@@ -92,7 +92,10 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
        experts whose reach overlaps its own; elsewhere it counts as its
        prior, exactly known. Merged means and variances then differ from
        evaluating every expert everywhere by about `prior_tol` at most.
-    5. **PLSC** (``a``, ``b``) is fitted on the committee's leave-one-out
+    5. **PLSC** (``a``, ``b``): with ``hyperparameters="global"`` (the
+       default), that of the GPOMIK fitted on a random subset of the data,
+       which also gives every expert its hyper-parameters. Otherwise it is
+       fitted on the committee's leave-one-out
        predictions: at each hit, and at a random point of each beam, every
        expert predicts and the observation's own expert predicts without it
        (a rank-one downdate). With a single expert the merged latent mean and
@@ -114,7 +117,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         which is cloned.
     combine : {"bcm", "tresp", "rbcm", "gpoe", "minvar"}, default="gpoe"
         The committee rule.
-    hyperparameters : {"global", "shared", "own"}, default="shared"
+    hyperparameters : {"global", "shared", "own"}, default="global"
         ``"global"``: one set for every expert and the classifier (PLSC)
         too, both fitted as :meth:`GPOMIK.fit` fits its own on a random
         subset of the template's `max_optimize` observations of all the
@@ -211,7 +214,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     """
 
     def __init__(self, expert=None, *, clustering="line", combine="gpoe",
-                 hyperparameters="shared", min_hits=5, min_size=1, max_cluster_size=1000,
+                 hyperparameters="global", min_hits=5, min_size=1, max_cluster_size=1000,
                  prior_tol=1e-3, update_experts="cholesky", max_optimize=1000, n_jobs=None,
                  random_state=None, occupancy_threshold=0.5, hit_tolerance=HIT_TOLERANCE):
         self.expert = expert
