@@ -208,7 +208,7 @@ def update_table(n_jobs):
 
 def family_table(which, n_jobs):
     seeds = TEST_SEEDS if which == "test" else TUNING_SEEDS
-    print(f"== scene family, {which} seeds {seeds.start}..{seeds.stop - 1}: defaults chosen "
+    print(f"== scene family, {which} seeds {seeds[0]}..{seeds[-1]}: defaults chosen "
           "on the tuning seeds ==")
     methods = {
         "GPOMIK (defaults)": lambda: GPOMIK(random_state=0, n_jobs=n_jobs),

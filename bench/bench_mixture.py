@@ -240,7 +240,7 @@ def family_methods(n_jobs):
 
 def family_table(which, n_jobs):
     seeds = TEST_SEEDS if which == "test" else TUNING_SEEDS
-    print(f"== scene family, {which} seeds {seeds.start}..{seeds.stop - 1}: defaults chosen "
+    print(f"== scene family, {which} seeds {seeds[0]}..{seeds[-1]}: defaults chosen "
           "on the tuning seeds ==")
     records = evaluate_scene_set(family_methods(n_jobs), seeds)
     by = {(r["method"], r["seed"]): r for r in records}
