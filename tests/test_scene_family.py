@@ -8,7 +8,7 @@ import pytest
 
 from occgp.datasets import (
     FAMILY_KINDS, TEST_SEEDS, TUNING_SEEDS, FamilyScene2D, LaserScan2D, Scene2D,
-    SensorSetting2D, scene_family_2d,
+    scene_family_2d,
 )
 from occgp.datasets._scene2d import Circle, Rect, path_samples
 from occgp.evaluation import (
