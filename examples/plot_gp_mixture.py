@@ -22,9 +22,9 @@ and compares ROC curves against the room's exact ground truth.
 # Scan the room and fit the maps
 # ------------------------------
 # The same 26 scans of 17 beams as :ref:`sphx_glr_auto_examples_plot_gp_maps.py`.
-# The mixture fits shared hyper-parameters by maximising the sum of its
-# experts' log marginal likelihoods, then each expert's factor and
-# classifier. Single GPOMIK's hyper-parameters are passed as its optimiser
+# The mixture fits its hyper-parameters and classifier as GPOMIK fits its
+# own, on a random subset of the observations (``hyperparameters="global"``,
+# the default), then each expert's factor. Single GPOMIK's hyper-parameters are passed as its optimiser
 # finds them (see that example) to keep this one fast.
 import time
 
