@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from .._validation import check_choice, check_int, check_real
 from ._family_layouts import furnish_densely, hall_layout, warehouse_layout
 from ._floorplan import floor_plan_2d
-from ._scene2d import LaserScan2D, Scene2D
+from ._scene2d import LaserScan2D, Scene2D, along_path
 
 __all__ = ["FAMILY_KINDS", "TUNING_SEEDS", "TEST_SEEDS", "SensorSetting2D", "FamilyScene2D",
            "scene_family_2d"]
@@ -173,14 +173,7 @@ class FamilyScene2D:
         """
         n = self.sensor.n_poses if n_poses is None else check_int(n_poses, "n_poses", low=1,
                                                                    high=10**7)
-        path = self.scene.path
-        seg = np.diff(path, axis=0)
-        length = np.linalg.norm(seg, axis=1)
-        cum = np.concatenate([[0.0], np.cumsum(length)])
-        s = (np.arange(n) + 0.5) * cum[-1] / n
-        k = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
-        u = (s - cum[k]) / length[k]
-        return path[k] + u[:, None] * seg[k], np.arctan2(seg[k, 1], seg[k, 0])
+        return along_path(self.scene.path, lambda total: (np.arange(n) + 0.5) * total / n)
 
     def scans(self, sensor: SensorSetting2D | None = None) -> list[LaserScan2D]:
         """Scans of the laser along the path, as a robot would record them.

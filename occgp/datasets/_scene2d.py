@@ -302,15 +302,8 @@ class Scene2D:
         ((26, 2), (26,))
         """
         n_poses = check_int(n_poses, "n_poses", low=1, high=MAX_POSES)
-        seg = np.diff(self.path, axis=0)
-        length = np.linalg.norm(seg, axis=1)
-        cum = np.concatenate([[0.0], np.cumsum(length)])
-        s = np.linspace(0.0, cum[-1], n_poses) if n_poses > 1 else np.zeros(1)
-        k = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
-        u = (s - cum[k]) / length[k]
-        origins = self.path[k] + u[:, None] * seg[k]
-        headings = np.arctan2(seg[k, 1], seg[k, 0])
-        return origins, headings
+        return along_path(self.path, lambda total: np.linspace(0.0, total, n_poses)
+                          if n_poses > 1 else np.zeros(1))
 
     def scan(
         self,
@@ -459,6 +452,21 @@ def room_2d(seed: int = 0) -> Scene2D:
         solids.append(solid)
         labels.append(label)
     return Scene2D(solids, labels, ([-hx, -hy], [hx, hy]), t, path)
+
+
+def along_path(path, arc_lengths):
+    """Points and headings of a polyline at arc lengths ``arc_lengths(total_length)``.
+
+    Returns ``(points (n, 2), headings (n,))``, the heading being the
+    direction of the segment each point lies on, radians from +x.
+    """
+    seg = np.diff(path, axis=0)
+    length = np.linalg.norm(seg, axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(length)])
+    s = arc_lengths(cum[-1])
+    k = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
+    u = (s - cum[k]) / length[k]
+    return path[k] + u[:, None] * seg[k], np.arctan2(seg[k, 1], seg[k, 0])
 
 
 def path_samples(path, step=0.05):
