@@ -90,6 +90,11 @@ cdef class _OcTree(_TreeCore):
     # change detection (liboctomap's rule): packed key -> the cell was new
     cdef bint _tracking
     cdef unordered_map[uint64_t, bint] _changes
+    # stamps (see occgp/_octree_stamps.py): packed key of a finest cell -> the stamp of
+    # the last update that reached it while _stamping was on (_stamp_now)
+    cdef unordered_map[uint64_t, double] _stamps
+    cdef bint _stamping
+    cdef double _stamp_now
 
     # ------------------------------------------------------------------ updates
     def _insert_point_cloud(self, const float[:, ::1] points, const float[::1] origin,
@@ -356,6 +361,9 @@ cdef class _OcTree(_TreeCore):
         cdef vector[uint8_t] known, before
         cdef OcTreeKey key
         cdef OcTreeNode* node
+        if self._stamping:
+            for j in range(cells.size()):
+                self._stamps[_pack(morton_key(cells[j].code))] = self._stamp_now
         if not self._tracking:
             return apply_updates(tree[0], cells, scratch)
         # apply_updates sorts the cells: sort first, so the states line up
@@ -387,6 +395,46 @@ cdef class _OcTree(_TreeCore):
                 self._changes[key] = False
             elif not deref(it).second:
                 self._changes.erase(it)
+
+    cdef void _reset(self) noexcept:
+        self._stamps.clear()
+
+    def _set_stamping(self, bint enable, double now):
+        """Stamp every cell the following updates reach with `now` (until disabled)."""
+        with self._lock:
+            self._stamping = enable
+            self._stamp_now = now
+
+    def _stamp_table(self):
+        """(packed keys uint64 (n,), stamps float64 (n,)) of the stamped cells, unsorted."""
+        cdef Py_ssize_t n, j = 0
+        cdef unordered_map[uint64_t, double].iterator it
+        with self._lock:
+            n = self._stamps.size()
+            keys = np.empty(n, dtype=np.uint64)
+            stamps = np.empty(n, dtype=np.float64)
+            it = self._stamps.begin()
+            while it != self._stamps.end():
+                keys[j] = deref(it).first
+                stamps[j] = deref(it).second
+                j += 1
+                inc(it)
+        return keys, stamps
+
+    def _set_stamps(self, const uint64_t[::1] keys, const double[::1] stamps):
+        """Set the stamps of packed keys (a NaN stamp removes the key's)."""
+        cdef Py_ssize_t j
+        with self._lock:
+            with nogil:
+                for j in range(keys.shape[0]):
+                    if stamps[j] != stamps[j]:
+                        self._stamps.erase(keys[j])
+                    else:
+                        self._stamps[keys[j]] = stamps[j]
+
+    def _clear_stamps(self):
+        with self._lock:
+            self._stamps.clear()
 
     def _set_tracking(self, bint enable):
         with self._lock:
@@ -432,6 +480,8 @@ cdef class _OcTree(_TreeCore):
                         known = node != NULL
                         before = known and tree.isNodeOccupied(node)
                     node = tree.setNodeValue(key, log_odds[i], True)
+                    if self._stamping:
+                        self._stamps[_pack(key)] = self._stamp_now
                     if self._tracking:
                         self._record(_pack(key), known, before, tree.isNodeOccupied(node))
                 tree.updateInnerOccupancy()

@@ -10,7 +10,7 @@ scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
 
 import logging
 
-from .octree import Changes, Leaves, Nodes, OccupancyOctree
+from .octree import Changes, Leaves, Nodes, OccupancyOctree, Stamps
 from .color import ColorLeaves, ColorOctree
 from .grid import GridMap
 from .kernel import AKIMap, BGKMap
@@ -19,7 +19,7 @@ from ._export import DistanceField
 from .maps import OccupancyMap, available_maps, make_map, register
 
 __version__ = "0.1.0.dev0"
-__all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "Nodes", "ColorLeaves", "Changes",
+__all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "Nodes", "ColorLeaves", "Changes", "Stamps",
            "AKIMap", "BGKMap", "KNNMap", "DistanceField", "OccupancyMap", "available_maps",
            "make_map", "register", "__version__"]
 

@@ -52,7 +52,7 @@ class OctreeFiles(OctreeFace):
         else:
             body = self._write_data(False)
             size = self.num_nodes
-        return fmt.write_header(binary, size, self.resolution) + body
+        return fmt.write_header(binary, size, self.resolution) + body + self._trailer()
 
     @classmethod
     def from_bytes(cls: type[T], data: bytes, **params) -> T:
@@ -146,6 +146,7 @@ class OctreeFiles(OctreeFace):
             raise ValueError(f"{source}: the header's {exc}") from None
         tree = cls(header.resolution, **params)
         if header.size == 0:
+            tree._read_trailer(data, header.data_offset, source)
             return tree
         check = _check_binary_data if header.binary else _check_full_data
         buf = np.frombuffer(data, dtype=np.uint8)
@@ -157,7 +158,15 @@ class OctreeFiles(OctreeFace):
             raise ValueError(f"{source}: corrupt data: the header announces {header.size} "
                              f"nodes, the data holds {nodes}")
         tree._read_data(data[header.data_offset:end], header.binary, header.resolution)
+        tree._read_trailer(data, end, source)
         return tree
+
+    def _trailer(self) -> bytes:
+        """What follows OctoMap's data block in this map's files (liboctomap skips it)."""
+        return b""
+
+    def _read_trailer(self, data: bytes, offset: int, source: str) -> None:
+        """Read what :meth:`_trailer` wrote at `offset` of `data` (nothing here)."""
 
 
 def check_format(format: str) -> str:

@@ -191,6 +191,7 @@ CAPABILITIES = MappingProxyType({
     "changed_cells": "changed_cells(): the cells changed since the last reset_changes()",
     "distance_field": "distance_field(bbox, ...): Euclidean distances to the occupied cells",
     "colors": "colors(points): the colour of each point's cell",
+    "decay": "decay(now, max_age=...): cells stamped by insert_scan(stamp=) fade when outdated",
 })
 
 #: The OctoMap files (and the point clouds of occupied cells) every map writes through
@@ -216,7 +217,7 @@ def capabilities(map: Any) -> frozenset[str]:
     >>> from occgp import OccupancyOctree, BGKMap
     >>> from occgp.maps import capabilities
     >>> sorted(capabilities(OccupancyOctree))
-    ['changed_cells', 'distance_field']
+    ['changed_cells', 'decay', 'distance_field']
     >>> sorted(capabilities(BGKMap))
     ['variance']
     """

@@ -13,10 +13,11 @@ from ._logodds_map import MODES, OCTREE_ATTRIBUTES, SENSOR_MODEL, Leaves
 from ._octree import KEYRAY_CELLS, _OcTree
 from ._octree_files import OctreeFiles
 from ._octree_queries import Nodes, OctreeQueries, pack_keys, unpack_keys
+from ._octree_stamps import OctreeStamps, Stamps
 from .maps import register
 from ._validation import as_numeric, check_bool, check_choice, check_n_jobs, n_threads
 
-__all__ = ["OccupancyOctree", "Leaves", "Changes", "Nodes"]
+__all__ = ["OccupancyOctree", "Leaves", "Changes", "Nodes", "Stamps"]
 
 
 class Changes(NamedTuple):
@@ -41,7 +42,7 @@ class Changes(NamedTuple):
 @register("octree", formats=(".bt", ".ot"), description="OctoMap's log-odds octree",
           resolution=0.1)
 @fill_doc(sensor_model=SENSOR_MODEL, octree_attributes=OCTREE_ATTRIBUTES)
-class OccupancyOctree(OctreeFiles, OctreeQueries, _OcTree):
+class OccupancyOctree(OctreeStamps, OctreeFiles, OctreeQueries, _OcTree):
     """Probabilistic 3D occupancy map on an octree (OctoMap).
 
     Each cell holds the log-odds of being occupied. A range scan marks the cells
@@ -120,6 +121,7 @@ class OccupancyOctree(OctreeFiles, OctreeQueries, _OcTree):
         discretize: bool = False,
         bbox: ArrayLike | None = None,
         n_jobs: int | None = None,
+        stamp: float | None = None,
     ) -> "OccupancyOctree":
         """Integrate one range scan into the map.
 
@@ -186,6 +188,12 @@ default="auto"
             in 4 bytes per cell of the scan's key box, within 2^24 cells for
             all threads together; larger boxes run on fewer threads, or count
             in hash tables.
+        stamp : float, default=None
+            Stamp every cell the scan updates with this time (see
+            :meth:`stamps` and :meth:`decay`). The culling region is then not
+            used (its cells are observed too, and are stamped), and the
+            traversal is occgp's (liboctomap's ``insertPointCloud`` records no
+            cells); the map is the same.
 
         Returns
         -------
@@ -203,8 +211,8 @@ default="auto"
             crosses a cell border (too short for the single-precision
             traversal), the scan reaches more than :attr:`MAX_SCAN_CELLS`
             distinct cells (the same scans for every `n_jobs`), or
-            `max_range`, `mode`, `discretize` or `n_jobs` is invalid (0, or not
-            an int). The map is then unchanged.
+            `max_range`, `mode`, `discretize`, `n_jobs` (0, or not an int) or
+            `stamp` (not finite) is invalid. The map is then unchanged.
 
         References
         ----------
@@ -219,6 +227,7 @@ default="auto"
         [True]
         """
         threads = n_threads(check_n_jobs(n_jobs))
+        stamping = self._stamped(stamp)
         discretize = check_bool(discretize, "discretize")
         mode = check_choice(mode, "mode", MODES)
         method, threshold = self._check_method(
@@ -243,7 +252,7 @@ default="auto"
             # (with change tracking, occgp's traversal, which gives the same map and
             # records the changes)
             if (cells.max() <= KEYRAY_CELLS and reach <= self._max_scan_cells()
-                    and not self._is_tracking()):
+                    and not self._is_tracking() and stamp is None):
                 self._insert_point_cloud(pts, org, rng, bool(discretize), box)
                 self.last_insert_: dict[str, float] = {"rays": len(pts)}
                 return self
@@ -262,10 +271,12 @@ default="auto"
                 self.last_insert_ = {"rays": 0}
                 return self
         threshold = self._adaptive_threshold(method, threshold)
-        self._record_insert(self._insert_batch(
-            pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold,
-            False, self._max_scan_cells(), key_box, threads), pts, org, rng, method,
-            threshold)
+        # the culling region's cells are observed, so a stamped scan walks them too
+        culling = method.endswith("culling") and stamp is None
+        with stamping:
+            stats = self._insert_batch(pts, org, rng, mode == "ray", culling, None, threshold,
+                                       False, self._max_scan_cells(), key_box, threads)
+        self._record_insert(stats, pts, org, rng, method, threshold)
         return self
 
     # ------------------------------------------------------------------ changes
@@ -328,7 +339,8 @@ default="auto"
 
 
     def update_cells(self, points: ArrayLike, log_odds: ArrayLike | None = None, *,
-                     occupied: ArrayLike | None = None) -> "OccupancyOctree":
+                     occupied: ArrayLike | None = None,
+                     stamp: float | None = None) -> "OccupancyOctree":
         """Add log-odds to the cells holding `points` (liboctomap's ``updateNode``).
 
         Row ``i`` adds ``log_odds[i]`` to the finest cell holding ``points[i]``
@@ -348,6 +360,8 @@ default="auto"
         occupied : bool or array-like of bool of shape (n_points,), optional
             ``updateNode(point, occupied)``: add the log-odds of ``prob_hit``
             where True, of ``prob_miss`` where False.
+        stamp : float, default=None
+            Stamp the cells with this time (see :meth:`decay`).
 
         Returns
         -------
@@ -371,6 +385,7 @@ default="auto"
         """
         keys = self.coord_to_key(points)
         values = self._cell_values(len(keys), log_odds, occupied)
+        stamping = self._stamped(stamp)
         if len(keys) == 0:
             return self
         packed = pack_keys(keys)
@@ -382,13 +397,15 @@ default="auto"
         by_round = np.lexsort((sorted_keys, rank))
         bounds = np.searchsorted(rank[by_round], np.arange(rank.max() + 2))
         rows = order[by_round]
-        for r in range(len(bounds) - 1):
-            take = rows[bounds[r]:bounds[r + 1]]
-            self._apply_cells(np.ascontiguousarray(packed[take]),
-                              np.ascontiguousarray(values[take]))
+        with stamping:
+            for r in range(len(bounds) - 1):
+                take = rows[bounds[r]:bounds[r + 1]]
+                self._apply_cells(np.ascontiguousarray(packed[take]),
+                                  np.ascontiguousarray(values[take]))
         return self
 
-    def set_cells(self, points: ArrayLike, log_odds: ArrayLike) -> "OccupancyOctree":
+    def set_cells(self, points: ArrayLike, log_odds: ArrayLike, *,
+                  stamp: float | None = None) -> "OccupancyOctree":
         """Set the log-odds of the cells holding `points` (liboctomap's ``setNodeValue``).
 
         Each value is clamped to ``[clamping_min, clamping_max]`` as liboctomap
@@ -401,6 +418,8 @@ default="auto"
             Points in the cells to set, metres; inside the key range.
         log_odds : float or array-like of shape (n_points,)
             The values (finite in single precision).
+        stamp : float, default=None
+            Stamp the cells with this time (see :meth:`decay`).
 
         Returns
         -------
@@ -419,8 +438,10 @@ default="auto"
         """
         keys = self.coord_to_key(points)
         values = self._cell_values(len(keys), log_odds, None)
+        stamping = self._stamped(stamp)
         if len(keys):
-            self._set_values(keys, values)
+            with stamping:
+                self._set_values(keys, values)
         return self
 
     def _cell_values(self, n: int, log_odds, occupied) -> np.ndarray:
