@@ -192,6 +192,7 @@ CAPABILITIES = MappingProxyType({
     "distance_field": "distance_field(bbox, ...): Euclidean distances to the occupied cells",
     "colors": "colors(points): the colour of each point's cell",
     "decay": "decay(now, max_age=...): cells stamped by insert_scan(stamp=) fade when outdated",
+    "merge": "merge(other, transform=None): another map's log-odds added cell by cell",
 })
 
 #: The OctoMap files (and the point clouds of occupied cells) every map writes through
@@ -217,7 +218,7 @@ def capabilities(map: Any) -> frozenset[str]:
     >>> from occgp import OccupancyOctree, BGKMap
     >>> from occgp.maps import capabilities
     >>> sorted(capabilities(OccupancyOctree))
-    ['changed_cells', 'decay', 'distance_field']
+    ['changed_cells', 'decay', 'distance_field', 'merge']
     >>> sorted(capabilities(BGKMap))
     ['variance']
     """

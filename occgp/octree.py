@@ -13,6 +13,7 @@ from ._logodds_map import MODES, OCTREE_ATTRIBUTES, SENSOR_MODEL, Leaves
 from ._octree import KEYRAY_CELLS, _OcTree
 from ._octree_files import OctreeFiles
 from ._octree_queries import Nodes, OctreeQueries, pack_keys, unpack_keys
+from ._merge import OctreeMerging
 from ._octree_stamps import OctreeStamps, Stamps
 from .maps import register
 from ._validation import as_numeric, check_bool, check_choice, check_n_jobs, n_threads
@@ -42,7 +43,7 @@ class Changes(NamedTuple):
 @register("octree", formats=(".bt", ".ot"), description="OctoMap's log-odds octree",
           resolution=0.1)
 @fill_doc(sensor_model=SENSOR_MODEL, octree_attributes=OCTREE_ATTRIBUTES)
-class OccupancyOctree(OctreeStamps, OctreeFiles, OctreeQueries, _OcTree):
+class OccupancyOctree(OctreeStamps, OctreeMerging, OctreeFiles, OctreeQueries, _OcTree):
     """Probabilistic 3D occupancy map on an octree (OctoMap).
 
     Each cell holds the log-odds of being occupied. A range scan marks the cells
