@@ -21,591 +21,21 @@ occupied cells as ``.ply`` or ``.pcd`` through the map's ``to_octree()``.
 from __future__ import annotations
 
 import argparse
-import ast
-import errno
-import inspect
-import re
 import sys
-import time
-from collections.abc import Mapping
-from pathlib import Path
-from typing import Any
-
-import numpy as np
 
 from . import __version__
-from ._validation import check_n_jobs, check_real, check_resolution
-from .knn import CDFS, KNN_PARAMS, KNNMap, check_knn_params
-from .maps import OCTREE_FORMATS, available_maps, make_map, map_type
-from .octree import OccupancyOctree
+from .knn import CDFS
+from .maps import map_type
+from ._map_command import (
+    KNN_DEFAULTS, KNN_OPTIONS, OPTION_OF, POSE_FORMATS, OptionError, check_knn_options,
+    knn_error, map_methods, map_scans, option_name, parse_fields, parse_param,
+)
 from ._demo import (  # noqa: F401  (re-exported: occgp.cli is the demo's public home)
     demo, gp_mapping_methods, mapping_methods, noisy_mapping_methods,
 )
 
 __all__ = ["main", "demo", "map_scans", "map_methods", "mapping_methods",
            "noisy_mapping_methods", "gp_mapping_methods"]
-
-# KNNMap's model parameters (those of `occgp map --method knn`) and their defaults,
-# read from its signature
-_KNN_OPTIONS = KNN_PARAMS + ("cdf",)
-_KNN_DEFAULTS = {name: prm.default for name, prm in
-                 inspect.signature(KNNMap.__init__).parameters.items() if name in _KNN_OPTIONS}
-def _check_knn_options(knn_params) -> dict:
-    """KNNMap's defaults updated by `knn_params`, checked (see :func:`map_scans`)."""
-    if not isinstance(knn_params, Mapping):
-        raise TypeError(f"knn_params must be a mapping of KNNMap parameters, "
-                        f"got {type(knn_params).__name__}")
-    unknown = sorted(set(knn_params) - set(_KNN_OPTIONS), key=str)
-    if unknown:
-        raise ValueError(f"knn_params holds {unknown}, which KNNMap does not take; it takes "
-                         f"{list(_KNN_OPTIONS)}")
-    params = {**_KNN_DEFAULTS, **knn_params}
-    cdf = params.pop("cdf")
-    if not isinstance(cdf, str) or cdf not in CDFS:
-        raise ValueError(f"cdf must be one of {CDFS}, got {cdf!r}")
-    return {**check_knn_params(params), "cdf": cdf}
-
-class _OptionError(ValueError):
-    """A ValueError about one argument of :func:`map_scans` (its name in `param`);
-    ``occgp map`` reports it as a usage error of the matching option (exit code 2)."""
-
-    def __init__(self, param: str, message: str) -> None:
-        super().__init__(message)
-        self.param = param
-
-
-# the option of each map_scans argument an _OptionError can name
-_OPTION_OF = {"output": "-o/--output", "method": "--method", "mode": "--mode",
-              "resolution": "--resolution", "max_range": "--max-range", "n_jobs": "--n-jobs",
-              "poses": "--poses", "poses_format": "--poses-format", "topic": "--topic",
-              "fixed_frame": "--fixed-frame", "sensor_frame": "--sensor-frame",
-              "tf_tolerance": "--tf-tolerance", "input_map": "--input-map",
-              "fields": "--fields", "paths": "scans"}
-_POSE_FORMATS = ("kitti", "tum")
-_BAG_SUFFIXES = (".bag", ".db3", ".mcap")
-
-
-def map_methods() -> list[str]:
-    """The map types ``occgp map --method`` builds: every registered 3D map whose
-    ``insert_scan`` takes a plain scan (points and origin; :class:`~occgp.ColorOctree`
-    also needs colours, which scan files do not carry).
-
-    Returns
-    -------
-    names : list of str
-        Names of :func:`occgp.maps.available_maps`, in its order.
-    """
-    return [name for name in available_maps(dims=3)
-            if _takes_plain_scans(map_type(name).cls)]
-
-
-def _takes_plain_scans(cls) -> bool:
-    try:
-        sig = inspect.signature(cls.insert_scan)
-    except (AttributeError, TypeError, ValueError):
-        return False
-    required = [p for p in list(sig.parameters.values())[1:]
-                if p.default is p.empty and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
-    return len(required) <= 2
-
-
-def _either(names, last: str) -> str:
-    """'a', 'a or b', 'a, b or c' (with `last` the word before the last name)."""
-    return ", ".join(names[:-1]) + last + names[-1] if len(names) > 1 else "".join(names)
-
-
-def _insert_options(cls) -> tuple[str, ...]:
-    """The keyword options of a map class's insert_scan."""
-    try:
-        return tuple(inspect.signature(cls.insert_scan).parameters)
-    except (AttributeError, TypeError, ValueError):
-        return ()
-
-
-def _is_bag(path) -> bool:
-    """Whether `path` is read with read_rosbag: a ``.bag`` / ``.db3`` / ``.mcap`` file or
-    a ROS 2 bag folder (one holding ``metadata.yaml``)."""
-    path = Path(path)
-    if path.is_dir():
-        return (path / "metadata.yaml").is_file()
-    return path.suffix.lower() in _BAG_SUFFIXES
-
-
-def _suffix(path: Path) -> str:
-    return path.suffix.lower()
-
-
-def _read_poses(path, poses_format):
-    """The (n, 4, 4) poses of a KITTI or TUM file; the format guessed from the first
-    line's column count when `poses_format` is None."""
-    from .datasets import read_kitti_poses, read_tum_trajectory
-    from .datasets._fileio import read_maybe_compressed
-
-    if poses_format is None:
-        try:
-            text = read_maybe_compressed(path).decode("utf-8")
-        except UnicodeDecodeError:
-            raise ValueError(f"{path}: not a text file (invalid UTF-8)") from None
-        first = next(((i, line.split("#", 1)[0].split())
-                      for i, line in enumerate(text.splitlines(), start=1)
-                      if line.split("#", 1)[0].split()), None)
-        if first is None:
-            raise _OptionError("poses", f"poses file {str(path)!r} holds no poses")
-        n = len(first[1])
-        if n not in (12, 8):
-            raise _OptionError("poses", f"cannot tell the format of poses file {str(path)!r}: "
-                               f"line {first[0]} has {n} columns; expected 12 (kitti: a 3x4 "
-                               f"row-major pose) or 8 (tum: t x y z qx qy qz qw); pass "
-                               f"poses_format")
-        poses_format = "kitti" if n == 12 else "tum"
-    if poses_format == "kitti":
-        return read_kitti_poses(path)
-    return read_tum_trajectory(path)[1]
-
-
-def _check_map_args(paths, output, method, mode, resolution, max_range, knn_params, n_jobs,
-                    poses, poses_format, bag_options,
-                    input_map) -> tuple[Path, float | None, float | None, int | None,
-                                        Path | None]:
-    """Check map_scans' arguments before anything is read; return (output, resolution,
-    max_range, n_jobs, input_map) as used."""
-    methods = map_methods()
-    if method not in methods:
-        raise _OptionError("method", f"method must be one of {tuple(methods)}, got {method!r}")
-    entry = map_type(method)
-    output = Path(output)
-    fits = entry.outputs
-    if _suffix(output) not in fits:
-        takers = [n for n in methods if _suffix(output) in map_type(n).formats]
-        note = f" ({_suffix(output)}: {_either(takers, ' and ')} only)" \
-            if _suffix(output) not in OCTREE_FORMATS and takers else ""
-        raise _OptionError("output", f"output must end in {', '.join(fits[:-1])} or "
-                           f"{fits[-1]} for method={method!r}{note}, got {str(output)!r}")
-    if not output.parent.is_dir():
-        raise FileNotFoundError(errno.ENOENT, "output: no such folder for the map file",
-                                str(output.parent))
-    if mode is not None and "mode" not in _insert_options(entry.cls):
-        takers = [repr(n) for n in methods if "mode" in _insert_options(map_type(n).cls)]
-        raise _OptionError("mode", f"mode applies to method={_either(takers, ' or ')} only, "
-                           f"got mode={mode!r} with method={method!r}")
-    if mode is not None and mode not in ("scan", "ray"):
-        raise _OptionError("mode", f"mode must be 'scan' or 'ray', got {mode!r}")
-    if knn_params is not None and method != "knn":
-        raise ValueError(f"knn_params applies to method='knn' only, got method={method!r}")
-    own = getattr(entry.cls, "RANGE_PARAM", "max_range")
-    if max_range is not None and own != "max_range":
-        raise _OptionError("max_range", f"max_range does not apply to method={method!r}: "
-                           f"its range limit is its {own} (default "
-                           f"{inspect.signature(entry.cls).parameters[own].default} m), got "
-                           f"max_range={max_range!r}")
-    try:
-        if max_range is not None:
-            max_range = check_real(max_range, "max_range", low=0.0)
-    except ValueError as exc:
-        raise _OptionError("max_range", str(exc)) from None
-    if resolution is not None:
-        try:
-            resolution = check_resolution(resolution)
-        except ValueError as exc:
-            raise _OptionError("resolution", str(exc)) from None
-    try:
-        n_jobs = check_n_jobs(n_jobs)
-    except ValueError as exc:
-        raise _OptionError("n_jobs", str(exc)) from None
-    if poses_format is not None:
-        if poses is None:
-            raise _OptionError("poses_format", f"poses_format applies with poses only, got "
-                               f"poses_format={poses_format!r} and no poses")
-        if poses_format not in _POSE_FORMATS:
-            raise _OptionError("poses_format", f"poses_format must be one of {_POSE_FORMATS} "
-                               f"or None (guess from the columns), got {poses_format!r}")
-    if isinstance(paths, (str, bytes)) or not len(paths):
-        raise _OptionError("paths", f"paths must be a non-empty sequence of scan files or "
-                           f"folders, got {paths!r}")
-    try:
-        check_real(bag_options["tf_tolerance"], "tf_tolerance", low=0.0, high=1e9,
-                   low_open=False)
-    except ValueError as exc:
-        raise _OptionError("tf_tolerance", str(exc)) from None
-    given = {k: v for k, v in bag_options.items() if v not in (None, 0.0)}
-    if given and not any(_is_bag(p) for p in paths):
-        name = next(iter(given))
-        raise _OptionError(name, f"{name} applies to ROS bag inputs only (.bag, .db3, .mcap "
-                           f"files or ROS 2 bag folders), and none is among the scans")
-    if input_map is not None:
-        input_map = Path(input_map)
-        if _suffix(input_map) not in entry.formats:
-            kinds = " or ".join(entry.formats)
-            raise _OptionError("input_map", f"input_map must be a {kinds} file to continue a "
-                               f"{method} map, got {str(input_map)!r}")
-    return output, resolution, max_range, n_jobs, input_map
-
-
-def _new_map(method, resolution, max_range, params, n_jobs, input_map):
-    """The map to insert into: loaded from `input_map` or new (through the registry)."""
-    entry = map_type(method)
-    names = entry.parameters()
-    given = dict(params)
-    if "n_jobs" in names:
-        given["n_jobs"] = n_jobs
-    if max_range is not None and "max_range" in names:
-        given["max_range"] = max_range
-    if input_map is None:
-        if "resolution" in names:
-            given["resolution"] = 0.1 if resolution is None else resolution
-        return make_map(method, **given)
-    try:
-        mapper = entry.cls.load(input_map)
-        if given:
-            mapper.set_params(**given)
-    except ValueError as exc:
-        raise ValueError(f"input_map: cannot continue it as a {method} map: {exc}") from None
-    if resolution is not None and resolution != mapper.resolution:
-        raise _OptionError("resolution", f"resolution {resolution:g} differs from that of "
-                           f"input_map {str(input_map)!r} ({mapper.resolution:g}); leave it "
-                           f"out to continue the map at its own")
-    return mapper
-
-
-def map_scans(paths, output: str | Path, *, resolution: float | None = None,
-              method: str = "octree", mode: str | None = None,
-              max_range: float | None = None, knn_params: Mapping[str, Any] | None = None,
-              poses: str | Path | None = None, poses_format: str | None = None,
-              topic: str | None = None, fixed_frame: str | None = None,
-              sensor_frame: str | None = None, tf_tolerance: float = 0.0, fields=None,
-              input_map: str | Path | None = None, n_jobs: int | None = -1,
-              params: Mapping[str, Any] | None = None, progress: bool | None = None,
-              out=None):
-    """Build a map from scan files and ROS bags and save it.
-
-    Every step (loading `input_map`, reading each scan file, inserting each
-    scan, converting a kernel map to an octree, saving) advances one progress
-    bar. At the end one line gives the scans, points, cells, the insertion
-    time and the wall time of the whole call; lines before it say how many
-    points were dropped (non-finite points of bags) or cut at the range
-    limit.
-
-    Parameters
-    ----------
-    paths : sequence of str or path-like
-        Scan files or folders, read with :func:`occgp.datasets.read_scans`,
-        and ROS bags (a ``.bag``, ``.db3`` or ``.mcap`` file, or a ROS 2 bag
-        folder holding ``metadata.yaml``), read with
-        :func:`occgp.datasets.read_rosbag`. Scans go in in this order.
-    output : str or path-like
-        The map file; its suffix gives the format: one of the map type's own
-        formats (:attr:`occgp.maps.MapType.formats`: ``.bt`` / ``.ot`` for
-        the octrees, ``.npz`` with the evidence for the kernel maps and the
-        grid, see their ``save``), or ``.bt`` / ``.ot`` (OctoMap) and
-        ``.ply`` / ``.pcd`` (the occupied cells, see
-        :meth:`~occgp.OccupancyOctree.save_ply` /
-        :meth:`~occgp.OccupancyOctree.save_pcd`) through the map's
-        ``to_octree()``: a kernel map's cells then hold their posterior mean
-        as log-odds (a ``.bt`` file keeps only whether it is above 0.5);
-        cells no kernel reached stay unknown.
-    resolution : float, default=None
-        Cell size in metres; None means 0.1, or the resolution of
-        `input_map` (which a value given must equal).
-    method : str, default="octree"
-        A map type of :func:`map_methods` (the registered 3D maps, see
-        :func:`occgp.maps.available_maps`), built with
-        :func:`occgp.maps.make_map`: e.g. ``"octree"``
-        (:class:`~occgp.OccupancyOctree`), ``"grid"``, ``"bgk"``,
-        ``"akimap"`` (``random_state=0``) or ``"knn"`` (an octree, written as
-        it is). The map gets `resolution` and `n_jobs` (and `max_range`) when
-        its constructor takes them.
-    mode : {"scan", "ray"}, default=None
-        The update mode (None: ``"scan"``); only for maps whose
-        ``insert_scan`` takes it (the octree and the grid).
-    max_range : float, default=None
-        Range limit in metres; None means none (and BGKMap's own 8 m for
-        ``method="bgk"``; a loaded BGK map keeps its own). A map whose
-        ``insert_scan`` takes ``max_range`` (the octree, the grid) inserts
-        longer beams up to it as free space only; one with a ``max_range``
-        parameter (BGK) gets it and drops them whole; any other map (AKIMap)
-        gets only the end points within `max_range` of the sensor. Not for a
-        map with a ``sensor_range`` parameter (``method="knn"``), its own
-        range limit (in `knn_params`). The points beyond
-        the limit are counted and reported (raw points: BGK applies its
-        limit to the centroids of its down-sampling cubes).
-    knn_params : mapping, default=None
-        For ``method="knn"`` only: :class:`~occgp.KNNMap`'s ``k``, ``p_u``,
-        ``p_l``, ``p_m``, ``p_m_out``, ``p_min``, ``p_max``, ``p_t``,
-        ``sensor_range`` and ``cdf``; those left out take KNNMap's defaults
-        (``sensor_range`` 4 m: points farther from the sensor are not
-        inserted, their rays are cut there). Checked as KNNMap checks them
-        (Miao et al.'s Eq. 12) before any scan is read.
-    poses : str or path-like, default=None
-        A trajectory file: KITTI odometry poses (12 numbers a line, a 3 x 4
-        row-major sensor-to-world pose) or TUM (``t x y z qx qy qz qw``).
-        Pose ``i`` moves scan ``i`` (in input order, over all `paths`) with
-        :func:`occgp.datasets.apply_poses`; the file must hold one pose per
-        scan. TUM timestamps are not matched to scans, only the order counts.
-    poses_format : {"kitti", "tum"}, default=None
-        The format of `poses`; None guesses it from the first line's columns
-        (12: kitti, 8: tum).
-    topic, fixed_frame, sensor_frame, tf_tolerance
-        For ROS bags only, passed to :func:`occgp.datasets.read_rosbag`
-        (defaults: the only PointCloud2 topic, the root of the TF tree, the
-        cloud's frame, 0 s).
-    fields : int, str or numpy.dtype, default=None
-        Record layout of ``.bin`` scan files, passed to
-        :func:`occgp.datasets.read_scans` (None: by file name).
-    input_map : str or path-like, default=None
-        A saved map to continue, in one of the map type's own formats
-        (``.bt`` / ``.ot`` for ``method="octree"`` and ``"knn"``, ``.npz``
-        written by ``save`` for ``"bgk"``, ``"akimap"`` and ``"grid"``),
-        read with the class's ``load``; `n_jobs`, `max_range`, `knn_params`
-        and `params` are then set with its ``set_params``. The scans are
-        inserted into it.
-    n_jobs : int, default=-1
-        Threads of the map (a constructor parameter, or an option of its
-        ``insert_scan``): -1 every core, None or 1 one. The map does not
-        depend on it.
-    params : mapping, default=None
-        Further constructor parameters of the map type (e.g.
-        ``{"prob_hit": 0.8}``), checked by the class.
-    progress : bool, default=None
-        Show a progress bar (None: only on a terminal).
-    out : file-like, default=None
-        Where the summary lines go (None: standard output).
-
-    Returns
-    -------
-    map : OccupancyMap
-        The map built.
-
-    Raises
-    ------
-    ValueError
-        If `output` has a suffix other than those above or one that does not
-        fit `method`; `method` or `mode` is not one of the choices (or `mode`
-        is given with another method than the octree); `max_range` or
-        `resolution` is not positive, or `max_range` is given with
-        ``method="knn"``; `n_jobs` is 0; `knn_params` is given with another
-        method, names a parameter KNNMap does not take or holds a value
-        KNNMap rejects; `poses_format` is given without `poses` or is not a
-        choice; the format of `poses` cannot be guessed, or it does not hold
-        one pose per scan; a bag option is given and no bag is among `paths`;
-        `input_map` does not fit `method`, holds another class of map, or its
-        resolution differs from `resolution`; a file is malformed; or no scan
-        is found. The arguments are checked before any file is read; the pose
-        count and `input_map` before any scan is inserted. Nothing is written
-        when an error is raised.
-    TypeError
-        If `max_range`, `resolution` or `tf_tolerance` is not a real number,
-        `knn_params` is not a mapping or holds a value of the wrong type.
-    OSError
-        If a scan, pose or map file cannot be read, the folder of `output`
-        does not exist (checked first) or the output cannot be written.
-    ImportError
-        If a bag is given and the ``rosbags`` package is not installed.
-    """
-    from tqdm.auto import tqdm
-
-    from .datasets import apply_poses, read_rosbag, read_scans
-
-    t_start = time.perf_counter()
-    out = sys.stdout if out is None else out
-    bag_options = {"topic": topic, "fixed_frame": fixed_frame, "sensor_frame": sensor_frame,
-                   "tf_tolerance": tf_tolerance}
-    output_path, resolution, max_range, n_jobs, input_path = _check_map_args(
-        paths, output, method, mode, resolution, max_range, knn_params, n_jobs, poses,
-        poses_format, bag_options, input_map)
-    knn = _check_knn_options({} if knn_params is None else knn_params) \
-        if method == "knn" else {}
-    entry = map_type(method)
-    pose_array = None if poses is None else _read_poses(poses, poses_format)
-    convert = _suffix(output_path) not in entry.formats and not (
-        isinstance(entry.cls, type) and issubclass(entry.cls, OccupancyOctree))
-    bar = tqdm(total=(input_path is not None) + len(paths) + convert + 1, unit="step",
-               disable=None if progress is None else not progress)
-    try:
-        if input_path is not None:
-            bar.set_description(f"loading {input_path.name}")
-        mapper: Any = _new_map(method, resolution, max_range, {**knn, **dict(params or {})},
-                               n_jobs, input_path)
-        if input_path is not None:
-            bar.update()
-        sources = []
-        for path in paths:
-            bar.set_description(f"reading {Path(path).name}")
-            if _is_bag(path):
-                source = read_rosbag(path, topic, fixed_frame=fixed_frame,
-                                     sensor_frame=sensor_frame, tf_tolerance=tf_tolerance)
-            else:
-                source = read_scans(path, fields=fields)
-            sources.append(source)
-            bar.total += len(source)
-            bar.update()
-        n_scans = sum(len(s) for s in sources)
-        if not n_scans:
-            raise ValueError("no scans found in " + ", ".join(map(str, paths)))
-        if pose_array is not None and len(pose_array) != n_scans:
-            raise _OptionError("poses", f"poses file {str(poses)!r} holds {len(pose_array)} "
-                               f"poses for {n_scans} scans; expected one pose per scan, in "
-                               f"input order")
-        insert, limit, how = _inserter(mapper, mode, max_range, n_jobs)
-        n_points = n_beyond = n_done = 0
-        beams = np.zeros(2, dtype=np.int64)     # BGK's (kept, dropped) beams
-        dropped = []
-        t0 = time.perf_counter()
-        bar.set_description("inserting scans")
-        for path, source in zip(paths, sources):
-            for scan in source:
-                if pose_array is not None:
-                    scan = apply_poses([scan], pose_array[n_done:n_done + 1])[0]
-                points = scan.points
-                n_points += len(points)
-                if limit is not None and len(points):
-                    far = np.linalg.norm(np.asarray(points, dtype=np.float64)
-                                         - np.asarray(scan.origin, dtype=np.float64),
-                                         axis=1) > limit
-                    n_beyond += int(np.count_nonzero(far))
-                    if how == "drop":
-                        points = points[~far]
-                insert(points, scan.origin)
-                if how == "param" and hasattr(mapper, "last_beams_"):
-                    beams += mapper.last_beams_
-                n_done += 1
-                bar.update()
-            if getattr(source, "n_dropped", 0):
-                dropped.append((path, source.n_dropped, source.n_points))
-        seconds = time.perf_counter() - t0
-        tree = mapper
-        if convert:
-            bar.set_description("converting to an octree")
-            tree = mapper.to_octree()
-            bar.update()
-        bar.set_description(f"writing {output_path.name}")
-        _save(mapper, tree, output_path, entry.formats)
-        bar.update()
-    finally:
-        bar.close()
-    wall = time.perf_counter() - t_start
-    for path, n, total in dropped:
-        print(f"dropped {n:,} of {total:,} points of {path} with a NaN or inf coordinate",
-              file=out)
-    if limit is not None and n_beyond:
-        print(_beyond_message(mapper, how, n_beyond, n_points, limit, beams), file=out)
-    if isinstance(mapper, OccupancyOctree):
-        built = f"{mapper.num_leaves:,} leaves"
-    elif convert:
-        built = f"{mapper.num_cells:,} cells ({tree.num_leaves:,} octree leaves)"
-    else:
-        built = f"{mapper.num_cells:,} cells"
-    start = f"{input_path} + " if input_path is not None else ""
-    print(f"{start}{n_scans} scans, {n_points:,} points → {built}; inserted in "
-          f"{seconds:.2f} s, wall time {wall:.2f} s; wrote {output_path}", file=out)
-    return mapper
-
-
-def _inserter(mapper, mode, max_range, n_jobs):
-    """(insert(points, origin), the range limit whose points are counted or None, how the
-    map meets it): "sensor_range" (the map's own range parameter cuts rays), "param" (its
-    ``max_range`` parameter), "option" (insert_scan's ``max_range`` cuts rays) or "drop"
-    (the points beyond are not passed)."""
-    options = _insert_options(type(mapper))
-    params = mapper.get_params()
-    kwargs: dict[str, Any] = {}
-    if mode is not None:
-        kwargs["mode"] = mode
-    elif "mode" in options:
-        kwargs["mode"] = "scan"
-    if "n_jobs" in options and "n_jobs" not in params:
-        kwargs["n_jobs"] = n_jobs
-    own = getattr(type(mapper), "RANGE_PARAM", "max_range")
-    if own != "max_range":
-        limit, how = params[own], "sensor_range"
-    elif "max_range" in params:
-        limit, how = params["max_range"], "param"
-    elif max_range is not None and "max_range" in options:
-        kwargs["max_range"] = max_range
-        limit, how = max_range, "option"
-    else:
-        limit, how = max_range, "drop"
-
-    def insert(points, origin):
-        mapper.insert_scan(points, origin, **kwargs)
-    return insert, limit, how
-
-
-def _beyond_message(mapper, how, n, total, limit, beams) -> str:
-    where = f"{n:,} of {total:,} points lie beyond"
-    if how == "option":
-        return f"{where} max_range {limit:g} m: their rays were cut there (free space only)"
-    if how == "sensor_range":
-        return (f"{where} {type(mapper).RANGE_PARAM} {limit:g} m: not inserted, their rays "
-                f"were cut there")
-    name = type(mapper).__name__
-    if how == "param" and hasattr(mapper, "last_beams_"):
-        kept, dropped = (int(b) for b in beams)
-        return (f"{where} max_range {limit:g} m: {name.removesuffix('Map')} dropped "
-                f"{dropped:,} of its {kept + dropped:,} beams (to the end points' centroids "
-                f"per cube of ds_resolution) beyond it")
-    if how == "param":
-        return f"{where} max_range {limit:g} m: {name} dropped them"
-    return f"{where} max_range {limit:g} m: dropped ({name} got only the nearer ones)"
-
-
-def _save(mapper, tree, output: Path, formats) -> None:
-    suffix = _suffix(output)
-    if suffix in formats:
-        mapper.save(output)
-    elif suffix == ".ply":
-        tree.save_ply(output)
-    elif suffix == ".pcd":
-        tree.save_pcd(output)
-    else:
-        tree.save(output, format=suffix[1:])
-
-
-def _option(name: str) -> str:
-    """The command-line option of a KNNMap parameter: ``p_m_out`` → ``--p-m-out``."""
-    return "--" + name.replace("_", "-")
-
-
-def _knn_error(parser: argparse.ArgumentParser, exc: Exception) -> None:
-    """parser.error for a rejected k-NN option, naming the options the message names."""
-    message = str(exc)
-    named = sorted({m.start(): m.group(1) for m in re.finditer(
-        r"(?<![\w-])(" + "|".join(sorted(_KNN_OPTIONS, key=len, reverse=True)) + r")(?![\w-])",
-        message)}.items())
-    options = "/".join(dict.fromkeys(_option(name) for _, name in named)) or "k-NN options"
-    parser.error(f"argument {options}: {message}")
-
-
-def _param(text: str) -> tuple[str, Any]:
-    """--param NAME=VALUE: (name, the value as a Python literal, else the text)."""
-    name, sep, value = text.partition("=")
-    if not sep or not name.strip().isidentifier():
-        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text[:60]!r}")
-    try:
-        return name.strip(), ast.literal_eval(value.strip())
-    except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
-        return name.strip(), value.strip()
-
-
-_FIELD_NAMES = ("kitti", "nuscenes")
-
-
-def _fields(text: str):
-    """--fields: an int (float32 values per record), "kitti" / "nuscenes", or a record
-    layout ``name:dtype,...`` (e.g. ``x:<f8,y:<f8,z:<f8,t:<u4``)."""
-    text = text.strip()
-    if text.isdigit():
-        return int(text)
-    if text in _FIELD_NAMES:
-        return text
-    try:
-        items = [item.split(":") for item in text.split(",")]
-        if not all(len(item) == 2 and item[0] for item in items):
-            raise ValueError
-        return np.dtype([(name.strip(), np.dtype(kind.strip())) for name, kind in items])
-    except (TypeError, ValueError):
-        raise argparse.ArgumentTypeError(
-            f"expected an int (float32 values per record), kitti, nuscenes or name:dtype,... "
-            f"(e.g. x:<f4,y:<f4,z:<f4,t:<u4), got {text[:60]!r}") from None
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -666,7 +96,7 @@ def _parser() -> argparse.ArgumentParser:
                    "for octree and knn, .npz (written by -o X.npz) for bgk, akimap and "
                    "grid; the scans are inserted into it (default: a new map)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                   type=_param, help="a constructor parameter of the map, repeatable (e.g. "
+                   type=parse_param, help="a constructor parameter of the map, repeatable (e.g. "
                    "--param prob_hit=0.8); the value is read as a Python literal, else kept "
                    "as text (default: the map type's defaults)")
     p.add_argument("--no-progress", action="store_true",
@@ -676,10 +106,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="sensor-to-world poses, one per scan in input order: KITTI poses.txt "
                    "(3x4 row-major) or TUM (t x y z qx qy qz qw; timestamps not matched) "
                    "(default: none, the scans are in the world frame)")
-    g.add_argument("--poses-format", choices=_POSE_FORMATS, default=None,
+    g.add_argument("--poses-format", choices=POSE_FORMATS, default=None,
                    help="format of --poses (default: guessed from the columns: 12 kitti, "
                    "8 tum)")
-    g.add_argument("--fields", type=_fields, default=None,
+    g.add_argument("--fields", type=parse_fields, default=None,
                    help="record layout of .bin scans: an int (float32 values per record, x y "
                    "z first), kitti, nuscenes, or name:dtype,... such as x:<f4,y:<f4,z:<f4,"
                    "t:<u4 (default: by file name: nuscenes for .pcd.bin, else kitti)")
@@ -696,7 +126,7 @@ def _parser() -> argparse.ArgumentParser:
                    "(default: %(default)s)")
     g = p.add_argument_group("k-NN inverse sensor model (--method knn only; defaults: "
                              "KNNMap's)")
-    d = _KNN_DEFAULTS
+    d = KNN_DEFAULTS
     g.add_argument("--k", type=int, default=None,
                    help=f"nearest neighbours scoring each point, in [1, 1000] "
                    f"(default: {d['k']})")
@@ -731,21 +161,21 @@ def _knn_args(args) -> dict | None:
     """The k-NN options given on the command line (None: none), checked; exits with
     parser.error (code 2) on a bad one or one given with another method."""
     parser = args.map_parser
-    given = {name: getattr(args, name) for name in _KNN_OPTIONS
+    given = {name: getattr(args, name) for name in KNN_OPTIONS
              if getattr(args, name) is not None}
     if args.method != "knn":
         if given:
-            parser.error(f"argument {'/'.join(map(_option, given))}: applies to --method "
+            parser.error(f"argument {'/'.join(map(option_name, given))}: applies to --method "
                          f"knn only, got --method {args.method}")
         return None
     if args.max_range is not None:
         parser.error(f"argument --max-range: not with --method knn, whose range limit is "
-                     f"--sensor-range (default: {_KNN_DEFAULTS['sensor_range']}); it cuts "
+                     f"--sensor-range (default: {KNN_DEFAULTS['sensor_range']}); it cuts "
                      f"rays as --max-range does for the octree")
     try:
-        _check_knn_options(given)
+        check_knn_options(given)
     except (ValueError, TypeError) as exc:
-        _knn_error(parser, exc)
+        knn_error(parser, exc)
     return given
 
 
@@ -767,8 +197,8 @@ def main(argv=None) -> int:
                       sensor_frame=args.sensor_frame, tf_tolerance=args.tf_tolerance,
                       fields=args.fields, input_map=args.input_map, n_jobs=args.n_jobs,
                       params=dict(args.param), progress=progress)
-    except _OptionError as exc:
-        args.map_parser.error(f"argument {_OPTION_OF.get(exc.param, exc.param)}: {exc}")
+    except OptionError as exc:
+        args.map_parser.error(f"argument {OPTION_OF.get(exc.param, exc.param)}: {exc}")
     except (ValueError, TypeError, OSError, ImportError) as exc:
         print(f"occgp {args.command}: error: {exc}", file=sys.stderr)
         return 1
