@@ -438,3 +438,17 @@ def test_scenes_and_sensors_reject_huge_or_mistyped_sizes(room):
 def test_room_2d_rejects_bad_points(room):
     with pytest.raises(ValueError, match=r"points must have shape \(n_points, 2\)"):
         room.occupancy(np.zeros((3, 3)))
+
+
+def test_scene_moved_moves_one_object_whole_and_leaves_the_scene_as_it_was():
+    room = structured_room(seed=2)
+    moved = room.moved("table", [0.5, -0.25, 0.0])
+    for label, a, b in zip(room.labels, room.solids, moved.solids):
+        shift = [0.5, -0.25, 0.0] if label.startswith("table_") else [0.0, 0.0, 0.0]
+        assert np.array_equal(b.center, a.center + shift)
+    assert moved.labels == room.labels and moved.name == room.name
+    top = np.array([room.solids[room.labels.index("table_0")].center])
+    assert room.occupancy(top).tolist() == [True]
+    assert moved.occupancy(top + [0.5, -0.25, 0.0]).tolist() == [True]
+    with pytest.raises(TypeError, match="label"):
+        room.moved(3, [0, 0, 0])

@@ -18,6 +18,7 @@ and headings 0, 120, 240 degrees; here the room is turned by -90 degrees
 (0, -1.5), (3, 0.5) with headings -90, 30, 150 degrees.
 """
 
+import copy
 import numbers
 
 import numpy as np
@@ -281,6 +282,53 @@ class Scene:
         (1.0, True)
         """
         return first_hits(self.solids, origins, directions, max_range)
+
+    def moved(self, label: str, offset: ArrayLike) -> "Scene":
+        """The scene with one object moved (for dynamic-scene experiments).
+
+        Parameters
+        ----------
+        label : str
+            The object's label (:attr:`labels`); an object made of several
+            solids (``"table"``: ``"table_0"``, ``"table_1"``, ...) moves whole.
+        offset : array-like of shape (3,)
+            Translation in metres, finite.
+
+        Returns
+        -------
+        scene : Scene
+            A new scene; this one is unchanged. Nothing checks that the
+            object stays clear of the others or of the sensor poses.
+
+        Raises
+        ------
+        TypeError
+            If `label` is not a str, or `offset` does not hold numbers.
+        ValueError
+            If no object has `label`, or `offset` is not three finite numbers.
+
+        Examples
+        --------
+        >>> room = structured_room()
+        >>> moved = room.moved("crate", [-1.0, 0.0, 0.0])
+        >>> point = [[1.3, -1.1, 0.25]]         # 1 m left of the crate's centre
+        >>> room.occupancy(point).tolist(), moved.occupancy(point).tolist()
+        ([False], [True])
+        """
+        shift = as_point(offset, "offset")
+        if not isinstance(label, str):
+            raise TypeError(f"label must be a str, got {type(label).__name__}")
+        parts = [i for i, name in enumerate(self.labels) if name == label
+                 or (name.startswith(f"{label}_") and name[len(label) + 1:].isdigit())]
+        if not parts:
+            raise ValueError(f"label must name an object of the scene ({', '.join(self.labels)}), "
+                             f"got {label!r}")
+        solids = list(self.solids)
+        for i in parts:
+            solids[i] = copy.copy(solids[i])
+            solids[i].center = solids[i].center + shift
+        return Scene(solids, self.labels, self._interior, self.name, self.sensor_positions,
+                     self.base_heading, self.wall_thickness)
 
     def poses(self, n_poses: int = 4, scans_per_pose: int = 3, seed: int = 0):
         """Sensor positions and scan headings.
