@@ -191,6 +191,8 @@ CAPABILITIES = MappingProxyType({
     "changed_cells": "changed_cells(): the cells changed since the last reset_changes()",
     "distance_field": "distance_field(bbox, ...): Euclidean distances to the occupied cells",
     "colors": "colors(points): the colour of each point's cell",
+    "project_2d": "project_2d(z_min, z_max, ...): a height band as a 2D occupancy grid",
+    "frontiers": "frontiers(...): free cells next to unknown space, in clusters",
 })
 
 #: The OctoMap files (and the point clouds of occupied cells) every map writes through
@@ -216,7 +218,7 @@ def capabilities(map: Any) -> frozenset[str]:
     >>> from occgp import OccupancyOctree, BGKMap
     >>> from occgp.maps import capabilities
     >>> sorted(capabilities(OccupancyOctree))
-    ['changed_cells', 'distance_field']
+    ['changed_cells', 'distance_field', 'frontiers', 'project_2d']
     >>> sorted(capabilities(BGKMap))
     ['variance']
     """
