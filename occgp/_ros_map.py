@@ -79,7 +79,7 @@ def _real(doc: dict, key: str, where: str) -> float:
 
 
 def _read_yaml(path: pathlib.Path) -> dict:
-    import yaml  # PyYAML
+    import yaml  # type: ignore[import-untyped]  # PyYAML
 
     try:
         text = path.read_bytes().decode("utf-8")
@@ -144,7 +144,8 @@ def read_pgm(path: pathlib.Path) -> tuple[NDArray[np.int64], int]:
     if magic not in (b"P5", b"P2"):
         raise ValueError(f"{path}: not a PGM image (P5 or P2); only PGM images are read "
                          f"(got a file starting with {data[:8]!r})")
-    pos, fields, separated = 2, [], False
+    pos, separated = 2, False
+    fields: list[int] = []
     names = ("width", "height", "maxval")
     while len(fields) < 3:
         char = data[pos:pos + 1]
