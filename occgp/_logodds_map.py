@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._docfill import fill_doc
 from ._octree import TREE_MAX_VAL
+from ._planning import PlanningMixin
 from ._status import Status, check_status
 from ._validation import (
     as_point, as_points, check_bool, check_choice, check_int, check_probability, check_real,
@@ -69,7 +70,7 @@ class Leaves(NamedTuple):
     log_odds: NDArray[np.float32]
 
 
-class LogOddsMap:
+class LogOddsMap(PlanningMixin):
     """Base of the log-odds maps: see :class:`occgp.OccupancyOctree` for the parameters."""
 
     #: What the map is called in error messages.

@@ -193,6 +193,8 @@ CAPABILITIES = MappingProxyType({
     "colors": "colors(points): the colour of each point's cell",
     "decay": "decay(now, max_age=...): cells stamped by insert_scan(stamp=) fade when outdated",
     "merge": "merge(other, transform=None): another map's log-odds added cell by cell",
+    "project_2d": "project_2d(z_min, z_max, ...): a height band as a 2D occupancy grid",
+    "frontiers": "frontiers(...): free cells next to unknown space, in clusters",
 })
 
 #: The OctoMap files (and the point clouds of occupied cells) every map writes through
@@ -218,7 +220,7 @@ def capabilities(map: Any) -> frozenset[str]:
     >>> from occgp import OccupancyOctree, BGKMap
     >>> from occgp.maps import capabilities
     >>> sorted(capabilities(OccupancyOctree))
-    ['changed_cells', 'decay', 'distance_field', 'merge']
+    ['changed_cells', 'decay', 'distance_field', 'frontiers', 'merge', 'project_2d']
     >>> sorted(capabilities(BGKMap))
     ['variance']
     """

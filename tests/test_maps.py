@@ -88,11 +88,12 @@ def test_the_threshold_rule_is_at_or_above():
 
 def test_capabilities_are_discoverable():
     assert capabilities(occgp.OccupancyOctree) == {"changed_cells", "distance_field", "decay",
-                                                  "merge"}
+                                                  "merge", "project_2d", "frontiers"}
+    assert {"project_2d", "frontiers"} <= capabilities(occgp.GridMap)
     assert "colors" in capabilities(occgp.ColorOctree(0.1))
     assert "variance" in map_type("bgk").capabilities
     assert set(maps.CAPABILITIES) == {"variance", "changed_cells", "distance_field", "colors",
-                                      "decay", "merge"}
+                                      "decay", "merge", "project_2d", "frontiers"}
 
 
 def test_registry_lists_builds_and_rejects():
