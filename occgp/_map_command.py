@@ -59,9 +59,12 @@ OPTION_OF = {"output": "-o/--output", "method": "--method", "mode": "--mode",
               "resolution": "--resolution", "max_range": "--max-range", "n_jobs": "--n-jobs",
               "poses": "--poses", "poses_format": "--poses-format", "topic": "--topic",
               "fixed_frame": "--fixed-frame", "sensor_frame": "--sensor-frame",
+              "project_2d": "--project-2d",
               "tf_tolerance": "--tf-tolerance", "input_map": "--input-map",
               "fields": "--fields", "paths": "scans"}
 POSE_FORMATS = ("kitti", "tum")
+#: The outputs that are 2D maps (map_server's YAML, with project_2d)
+ROS_MAP_SUFFIXES = (".yaml", ".yml")
 _BAG_SUFFIXES = (".bag", ".db3", ".mcap")
 
 
@@ -144,9 +147,9 @@ def _read_poses(path, poses_format):
 
 
 def _check_map_args(paths, output, method, mode, resolution, max_range, knn_params, n_jobs,
-                    poses, poses_format, bag_options,
-                    input_map) -> tuple[Path, float | None, float | None, int | None,
-                                        Path | None]:
+                    poses, poses_format, bag_options, input_map,
+                    project_2d=None) -> tuple[Path, float | None, float | None, int | None,
+                                              Path | None]:
     """Check map_scans' arguments before anything is read; return (output, resolution,
     max_range, n_jobs, input_map) as used."""
     methods = map_methods()
@@ -155,7 +158,16 @@ def _check_map_args(paths, output, method, mode, resolution, max_range, knn_para
     entry = map_type(method)
     output = Path(output)
     fits = entry.outputs
-    if _suffix(output) not in fits:
+    if project_2d is not None:
+        _check_band(project_2d)
+        if _suffix(output) not in ROS_MAP_SUFFIXES:
+            raise OptionError("output", f"output must end in .yaml or .yml with project_2d "
+                              f"(map_server's YAML, beside its .pgm image), got "
+                              f"{str(output)!r}")
+    elif _suffix(output) in ROS_MAP_SUFFIXES:
+        raise OptionError("output", f"a .yaml output is a 2D map: give project_2d (the "
+                          f"height band, --project-2d Z_MIN Z_MAX), got {str(output)!r}")
+    elif _suffix(output) not in fits:
         takers = [n for n in methods if _suffix(output) in map_type(n).formats]
         note = f" ({_suffix(output)}: {_either(takers, ' and ')} only)" \
             if _suffix(output) not in OCTREE_FORMATS and takers else ""
@@ -221,6 +233,24 @@ def _check_map_args(paths, output, method, mode, resolution, max_range, knn_para
     return output, resolution, max_range, n_jobs, input_map
 
 
+def _check_band(band) -> tuple[float, float]:
+    """project_2d's (z_min, z_max), checked."""
+    try:
+        z_min, z_max = band
+    except (TypeError, ValueError):
+        raise OptionError("project_2d", f"project_2d must be a pair (z_min, z_max), got "
+                          f"{band!r}") from None
+    try:
+        z_min = check_real(z_min, "project_2d's z_min", state_bounds=True)
+        z_max = check_real(z_max, "project_2d's z_max", state_bounds=True)
+    except ValueError as exc:
+        raise OptionError("project_2d", str(exc)) from None
+    if z_min > z_max:
+        raise OptionError("project_2d", f"project_2d must have z_min <= z_max, got "
+                          f"({z_min}, {z_max})")
+    return z_min, z_max
+
+
 def _new_map(method, resolution, max_range, params, n_jobs, input_map):
     """The map to insert into: loaded from `input_map` or new (through the registry)."""
     entry = map_type(method)
@@ -254,7 +284,8 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
               topic: str | None = None, fixed_frame: str | None = None,
               sensor_frame: str | None = None, tf_tolerance: float = 0.0, fields=None,
               input_map: str | Path | None = None, n_jobs: int | None = -1,
-              params: Mapping[str, Any] | None = None, progress: bool | None = None,
+              params: Mapping[str, Any] | None = None,
+              project_2d: tuple[float, float] | None = None, progress: bool | None = None,
               out=None):
     """Build a map from scan files and ROS bags and save it.
 
@@ -345,6 +376,14 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     params : mapping, default=None
         Further constructor parameters of the map type (e.g.
         ``{"prob_hit": 0.8}``), checked by the class.
+    project_2d : (float, float), default=None
+        ``(z_min, z_max)``: write a 2D map of that height band instead of
+        the 3D map (:meth:`~occgp.OccupancyOctree.project_2d` at the map's
+        resolution, over its bounds; a map without it, such as a kernel
+        map, goes through its ``to_octree()``), as map_server / Nav2's
+        YAML + PGM pair (:meth:`~occgp.OccupancyGrid2D.save_ros_map`);
+        `output` must then end in ``.yaml`` or ``.yml``, and the image is
+        written beside it with the suffix ``.pgm``.
     progress : bool, default=None
         Show a progress bar (None: only on a terminal).
     out : file-like, default=None
@@ -391,13 +430,16 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
                    "tf_tolerance": tf_tolerance}
     output_path, resolution, max_range, n_jobs, input_path = _check_map_args(
         paths, output, method, mode, resolution, max_range, knn_params, n_jobs, poses,
-        poses_format, bag_options, input_map)
+        poses_format, bag_options, input_map, project_2d)
     knn = check_knn_options({} if knn_params is None else knn_params) \
         if method == "knn" else {}
     entry = map_type(method)
     pose_array = None if poses is None else _read_poses(poses, poses_format)
-    convert = _suffix(output_path) not in entry.formats and not (
-        isinstance(entry.cls, type) and issubclass(entry.cls, OccupancyOctree))
+    if project_2d is not None:
+        convert = not callable(getattr(entry.cls, "project_2d", None))
+    else:
+        convert = _suffix(output_path) not in entry.formats and not (
+            isinstance(entry.cls, type) and issubclass(entry.cls, OccupancyOctree))
     bar = tqdm(total=(input_path is not None) + len(paths) + convert + 1, unit="step",
                disable=None if progress is None else not progress)
     try:
@@ -458,7 +500,12 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
             tree = mapper.to_octree()
             bar.update()
         bar.set_description(f"writing {output_path.name}")
-        _save(mapper, tree, output_path, entry.formats)
+        if project_2d is not None:
+            written = " and ".join(map(str, tree.project_2d(
+                *_check_band(project_2d)).save_ros_map(output_path)))
+        else:
+            written = str(output_path)
+            _save(mapper, tree, output_path, entry.formats)
         bar.update()
     finally:
         bar.close()
@@ -476,7 +523,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         built = f"{mapper.num_cells:,} cells"
     start = f"{input_path} + " if input_path is not None else ""
     print(f"{start}{n_scans} scans, {n_points:,} points → {built}; inserted in "
-          f"{seconds:.2f} s, wall time {wall:.2f} s; wrote {output_path}", file=out)
+          f"{seconds:.2f} s, wall time {wall:.2f} s; wrote {written}", file=out)
     return mapper
 
 

@@ -99,6 +99,11 @@ def _parser() -> argparse.ArgumentParser:
                    type=parse_param, help="a constructor parameter of the map, repeatable (e.g. "
                    "--param prob_hit=0.8); the value is read as a Python literal, else kept "
                    "as text (default: the map type's defaults)")
+    p.add_argument("--project-2d", type=float, nargs=2, default=None,
+                   metavar=("Z_MIN", "Z_MAX"),
+                   help="write a 2D map of this height band instead (occupied if any cell "
+                   "in the band is, free if its known cells all are): map_server / Nav2's "
+                   "YAML, with -o MAP.yaml, and its MAP.pgm image (default: the 3D map)")
     p.add_argument("--no-progress", action="store_true",
                    help="no progress bar (default: shown on a terminal)")
     g = p.add_argument_group("poses and record layouts")
@@ -196,7 +201,8 @@ def main(argv=None) -> int:
                       topic=args.topic, fixed_frame=args.fixed_frame,
                       sensor_frame=args.sensor_frame, tf_tolerance=args.tf_tolerance,
                       fields=args.fields, input_map=args.input_map, n_jobs=args.n_jobs,
-                      params=dict(args.param), progress=progress)
+                      params=dict(args.param), project_2d=args.project_2d,
+                      progress=progress)
     except OptionError as exc:
         args.map_parser.error(f"argument {OPTION_OF.get(exc.param, exc.param)}: {exc}")
     except (ValueError, TypeError, OSError, ImportError) as exc:
