@@ -15,12 +15,14 @@ from .color import ColorLeaves, ColorOctree
 from .grid import GridMap
 from .kernel import AKIMap, BGKMap
 from .knn import KNNMap
-from ._export import DistanceField
+from ._distance import DistanceField
+from ._distance_map import DistanceMap
 from .maps import OccupancyMap, available_maps, make_map, register
 
 __version__ = "0.1.0.dev0"
 __all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "Nodes", "ColorLeaves", "Changes",
-           "AKIMap", "BGKMap", "KNNMap", "DistanceField", "OccupancyMap", "available_maps",
+           "AKIMap", "BGKMap", "KNNMap", "DistanceField", "DistanceMap",
+           "OccupancyMap", "available_maps",
            "make_map", "register", "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())
