@@ -165,18 +165,26 @@ def signed_transform(obstacle: np.ndarray, signed: bool, region: tuple[slice, ..
     shape = inside.shape
     d2 = np.full(shape, -1, dtype=np.int64)
     near = np.full((3, *shape), -1, dtype=np.int32)
-    idx = nearest_features(obstacle)
-    if idx is not None:
-        d2[...] = squared_offsets(idx, region)
-        near[...] = idx[(slice(None), *region)]
+    # a transform runs only if the region has cells that need it
+    if not inside.all():
+        idx = nearest_features(obstacle)
+        if idx is not None:
+            d2[...] = squared_offsets(idx, region)
+            near[...] = idx[(slice(None), *region)]
     if signed:
         d2[inside] = -1
         near[:, inside] = -1
-        idx = nearest_features(~obstacle)
+        idx = nearest_features(~obstacle) if inside.any() else None
         if idx is not None:
             d2_in = squared_offsets(idx, region)
             d2[inside] = d2_in[inside]
             near[:, inside] = idx[(slice(None), *region)][:, inside]
+    elif inside.any():          # an obstacle cell is its own nearest obstacle
+        d2[inside] = 0
+        here = np.meshgrid(*[np.arange(sl.start, sl.stop, dtype=np.int32) for sl in region],
+                           indexing="ij")
+        for a in range(3):
+            near[a][inside] = here[a][inside]
     return d2, near
 
 

@@ -297,8 +297,7 @@ class DistanceMap:
             offs = np.stack(np.meshgrid(ar, ar, ar, indexing="ij"), -1).reshape(-1, 3)
             blk = ((low[rows] >> sh)[:, None, :] + offs[None]).reshape(-1, 3)
             blocks.append(blk)
-        allb = np.unique(np.concatenate(blocks), axis=0) if len(low) else \
-            np.empty((0, 3), dtype=np.int64)
+        allb = _unpack(np.unique(_pack(np.concatenate(blocks))))
         keep = ((allb * B < dhi) & (allb * B + B > dlo)).all(axis=1)
         self._allocate(allb[keep])
         flat = self._state.reshape(len(self._state), -1)
@@ -721,5 +720,11 @@ class DistanceMap:
 
 def _pack(blocks: np.ndarray) -> NDArray[np.int64]:
     """One int64 per block coordinate (each in [-2**20, 2**20))."""
-    b = blocks.astype(np.int64) + (1 << 20)
+    b = blocks.astype(np.int64).reshape(-1, 3) + (1 << 20)
     return (b[:, 0] << 42) | (b[:, 1] << 21) | b[:, 2]
+
+
+def _unpack(keys: np.ndarray) -> NDArray[np.int64]:
+    """The block coordinates (n, 3) of packed keys."""
+    mask = (1 << 21) - 1
+    return np.column_stack([(keys >> 42) & mask, (keys >> 21) & mask, keys & mask]) - (1 << 20)
