@@ -20,7 +20,8 @@ from ._logodds_map import LogOddsMap
 from ._validation import as_numeric, check_bool, check_choice, check_int, check_real
 
 __all__ = ["DistanceField", "distance_field", "MAX_DISTANCE_CELLS", "UNKNOWN_CHOICES",
-           "check_distance_map", "nearest_features", "squared_offsets", "cells_of"]
+           "check_distance_map", "nearest_features", "squared_offsets", "cells_of", "grid_of_box",
+           "signed_transform", "finish", "closest_and_gradient"]
 
 #: Default cap on the cells of a :func:`distance_field` grid (about 30 bytes each at
 #: peak for an unsigned field without extras: the distances, the obstacle mask and
@@ -101,7 +102,7 @@ def squared_offsets(indices: np.ndarray, region: tuple[slice, ...]) -> NDArray[n
         here = np.arange(sl.start, sl.stop, dtype=np.int64)
         shape = [1] * len(region)
         shape[a] = len(here)
-        diff = indices[(a, *region)].astype(np.int64) - here.reshape(shape)
+        diff = indices[a][region].astype(np.int64) - here.reshape(shape)
         out += diff * diff
     return out
 
@@ -109,7 +110,7 @@ def squared_offsets(indices: np.ndarray, region: tuple[slice, ...]) -> NDArray[n
 # --------------------------------------------------------------------------- #
 # the dense field
 # --------------------------------------------------------------------------- #
-def _grid_of_box(bbox: ArrayLike, res: float, max_cells: int):
+def grid_of_box(bbox: ArrayLike, res: float, max_cells: float):
     """(shape, origin) of the grid of cells of edge `res` that covers `bbox`."""
     box = as_numeric(bbox, "bbox")
     if box.shape != (2, 3):
@@ -235,7 +236,7 @@ def distance_field(tree: LogOddsMap, bbox: ArrayLike, resolution: float | None =
     signed = check_bool(signed, "signed")
     return_closest = check_bool(return_closest, "return_closest")
     return_gradient = check_bool(return_gradient, "return_gradient")
-    shape, first = _grid_of_box(bbox, res, max_cells)
+    shape, first = grid_of_box(bbox, res, max_cells)
     origin = first * res
     obstacle = _obstacles(tree, shape, origin, res, unknown)
     region = tuple(slice(0, n) for n in shape)

@@ -8,10 +8,9 @@ from itertools import product
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import _distance
 from ._distance import (
     DistanceField, MAX_DISTANCE_CELLS, UNKNOWN_CHOICES, cells_of, check_distance_map,
-    closest_and_gradient, finish, signed_transform,
+    closest_and_gradient, finish, grid_of_box, signed_transform,
 )
 from ._logodds_map import LogOddsMap
 from ._validation import as_points, check_bool, check_choice, check_int, check_real
@@ -158,7 +157,8 @@ class DistanceMap:
         start = time.perf_counter()
         check_distance_map(tree)
         self._setup(tree.resolution)
-        centres, sizes = tree.leaves()[:2] if hasattr(tree, "leaves") else tree.cells()[:2]
+        table = getattr(tree, "leaves", None) or getattr(tree, "cells")
+        centres, sizes = table()[:2]
         occupied = tree.is_occupied(centres) if len(centres) else np.empty(0, bool)
         side = np.rint(np.asarray(sizes) / self._res).astype(np.int64)
         low = np.rint(centres / self._res - side[:, None] / 2.0).astype(np.int64)
@@ -190,12 +190,13 @@ class DistanceMap:
         if self.bbox is None:
             dlo, dhi = np.full(3, _KEY_LO), np.full(3, _KEY_HI)
         else:
-            shape, first = _distance._grid_of_box(self.bbox, self._res, np.inf)
+            shape, first = grid_of_box(self.bbox, self._res, np.inf)
             dlo = np.clip(first.astype(np.int64), _KEY_LO, _KEY_HI)
             dhi = np.clip(first.astype(np.int64) + np.array(shape), _KEY_LO, _KEY_HI)
         self._domain = (dlo.astype(np.int64), dhi.astype(np.int64))
         self._pcap = None if self._max_d is None else int(np.ceil(self._max_d / self._res))
-        self._slot: dict[tuple[int, int, int], int] = {}
+        self._slot: dict[tuple[int, ...], int] = {}
+        self._new_slots = np.empty(0, dtype=np.int64)
         self._free: list[int] = []
         self._alloc_arrays(0)
         self.resolution_ = self._res
@@ -450,7 +451,8 @@ class DistanceMap:
                              "updating it) and no points were given")
         cells = [np.empty((0, 3), dtype=np.int64)]
         if tracking:
-            cells.append(tree.changed_cells().keys.astype(np.int64) + _KEY_LO)
+            record = getattr(tree, "changed_cells")()
+            cells.append(record.keys.astype(np.int64) + _KEY_LO)
         boxes = None
         if points is not None:
             pts = as_points(points, "points")
@@ -461,11 +463,11 @@ class DistanceMap:
                 s = 16 - depth
                 blo = ((c - _KEY_LO) >> s << s) + _KEY_LO
                 boxes = (blo, blo + (1 << s))
-        cells = np.unique(np.concatenate(cells), axis=0)
+        read = np.unique(np.concatenate(cells), axis=0)
         dlo, dhi = self._domain
-        cells = cells[((cells >= dlo) & (cells < dhi)).all(axis=1)]
+        read = read[((read >= dlo) & (read < dhi)).all(axis=1)]
         old_region = self._region
-        flipped = self._reread_cells(tree, cells)
+        flipped = self._reread_cells(tree, read)
         if boxes is not None:
             flipped = np.concatenate([flipped, self._reread_boxes(tree, *boxes)])
         new_slots = self._new_slots
@@ -475,7 +477,7 @@ class DistanceMap:
         todo = np.intersect1d(np.union1d(todo, new_slots), live).astype(np.int64)
         for s in todo:
             self._compute(int(s))
-        self.last_update_ = {"changed_cells": len(cells), "obstacle_changes": len(flipped),
+        self.last_update_ = {"changed_cells": len(read), "obstacle_changes": len(flipped),
                              "blocks": len(self._slot), "recomputed": len(todo),
                              "seconds": time.perf_counter() - start}
         return self
@@ -689,7 +691,7 @@ class DistanceMap:
                 raise ValueError(f"the allocated blocks span {shape} cells, more than "
                                  f"max_cells={max_cells}; pass a smaller bbox")
         else:
-            shape, first = _distance._grid_of_box(bbox, self._res, max_cells)
+            shape, first = grid_of_box(bbox, self._res, max_cells)
             first = first.astype(np.int64)
         axes = [first[a] + np.arange(n) for a, n in enumerate(shape)]
         cells = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)

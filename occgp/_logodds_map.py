@@ -605,46 +605,6 @@ class LogOddsMap:
             max_cells=_distance.MAX_DISTANCE_CELLS if max_cells is None else max_cells,
             signed=signed, return_closest=return_closest, return_gradient=return_gradient)
 
-    def distance_map(self, max_distance: float | None = None, *, signed: bool = False,
-                     unknown: str = "occupied", bbox: ArrayLike | None = None,
-                     block_size: int = 16):
-        """The map's distance field stored in blocks: ``DistanceMap(...).fit(self)``.
-
-        Parameters
-        ----------
-        max_distance : float, default=None
-            Truncation distance in metres (None: exact everywhere).
-        signed : bool, default=False
-            Negative distances inside obstacles.
-        unknown : {"occupied", "free"}, default="occupied"
-            How unknown cells count.
-        bbox : array-like of shape (2, 3), default=None
-            Restrict the field to this box.
-        block_size : int, default=16
-            Edge of the blocks in cells, a power of 2 in [4, 128].
-
-        Returns
-        -------
-        field : DistanceMap
-            The fitted field; see :class:`occgp.DistanceMap` for its queries and
-            its incremental :meth:`~occgp.DistanceMap.update`.
-
-        Raises
-        ------
-        TypeError, ValueError
-            As :meth:`occgp.DistanceMap.fit`.
-
-        Examples
-        --------
-        >>> from occgp import OccupancyOctree
-        >>> m = OccupancyOctree(1.0).set_cells([[0.5, 0.5, 0.5]], [2.0])
-        >>> m.distance_map(max_distance=2.0, unknown="free").query([[1.5, 1.5, 0.5]]).round(3)
-        array([1.414])
-        """
-        from ._distance_map import DistanceMap
-        return DistanceMap(max_distance, signed=signed, unknown=unknown, bbox=bbox,
-                           block_size=block_size).fit(self)
-
     # ------------------------------------------------------------------ helpers
     @staticmethod
     def _check_method(method: str, superray_threshold: int) -> tuple[str, int]:

@@ -212,8 +212,7 @@ def test_truncated_field_clamps_and_has_no_closest_beyond():
 
 def test_blocks_are_allocated_only_where_the_map_is_known_and_memory():
     m = OccupancyOctree(0.1).set_cells([[0.05, 0.05, 0.05], [5.05, 0.05, 0.05]], [2.0, 2.0])
-    field = m.distance_map(max_distance=0.5, unknown="free", block_size=8)
-    assert isinstance(field, DistanceMap)
+    field = DistanceMap(max_distance=0.5, unknown="free", block_size=8).fit(m)
     assert field.num_blocks_ == 2
     assert field.memory_usage() == 2 * (21 * 8**3 + 32)
     assert field.resolution_ == 0.1
