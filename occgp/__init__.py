@@ -15,15 +15,16 @@ from .color import ColorLeaves, ColorOctree
 from .grid import GridMap
 from .kernel import AKIMap, BGKMap
 from .knn import KNNMap
-from ._export import DistanceField
+from ._distance import DistanceField
+from ._distance_map import DistanceMap
 from ._frontiers import Frontiers
 from ._map2d import OccupancyGrid2D
 from .maps import OccupancyMap, available_maps, make_map, register
 
 __version__ = "0.1.0.dev0"
-__all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "Nodes", "ColorLeaves", "Changes", "Stamps",
-           "AKIMap", "BGKMap", "KNNMap", "DistanceField", "OccupancyMap", "available_maps",
-           "make_map", "register", "__version__",
-           "OccupancyGrid2D", "Frontiers"]
+__all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "Nodes", "ColorLeaves",
+           "Changes", "Stamps", "AKIMap", "BGKMap", "KNNMap", "DistanceField", "DistanceMap",
+           "OccupancyGrid2D", "Frontiers", "OccupancyMap", "available_maps", "make_map",
+           "register", "__version__"]
 
 logging.getLogger("occgp").addHandler(logging.NullHandler())

@@ -1,4 +1,4 @@
-"""Maps out: PLY, PCD and Open3D exports of a log-odds map, and a distance field.
+"""Maps out: PLY, PCD and Open3D exports of a log-odds map.
 
 The functions take the map (an :class:`occgp.OccupancyOctree` or an
 :class:`occgp.GridMap`) as their first argument; the maps' methods of the same
@@ -9,23 +9,18 @@ library); PCD files through :func:`occgp.datasets.write_pcd`.
 from __future__ import annotations
 
 import importlib
-from typing import NamedTuple
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._distance import DistanceField  # noqa: F401  (its public name's import path)
 from ._logodds_map import LogOddsMap
-from ._validation import as_numeric, as_path, check_bool, check_choice, check_int, check_real
+from ._validation import as_path, check_bool, check_choice, check_int
 
-__all__ = ["save_ply", "save_pcd", "to_open3d", "distance_field", "DistanceField",
-           "MAX_VOXELS", "MAX_DISTANCE_CELLS", "pack_rgb", "unpack_rgb"]
+__all__ = ["save_ply", "save_pcd", "to_open3d", "MAX_VOXELS", "pack_rgb", "unpack_rgb"]
 
 #: Default cap on the finest voxels :func:`to_open3d` builds (about 56 bytes each
 #: while the voxel grid is built: centres, colours and Open3D's own copy).
 MAX_VOXELS = 2**22
-#: Default cap on the cells of a :func:`distance_field` grid (about 30 bytes each
-#: at peak: the distances, the obstacle mask and scipy's feature transform).
-MAX_DISTANCE_CELLS = 2**23
 #: The most cubes one PLY mesh holds: 8 vertices each, indexed by int32.
 _MAX_CUBES = (2**31 - 1) // 8
 #: Rows formatted at a time in ASCII files (bounds the memory of the text).
@@ -41,33 +36,6 @@ _CUBE_QUADS = np.array([[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4],
                         [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]])
 _CUBE_TRIANGLES = np.concatenate([_CUBE_QUADS[:, [0, 1, 2]], _CUBE_QUADS[:, [0, 2, 3]]])
 _KINDS = ("voxels", "points")
-_UNKNOWN = ("occupied", "free")
-
-
-class DistanceField(NamedTuple):
-    """A Euclidean distance field on a regular grid (see :func:`distance_field`)."""
-
-    #: Distance (metres) from each cell's centre to the nearest obstacle cell's
-    #: centre, shape (nx, ny, nz), indexed [i, j, k] along x, y, z; 0 in obstacle
-    #: cells, inf everywhere when the grid holds no obstacle.
-    distances: NDArray[np.float64]
-    #: The grid's minimum corner, shape (3,): cell [i, j, k] spans
-    #: ``origin + [i, j, k] * resolution`` to ``origin + [i + 1, j + 1, k + 1] * resolution``.
-    origin: NDArray[np.float64]
-    #: Edge of the grid's cells, in metres.
-    resolution: float
-
-    def centers(self) -> NDArray[np.float64]:
-        """Centres of every cell of the grid.
-
-        Returns
-        -------
-        centers : ndarray of shape (nx, ny, nz, 3)
-            In metres, indexed as `distances`.
-        """
-        axes = [self.origin[a] + (np.arange(n) + 0.5) * self.resolution
-                for a, n in enumerate(self.distances.shape)]
-        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
 
 
 # --------------------------------------------------------------------------- #
@@ -325,58 +293,3 @@ def to_open3d(tree: LogOddsMap, *, kind: str = "voxels", occupied: bool = True,
     low = centres.min(axis=0) - 0.5 * res
     high = centres.max(axis=0) + 0.5 * res
     return o3d.geometry.VoxelGrid.create_from_point_cloud_within_bounds(cloud, res, low, high)
-
-
-# --------------------------------------------------------------------------- #
-# distance field
-# --------------------------------------------------------------------------- #
-def distance_field(tree: LogOddsMap, bbox: ArrayLike, resolution: float | None = None, *,
-                   unknown: str = "occupied",
-                   max_cells: int = MAX_DISTANCE_CELLS) -> DistanceField:
-    """The distance field of `tree` over a box: :meth:`occgp.OccupancyOctree.distance_field`."""
-    from scipy import ndimage  # type: ignore[import-untyped]
-
-    _check_map(tree)
-    box = as_numeric(bbox, "bbox")
-    if box.shape != (2, 3):
-        raise ValueError(f"bbox must have shape (2, 3) (min and max corner), got {box.shape}")
-    box = box.astype(np.float64)
-    if not np.isfinite(box).all():
-        raise ValueError(f"bbox must be finite, got {box.tolist()}")
-    if not (box[0] < box[1]).all():
-        raise ValueError(f"bbox must have min < max on every axis, got {box.tolist()}")
-    res = tree.resolution if resolution is None else check_real(resolution, "resolution",
-                                                                 low=0.0)
-    unknown = check_choice(unknown, "unknown", _UNKNOWN)
-    max_cells = check_int(max_cells, "max_cells", low=1)
-    with np.errstate(over="ignore", invalid="ignore"):
-        # corners within 1e-9 cell of a multiple of res snap to it (0.3 / 0.1 is 2.9999...)
-        q = box / res
-        near = np.rint(q)
-        q = np.where(np.abs(q - near) <= 1e-9 * np.maximum(1.0, np.abs(near)), near, q)
-        first = np.floor(q[0])
-        stop = np.ceil(q[1])
-        counts = np.maximum(stop - first, 1.0)
-        total = float(np.prod(counts))
-    if not (np.isfinite(total) and total <= max_cells
-            and np.isfinite(first).all() and np.isfinite(stop).all()):
-        raise ValueError(
-            f"bbox {box.tolist()} at resolution {res:g} m needs "
-            f"{' x '.join(f'{c:.3g}' for c in counts)} cells, more than max_cells={max_cells}; "
-            "use a smaller box or a coarser resolution")
-    shape = tuple(int(c) for c in counts)
-    origin = first * res
-    obstacle = np.empty(shape, dtype=bool)
-    axes = [origin[a] + (np.arange(n) + 0.5) * res for a, n in enumerate(shape)]
-    yz = np.stack(np.meshgrid(axes[1], axes[2], indexing="ij"), axis=-1).reshape(-1, 2)
-    per_slab = max(1, 2**20 // len(yz))
-    for start in range(0, shape[0], per_slab):  # bounded memory for the query points
-        xs = axes[0][start:start + per_slab]
-        pts = np.column_stack([np.repeat(xs, len(yz)), np.tile(yz, (len(xs), 1))])
-        occ, unk = tree.is_occupied(pts, return_unknown=True)
-        block = occ | unk if unknown == "occupied" else occ
-        obstacle[start:start + len(xs)] = block.reshape(len(xs), shape[1], shape[2])
-    if not obstacle.any():
-        return DistanceField(np.full(shape, np.inf), origin, res)
-    distances = ndimage.distance_transform_edt(~obstacle, sampling=(res, res, res))
-    return DistanceField(distances, origin, res)

@@ -506,7 +506,9 @@ class LogOddsMap(PlanningMixin):
                                  else max_voxels)
 
     def distance_field(self, bbox: ArrayLike, resolution: float | None = None, *,
-                       unknown: str = "occupied", max_cells: int | None = None):
+                       unknown: str = "occupied", max_cells: int | None = None,
+                       signed: bool = False, return_closest: bool = False,
+                       return_gradient: bool = False):
         """Euclidean distance from each cell of a regular grid to the nearest obstacle.
 
         The grid covers the box `bbox` with cubic cells of edge `resolution`,
@@ -516,14 +518,16 @@ class LogOddsMap(PlanningMixin):
         counts as on it). Each cell takes the map's state at its centre (occupied,
         free or unknown); obstacle cells are the occupied ones, plus the unknown
         ones when ``unknown="occupied"``. The distance, in metres, is from each
-        cell's centre to the nearest obstacle cell's centre
-        (``scipy.ndimage.distance_transform_edt`` with the cell edge as sampling),
-        so obstacle cells hold 0 and a cell next to one holds `resolution`.
-        Obstacles outside the box are not seen.
+        cell's centre to the nearest obstacle cell's centre (scipy's exact
+        feature transform, ``scipy.ndimage.distance_transform_edt``; the
+        distance is ``sqrt(i² + j² + k²) * resolution`` for the integer offset
+        ``(i, j, k)`` to that cell), so obstacle cells hold 0 and a cell next to
+        one holds `resolution`. Obstacles outside the box are not seen. For a
+        field stored in blocks, truncated, and updated from the map's changes,
+        see :class:`occgp.DistanceMap`.
 
         Parameters
         ----------
-        tree : OccupancyOctree or GridMap
         bbox : array-like of shape (2, 3)
             ``[min_corner, max_corner]`` in metres, finite, min < max on every axis.
         resolution : float, default=None
@@ -534,8 +538,29 @@ class LogOddsMap(PlanningMixin):
             choice for planning) or as free space. Points outside the map's key
             range are unknown.
         max_cells : int, default=None
-            The most cells (None: ``occgp._export.MAX_DISTANCE_CELLS``, 8388608) the grid may have (about 30 bytes each at peak); past
-            it a ValueError is raised before any allocation.
+            The most cells (None: ``occgp._distance.MAX_DISTANCE_CELLS``, 8388608)
+            the grid may have (about 30 bytes each at peak, up to 90 with
+            `signed` and both extras); past it a ValueError is raised before any
+            allocation.
+        signed : bool, default=False
+            Signed distances, as voxblox's and nvblox's ESDF: positive outside
+            obstacles (the distance above), and in each obstacle cell minus the
+            distance from its centre to the nearest non-obstacle cell's centre.
+            A boundary obstacle cell holds ``-resolution``, its free neighbour
+            ``+resolution``; no cell holds 0 (``-inf`` in every cell when the
+            grid holds no non-obstacle cell).
+        return_closest : bool, default=False
+            Also return, per cell, the centre of the cell its distance is
+            measured to: the nearest obstacle cell (an obstacle cell's own
+            centre in an unsigned field; with `signed`, for obstacle cells, the
+            nearest non-obstacle cell). NaN where there is none. Ties between
+            equally near cells are broken by scipy's transform.
+        return_gradient : bool, default=False
+            Also return the gradient of the distance as the unit vector
+            ``(centre - closest) / distance``: away from the nearest obstacle
+            outside obstacles, towards free space inside them (signed), so that
+            it points where the distance grows; 0 in the obstacle cells of an
+            unsigned field, NaN where `closest` is NaN.
 
         Returns
         -------
@@ -544,12 +569,16 @@ class LogOddsMap(PlanningMixin):
             (nx, ny, nz) indexed along x, y, z (inf everywhere when the grid holds
             no obstacle), `origin` the grid's minimum corner, `resolution` its
             cell edge.
+        closest : ndarray of shape (nx, ny, nz, 3)
+            Only with `return_closest`: centres in metres.
+        gradient : ndarray of shape (nx, ny, nz, 3)
+            Only with `return_gradient`.
 
         Raises
         ------
         TypeError
-            If `bbox` does not hold numbers, `resolution` is
-            not a real number or `max_cells` not an int.
+            If `bbox` does not hold numbers, `resolution` is not a real number,
+            `max_cells` not an int, or a flag not a bool.
         ValueError
             If `bbox` is not of shape (2, 3), not finite or not min < max;
             `resolution` not positive and finite; `unknown` not one of the
@@ -562,11 +591,20 @@ class LogOddsMap(PlanningMixin):
         >>> field = m.distance_field([[0, 0, 0], [3, 1, 1]], unknown="free")
         >>> field.distances[:, 0, 0].tolist(), field.origin.tolist()
         ([0.0, 1.0, 2.0], [0.0, 0.0, 0.0])
+        >>> m = m.set_cells([[1.5, 0.5, 0.5], [2.5, 0.5, 0.5]], [2.0, -2.0])
+        >>> field, closest, gradient = m.distance_field(
+        ...     [[0, 0, 0], [3, 1, 1]], unknown="free", signed=True,
+        ...     return_closest=True, return_gradient=True)
+        >>> field.distances[:, 0, 0].tolist()
+        [-2.0, -1.0, 1.0]
+        >>> closest[:, 0, 0, 0].tolist(), gradient[:, 0, 0, 0].tolist()
+        ([2.5, 2.5, 1.5], [1.0, 1.0, 1.0])
         """
-        from . import _export
-        return _export.distance_field(self, bbox, resolution, unknown=unknown,
-                                      max_cells=_export.MAX_DISTANCE_CELLS
-                                      if max_cells is None else max_cells)
+        from . import _distance
+        return _distance.distance_field(
+            self, bbox, resolution, unknown=unknown,
+            max_cells=_distance.MAX_DISTANCE_CELLS if max_cells is None else max_cells,
+            signed=signed, return_closest=return_closest, return_gradient=return_gradient)
 
     # ------------------------------------------------------------------ helpers
     @staticmethod

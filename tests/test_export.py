@@ -9,9 +9,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from occgp import GridMap, OccupancyOctree
 from occgp import _octomap_format as fmt
-from occgp._export import (
-    _CUBE_TRIANGLES, _finest_cells, distance_field, save_pcd, save_ply, to_open3d,
-)
+from occgp._distance import distance_field
+from occgp._export import _CUBE_TRIANGLES, _finest_cells, save_pcd, save_ply, to_open3d
 from occgp.datasets import read_pcd
 
 
