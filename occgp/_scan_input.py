@@ -51,8 +51,9 @@ def prefilter(points: ArrayLike, origin: ArrayLike, min_range: object,
     """
     rng = None if max_range is None else check_real(max_range, "max_range", low=0.0)
     near = check_min_range(min_range, rng)
-    pts = as_points(points, "points") if near is not None or free_points is not None \
-        else points
+    if near is None and free_points is None:
+        return points, None, None
+    pts = as_points(points, "points")
     free = None if free_points is None else as_points(free_points, "free_points")
     keep = None
     if near is not None:
