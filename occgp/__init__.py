@@ -17,6 +17,7 @@ from .kernel import AKIMap, BGKMap
 from .knn import KNNMap
 from ._export import DistanceField
 from .maps import OccupancyMap, available_maps, make_map, register
+from . import filters  # noqa: F401  (occgp.filters: the scan filters)
 
 __version__ = "0.1.0.dev0"
 __all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "Nodes", "ColorLeaves", "Changes",

@@ -22,8 +22,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._scan_input import check_min_range, far_enough
-from ._validation import (as_point, as_points, check_bool, check_choice, check_int, check_real,
-                          check_seed)
+from ._validation import (as_numeric, as_point, as_points, check_bool, check_choice, check_int,
+                          check_real, check_seed)
 
 __all__ = ["height_band", "box_filter", "segment_ground", "GroundPlane", "ScanFilter",
            "GROUND_MODES"]
@@ -32,11 +32,19 @@ __all__ = ["height_band", "box_filter", "segment_ground", "GroundPlane", "ScanFi
 GROUND_MODES = ("keep", "drop", "free")
 
 
+def _as_matrix(x: ArrayLike, name: str, shape: tuple[int, int],
+               what: str = "") -> NDArray[np.float64]:
+    arr = as_numeric(x, name)
+    if arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}{what}, got {arr.shape}")
+    arr = np.asarray(arr, dtype=np.float64)
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+    return arr
+
+
 def _check_box(box: ArrayLike, name: str = "box") -> NDArray[np.float64]:
-    arr = as_points(box, name)
-    if arr.shape != (2, 3):
-        raise ValueError(f"{name} must have shape (2, 3) ([min_corner, max_corner]), "
-                         f"got {arr.shape}")
+    arr = _as_matrix(box, name, (2, 3), " ([min_corner, max_corner])")
     if not (arr[0] <= arr[1]).all():
         raise ValueError(f"{name} must have min_corner <= max_corner on every axis, "
                          f"got {arr.tolist()}")
@@ -44,9 +52,7 @@ def _check_box(box: ArrayLike, name: str = "box") -> NDArray[np.float64]:
 
 
 def _check_pose(pose: ArrayLike) -> NDArray[np.float64]:
-    arr = as_points(pose, "pose", dim=4)
-    if arr.shape != (4, 4):
-        raise ValueError(f"pose must have shape (4, 4), got {arr.shape}")
+    arr = _as_matrix(pose, "pose", (4, 4))
     rot = arr[:3, :3]
     if not np.allclose(arr[3], [0, 0, 0, 1]) or not np.allclose(rot.T @ rot, np.eye(3),
                                                                    atol=1e-6):
