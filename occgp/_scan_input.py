@@ -18,14 +18,15 @@ from ._validation import as_point, as_points, check_real
 __all__ = ["check_min_range", "far_enough", "prefilter", "join_free"]
 
 
-def check_min_range(min_range: object, max_range: float | None = None) -> float | None:
+def check_min_range(min_range: object, max_range: float | None = None,
+                    range_name: str = "max_range") -> float | None:
     """`min_range` as a float (None: no filter), finite, >= 0 and < `max_range` when
-    that is given (None or < 0: no limit)."""
+    that is given (None or < 0: no limit; `range_name`: its name in the error)."""
     if min_range is None:
         return None
     value = check_real(min_range, "min_range", low=0.0, low_open=False)
     if max_range is not None and max_range >= 0 and not value < max_range:
-        raise ValueError(f"min_range must be less than max_range ({max_range!r}), "
+        raise ValueError(f"min_range must be less than {range_name} ({max_range!r}), "
                          f"got {min_range!r}")
     return value
 
@@ -41,16 +42,18 @@ def far_enough(points: NDArray[np.float64], origin: NDArray[np.float64],
 
 
 def prefilter(points: ArrayLike, origin: ArrayLike, min_range: object,
-              max_range: object, free_points: ArrayLike | None = None):
+              max_range: object, free_points: ArrayLike | None = None,
+              range_name: str = "max_range"):
     """Check and apply `min_range` to a scan (and its free-only rays).
 
     Returns ``(points, free_points, keep)``: the kept points as float64 (the
     points as given when `min_range` is None), the kept free points (None when
     none were given or none is left), and the mask of the kept points (None
-    without `min_range`). Raises ValueError / TypeError naming the argument.
+    without `min_range`). `range_name`: the name of `max_range` in errors. Raises
+    ValueError / TypeError naming the argument.
     """
-    rng = None if max_range is None else check_real(max_range, "max_range", low=0.0)
-    near = check_min_range(min_range, rng)
+    rng = None if max_range is None else check_real(max_range, range_name, low=0.0)
+    near = check_min_range(min_range, rng, range_name)
     if near is None and free_points is None:
         return points, None, None
     pts = as_points(points, "points")

@@ -466,7 +466,8 @@ default="auto"
             `min_range` is negative, not finite or not less than
             `sensor_range`. The map and its statistics are then unchanged.
         """
-        points, _, _ = prefilter(points, origin, min_range, self.sensor_range)
+        points, _, _ = prefilter(points, origin, min_range, self.sensor_range,
+                                 range_name="sensor_range")
         method, threshold = self._check_method(method, superray_threshold)
         scan = self._validated_scan(points, origin, self.sensor_range, "scan",
                                     check_ends=False)
