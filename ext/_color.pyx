@@ -105,8 +105,8 @@ cdef class _ColorOcTree(_TreeCore):
                         const float[:, ::1] free_points=None):
         """liboctomap's ``insertPointCloud`` (every ray valid: checked by the caller;
         with `free_points`, whose rays only clear, its key sets built here, see
-        :func:`_insert_key_sets`), then the colour of each point whose ray is not truncated at `max_range` fused
-        into its end cell. FUSE_AVERAGE: ``averageNodeColor`` point by point, in
+        :func:`_insert_key_sets`), then the colour of each point whose ray is not
+        truncated at `max_range` fused into its end cell. FUSE_AVERAGE: ``averageNodeColor`` point by point, in
         order. FUSE_MEAN: per end cell, the rounded mean of its points' colours, fused
         by one ``averageNodeColor`` per cell, in key order (x fastest). Returns the
         number of points whose colour was fused."""
