@@ -46,9 +46,9 @@ cdef struct ColorSum:
     uint64_t r, g, b, n
 
 
-cdef void _insert_key_sets(ColorOcTree* tree, const float[:, ::1] points,
-                           const float[:, ::1] free_points, const point3d& o,
-                           double max_range) except * nogil:
+cdef int _insert_key_sets(ColorOcTree* tree, const float[:, ::1] points,
+                          const float[:, ::1] free_points, const point3d& o,
+                          double max_range) except -1 nogil:
     """liboctomap's ``insertPointCloud`` (its ``computeUpdate`` key sets, one
     ``updateNode`` per cell, a cell in both sets occupied) for `points`, with the rays
     to `free_points` adding their cells to the free set only (octomap_server's ground
@@ -81,6 +81,7 @@ cdef void _insert_key_sets(ColorOcTree* tree, const float[:, ::1] points,
     while c != cells.end():
         tree.updateNode(_unpack(deref(c).first), l_hit if deref(c).second else l_miss, False)
         inc(c)
+    return 0
 
 
 ctypedef ColorOcTree Tree
