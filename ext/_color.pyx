@@ -20,13 +20,14 @@ from libc.stdint cimport uint8_t, uint64_t
 from libc.string cimport memcpy
 from libcpp cimport bool
 from libcpp.algorithm cimport sort
+from libcpp.pair cimport pair
 from libcpp.string cimport string
 from libcpp.unordered_map cimport unordered_map
 from libcpp.vector cimport vector
 
 from _keys cimport effective_end, pack_key as _pack, unpack_key as _unpack
 from liboctomap cimport (
-    Color, ColorOcTree, ColorOcTreeNode, OcTreeKey, Pointcloud, ostringstream, point3d,
+    Color, ColorOcTree, ColorOcTreeNode, KeyRay, OcTreeKey, Pointcloud, ostringstream, point3d,
 )
 
 import numpy as np
@@ -43,6 +44,44 @@ FUSE_MEAN = _FUSE_MEAN
 
 cdef struct ColorSum:
     uint64_t r, g, b, n
+
+
+cdef int _insert_key_sets(ColorOcTree* tree, const float[:, ::1] points,
+                          const float[:, ::1] free_points, const point3d& o,
+                          double max_range) except -1 nogil:
+    """liboctomap's ``insertPointCloud`` (its ``computeUpdate`` key sets, one
+    ``updateNode`` per cell, a cell in both sets occupied) for `points`, with the rays
+    to `free_points` adding their cells to the free set only (octomap_server's ground
+    points): each such ray is cut at `max_range` (< 0: none) as a point's ray is, and
+    its end cell gets nothing from it."""
+    cdef KeyRay ray
+    cdef KeyRay.iterator it
+    cdef unordered_map[uint64_t, bool] cells   # packed key -> occupied
+    cdef unordered_map[uint64_t, bool].iterator c
+    cdef point3d p, end
+    cdef OcTreeKey key
+    cdef Py_ssize_t i
+    cdef int part
+    cdef bint truncated
+    cdef float l_hit = tree.getProbHitLog(), l_miss = tree.getProbMissLog()
+    cdef const float[:, ::1] rows
+    for part in range(2):
+        rows = points if part == 0 else free_points
+        for i in range(rows.shape[0]):
+            p = point3d(rows[i, 0], rows[i, 1], rows[i, 2])
+            truncated = effective_end(o, p, max_range, &end)
+            if tree.computeRayKeys(o, end, ray):
+                it = ray.begin()
+                while it != ray.end():
+                    cells.insert(pair[uint64_t, bool](_pack(deref(it)), False))
+                    inc(it)
+            if part == 0 and not truncated and tree.coordToKeyChecked(p, key):
+                cells[_pack(key)] = True
+    c = cells.begin()
+    while c != cells.end():
+        tree.updateNode(_unpack(deref(c).first), l_hit if deref(c).second else l_miss, False)
+        inc(c)
+    return 0
 
 
 ctypedef ColorOcTree Tree
@@ -63,10 +102,12 @@ cdef class _ColorOcTree(_TreeCore):
 
     # ------------------------------------------------------------------ updates
     def _insert_colored(self, const float[:, ::1] points, const float[::1] origin,
-                        double max_range, const uint8_t[:, ::1] colors, int fusion):
-        """liboctomap's ``insertPointCloud`` (every ray valid: checked by the caller),
-        then the colour of each point whose ray is not truncated at `max_range` fused
-        into its end cell. FUSE_AVERAGE: ``averageNodeColor`` point by point, in
+                        double max_range, const uint8_t[:, ::1] colors, int fusion,
+                        const float[:, ::1] free_points=None):
+        """liboctomap's ``insertPointCloud`` (every ray valid: checked by the caller;
+        with `free_points`, whose rays only clear, its key sets built here, see
+        :func:`_insert_key_sets`), then the colour of each point whose ray is not
+        truncated at `max_range` fused into its end cell. FUSE_AVERAGE: ``averageNodeColor`` point by point, in
         order. FUSE_MEAN: per end cell, the rounded mean of its points' colours, fused
         by one ``averageNodeColor`` per cell, in key order (x fastest). Returns the
         number of points whose colour was fused."""
@@ -82,13 +123,17 @@ cdef class _ColorOcTree(_TreeCore):
         cdef ColorSum* s
         cdef size_t j
         cdef Py_ssize_t fused = 0
+        cdef bint sets = free_points is not None
         with self._lock:
             with nogil:
-                cloud.reserve(n)
-                for i in range(n):
-                    cloud.push_back(points[i, 0], points[i, 1], points[i, 2])
                 self._inner_dirty = True
-                tree.insertPointCloud(cloud, o, max_range, False, False)
+                if sets:
+                    _insert_key_sets(tree, points, free_points, o, max_range)
+                else:
+                    cloud.reserve(n)
+                    for i in range(n):
+                        cloud.push_back(points[i, 0], points[i, 1], points[i, 2])
+                    tree.insertPointCloud(cloud, o, max_range, False, False)
                 for i in range(n):
                     p = point3d(points[i, 0], points[i, 1], points[i, 2])
                     if effective_end(o, p, max_range, &end):

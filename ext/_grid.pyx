@@ -30,7 +30,7 @@ from liboctomap cimport OcTree, OcTreeKey, point3d
 from _keys cimport (
     KEY_DEPTH, ray_codes, in_range_mask, pack_key, set_sensor_model, unpack_key,
 )
-from _scan cimport ScanCell, ScanStats, scan_updates
+from _scan cimport ScanCell, ScanStats, scan_updates_free_only
 from _status cimport Status
 
 include "_scan_result.pxi"
@@ -123,7 +123,7 @@ cdef class _Grid:
     def _insert(self, const float[:, ::1] points, const float[::1] origin, double max_range,
                 bint ray_mode, bint culling=False, const uint32_t[::1] weights=None,
                 int superray_threshold=0, bint diagnose=False, uint64_t max_cells=0,
-                int n_threads=1):
+                int n_threads=1, const uint8_t[::1] free_only=None):
         """Insert a scan: one update per cell (see ``scan_updates`` in ``ext/_scan.pxd``).
 
         The cells, their counts and updates are the octree's; each update is
@@ -132,7 +132,8 @@ cdef class _Grid:
         with `weights` (ray mode), ray i counts ``weights[i]`` times; with
         `superray_threshold` > 0 the rays are grouped into super rays first. The rays
         are walked on up to `n_threads` threads (one with `diagnose`); the grid and the
-        statistics are the same for every `n_threads`.
+        statistics are the same for every `n_threads`. Rays i with ``free_only[i]``
+        (None: none) only clear, as rays cut at `max_range`.
 
         Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
         seconds, unnecessary_traversals) as ``OccupancyOctree``'s ``_insert_batch``.
@@ -140,6 +141,7 @@ cdef class _Grid:
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t j
         cdef const uint32_t* w = scan_weights(weights, points.shape[0], superray_threshold)
+        cdef const uint8_t* fo = scan_free_only(free_only, points.shape[0])
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
         cdef vector[ScanCell] found
         cdef ScanStats stats
@@ -152,10 +154,10 @@ cdef class _Grid:
         view.floor = lo
         with self._lock:
             with nogil:
-                status = scan_updates(tree[0], scan_points(points), points.shape[0], o,
-                                      max_range, ray_mode, culling, w, superray_threshold,
-                                      _fully_free, &view, self._counts, self._counts_dirty,
-                                      found, &stats, diagnose, max_cells, n_threads)
+                status = scan_updates_free_only(
+                    tree[0], scan_points(points), points.shape[0], o, max_range, ray_mode,
+                    culling, w, superray_threshold, _fully_free, &view, self._counts,
+                    self._counts_dirty, found, &stats, diagnose, max_cells, n_threads, fo)
                 if self._cells.empty():
                     self._cells.reserve(found.size())
                 for j in range(<Py_ssize_t>found.size()):

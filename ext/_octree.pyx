@@ -23,7 +23,7 @@ from _keys cimport (
     KEY_DEPTH as _DEPTH, KEY_MAX_VAL as _MAX_VAL, KEYRAY_SAFE_CELLS, effective_end,
     pack_key as _pack, unpack_key as _unpack,
 )
-from _scan cimport ScanCell, ScanStats, empty_stats, scan_updates
+from _scan cimport ScanCell, ScanStats, empty_stats, scan_updates, scan_updates_free_only
 from _status cimport Status
 from liboctomap cimport (
     OcTree, OcTreeKey, OcTreeNode, Pointcloud, key_type, ostringstream, point3d,
@@ -147,7 +147,8 @@ cdef class _OcTree(_TreeCore):
                       double max_range, bint ray_mode, bint culling,
                       const uint32_t[::1] weights=None, int superray_threshold=0,
                       bint diagnose=False, uint64_t max_cells=0,
-                      const uint16_t[:, ::1] key_box=None, int n_threads=1):
+                      const uint16_t[:, ::1] key_box=None, int n_threads=1,
+                      const uint8_t[::1] free_only=None):
         """Insert a scan through occgp's own key table, optionally culled.
 
         Every ray is traversed by liboctomap's ``computeRayKeys``; the cells are
@@ -173,10 +174,13 @@ cdef class _OcTree(_TreeCore):
         than `max_cells` cells (> 0) (:mod:`occgp._status`).
         The rays are walked on up to `n_threads` threads (one with `diagnose`), without
         the GIL; the tree and the statistics are the same for every `n_threads`.
+        Rays i with ``free_only[i]`` (None: none) only clear, as rays cut at
+        `max_range` (their end cell gets nothing from them).
         """
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t j
         cdef const uint32_t* w = scan_weights(weights, points.shape[0], superray_threshold)
+        cdef const uint8_t* fo = scan_free_only(free_only, points.shape[0])
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
         cdef vector[ScanCell] found
         cdef vector[CellUpdate] cells, scratch
@@ -195,10 +199,10 @@ cdef class _OcTree(_TreeCore):
                 hi[axis] = key_box[1, axis]
         with self._lock:
             with nogil:
-                status = scan_updates(tree[0], scan_points(points), points.shape[0], o,
-                                      max_range, ray_mode, culling, w, superray_threshold,
-                                      _fully_free, tree, self._counts, self._counts_dirty,
-                                      found, &stats, diagnose, max_cells, n_threads)
+                status = scan_updates_free_only(
+                    tree[0], scan_points(points), points.shape[0], o, max_range, ray_mode,
+                    culling, w, superray_threshold, _fully_free, tree, self._counts,
+                    self._counts_dirty, found, &stats, diagnose, max_cells, n_threads, fo)
                 if status == Status.ok:
                     cells.resize(found.size())
                     for j in range(<Py_ssize_t>found.size()):

@@ -561,12 +561,19 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t
 // exceeds the limit, a table of its own. The counts are merged (integer sums) before
 // the cells are collected, so the cells, their updates and the statistics are the same
 // for every `n_threads`; only the order of `cells` may differ.
+//
+// With `free_only` (nullptr: none), a ray i with free_only[i] != 0 only clears: it is
+// handled as a ray truncated at `max_range` is (octomap_server's ground points) -- its
+// cells up to its (possibly truncated) end count as free, its end cell gets nothing
+// from it, it is never grouped into a super ray, and its end does not keep a cell out
+// of the culling region -- so every method stays exact.
 static inline Status scan_updates(const octomap::OcTree& keys, const float* points, ptrdiff_t n,
                            const octomap::point3d& o, double max_range, bool ray_mode,
                            bool culling, const uint32_t* weights, int superray_threshold,
                            FreeTest fully_free, void* map, std::vector<uint32_t>& counts,
                            bool& counts_dirty, std::vector<ScanCell>& cells, ScanStats* stats,
-                           bool diagnose, uint64_t max_cells, int n_threads) {
+                           bool diagnose, uint64_t max_cells, int n_threads,
+                           const uint8_t* free_only = nullptr) {
   using namespace scan_detail;
   using octomap::OcTreeKey;
   using octomap::point3d;
@@ -603,6 +610,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   for (ptrdiff_t i = 0; i < n; ++i) {
     const float* p = points + 3 * i;
     truncated[i] = effective_end(o, point3d(p[0], p[1], p[2]), max_range, &ends[i]);
+    if (free_only != nullptr && free_only[i]) truncated[i] = 1;  // clears only, as a cut ray
     end_ok[i] = key_checked(rf, ends[i].x(), &key[0]) && key_checked(rf, ends[i].y(), &key[1]) &&
                 key_checked(rf, ends[i].z(), &key[2]);
     if (!end_ok[i]) {

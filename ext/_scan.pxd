@@ -8,7 +8,7 @@ built with OpenMP (``OPENMP_MODULES`` in ``setup.py``). What a map's scan insert
 returns to Python is built in ``ext/_scan_result.pxi``.
 """
 
-from libc.stdint cimport uint32_t, uint64_t
+from libc.stdint cimport uint8_t, uint32_t, uint64_t
 from libcpp cimport bool
 from libcpp.vector cimport vector
 from posix.time cimport timespec
@@ -43,3 +43,11 @@ cdef extern from "_scan.h" namespace "occgp" nogil:
                         void* map, vector[uint32_t]& counts, bool& counts_dirty,
                         vector[ScanCell]& cells, ScanStats* stats, bool diagnose,
                         uint64_t max_cells, int n_threads) except +
+    # the same, where rays i with free_only[i] (NULL: none) only clear, as rays cut at
+    # max_range do (their end cell gets nothing from them)
+    Status scan_updates_free_only "occgp::scan_updates"(
+        const OcTree& keys, const float* points, Py_ssize_t n, const point3d& o,
+        double max_range, bool ray_mode, bool culling, const uint32_t* weights,
+        int superray_threshold, FreeTest fully_free, void* map, vector[uint32_t]& counts,
+        bool& counts_dirty, vector[ScanCell]& cells, ScanStats* stats, bool diagnose,
+        uint64_t max_cells, int n_threads, const uint8_t* free_only) except +

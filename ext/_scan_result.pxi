@@ -18,6 +18,17 @@ cdef inline const uint32_t* scan_weights(const uint32_t[::1] weights, Py_ssize_t
     return &weights[0] if n else NULL
 
 
+cdef inline const uint8_t* scan_free_only(const uint8_t[::1] free_only,
+                                           Py_ssize_t n) except? NULL:
+    """The per-ray "clears only" flags for ``scan_updates`` (NULL: none), checked
+    against the scan."""
+    if free_only is None:
+        return NULL
+    if free_only.shape[0] != n:
+        raise ValueError(f"free_only must have {n} entries, got {free_only.shape[0]}")
+    return &free_only[0] if n else NULL
+
+
 cdef inline const float* scan_points(const float[:, ::1] points) noexcept nogil:
     """The rows of `points` for ``scan_updates`` (NULL when there are none)."""
     return &points[0, 0] if points.shape[0] else NULL

@@ -196,6 +196,10 @@ cdef extern from "octomap/ColorOcTree.h" namespace "octomap" nogil:
         # updates
         void insertPointCloud(const Pointcloud& scan, const point3d& sensor_origin,
                               double maxrange, bool lazy_eval, bool discretize) except +
+        ColorOcTreeNode* updateNode(const OcTreeKey& key, float log_odds_update,
+                                    bool lazy_eval) except +
+        bool computeRayKeys(const point3d& origin, const point3d& end,
+                            KeyRay& ray) except +
         ColorOcTreeNode* averageNodeColor(const OcTreeKey& key, uint8_t r, uint8_t g,
                                           uint8_t b)
         ColorOcTreeNode* setNodeColor(const OcTreeKey& key, uint8_t r, uint8_t g, uint8_t b)

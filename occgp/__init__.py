@@ -20,6 +20,7 @@ from ._distance_map import DistanceMap
 from ._frontiers import Frontiers
 from ._map2d import OccupancyGrid2D
 from .maps import OccupancyMap, available_maps, make_map, register
+from . import filters  # noqa: F401  (occgp.filters: the scan filters)
 
 __version__ = "0.1.0.dev0"
 __all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "Nodes", "ColorLeaves",

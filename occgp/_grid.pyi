@@ -19,6 +19,7 @@ class _Grid:
                 max_range: float, ray_mode: bool, culling: bool = False,
                 weights: NDArray[np.uint32] | None = None, superray_threshold: int = 0,
                 diagnose: bool = False, max_cells: int = 0, n_threads: int = 1,
+                free_only: NDArray[np.uint8] | None = None,
                 ) -> tuple[int, int, int, int, tuple[float, float, float, float, float], int] | Status: ...
     def _query(self, points: NDArray[np.float32], what: int) -> NDArray[np.float64]: ...
     def _cells_sorted(self, occupied_only: bool,

@@ -658,15 +658,15 @@ class LogOddsMap(PlanningMixin):
         return out
 
     def _validated_scan(self, points: ArrayLike, origin: ArrayLike, max_range, mode: str,
-                        check_ends: bool = True):
+                        check_ends: bool = True, name: str = "points"):
         """Check a scan for insertion; return (points, origin, max_range, cells) as the
         core wants them (float32, -1 for no limit; cells: see :meth:`_raise_bad_ends`), or
         None for an empty scan. Without `check_ends` the caller's core checks the ray ends
         itself (and calls :meth:`_raise_bad_ends` when one is out of range or cannot be
-        walked), and cells is None."""
+        walked), and cells is None. `name`: the points' name in errors."""
         mode = check_choice(mode, "mode", MODES)
         rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
-        pts64 = as_points(points, "points")
+        pts64 = as_points(points, name)
         org = self._as_float32_origin(origin)
         with np.errstate(over="ignore"):
             pts = pts64.astype(np.float32)
@@ -674,16 +674,17 @@ class LogOddsMap(PlanningMixin):
             return None
         if rng >= 0:
             pts = _cut_far_rays(pts64, pts, org, rng)
-        cells = self._raise_bad_ends(pts, org, rng) if check_ends else None
+        cells = self._raise_bad_ends(pts, org, rng, name) if check_ends else None
         return pts, org, rng, cells
 
-    def _raise_bad_ends(self, pts: np.ndarray, org: np.ndarray, rng: float) -> np.ndarray:
+    def _raise_bad_ends(self, pts: np.ndarray, org: np.ndarray, rng: float,
+                        name: str = "points") -> np.ndarray:
         """Raise ValueError if a ray end (after truncation at `rng`) is out of key range,
         or a ray is too short for the single-precision traversal to walk it; otherwise
         return each ray's key distance (a bound on the cells it crosses)."""
         codes, cells = self._check_rays(pts, org, rng)
         if (codes == Status.OUT_OF_RANGE).any():
-            self._raise_out_of_range("points", codes != Status.OUT_OF_RANGE,
+            self._raise_out_of_range(name, codes != Status.OUT_OF_RANGE,
                                      " (after truncation at max_range)" if rng >= 0 else "")
         if (codes == Status.RAY_TOO_SHORT).any():
             bad = np.flatnonzero(codes == Status.RAY_TOO_SHORT)

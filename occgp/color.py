@@ -14,6 +14,7 @@ from ._color import FUSE_AVERAGE, FUSE_MEAN, _ColorOcTree
 from ._logodds_map import OCTREE_ATTRIBUTES, SENSOR_MODEL, OctreeFace
 from .maps import register
 from ._octree import KEYRAY_CELLS, _check_full_data
+from ._scan_input import prefilter
 from ._validation import as_path, check_bool, check_choice, check_resolution
 
 __all__ = ["ColorOctree", "ColorLeaves", "FUSIONS"]
@@ -103,6 +104,8 @@ class ColorOctree(OctreeFace, _ColorOcTree):
         *,
         max_range: float | None = None,
         fusion: str = "average",
+        min_range: float | None = None,
+        free_points: ArrayLike | None = None,
     ) -> "ColorOctree":
         """Integrate one coloured range scan into the map.
 
@@ -142,6 +145,20 @@ class ColorOctree(OctreeFace, _ColorOcTree):
             ``averageNodeColor`` (cells in key order): within a scan every
             point weighs the same; across scans, each scan's mean is averaged
             pairwise with the cell's colour (a file stores no point counts).
+        min_range : float, default=None
+            Points (with their colours) and free points nearer to `origin`
+            than this are dropped first, as for
+            :meth:`occgp.OccupancyOctree.insert_scan` (double-precision
+            distances; None: no filter). Must be finite, >= 0 and less than
+            `max_range`.
+        free_points : array-like of shape (n_free, 3), default=None
+            End points of rays that only clear (octomap_server's ground
+            points): their cells join the scan's free set, their end cells get
+            nothing and no colour. The update is then liboctomap's
+            ``insertPointCloud`` key sets built by occgp (liboctomap's
+            ``computeRayKeys``, one ``updateNode`` per cell, occupied over
+            free), the map :meth:`occgp.OccupancyOctree.insert_scan` gives with
+            the same `free_points`.
 
         Returns
         -------
@@ -161,8 +178,10 @@ class ColorOctree(OctreeFace, _ColorOcTree):
             (liboctomap's ray buffer) or the scan reaches more than
             :attr:`MAX_SCAN_CELLS` cells; `colors` is not of shape
             (n_points, 3), holds integers outside [0, 255] or floats outside
-            [0, 1] (or NaN); `max_range` or `fusion` is invalid. The map is then
-            unchanged.
+            [0, 1] (or NaN); `max_range` or `fusion` is invalid; `min_range`
+            is negative, not finite or not less than `max_range`;
+            `free_points` is not of shape (n_free, 3), holds NaN or inf, or
+            has a ray as bad as the points' above. The map is then unchanged.
 
         Examples
         --------
@@ -176,27 +195,44 @@ class ColorOctree(OctreeFace, _ColorOcTree):
         [[40, 40, 40]]
         """
         fusion = check_choice(fusion, "fusion", FUSIONS)
+        points, free64, keep = prefilter(points, origin, min_range, max_range, free_points)
         scan = self._validated_scan(points, origin, max_range, "scan")
+        free = None if free64 is None else self._validated_scan(
+            free64, origin, max_range, "scan", name="free_points")
+        n_given = len(keep) if keep is not None else (0 if scan is None else len(scan[0]))
+        rgb = _as_colors(colors, n_given)
+        if keep is not None:
+            rgb = np.ascontiguousarray(rgb[keep])
         if scan is None:
-            _as_colors(colors, 0)
-            return self
+            if free is None:
+                return self
+            scan = (np.empty((0, 3), np.float32), free[1], free[2], np.zeros(0, np.int64))
         pts, org, rng, cells = scan
-        rgb = _as_colors(colors, len(pts))
-        if cells.max() > KEYRAY_CELLS:
-            bad = np.flatnonzero(cells > KEYRAY_CELLS)
+        rays = [(cells, "points")] + ([] if free is None else [(free[3], "free_points")])
+        self._check_ray_cells(rays, len(pts) + (0 if free is None else len(free[0])))
+        self._insert_colored(pts, org, rng, rgb,
+                             FUSE_AVERAGE if fusion == "average" else FUSE_MEAN,
+                             None if free is None else free[0])
+        return self
+
+    def _check_ray_cells(self, rays: list, n_rays: int) -> None:
+        """Raise ValueError when a ray crosses more cells than liboctomap's ray buffer
+        holds, or the scan's rays may reach more than MAX_SCAN_CELLS; `rays`: (cells,
+        name) of each set of rays (see ``_raise_bad_ends``)."""
+        for cells, name in rays:
+            if len(cells) and cells.max() > KEYRAY_CELLS:
+                bad = np.flatnonzero(cells > KEYRAY_CELLS)
+                to = "" if name == "points" else f" to {name}"
+                raise ValueError(
+                    f"{len(bad)} of {len(cells)} rays{to} cross more than {KEYRAY_CELLS} "
+                    f"cells (first: row {int(bad[0])}), more than liboctomap's ray buffer "
+                    "holds; use a coarser resolution or max_range; the map is unchanged")
+        if sum(int(c.sum()) + len(c) for c, _ in rays) > self._max_scan_cells():
             raise ValueError(
-                f"{len(bad)} of {len(pts)} rays cross more than {KEYRAY_CELLS} cells (first: "
-                f"row {int(bad[0])}), more than liboctomap's ray buffer holds; use a coarser "
-                "resolution or max_range; the map is unchanged")
-        if int(cells.sum()) + len(cells) > self._max_scan_cells():
-            raise ValueError(
-                f"the scan's {len(pts)} rays may reach more than MAX_SCAN_CELLS="
+                f"the scan's {n_rays} rays may reach more than MAX_SCAN_CELLS="
                 f"{self.MAX_SCAN_CELLS} cells at resolution {self.resolution:g} m; use a "
                 "coarser resolution, max_range or fewer points, or raise MAX_SCAN_CELLS; "
                 "the map is unchanged")
-        self._insert_colored(pts, org, rng, rgb,
-                             FUSE_AVERAGE if fusion == "average" else FUSE_MEAN)
-        return self
 
     def update_colors(self, points: ArrayLike, colors: ArrayLike) -> "ColorOctree":
         """Fuse colours into the cells holding `points` (liboctomap's ``averageNodeColor``).

@@ -13,6 +13,7 @@ from . import _npz_io
 from ._grid import _Grid
 from ._logodds_map import SENSOR_MODEL, Leaves, LogOddsMap
 from .maps import register
+from ._scan_input import join_free, prefilter
 from ._validation import check_bool, check_n_jobs, n_threads
 
 if TYPE_CHECKING:
@@ -106,6 +107,8 @@ class GridMap(LogOddsMap, _Grid):
         method: str = "auto",
         superray_threshold: int = 20,
         n_jobs: int | None = None,
+        min_range: float | None = None,
+        free_points: ArrayLike | None = None,
     ) -> "GridMap":
         """Integrate one range scan into the map.
 
@@ -151,6 +154,15 @@ default="auto"
             `n_jobs`. As for :meth:`OccupancyOctree.insert_scan`, the threads'
             dense counts share a limit of 2^24 cells of the scan's key box
             (fewer threads where their boxes exceed it).
+        min_range : float, default=None
+            Points (and free points) nearer to `origin` than this cast no ray,
+            as for :meth:`OccupancyOctree.insert_scan` (double-precision
+            distances; None: no filter). Must be finite, >= 0 and less than
+            `max_range`.
+        free_points : array-like of shape (n_free, 3), default=None
+            End points of rays that only clear (their end cell gets nothing
+            from them), joined to the same update as `points`, as for
+            :meth:`OccupancyOctree.insert_scan`.
 
         Returns
         -------
@@ -169,7 +181,10 @@ default="auto"
             traversal), the scan reaches more than :attr:`MAX_SCAN_CELLS`
             distinct cells (the same scans for every `n_jobs`), or
             `max_range`, `mode`, `method`, `superray_threshold` or `n_jobs` is
-            invalid (`n_jobs` 0 or not an int). The map is then unchanged.
+            invalid (`n_jobs` 0 or not an int); `min_range` is negative, not
+            finite or not less than `max_range`; `free_points` is not of shape
+            (n_free, 3), holds NaN or inf or has an end outside the key range.
+            The map is then unchanged.
 
         Examples
         --------
@@ -179,15 +194,21 @@ default="auto"
         >>> m.num_cells        # the cells the ray crosses, and its end cell
         10
         """
+        points, free64, _ = prefilter(points, origin, min_range, max_range, free_points)
         threads = n_threads(check_n_jobs(n_jobs))
         method, threshold = self._check_method(method, superray_threshold)
-        scan = self._validated_scan(points, origin, max_range, mode, check_ends=False)
+        scan = join_free(
+            self._validated_scan(points, origin, max_range, mode,
+                                 check_ends=free64 is not None),
+            None if free64 is None else self._validated_scan(free64, origin, max_range, mode,
+                                                             name="free_points"))
         if scan is not None:
-            pts, org, rng, _ = scan
+            pts, org, rng, _, free_only = scan
             threshold = self._adaptive_threshold(method, threshold)
             self._record_insert(self._insert(
                 pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold,
-                False, self._max_scan_cells(), threads), pts, org, rng, method, threshold)
+                False, self._max_scan_cells(), threads, free_only), pts, org, rng, method,
+                threshold)
         return self
 
     # ------------------------------------------------------------------ queries

@@ -34,6 +34,7 @@ from ._validation import (
 )
 from .maps import register
 from .octree import OccupancyOctree
+from ._scan_input import prefilter
 
 __all__ = ["KNNMap", "ScanReplay", "check_knn_params", "check_octomap_params",
            "check_score_stats", "mean_knn_distances", "history_knn_distances",
@@ -423,7 +424,8 @@ class KNNMap(OccupancyOctree):
 
     # ------------------------------------------------------------------ updates
     def insert_scan(self, points: ArrayLike, origin: ArrayLike, *,  # type: ignore[override]
-                    method: str = "auto", superray_threshold: int = 20) -> "KNNMap":
+                    method: str = "auto", superray_threshold: int = 20,
+                    min_range: float | None = None) -> "KNNMap":
         """Integrate one point cloud with the k-NN inverse sensor model.
 
         Parameters
@@ -441,6 +443,12 @@ default="auto"
         superray_threshold : int, default=20
             With the super-ray methods, the fewest end points a cell must hold
             for its rays to be grouped; at least 1.
+        min_range : float, default=None
+            Points nearer to `origin` than this are dropped first (they cast no
+            ray and are nobody's neighbour): the map, its score statistics and
+            its history are those of the pre-filtered scan. Distances in double
+            precision, as for :meth:`occgp.OccupancyOctree.insert_scan`; None: no
+            filter. Must be finite, >= 0 and less than `sensor_range`.
 
         Returns
         -------
@@ -454,9 +462,12 @@ default="auto"
             If `points` is not of shape (n_points, 3), `origin` not of shape
             (3,), either holds NaN or inf, a ray end (after the cut at
             `sensor_range`) lies outside the key range, the scan reaches more
-            than :attr:`MAX_SCAN_CELLS` cells, or `method` is invalid. The map
-            and its statistics are then unchanged.
+            than :attr:`MAX_SCAN_CELLS` cells, `method` is invalid, or
+            `min_range` is negative, not finite or not less than
+            `sensor_range`. The map and its statistics are then unchanged.
         """
+        points, _, _ = prefilter(points, origin, min_range, self.sensor_range,
+                                 range_name="sensor_range")
         method, threshold = self._check_method(method, superray_threshold)
         scan = self._validated_scan(points, origin, self.sensor_range, "scan",
                                     check_ends=False)

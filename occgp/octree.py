@@ -16,6 +16,7 @@ from ._octree_queries import Nodes, OctreeQueries, pack_keys, unpack_keys
 from ._merge import OctreeMerging
 from ._octree_stamps import OctreeStamps, Stamps
 from .maps import register
+from ._scan_input import join_free, prefilter
 from ._validation import as_numeric, check_bool, check_choice, check_n_jobs, n_threads
 
 __all__ = ["OccupancyOctree", "Leaves", "Changes", "Nodes", "Stamps"]
@@ -122,6 +123,8 @@ class OccupancyOctree(OctreeStamps, OctreeMerging, OctreeFiles, OctreeQueries, _
         discretize: bool = False,
         bbox: ArrayLike | None = None,
         n_jobs: int | None = None,
+        min_range: float | None = None,
+        free_points: ArrayLike | None = None,
         stamp: float | None = None,
     ) -> "OccupancyOctree":
         """Integrate one range scan into the map.
@@ -189,6 +192,28 @@ default="auto"
             in 4 bytes per cell of the scan's key box, within 2^24 cells for
             all threads together; larger boxes run on fewer threads, or count
             in hash tables.
+        min_range : float, default=None
+            Points nearer to `origin` than this (and free points, below) are
+            dropped before anything else: they cast no ray at all
+            (octomap_server's ``sensor_model/min_range``). The distance is
+            Euclidean, computed in double precision from the points and the
+            origin as given, before their conversion to single precision; a
+            point at exactly `min_range` is kept. The map is the one the
+            pre-filtered scan gives, for every method and mode. None (or 0):
+            no filter. Must be finite, >= 0 and less than `max_range`.
+        free_points : array-like of shape (n_free, 3), default=None
+            End points of rays that only clear (octomap_server inserts its
+            ground points so): the cells such a ray crosses count as free,
+            and its end cell gets nothing from it, as for a ray cut at
+            `max_range` (which applies to these rays too). They join the same
+            update as `points`: with ``mode="scan"`` a cell in both the free
+            and the occupied sets is occupied and every cell is updated once;
+            with ``mode="ray"`` each crossed cell counts one more miss. Free
+            rays are never grouped into super rays, so every method gives
+            the same map. With `bbox`, a free ray counts when its end lies in
+            the box and within `max_range`, as a point's ray does, and clears
+            its cells inside the box. Not with `discretize`. Each must be
+            finite and in the key range (after truncation at `max_range`).
         stamp : float, default=None
             Stamp every cell the scan updates with this time (see
             :meth:`stamps` and :meth:`decay`). The culling region is then not
@@ -212,8 +237,12 @@ default="auto"
             crosses a cell border (too short for the single-precision
             traversal), the scan reaches more than :attr:`MAX_SCAN_CELLS`
             distinct cells (the same scans for every `n_jobs`), or
-            `max_range`, `mode`, `discretize`, `n_jobs` (0, or not an int) or
-            `stamp` (not finite) is invalid. The map is then unchanged.
+            `max_range`, `mode`, `discretize` or `n_jobs` is invalid (0, or not
+            an int); `min_range` is negative, not finite or not less than
+            `max_range`; `free_points` is not of shape (n_free, 3), holds NaN
+            or inf, has an end (after truncation) outside the key range, or
+            comes with `discretize`; or `stamp` is not finite. The map is then
+            unchanged.
 
         References
         ----------
@@ -226,7 +255,19 @@ default="auto"
         >>> m = OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], mode="ray")
         >>> m.is_occupied([[1.0, 0, 0]]).tolist()
         [True]
+
+        A point nearer than `min_range` casts no ray; a free point's ray only
+        clears:
+
+        >>> m = OccupancyOctree(0.1).insert_scan(
+        ...     [[0.05, 0.05, 1.05], [0.05, 0.05, 0.35]], [0.05, 0.05, 0.05],
+        ...     min_range=0.5, free_points=[[1.05, 0.05, 0.05]])
+        >>> m.is_occupied([[0.05, 0.05, 1.05], [0.05, 0.05, 0.35]], return_unknown=True)
+        (array([ True, False]), array([False, False]))
+        >>> m.is_occupied([[0.95, 0.05, 0.05], [1.05, 0.05, 0.05]], return_unknown=True)
+        (array([False, False]), array([False,  True]))
         """
+        points, free64, _ = prefilter(points, origin, min_range, max_range, free_points)
         threads = n_threads(check_n_jobs(n_jobs))
         stamping = self._stamped(stamp)
         discretize = check_bool(discretize, "discretize")
@@ -236,12 +277,18 @@ default="auto"
             superray_threshold)
         if discretize and (mode != "scan" or method != "plain"):
             raise ValueError("discretize=True is only defined for mode='scan', method='plain'")
-        liboctomap = mode == "scan" and method == "plain"
+        if discretize and free64 is not None:
+            raise ValueError("free_points do not combine with discretize=True")
+        liboctomap = mode == "scan" and method == "plain" and free64 is None
         box = None if bbox is None else self._check_bbox(bbox)
-        scan = self._validated_scan(points, origin, max_range, mode, check_ends=liboctomap)
+        scan = join_free(
+            self._validated_scan(points, origin, max_range, mode,
+                                 check_ends=liboctomap or free64 is not None),
+            None if free64 is None else self._validated_scan(free64, origin, max_range, mode,
+                                                             name="free_points"))
         if scan is None:
             return self
-        pts, org, rng, cells = scan
+        pts, org, rng, cells, free_only = scan
         if liboctomap:
             if discretize and not (inside := self._in_range(pts)).all():
                 # liboctomap discretises before it truncates, with unchecked keys
@@ -266,7 +313,9 @@ default="auto"
         if box is not None:
             # liboctomap keeps the rays that end in the box within range, and of their
             # cells those in the box's keys
-            pts = np.ascontiguousarray(pts[self._bbx_rays(pts, org, rng, box)])
+            kept = self._bbx_rays(pts, org, rng, box)
+            pts = np.ascontiguousarray(pts[kept])
+            free_only = None if free_only is None else np.ascontiguousarray(free_only[kept])
             key_box = self.coord_to_key(box)
             if len(pts) == 0:
                 self.last_insert_ = {"rays": 0}
@@ -276,7 +325,8 @@ default="auto"
         culling = method.endswith("culling") and stamp is None
         with stamping:
             stats = self._insert_batch(pts, org, rng, mode == "ray", culling, None, threshold,
-                                       False, self._max_scan_cells(), key_box, threads)
+                                       False, self._max_scan_cells(), key_box, threads,
+                                       free_only)
         self._record_insert(stats, pts, org, rng, method, threshold)
         return self
 

@@ -23,6 +23,7 @@ from .._kernel import _KernelCells
 from .._validation import (as_point, as_points, check_bool, check_n_jobs, check_probability,
                            check_real, n_threads)
 from ..octree import OccupancyOctree
+from .._scan_input import prefilter
 from ._kernel_io import KernelMapFiles
 from ._kernel_samples import MAX_VAL, MAX_WEIGHT, check_max_cells, support_cells
 from ._kernel_utils import KernelCells
@@ -268,27 +269,38 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         self._accepted()
         return self
 
-    def insert_scan(self, points: ArrayLike, origin: ArrayLike, **options: Any):
+    def insert_scan(self, points: ArrayLike, origin: ArrayLike, *,
+                    min_range: float | None = None, **options: Any):
         """Add one scan's evidence (:class:`occgp.maps.OccupancyMap`'s call); return self.
 
-        The same as :meth:`update`.
+        The same as :meth:`update`, after dropping the points nearer to
+        `origin` than `min_range`.
 
         {scan_parameters}
+        min_range : float, default=None
+            Points nearer to `origin` than this are dropped first: the map is
+            the one :meth:`update` gives with the pre-filtered scan (distances
+            in double precision, a point at exactly `min_range` kept; None: no
+            filter). Must be finite and >= 0 (and less than ``max_range``
+            for :class:`occgp.BGKMap` when that is set).
         **options
-            None: the kernel maps take no per-scan option.
+            None: the kernel maps take no other per-scan option.
 
         {updated_map_returns}
 
         Raises
         ------
         TypeError
-            If an option is given; as :meth:`update`.
+            If another option is given; as :meth:`update`.
         ValueError
-            As :meth:`update`; the map is then unchanged.
+            If `min_range` is invalid; as :meth:`update`. The map is then
+            unchanged.
         """
         if options:
             raise TypeError(f"{type(self).__name__}.insert_scan takes no options, got "
-                            f"{next(iter(options))!r}")
+                            f"{next(iter(options))!r} (only min_range)")
+        if min_range is not None:
+            points, _, _ = prefilter(points, origin, min_range, getattr(self, "max_range", None))
         return self.update(points, origin)
 
     # ------------------------------------------------------------ queries
