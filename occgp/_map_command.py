@@ -59,7 +59,7 @@ OPTION_OF = {"output": "-o/--output", "method": "--method", "mode": "--mode",
               "resolution": "--resolution", "max_range": "--max-range", "n_jobs": "--n-jobs",
               "poses": "--poses", "poses_format": "--poses-format", "topic": "--topic",
               "fixed_frame": "--fixed-frame", "sensor_frame": "--sensor-frame",
-              "project_2d": "--project-2d",
+              "project_2d": "--project-2d", "scan_filter": "scan filter options",
               "tf_tolerance": "--tf-tolerance", "input_map": "--input-map",
               "fields": "--fields", "paths": "scans"}
 POSE_FORMATS = ("kitti", "tum")
@@ -285,8 +285,8 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
               sensor_frame: str | None = None, tf_tolerance: float = 0.0, fields=None,
               input_map: str | Path | None = None, n_jobs: int | None = -1,
               params: Mapping[str, Any] | None = None,
-              project_2d: tuple[float, float] | None = None, progress: bool | None = None,
-              out=None):
+              project_2d: tuple[float, float] | None = None, scan_filter=None,
+              progress: bool | None = None, out=None):
     """Build a map from scan files and ROS bags and save it.
 
     Every step (loading `input_map`, reading each scan file, inserting each
@@ -384,6 +384,14 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         YAML + PGM pair (:meth:`~occgp.OccupancyGrid2D.save_ros_map`);
         `output` must then end in ``.yaml`` or ``.yml``, and the image is
         written beside it with the suffix ``.pgm``.
+    scan_filter : occgp.filters.ScanFilter, default=None
+        octomap_server's filters (minimum range, height band, self box,
+        ground plane), applied to every scan in the world frame before it is
+        inserted (:meth:`~occgp.filters.ScanFilter.apply`); with
+        ``ground="free"`` the ground points go in as ``free_points`` (maps
+        whose ``insert_scan`` takes them: the octree and the grid). Checked
+        before any scan is read; the points it drops are counted and
+        reported.
     progress : bool, default=None
         Show a progress bar (None: only on a terminal).
     out : file-like, default=None
@@ -431,6 +439,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     output_path, resolution, max_range, n_jobs, input_path = _check_map_args(
         paths, output, method, mode, resolution, max_range, knn_params, n_jobs, poses,
         poses_format, bag_options, input_map, project_2d)
+    _check_scan_filter(scan_filter, method)
     knn = check_knn_options({} if knn_params is None else knn_params) \
         if method == "knn" else {}
     entry = map_type(method)
@@ -468,7 +477,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
                                f"poses for {n_scans} scans; expected one pose per scan, in "
                                f"input order")
         insert, limit, how = _inserter(mapper, mode, max_range, n_jobs)
-        n_points = n_beyond = n_done = 0
+        n_points = n_beyond = n_done = n_filtered = n_free = 0
         beams = np.zeros(2, dtype=np.int64)     # BGK's (kept, dropped) beams
         dropped = []
         t0 = time.perf_counter()
@@ -479,6 +488,11 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
                     scan = apply_poses([scan], pose_array[n_done:n_done + 1])[0]
                 points = scan.points
                 n_points += len(points)
+                free = None
+                if scan_filter is not None:
+                    points, free = scan_filter.apply(points, scan.origin)
+                    n_filtered += len(scan.points) - len(points)
+                    n_free += 0 if free is None else len(free)
                 if limit is not None and len(points):
                     far = np.linalg.norm(np.asarray(points, dtype=np.float64)
                                          - np.asarray(scan.origin, dtype=np.float64),
@@ -486,7 +500,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
                     n_beyond += int(np.count_nonzero(far))
                     if how == "drop":
                         points = points[~far]
-                insert(points, scan.origin)
+                insert(points, scan.origin, free)
                 if how == "param" and hasattr(mapper, "last_beams_"):
                     beams += mapper.last_beams_
                 n_done += 1
@@ -513,6 +527,9 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     for path, n, total in dropped:
         print(f"dropped {n:,} of {total:,} points of {path} with a NaN or inf coordinate",
               file=out)
+    if n_filtered:
+        ground = f" ({n_free:,} ground points inserted as free)" if n_free else ""
+        print(f"the scan filter took {n_filtered:,} of {n_points:,} points{ground}", file=out)
     if limit is not None and n_beyond:
         print(_beyond_message(mapper, how, n_beyond, n_points, limit, beams), file=out)
     if isinstance(mapper, OccupancyOctree):
@@ -552,9 +569,33 @@ def _inserter(mapper, mode, max_range, n_jobs):
     else:
         limit, how = max_range, "drop"
 
-    def insert(points, origin):
-        mapper.insert_scan(points, origin, **kwargs)
+    def insert(points, origin, free_points=None):
+        if free_points is None:
+            mapper.insert_scan(points, origin, **kwargs)
+        else:
+            mapper.insert_scan(points, origin, free_points=free_points, **kwargs)
     return insert, limit, how
+
+
+def _check_scan_filter(scan_filter, method: str) -> None:
+    """map_scans' `scan_filter`, checked (on an empty scan) before any file is read."""
+    if scan_filter is None:
+        return
+    from .filters import ScanFilter
+    if not isinstance(scan_filter, ScanFilter):
+        raise TypeError(f"scan_filter must be an occgp.filters.ScanFilter, got "
+                        f"{type(scan_filter).__name__}")
+    try:
+        scan_filter.masks(np.empty((0, 3)), np.zeros(3))
+    except ValueError as exc:
+        raise OptionError("scan_filter", str(exc)) from None
+    if scan_filter.ground == "free" and "free_points" not in _insert_options(
+            map_type(method).cls):
+        takers = [repr(n) for n in map_methods()
+                  if "free_points" in _insert_options(map_type(n).cls)]
+        raise OptionError("scan_filter", f"ground='free' needs a map whose insert_scan takes "
+                          f"free_points ({_either(takers, ' or ')}), got method={method!r}; "
+                          f"use ground='drop'")
 
 
 def _beyond_message(mapper, how, n, total, limit, beams) -> str:

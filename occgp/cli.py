@@ -24,6 +24,7 @@ import argparse
 import sys
 
 from . import __version__
+from .filters import GROUND_MODES
 from .knn import CDFS
 from .maps import map_type
 from ._map_command import (
@@ -118,6 +119,33 @@ def _parser() -> argparse.ArgumentParser:
                    help="record layout of .bin scans: an int (float32 values per record, x y "
                    "z first), kitti, nuscenes, or name:dtype,... such as x:<f4,y:<f4,z:<f4,"
                    "t:<u4 (default: by file name: nuscenes for .pcd.bin, else kitti)")
+    g = p.add_argument_group("scan filters (octomap_server's; world frame, applied to every "
+                             "scan before it is inserted)")
+    g.add_argument("--min-range", type=float, default=None, metavar="M",
+                   help="drop the points nearer to the sensor than M metres (default: none)")
+    g.add_argument("--z-min", type=float, default=None,
+                   help="drop the points below this height (default: none)")
+    g.add_argument("--z-max", type=float, default=None,
+                   help="drop the points above this height (default: none)")
+    g.add_argument("--self-box", type=float, nargs=6, default=None,
+                   metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
+                   help="drop the points in this box of offsets from the sensor (the "
+                   "robot's body; axis-aligned) (default: none)")
+    g.add_argument("--ground", choices=GROUND_MODES, default="keep",
+                   help="the ground plane's points (RANSAC, a plane within --ground-angle "
+                   "of horizontal and --ground-plane-distance of --ground-height): keep "
+                   "them, drop them, or insert them as free space, as octomap_server does "
+                   "(octree and grid) (default: %(default)s)")
+    g.add_argument("--ground-distance", type=float, default=0.04,
+                   help="points within this distance of the plane are ground "
+                   "(default: %(default)s)")
+    g.add_argument("--ground-angle", type=float, default=0.15,
+                   help="the plane's largest tilt, radians (default: %(default)s)")
+    g.add_argument("--ground-plane-distance", type=float, default=0.07,
+                   help="the plane's largest distance from --ground-height "
+                   "(default: %(default)s)")
+    g.add_argument("--ground-height", type=float, default=0.0,
+                   help="height of the ground in the world frame (default: %(default)s)")
     g = p.add_argument_group("ROS bags (PointCloud2 messages posed by /tf and /tf_static)")
     g.add_argument("--topic", default=None,
                    help="the PointCloud2 topic (default: the bag's only one)")
@@ -184,6 +212,20 @@ def _knn_args(args) -> dict | None:
     return given
 
 
+def _scan_filter(args):
+    """The ScanFilter of the filter options, None when none is given."""
+    from .filters import ScanFilter
+    given = (args.min_range, args.z_min, args.z_max, args.self_box)
+    if all(v is None for v in given) and args.ground == "keep":
+        return None
+    box = None if args.self_box is None else [args.self_box[:3], args.self_box[3:]]
+    return ScanFilter(min_range=args.min_range, z_min=args.z_min, z_max=args.z_max,
+                      self_box=box, ground=args.ground, ground_distance=args.ground_distance,
+                      ground_angle=args.ground_angle,
+                      ground_plane_distance=args.ground_plane_distance,
+                      ground_height=args.ground_height, random_state=0)
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.command == "iln":
@@ -202,7 +244,7 @@ def main(argv=None) -> int:
                       sensor_frame=args.sensor_frame, tf_tolerance=args.tf_tolerance,
                       fields=args.fields, input_map=args.input_map, n_jobs=args.n_jobs,
                       params=dict(args.param), project_2d=args.project_2d,
-                      progress=progress)
+                      scan_filter=_scan_filter(args), progress=progress)
     except OptionError as exc:
         args.map_parser.error(f"argument {OPTION_OF.get(exc.param, exc.param)}: {exc}")
     except (ValueError, TypeError, OSError, ImportError) as exc:

@@ -47,3 +47,38 @@ def test_project_2d_is_checked_before_reading(tmp_path, capsys, monkeypatch, arg
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert message in err and ("--project-2d" in err or "-o/--output" in err)
+
+
+def test_filter_options_give_the_map_of_the_filtered_scans(tmp_path, capsys):
+    from occgp.filters import ScanFilter
+    paths, scans = _write_scans(tmp_path, n_points=1500)
+    out = tmp_path / "m.ot"
+    assert main(["map", *map(str, paths), "-o", str(out), "--min-range", "0.8",
+                 "--z-max", "1.8", "--self-box", "-0.3", "-0.3", "-0.5", "0.3", "0.3", "0.2",
+                 "--ground", "free", "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    f = ScanFilter(min_range=0.8, z_max=1.8, self_box=[[-0.3, -0.3, -0.5], [0.3, 0.3, 0.2]],
+                   ground="free", random_state=0)
+    expected, n_free = OccupancyOctree(0.1), 0
+    for s in scans:
+        points, free = f.apply(s.points, s.origin)
+        n_free += len(free)
+        expected.insert_scan(points, s.origin, free_points=free)
+    assert n_free > 50 and f"({n_free:,} ground points inserted as free)" in text
+    got = OccupancyOctree.load(out)
+    assert got.to_bytes() == expected.to_bytes()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--method", "akimap", "--ground", "free"], "ground='free' needs a map whose insert_scan"),
+    (["--min-range", "-1"], "min_range"),
+    (["--z-min", "2", "--z-max", "1"], "z_min"),
+    (["--ground", "drop", "--ground-angle", "3"], "angle"),
+])
+def test_filter_options_are_checked_before_reading(tmp_path, capsys, monkeypatch, args,
+                                                   message):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        main(["map", "missing.pcd", "-o", "m.bt", *args, "--no-progress"])
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
