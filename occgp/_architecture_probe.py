@@ -1,0 +1,1 @@
+from .knn import _log_odds  # noqa
