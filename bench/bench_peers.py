@@ -23,8 +23,8 @@ Measured, at 0.1 m and 0.2 m, each the best of several repeats:
   (``mode="scan"``, the default method), and occgp with ``n_jobs=2`` as an extra
   row (the peers' calls run on one thread);
 * querying 1,000,000 points (half of them within 5 cm of a scan point, half
-  uniform in the scan's bounding box), in points per second, with each package's
-  fastest public call: the occupancy probability (occgp's vectorised
+  uniform in the scan's bounding box, float32 values), in points per second, with
+  each package's fastest public call: the occupancy probability (occgp's vectorised
   ``occupancy``; the peers have no vectorised call for it, so a Python loop over
   ``search(point)`` and ``node.getOccupancy()``), and the occupied / free /
   unknown label (occgp's ``is_occupied(..., return_unknown=True)``; the peers'
@@ -185,11 +185,18 @@ def prepare_datasets(folder, n_queries, seed=0, names=("scan.dat", "geb079")):
 
 
 def make_queries(points, n_queries, rng):
-    """Half the queries within 5 cm of a scan point, half uniform in the scan's box."""
+    """Half the queries within 5 cm of a scan point, half uniform in the scan's box.
+
+    The coordinates are float32 values (stored as float64): occgp, like liboctomap's
+    ``point3d``, looks points up in single precision, while the peers' ``search(point)``
+    computes the key in double precision, and the two may pick neighbouring cells
+    for a point within a float32 step of a cell border.
+    """
     near = points[rng.integers(0, len(points), n_queries // 2)]
     near = near + rng.uniform(-0.05, 0.05, near.shape)
     box = rng.uniform(points.min(axis=0), points.max(axis=0), (n_queries - len(near), 3))
-    return np.ascontiguousarray(rng.permutation(np.vstack([near, box])))
+    queries = rng.permutation(np.vstack([near, box])).astype(np.float32)
+    return np.ascontiguousarray(queries, dtype=np.float64)
 
 
 def write_dataset(folder, name, points, origin, queries):
