@@ -400,7 +400,9 @@ def main(argv=None):
         sys.exit("occgp's worker failed")
     table, notes = markdown_table(results, missing, args.n_jobs)
     problems = check_identical(results, out, args.n_jobs)
-    print(f"\n{hardware_line()}; "
+    given = sys.argv[1:] if argv is None else list(argv)
+    print("\n$ python bench/bench_peers.py" + "".join(f" {a}" for a in given))
+    print(f"{hardware_line()}; "
           + ", ".join(f"{p} {r['version']}" for p, r in results.items())
           + f"; load average after: {os.getloadavg()[0]:.2f}")
     print(f"points per second (M = millions), best of {args.repeats} insertions into a fresh "
