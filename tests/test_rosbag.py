@@ -316,6 +316,97 @@ def test_bag_without_tf_warns_once_and_rejects_frames(tmp_path):
         read_rosbag(bag, fixed_frame="odom")
 
 
+# --------------------------------------------------------------------------- #
+# a sensor origin that never moves while TF does (registered clouds)
+# --------------------------------------------------------------------------- #
+def _user_warnings(fn):
+    """fn()'s result and the messages of the UserWarnings it emitted."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = fn()
+    return out, [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+
+
+def registered_bag(path, edge_moves=True, stamps=(S, 2 * S, 3 * S)):
+    """Clouds already in odom (as LOAM publishes them); odom -> base_link on /tf (moving
+    or not), base_link -> lidar static."""
+    end = (2, 0, 0) if edge_moves else (0, 0, 0)
+    msgs = [
+        ("/tf_static", TFM, tf_msg(TS1, [(0, "base_link", "lidar", (0, 0, 1), yaw_q(0.0))])),
+        ("/tf", TFM, tf_msg(TS1, [(1 * S, "odom", "base_link", (0, 0, 0), yaw_q(0.0))])),
+        ("/tf", TFM, tf_msg(TS1, [(3 * S, "odom", "base_link", end, yaw_q(0.0))])),
+    ]
+    msgs += [("/points", PC2, xyz32([[5.0, 0.0, 0.0]], "odom", s)) for s in stamps]
+    return write_bag(path, msgs)
+
+
+def test_akimap_sample_bag_warns_that_the_sensor_never_moves():
+    bag = data_path("akimap_sample", "sample.bag")
+    scans, messages = _user_warnings(lambda: list(read_rosbag(bag)))
+    assert len(scans) == 73
+    assert_array_equal([s.origin for s in scans], 0.0)
+    assert messages == [
+        f"{bag}: the sensor origin is the same point [0.0, 0.0, 0.0] in all 73 clouds of "
+        "/pointcloud_in: the origin of their frame 'camera_init' (the default sensor frame), "
+        "fixed in 'map', while TF frame(s) 'camera', 'base_link' move in 'map'. Clouds "
+        "published already registered (in an odometry frame, as LOAM's are) need the "
+        "sensor's own frame: pass it as sensor_frame= (occgp map --sensor-frame), e.g. "
+        "'camera'"]
+    _, messages = _user_warnings(lambda: list(read_rosbag(bag, sensor_frame="camera")))
+    assert messages == []
+    # a partial read cannot tell: no warning
+    _, messages = _user_warnings(lambda: next(iter(read_rosbag(bag))))
+    assert messages == []
+
+
+def test_registered_clouds_warn_without_sensor_frame(tmp_path):
+    bag = registered_bag(tmp_path / "r.bag")
+    scans, messages = _user_warnings(lambda: list(read_rosbag(bag)))
+    assert_array_equal([s.origin for s in scans], 0.0)
+    [message] = messages
+    assert "in all 3 clouds of /points: the origin of their frame 'odom'" in message
+    assert "TF frame(s) 'base_link', 'lidar' move in 'odom'" in message
+    assert "sensor_frame= (occgp map --sensor-frame), e.g. 'base_link'" in message
+    scans, messages = _user_warnings(lambda: list(read_rosbag(bag, sensor_frame="lidar")))
+    assert messages == []
+    assert_allclose([s.origin for s in scans], [[0, 0, 1], [1, 0, 1], [2, 0, 1]], atol=1e-12)
+    # a sensor frame given on purpose is taken as it is, moving or not
+    _, messages = _user_warnings(lambda: list(read_rosbag(bag, sensor_frame="odom")))
+    assert messages == []
+
+
+@pytest.mark.parametrize("case", ["constant-tf", "static-sensor", "moving-cloud-frame",
+                                  "one-cloud"])
+def test_no_warning_when_the_sensor_is_fixed_or_moves(tmp_path, case):
+    path = tmp_path / "b.bag"
+    if case == "constant-tf":  # odom -> base_link on /tf, never moving
+        bag = registered_bag(path, edge_moves=False)
+    elif case == "static-sensor":
+        bag = write_bag(path, [
+            ("/tf_static", TFM, tf_msg(TS1, [(0, "map", "lidar", (1, 2, 3), yaw_q(0.5))]))]
+            + [("/points", PC2, xyz32([[5.0, 0.0, 0.0]], "lidar", s)) for s in (S, 2 * S)])
+    elif case == "moving-cloud-frame":
+        bag = chain_bag(path, stamps=(S, 2 * S, 3 * S))
+    else:  # a registered cloud, but only one: nothing to compare
+        bag = registered_bag(path, stamps=(2 * S,))
+    scans, messages = _user_warnings(lambda: list(read_rosbag(bag)))
+    assert len(scans) == (1 if case == "one-cloud" else 2 if case == "static-sensor" else 3)
+    assert messages == []
+
+
+def test_map_command_surfaces_the_warning(tmp_path):
+    from occgp.cli import main
+
+    bag = registered_bag(tmp_path / "r.bag")
+    with pytest.warns(UserWarning, match=r"pass it as sensor_frame= \(occgp map "
+                      r"--sensor-frame\), e.g. 'base_link'"):
+        assert main(["map", str(bag), "-o", str(tmp_path / "a.bt"), "--no-progress"]) == 0
+    _, messages = _user_warnings(lambda: main(
+        ["map", str(bag), "-o", str(tmp_path / "b.bt"), "--no-progress",
+         "--sensor-frame", "lidar"]))
+    assert messages == []
+
+
 @pytest.mark.parametrize("q, match", [
     ((0.0, 0.0, 0.0, 0.0), "not a finite rigid transform"),
     ((0.0, 0.0, 0.0, 2.0), "expected a unit quaternion"),

@@ -26,6 +26,8 @@ _PF_NAMES = {1: "INT8", 2: "UINT8", 3: "INT16", 4: "UINT16", 5: "INT32", 6: "UIN
              7: "FLOAT32", 8: "FLOAT64"}
 _PF_FLOATS = {7: "f4", 8: "f8"}
 _NORM_TOL = 1e-2  # |q|^2 - 1 beyond this: a broken quaternion (tf2's own check)
+_STILL_M = 1e-3  # metres: origins closer than this to the first count as the same point
+_MOTION_SAMPLES = 32  # cloud stamps at which the TF frames are checked for motion
 
 
 def _rosbags():
@@ -381,17 +383,60 @@ class RosbagScans:
 
     def __iter__(self):
         self.n_points = self.n_dropped = 0
+        # with the default sensor frame: each cloud's stamp and frame, and how far the
+        # sensor origin strays from the first one (see _warn_if_sensor_still)
+        watch = self.fixed_frame is not None and self.sensor_frame is None and bool(self._tf)
+        stamps, frames, first, spread = [], set(), None, 0.0
         reader = _open(self.path)
         try:
             cons = [c for c in reader.connections
                     if c.topic == self.topic and c.msgtype == _POINTCLOUD2]
             for i, _, _, msg in _messages(reader, cons, self.path, self.topic):
-                yield self._scan(i, msg)
+                scan = self._scan(i, msg)
+                if watch:
+                    stamps.append(_stamp_ns(msg.header.stamp))
+                    frames.add(_frame(msg.header.frame_id))
+                    first = scan.origin if first is None else first
+                    spread = max(spread, float(np.abs(scan.origin - first).max()))
+                yield scan
         finally:
             reader.close()
         if self.n_dropped:
             logger.warning("%s: dropped %d of %d points of %s with a non-finite coordinate "
                            "(NaN or inf)", self.path, self.n_dropped, self.n_points, self.topic)
+        if len(stamps) > 1 and spread <= _STILL_M:
+            self._warn_if_sensor_still(stamps, frames, first)
+
+    def _warn_if_sensor_still(self, stamps, frames, origin):
+        """Warn that the sensor never moved while a TF frame does (registered clouds)."""
+        picks = np.unique(np.linspace(0, len(stamps) - 1, _MOTION_SAMPLES).round().astype(int))
+        root = self._tf.root(self.fixed_frame)
+        moving = []
+        for frame in self._tf.frames:
+            if frame == self.fixed_frame or frame in frames or self._tf.root(frame) != root:
+                continue
+            seen = []
+            for k in picks:
+                try:
+                    seen.append(self._tf.lookup(self.fixed_frame, frame, stamps[k], self._tol,
+                                                "")[1])
+                except ValueError:  # a stamp outside this frame's TF data
+                    continue
+            if seen and np.abs(np.array(seen) - seen[0]).max() > _STILL_M:
+                moving.append(frame)
+        if not moving:
+            return
+        moving.sort(key=lambda f: (len(self._tf.chain(f)), f))  # nearest the root first
+        names = ", ".join(f"'{f}'" for f in moving)
+        clouds = ", ".join(f"'{f}'" for f in sorted(frames))
+        warnings.warn(
+            f"{self.path}: the sensor origin is the same point {np.round(origin, 6).tolist()} "
+            f"in all {len(stamps)} clouds of {self.topic}: the origin of their frame {clouds} "
+            f"(the default sensor frame), fixed in '{self.fixed_frame}', while TF frame(s) "
+            f"{names} move in '{self.fixed_frame}'. Clouds published already registered (in "
+            f"an odometry frame, as LOAM's are) need the sensor's own frame: pass it as "
+            f"sensor_frame= (occgp map --sensor-frame), e.g. '{moving[0]}'",
+            UserWarning, stacklevel=3)
 
     def _scan(self, i, msg):
         where = f"{self.path}: {self.topic} message {i}"
@@ -456,7 +501,11 @@ def read_rosbag(path, topic=None, *, fixed_frame=None, sensor_frame=None,
         The frame whose origin is the sensor position. Default: the cloud's
         ``header.frame_id``. Give it when the clouds are published already
         registered in an odometry frame (as LOAM's are: the akimap sample's
-        clouds are in ``camera_init``, the sensor is ``camera``).
+        clouds are in ``camera_init``, the sensor is ``camera``). Left at
+        the default, an iteration that finds the sensor origin at the same
+        point (within 1 mm) in every cloud while a frame of the TF tree moves
+        in `fixed_frame` ends with a :class:`UserWarning` naming the moving
+        frames.
     tf_tolerance : float, default=0.0
         Seconds a cloud stamp may lie before the first or after the last
         transform of a dynamic TF edge; that transform is then used as is.
