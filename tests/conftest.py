@@ -21,9 +21,8 @@ def data_path(*parts: str) -> Path:
     return path
 
 
-@pytest.fixture
-def tiny_room():
-    """Wall points of a 2 m x 2 m x 1 m box seen from its centre."""
+def tiny_room_scan():
+    """Wall points of a 2 m x 2 m x 1 m box seen from its centre, and the origin."""
     rng = np.random.default_rng(0)
     n = 400
     u, z = rng.uniform(-1, 1, n), rng.uniform(0.05, 0.95, n)
@@ -31,6 +30,12 @@ def tiny_room():
     x = np.where(side == 0, -1.0, np.where(side == 1, 1.0, u))
     y = np.where(side == 2, -1.0, np.where(side == 3, 1.0, u))
     return np.column_stack([x, y, z]), np.array([0.0, 0.0, 0.5])
+
+
+@pytest.fixture
+def tiny_room():
+    """:func:`tiny_room_scan`."""
+    return tiny_room_scan()
 
 
 @pytest.fixture(scope="session")

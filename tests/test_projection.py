@@ -8,21 +8,13 @@ import yaml
 from numpy.testing import assert_array_equal, assert_allclose
 from PIL import Image
 
+from conftest import tiny_room_scan as room_scan
 from occgp import ColorOctree, GridMap, OccupancyGrid2D, OccupancyOctree
 
 
 # --------------------------------------------------------------------------- #
 # scenes and the reference
 # --------------------------------------------------------------------------- #
-def room_scan():
-    """Wall points of a 2 m x 2 m x 1 m box seen from its centre, and the origin."""
-    rng = np.random.default_rng(0)
-    n = 400
-    u, z = rng.uniform(-1, 1, n), rng.uniform(0.05, 0.95, n)
-    side = rng.integers(0, 4, n)
-    x = np.where(side == 0, -1.0, np.where(side == 1, 1.0, u))
-    y = np.where(side == 2, -1.0, np.where(side == 3, 1.0, u))
-    return np.column_stack([x, y, z]), np.array([0.0, 0.0, 0.5])
 
 
 def grid_with(cells, values, resolution=0.1):

@@ -1,1 +1,0 @@
-from .knn import _log_odds  # noqa
