@@ -29,6 +29,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
 import hashlib
+import inspect
 import json
 import subprocess
 import sys
@@ -66,11 +67,16 @@ def worker(root: str, scans_path: str) -> None:
     for line in sys.stdin:
         case = json.loads(line)
         cls = OccupancyOctree if case["kind"] == "octree" else GridMap
+        options = {"mode": case["mode"], "method": case["method"]}
+        if "n_jobs" in inspect.signature(cls.insert_scan).parameters:
+            options["n_jobs"] = case["threads"]
+        elif case["threads"] != 1:      # an older build without threads
+            print(json.dumps({"skipped": True}), flush=True)
+            continue
         m = cls(case["resolution"])
         t0 = time.perf_counter()
         for points, origin in sets[case["dataset"]]:
-            m.insert_scan(points, origin, mode=case["mode"], method=case["method"],
-                          n_jobs=case["threads"])
+            m.insert_scan(points, origin, **options)
         seconds = time.perf_counter() - t0
         if case["kind"] == "octree":
             digest = hashlib.sha1(m.to_bytes("ot")).hexdigest()
@@ -151,6 +157,9 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--margin", type=float, default=0.05,
                         help="the slow-down past which a case fails (default: %(default)s)")
+    parser.add_argument("--only", nargs="+", default=None, metavar="TEXT",
+                        help="run the cases whose label holds one of these texts (e.g. "
+                        "'octree scan auto n_jobs=1')")
     parser.add_argument("--quick", action="store_true",
                         help="2 geb079 scans and 1 scan.dat pose at 0.2 m, 2 repeats")
     parser.add_argument("--worker", nargs=2, metavar=("ROOT", "SCANS"), help=argparse.SUPPRESS)
@@ -186,16 +195,27 @@ def main(argv=None) -> int:
                                     method=method, threads=threads)
                         best = {"ref": np.inf, "this": np.inf}
                         digests = {}
+                        label = f"{kind} {mode} {method} n_jobs={threads}"
+                        if args.only and not any(t in label for t in args.only):
+                            continue
                         for r in range(args.repeats):
                             for name in (("ref", "this") if r % 2 == 0 else ("this", "ref")):
                                 out = builds[name].run(case)
+                                if out.get("skipped"):
+                                    break
                                 best[name] = min(best[name], out["seconds"])
                                 digests[name] = out["digest"]
+                            else:
+                                continue
+                            break
+                        if len(digests) < 2:
+                            print(f"{dataset:<9}{res:>5.2f}  {label:<28}  (a build has no "
+                                  f"n_jobs)", flush=True)
+                            continue
                         ratio = best["this"] / best["ref"]
                         same = digests["ref"] == digests["this"]
                         slow = ratio > 1.0 + args.margin
                         failed |= slow or not same
-                        label = f"{kind} {mode} {method} n_jobs={threads}"
                         n = counts[dataset]
                         print(f"{dataset:<9}{res:>5.2f}  {label:<28}"
                               f"{1e3 * best['ref'] / n:>9.1f}{1e3 * best['this'] / n:>9.1f}"
