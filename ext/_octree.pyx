@@ -49,7 +49,7 @@ cdef extern from "_octree_batch.h" namespace "occgp" nogil:
     OcTreeKey morton_key(uint64_t code)
     void sort_by_code(vector[CellUpdate]& cells, vector[CellUpdate]& scratch) except +
     size_t apply_updates(OcTree& tree, vector[CellUpdate]& cells,
-                         vector[CellUpdate]& scratch) except +
+                         vector[CellUpdate]& scratch, int n_threads) except +
 
 
 cdef extern from "_octree_io.h" namespace "occgp" nogil:
@@ -214,7 +214,7 @@ cdef class _OcTree(_TreeCore):
                         cells[m].update = found[j].update
                         m += 1
                     cells.resize(m)
-                    self._apply_tracked(tree, cells, scratch)
+                    self._apply_tracked(tree, cells, scratch, n_threads)
                 clock_gettime(CLOCK_MONOTONIC, &done)
         return scan_result(status, stats, m, done)
 
@@ -359,8 +359,9 @@ cdef class _OcTree(_TreeCore):
         return out
 
     cdef size_t _apply_tracked(self, OcTree* tree, vector[CellUpdate]& cells,
-                               vector[CellUpdate]& scratch) except * nogil:
-        """apply_updates, recording the changes of liboctomap's change detection when on."""
+                               vector[CellUpdate]& scratch, int n_threads=1) except * nogil:
+        """apply_updates (on up to `n_threads` threads), recording the changes of
+        liboctomap's change detection when on (then on one thread)."""
         cdef size_t j, applied
         cdef vector[uint8_t] known, before
         cdef OcTreeKey key
@@ -369,7 +370,7 @@ cdef class _OcTree(_TreeCore):
             for j in range(cells.size()):
                 self._stamps[_pack(morton_key(cells[j].code))] = self._stamp_now
         if not self._tracking:
-            return apply_updates(tree[0], cells, scratch)
+            return apply_updates(tree[0], cells, scratch, n_threads)
         # apply_updates sorts the cells: sort first, so the states line up
         sort_by_code(cells, scratch)
         known.resize(cells.size())
@@ -378,7 +379,7 @@ cdef class _OcTree(_TreeCore):
             node = tree.search(morton_key(cells[j].code), 0)
             known[j] = node != NULL
             before[j] = node != NULL and tree.isNodeOccupied(node)
-        applied = apply_updates(tree[0], cells, scratch)
+        applied = apply_updates(tree[0], cells, scratch, 1)
         for j in range(cells.size()):
             key = morton_key(cells[j].code)
             node = tree.search(key, 0)

@@ -89,34 +89,109 @@ inline void sort_by_code(std::vector<CellUpdate>& cells, std::vector<CellUpdate>
   if (src != cells.data()) std::copy(src, src + n, cells.data());
 }
 
-// Apply `cells` (distinct keys) to `tree` as updateNode(key, update, false) would.
-// Sorts `cells`; `scratch` is working memory. Returns the number of cells not
-// aborted early.
-inline size_t apply_updates(octomap::OcTree& tree, std::vector<CellUpdate>& cells,
-                            std::vector<CellUpdate>& scratch) {
-  typedef octomap::OcTreeNode Node;
-  constexpr int kDepth = 16;
-  if (cells.empty()) return 0;
-  sort_by_code(cells, scratch);
-  size_t first = 0, applied = 0;
-  if (tree.getRoot() == nullptr) {  // liboctomap's updateNode creates the root
-    tree.updateNode(morton_key(cells[0].code), cells[0].update, false);
-    first = 1;
-    applied = 1;
+namespace batch_detail {
+
+typedef octomap::OcTreeNode Node;
+typedef octomap::OcTreeBaseImpl<octomap::OcTreeNode, octomap::AbstractOccupancyOcTree> Base;
+constexpr int kDepth = 16;
+
+// liboctomap keeps the node count (tree_size) and the extent flag (size_changed) of
+// the tree, and each node's children array, protected. Threads that change disjoint
+// subtrees must not touch the shared count: they allocate and free nodes as
+// liboctomap does, count what they did, and the count is set once afterwards. The
+// members are reached through pointers to members named in derived classes.
+struct TreeAccess : octomap::OcTree {
+  static size_t Base::*size_member() { return &TreeAccess::tree_size; }
+  static bool Base::*changed_member() { return &TreeAccess::size_changed; }
+};
+struct NodeAccess : octomap::OcTreeNode {
+  static octomap::AbstractOcTreeNode** octomap::OcTreeDataNode<float>::*children_member() {
+    return &NodeAccess::children;
   }
+};
+
+// Node operations through liboctomap itself (one thread).
+struct TreeOps {
+  octomap::OcTree& tree;
+  void create(Node* node, unsigned pos) { tree.createNodeChild(node, pos); }
+  void expand(Node* node) { tree.expandNode(node); }
+  bool prune(Node* node) { return tree.pruneNode(node); }
+};
+
+// The same operations on a subtree one thread owns: liboctomap's createNodeChild,
+// expandNode and pruneNode without the shared count, whose change is kept in `delta`.
+struct SubtreeOps {
+  const octomap::OcTree& tree;
+  long delta;
+  void create(Node* node, unsigned pos) {
+    octomap::AbstractOcTreeNode**& children = node->*NodeAccess::children_member();
+    if (children == nullptr) {
+      children = new octomap::AbstractOcTreeNode*[8];
+      for (unsigned i = 0; i < 8; ++i) children[i] = nullptr;
+    }
+    children[pos] = new Node();
+    ++delta;
+  }
+  void expand(Node* node) {
+    for (unsigned k = 0; k < 8; ++k) {
+      create(node, k);
+      tree.getNodeChild(node, k)->copyData(*node);
+    }
+  }
+  bool prune(Node* node) {
+    if (!tree.isNodeCollapsible(node)) return false;
+    node->copyData(*tree.getNodeChild(node, 0));
+    octomap::AbstractOcTreeNode**& children = node->*NodeAccess::children_member();
+    for (unsigned i = 0; i < 8; ++i) {
+      delete static_cast<Node*>(children[i]);
+      children[i] = nullptr;
+      --delta;
+    }
+    delete[] children;
+    children = nullptr;
+    return true;
+  }
+};
+
+inline unsigned child_index(uint64_t code, int depth) {
+  return static_cast<unsigned>((code >> (3 * (kDepth - 1 - depth))) & 7);
+}
+
+// Whether the cell's update aborts early in liboctomap's updateNode: the deepest
+// existing node on its path is a leaf already clamped in the update's direction.
+inline bool aborts(const octomap::OcTree& tree, Node* root, uint64_t code, float update,
+                   float clamp_min, float clamp_max) {
+  const Node* node = root;
+  int d = 0;
+  while (d < kDepth) {
+    const unsigned pos = child_index(code, d);
+    if (!tree.nodeChildExists(node, pos)) break;
+    node = tree.getNodeChild(node, pos);
+    ++d;
+  }
+  if (d < kDepth && tree.nodeHasChildren(node)) return false;
+  const float value = node->getLogOdds();
+  return (update >= 0 && value >= clamp_max) || (update <= 0 && value <= clamp_min);
+}
+
+// The depth-first pass over cells[0, n) (sorted, distinct), all below stack[base]
+// (stack[0..base] the path to it, which exists). `base_created`: stack[base] was just
+// created on the way down (liboctomap's updateNodeRecurs then creates, rather than
+// expands, below it). Finalises (prunes or re-evaluates) the dirty nodes at depths
+// `base`..15; returns the number of cells not aborted early and, in *dirty_base,
+// whether stack[base] had an updated cell below it.
+template <class Ops>
+size_t update_below(const octomap::OcTree& tree, const CellUpdate* cells, size_t n,
+                    Node** stack, int base, bool base_created, Ops& ops, bool* dirty_base) {
   const float clamp_min = tree.getClampingThresMinLog();
   const float clamp_max = tree.getClampingThresMaxLog();
-  Node* stack[kDepth + 1];
-  stack[0] = tree.getRoot();
-  int top = 0;     // stack[0..top] is the path of the last cell (as far as it went)
-  int dirty = -1;  // stack[0..dirty] have an updated cell below them
-  auto finalize = [&tree](Node* node) {
-    if (!tree.pruneNode(node)) node->updateOccupancyChildren();
+  size_t applied = 0;
+  int top = base;      // stack[0..top] is the path of the last cell (as far as it went)
+  int dirty = base - 1;  // stack[base..dirty] have an updated cell below them
+  auto finalize = [&ops](Node* node) {
+    if (!ops.prune(node)) node->updateOccupancyChildren();
   };
-  auto child_index = [](uint64_t code, int depth) {
-    return static_cast<unsigned>((code >> (3 * (kDepth - 1 - depth))) & 7);
-  };
-  for (size_t i = first; i < cells.size(); ++i) {
+  for (size_t i = 0; i < n; ++i) {
     const uint64_t code = cells[i].code;
     const float update = cells[i].update;
     int common = top;
@@ -138,19 +213,21 @@ inline size_t apply_updates(octomap::OcTree& tree, std::vector<CellUpdate>& cell
       stack[++d] = node;
     }
     top = d;
-    if (d == kDepth || !tree.nodeHasChildren(node)) {  // a leaf holds the cell: maybe abort
+    // a base just made for this cell stands for the inner node above it (no abort)
+    const bool fresh = base_created && applied == 0 && d == base;
+    if (!fresh && (d == kDepth || !tree.nodeHasChildren(node))) {  // a leaf: maybe abort
       const float value = node->getLogOdds();
       if ((update >= 0 && value >= clamp_max) || (update <= 0 && value <= clamp_min)) continue;
     }
     // liboctomap's updateNodeRecurs on the way down
-    bool created = false;
+    bool created = fresh;
     while (d < kDepth) {
       const unsigned pos = child_index(code, d);
       if (!tree.nodeChildExists(node, pos)) {
         if (!tree.nodeHasChildren(node) && !created) {
-          tree.expandNode(node);  // a pruned leaf
+          ops.expand(node);  // a pruned leaf
         } else {
-          tree.createNodeChild(node, pos);
+          ops.create(node, pos);
           created = true;
         }
       } else {
@@ -164,8 +241,152 @@ inline size_t apply_updates(octomap::OcTree& tree, std::vector<CellUpdate>& cell
     dirty = kDepth;
     ++applied;
   }
-  for (int d = top; d >= 0; --d) {
+  for (int d = top; d >= base; --d) {
     if (d <= dirty && d < kDepth) finalize(stack[d]);
+  }
+  *dirty_base = dirty >= base;
+  return applied;
+}
+
+}  // namespace batch_detail
+
+// Apply `cells` (distinct keys) to `tree` as updateNode(key, update, false) would.
+// Sorts `cells`; `scratch` is working memory. Returns the number of cells not
+// aborted early.
+//
+// With `n_threads` > 1 (and enough cells), the cells are split into the subtrees of
+// one depth (the shallowest with at least 8 per thread); the paths down to them are
+// made on one thread (as the first cell of each subtree that is not aborted would make
+// them), the subtrees are updated on the threads, each owning its own, and the few
+// shared nodes above them are finalised on one thread: the same tree, node for node,
+// as on one thread.
+inline size_t apply_updates(octomap::OcTree& tree, std::vector<CellUpdate>& cells,
+                            std::vector<CellUpdate>& scratch, int n_threads = 1) {
+  using namespace batch_detail;
+  if (cells.empty()) return 0;
+  sort_by_code(cells, scratch);
+  size_t first = 0, applied = 0;
+  if (tree.getRoot() == nullptr) {  // liboctomap's updateNode creates the root
+    tree.updateNode(morton_key(cells[0].code), cells[0].update, false);
+    first = 1;
+    applied = 1;
+  }
+  const CellUpdate* rest = cells.data() + first;
+  const size_t n = cells.size() - first;
+  Node* stack[kDepth + 1];
+  stack[0] = tree.getRoot();
+  bool dirty_root = false;
+  constexpr size_t kMinParallelCells = 4096;
+  if (n_threads <= 1 || n < kMinParallelCells) {
+    TreeOps ops{tree};
+    return applied + update_below(tree, rest, n, stack, 0, false, ops, &dirty_root);
+  }
+  // the split depth: the shallowest with at least 8 subtrees a thread (at most 12)
+  int base = 1;
+  std::vector<size_t> starts;
+  for (; base <= 12; ++base) {
+    const int shift = 3 * (kDepth - base);
+    starts.clear();
+    for (size_t i = 0; i < n; ++i)
+      if (i == 0 || (rest[i].code >> shift) != (rest[i - 1].code >> shift)) starts.push_back(i);
+    if (starts.size() >= static_cast<size_t>(64 * n_threads)) break;
+  }
+  base = std::min(base, 12);
+  starts.push_back(n);
+  const ptrdiff_t n_groups = static_cast<ptrdiff_t>(starts.size()) - 1;
+  const float clamp_min = tree.getClampingThresMinLog();
+  const float clamp_max = tree.getClampingThresMaxLog();
+  // each subtree's first cell that is not aborted (n: none), found without changing the tree
+  std::vector<size_t> lead(n_groups, n);
+#pragma omp parallel for num_threads(n_threads) schedule(dynamic)
+  for (ptrdiff_t g = 0; g < n_groups; ++g) {
+    for (size_t i = starts[g]; i < starts[g + 1]; ++i) {
+      if (!aborts(tree, stack[0], rest[i].code, rest[i].update, clamp_min, clamp_max)) {
+        lead[g] = i;
+        break;
+      }
+    }
+  }
+  // the paths down to the subtrees, made as that cell's updateNodeRecurs makes them
+  std::vector<Node*> roots(n_groups, nullptr);
+  std::vector<uint8_t> fresh(n_groups, 0);
+  {
+    TreeOps ops{tree};
+    for (ptrdiff_t g = 0; g < n_groups; ++g) {
+      if (lead[g] == n) continue;
+      const uint64_t code = rest[lead[g]].code;
+      Node* node = stack[0];
+      int d = 0;
+      while (d < base) {
+        const unsigned pos = child_index(code, d);
+        if (!tree.nodeChildExists(node, pos)) break;
+        node = tree.getNodeChild(node, pos);
+        ++d;
+      }
+      bool created = false;
+      while (d < base) {
+        const unsigned pos = child_index(code, d);
+        if (!tree.nodeChildExists(node, pos)) {
+          if (!tree.nodeHasChildren(node) && !created) {
+            ops.expand(node);
+          } else {
+            ops.create(node, pos);
+            created = true;
+          }
+        } else {
+          created = false;
+        }
+        node = tree.getNodeChild(node, pos);
+        ++d;
+      }
+      roots[g] = node;
+      fresh[g] = created;
+    }
+  }
+  // the subtrees, on the threads
+  std::vector<size_t> done(n_groups, 0);
+  std::vector<long> delta(n_groups, 0);
+  std::exception_ptr error;
+#pragma omp parallel for num_threads(n_threads) schedule(dynamic)
+  for (ptrdiff_t g = 0; g < n_groups; ++g) {
+    if (roots[g] == nullptr) continue;
+    try {
+      Node* sub[kDepth + 1];
+      sub[base] = roots[g];
+      SubtreeOps ops{tree, 0};
+      bool dirty = false;
+      done[g] = update_below(tree, rest + lead[g], starts[g + 1] - lead[g], sub, base,
+                             fresh[g] != 0, ops, &dirty);
+      delta[g] = ops.delta;
+    } catch (...) {
+#pragma omp critical(occgp_batch_error)
+      if (!error) error = std::current_exception();
+    }
+  }
+  long total = 0;
+  for (ptrdiff_t g = 0; g < n_groups; ++g) {
+    applied += done[g];
+    total += delta[g];
+  }
+  if (total != 0) {
+    tree.*TreeAccess::size_member() = static_cast<size_t>(static_cast<long>(tree.size()) + total);
+    tree.*TreeAccess::changed_member() = true;
+  }
+  if (error) std::rethrow_exception(error);
+  // the shared nodes above the subtrees, deepest first, each once
+  TreeOps ops{tree};
+  for (int d = base - 1; d >= 0; --d) {
+    const int shift = 3 * (kDepth - d);
+    uint64_t last = ~0ULL;
+    for (ptrdiff_t g = 0; g < n_groups; ++g) {
+      if (roots[g] == nullptr) continue;
+      const uint64_t prefix = rest[starts[g]].code >> shift;
+      if (prefix == last) continue;
+      last = prefix;
+      Node* node = stack[0];
+      for (int k = 0; k < d; ++k) node = tree.getNodeChild(node, child_index(rest[starts[g]].code, k));
+      if (!ops.prune(node)) node->updateOccupancyChildren();
+    }
   }
   return applied;
 }

@@ -185,10 +185,13 @@ default="auto"
         n_jobs : int or None, default=None
             Threads that walk the scan's rays (None: 1, -1: every core; at
             most the cores, and about one per 64 rays). The threads' counts
-            are merged (integer sums) before the one tree update, so the map
-            and :attr:`last_insert_`'s counts are the same for every `n_jobs`.
-            liboctomap's own ``insertPointCloud`` (``method="plain"``,
-            ``mode="scan"``) runs on one thread. Each thread counts densely
+            are merged (integer sums); the tree is then updated once, on the
+            same threads for scans of at least 4096 cells (each owns whole
+            subtrees; the few nodes above them are finished on one thread),
+            so the tree, node for node, and :attr:`last_insert_`'s counts are
+            the same for every `n_jobs`. liboctomap's own ``insertPointCloud``
+            (``method="plain"``, ``mode="scan"``), and any scan with
+            :attr:`track_changes` on, update on one thread. Each thread counts densely
             in 4 bytes per cell of the scan's key box, within 2^24 cells for
             all threads together; larger boxes run on fewer threads, or count
             in hash tables.

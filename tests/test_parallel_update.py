@@ -1,0 +1,74 @@
+"""The octree's tree update on several threads (``insert_scan(n_jobs=)``): the tree is
+the one a single thread builds, node for node (the ``.ot`` bytes hold every node's
+value and children), on scans large enough to take the threaded path (at least 4096
+cells), over fresh, pruned, clamped and re-opened trees."""
+
+import numpy as np
+import pytest
+
+from occgp import OccupancyOctree
+from occgp.datasets import structured_room
+
+
+def room_scans(n_points=6000, seed=0):
+    return structured_room(seed=seed).scan(n_poses=3, scans_per_pose=2, n_points=n_points,
+                                           seed=seed)
+
+
+def same_tree(a, b):
+    assert a.num_nodes == b.num_nodes and a.num_leaves == b.num_leaves
+    assert a.to_bytes("ot") == b.to_bytes("ot")
+    assert a.memory_usage() == b.memory_usage()
+
+
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+@pytest.mark.parametrize("method", ["plain", "culling", "superray+culling"])
+@pytest.mark.parametrize("resolution", [0.05, 0.2])
+def test_threaded_tree_update_gives_the_single_thread_tree(mode, method, resolution):
+    scans = room_scans()
+    trees = {n: OccupancyOctree(resolution) for n in (1, 2, 3, 8)}
+    for points, origin in scans:
+        for n, m in trees.items():
+            m.insert_scan(points, origin, mode=mode, method=method, n_jobs=n)
+            assert m.last_insert_.get("updated_cells", 5000) >= 4096 or resolution == 0.2
+        for n in (2, 3, 8):
+            same_tree(trees[n], trees[1])
+
+
+def test_pruned_clamped_and_reopened_trees_update_alike():
+    """The same scan again and again clamps its cells (their updates abort) and prunes
+    the free space into large leaves; a block set free and a block set occupied, then
+    scans through them, expand pruned leaves below and above the split depth."""
+    scans = room_scans(n_points=4000, seed=1)
+    trees = [OccupancyOctree(0.1) for _ in range(3)]
+    ar = np.arange(32) * 0.1 + 0.05
+    block = np.stack(np.meshgrid(ar - 1.6, ar - 1.6, ar * 0.25, indexing="ij"),
+                     -1).reshape(-1, 3)
+    for m in trees:
+        m.set_cells(block, -2.0)                    # one pruned 3.2 m leaf
+        m.set_cells(block[::7] + [0, 0, 0.8], 3.5)  # occupied cells above it
+    for rep in range(6):
+        for points, origin in scans[:2]:
+            for m, n in zip(trees, (1, 2, 4)):
+                m.insert_scan(points, origin, mode="ray" if rep % 2 else "scan", n_jobs=n)
+        same_tree(trees[1], trees[0])
+        same_tree(trees[2], trees[0])
+    # the opposite evidence re-opens clamped, pruned leaves
+    for m, n in zip(trees, (1, 2, 4)):
+        m.insert_scan(scans[3].points, scans[3].origin, n_jobs=n)
+    same_tree(trees[1], trees[0])
+    same_tree(trees[2], trees[0])
+
+
+def test_threaded_update_into_a_loaded_tree_and_with_a_box():
+    scans = room_scans(n_points=5000, seed=2)
+    base = OccupancyOctree(0.05)
+    for points, origin in scans[:2]:
+        base.insert_scan(points, origin)
+    data = base.to_bytes("bt")               # clamped, pruned, as a .bt file gives it
+    one, two = OccupancyOctree.from_bytes(data), OccupancyOctree.from_bytes(data)
+    box = [[-3.0, -2.0, 0.0], [2.0, 2.5, 1.5]]
+    for points, origin in scans[2:]:
+        one.insert_scan(points, origin, bbox=box, n_jobs=1)
+        two.insert_scan(points, origin, bbox=box, n_jobs=2)
+    same_tree(two, one)
