@@ -157,6 +157,25 @@ inline unsigned child_index(uint64_t code, int depth) {
   return static_cast<unsigned>((code >> (3 * (kDepth - 1 - depth))) & 7);
 }
 
+// One step of liboctomap's updateNodeRecurs on the way down: to child `pos` of `node`,
+// created where missing below a node just created (`created`), or after expanding
+// `node` when it is a pruned leaf. Updates `created` for the child.
+template <class Ops>
+inline Node* step_down(const octomap::OcTree& tree, Ops& ops, Node* node, unsigned pos,
+                       bool& created) {
+  if (!tree.nodeChildExists(node, pos)) {
+    if (!tree.nodeHasChildren(node) && !created) {
+      ops.expand(node);  // a pruned leaf
+    } else {
+      ops.create(node, pos);
+      created = true;
+    }
+  } else {
+    created = false;
+  }
+  return tree.getNodeChild(node, pos);
+}
+
 // Whether the cell's update aborts early in liboctomap's updateNode: the deepest
 // existing node on its path is a leaf already clamped in the update's direction.
 inline bool aborts(const octomap::OcTree& tree, Node* root, uint64_t code, float update,
@@ -222,18 +241,7 @@ size_t update_below(const octomap::OcTree& tree, const CellUpdate* cells, size_t
     // liboctomap's updateNodeRecurs on the way down
     bool created = fresh;
     while (d < kDepth) {
-      const unsigned pos = child_index(code, d);
-      if (!tree.nodeChildExists(node, pos)) {
-        if (!tree.nodeHasChildren(node) && !created) {
-          ops.expand(node);  // a pruned leaf
-        } else {
-          ops.create(node, pos);
-          created = true;
-        }
-      } else {
-        created = false;
-      }
-      node = tree.getNodeChild(node, pos);
+      node = step_down(tree, ops, node, child_index(code, d), created);
       stack[++d] = node;
     }
     top = kDepth;
@@ -325,18 +333,7 @@ inline size_t apply_updates(octomap::OcTree& tree, std::vector<CellUpdate>& cell
       }
       bool created = false;
       while (d < base) {
-        const unsigned pos = child_index(code, d);
-        if (!tree.nodeChildExists(node, pos)) {
-          if (!tree.nodeHasChildren(node) && !created) {
-            ops.expand(node);
-          } else {
-            ops.create(node, pos);
-            created = true;
-          }
-        } else {
-          created = false;
-        }
-        node = tree.getNodeChild(node, pos);
+        node = step_down(tree, ops, node, child_index(code, d), created);
         ++d;
       }
       roots[g] = node;
