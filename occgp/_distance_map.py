@@ -294,8 +294,7 @@ class DistanceMap:
         for s in big_levels:
             rows = np.flatnonzero(side == s)
             n = int(s) // B
-            ar = np.arange(n)
-            offs = np.stack(np.meshgrid(ar, ar, ar, indexing="ij"), -1).reshape(-1, 3)
+            offs = _cube_offsets(n)
             blk = ((low[rows] >> sh)[:, None, :] + offs[None]).reshape(-1, 3)
             blocks.append(blk)
         allb = _unpack(np.unique(_pack(np.concatenate(blocks))))
@@ -306,8 +305,7 @@ class DistanceMap:
         for s in np.unique(side[small]):
             rows = np.flatnonzero(side == s)
             s = int(s)
-            ar = np.arange(s)
-            offs = np.stack(np.meshgrid(ar, ar, ar, indexing="ij"), -1).reshape(-1, 3)
+            offs = _cube_offsets(s)
             slots = self._slots_of(low[rows] >> sh)
             ok = slots >= 0
             rows, slots = rows[ok], slots[ok]
@@ -317,8 +315,7 @@ class DistanceMap:
         for s in big_levels:
             rows = np.flatnonzero(side == s)
             n = int(s) // B
-            ar = np.arange(n)
-            offs = np.stack(np.meshgrid(ar, ar, ar, indexing="ij"), -1).reshape(-1, 3)
+            offs = _cube_offsets(n)
             blk = ((low[rows] >> sh)[:, None, :] + offs[None]).reshape(-1, 3)
             slots = self._slots_of(blk)
             ok = slots >= 0
@@ -528,8 +525,7 @@ class DistanceMap:
         meet = np.zeros(len(coords), dtype=bool)
         for a, b in zip(blo, bhi):
             meet |= ((lo < b) & (lo + B > a)).all(axis=1)
-        ar = np.arange(B)
-        offs = np.stack(np.meshgrid(ar, ar, ar, indexing="ij"), -1).reshape(-1, 3)
+        offs = _cube_offsets(B)
         out = [np.empty((0, 3), dtype=np.int64)]
         for c in coords[meet]:
             cells = c * B + offs
@@ -718,6 +714,12 @@ class DistanceMap:
         """
         self._check_fitted()
         return len(self._slot) * (CELL_BYTES * self._B**3 + 4 * 8)
+
+
+def _cube_offsets(n: int) -> NDArray[np.int64]:
+    """The (n**3, 3) integer offsets of an n x n x n cube of cells, x slowest."""
+    ar = np.arange(n)
+    return np.stack(np.meshgrid(ar, ar, ar, indexing="ij"), -1).reshape(-1, 3)
 
 
 def _pack(blocks: np.ndarray) -> NDArray[np.int64]:
