@@ -26,7 +26,7 @@ $(PY):
 
 $(STAMP): $(PY) $(BUILD_INPUTS)
 	@PYTHON=$(PYTHON) bash tools/install-system-deps.sh
-	$(PY) -m pip install -q "setuptools>=77" wheel "Cython>=3.0" "numpy>=2.0"
+	$(PY) -m pip install -q "setuptools>=77" wheel "Cython>=3.1" "numpy>=2.0"
 	$(PY) -m pip install -q "$(TORCH)"
 	$(PY) -m pip install -q --no-build-isolation -e ".[$(EXTRAS)]"
 	@touch $@

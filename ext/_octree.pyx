@@ -9,6 +9,7 @@ a per-tree lock serialises the operations on one tree.
 """
 
 cimport cython
+from cython.parallel cimport prange
 from cython.operator cimport dereference as deref, preincrement as inc
 from libc.math cimport floor, isfinite
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint32_t, uint64_t
@@ -46,6 +47,7 @@ cdef extern from "_octree_batch.h" namespace "occgp" nogil:
         uint64_t code
         float update
     uint64_t morton_code(unsigned x, unsigned y, unsigned z)
+    uint64_t morton_of_packed(uint64_t packed)
     OcTreeKey morton_key(uint64_t code)
     void sort_by_code(vector[CellUpdate]& cells, vector[CellUpdate]& scratch) except +
     size_t apply_updates(OcTree& tree, vector[CellUpdate]& cells,
@@ -203,7 +205,16 @@ cdef class _OcTree(_TreeCore):
                     tree[0], scan_points(points), points.shape[0], o, max_range, ray_mode,
                     culling, w, superray_threshold, _fully_free, tree, self._counts,
                     self._counts_dirty, found, &stats, diagnose, max_cells, n_threads, fo)
-                if status == Status.ok:
+                if status == Status.ok and not boxed:
+                    # each row its own: on the threads for large scans
+                    m = found.size()
+                    cells.resize(m)
+                    for j in prange(<Py_ssize_t>m, num_threads=max(n_threads, 1),
+                                    schedule="static", use_threads_if=m >= 65536):
+                        cells[j].code = morton_of_packed(found[j].key)
+                        cells[j].update = found[j].update
+                    self._apply_tracked(tree, cells, scratch, n_threads)
+                elif status == Status.ok:
                     cells.resize(found.size())
                     for j in range(<Py_ssize_t>found.size()):
                         key = _unpack(found[j].key)

@@ -56,34 +56,59 @@ inline uint64_t morton_code(unsigned x, unsigned y, unsigned z) {
   return spread_bits3(x) | (spread_bits3(y) << 1) | (spread_bits3(z) << 2);
 }
 
+// The Morton code of a packed key (x in the low 16 bits, as ext/_keys.h packs them).
+inline uint64_t morton_of_packed(uint64_t packed) {
+  return morton_code(static_cast<unsigned>(packed & 0xFFFF),
+                     static_cast<unsigned>((packed >> 16) & 0xFFFF),
+                     static_cast<unsigned>((packed >> 32) & 0xFFFF));
+}
+
 inline octomap::OcTreeKey morton_key(uint64_t code) {
   return octomap::OcTreeKey(static_cast<octomap::key_type>(gather_bits3(code)),
                             static_cast<octomap::key_type>(gather_bits3(code >> 1)),
                             static_cast<octomap::key_type>(gather_bits3(code >> 2)));
 }
 
-// Sort by code: least significant digit first, three passes of 16 bits.
-inline void sort_by_code(std::vector<CellUpdate>& cells, std::vector<CellUpdate>& scratch) {
+// Sort by code: least significant digit first, three passes of 16 bits (stable; the
+// codes are distinct, so the order is the same for every `n_threads`). With threads,
+// each pass counts and scatters contiguous chunks of the cells, one chunk a thread,
+// each digit's rows of chunk t placed after those of the chunks before it.
+inline void sort_by_code(std::vector<CellUpdate>& cells, std::vector<CellUpdate>& scratch,
+                         int n_threads = 1) {
+  constexpr size_t kBuckets = 1 << 16;
   const size_t n = cells.size();
   if (n < 256) {
     std::sort(cells.begin(), cells.end(),
               [](const CellUpdate& a, const CellUpdate& b) { return a.code < b.code; });
     return;
   }
+  const int T = n < (1 << 16) ? 1 : std::max(1, n_threads);
   scratch.resize(n);
-  std::vector<uint32_t> count(1 << 16);
+  std::vector<uint32_t> count(kBuckets * T);
   CellUpdate* src = cells.data();
   CellUpdate* dst = scratch.data();
   for (int shift = 0; shift < 48; shift += 16) {
     std::fill(count.begin(), count.end(), 0);
-    for (size_t i = 0; i < n; ++i) ++count[(src[i].code >> shift) & 0xFFFF];
-    uint32_t sum = 0;
-    for (uint32_t& c : count) {
-      const uint32_t k = c;
-      c = sum;
-      sum += k;
+#pragma omp parallel for num_threads(T) schedule(static, 1) if (T > 1)
+    for (int t = 0; t < T; ++t) {
+      uint32_t* c = count.data() + kBuckets * t;
+      for (size_t i = n * t / T; i < n * (t + 1) / T; ++i) ++c[(src[i].code >> shift) & 0xFFFF];
     }
-    for (size_t i = 0; i < n; ++i) dst[count[(src[i].code >> shift) & 0xFFFF]++] = src[i];
+    uint32_t sum = 0;  // digit-major, chunk-minor: the stable order
+    for (size_t b = 0; b < kBuckets; ++b) {
+      for (int t = 0; t < T; ++t) {
+        uint32_t& c = count[kBuckets * t + b];
+        const uint32_t k = c;
+        c = sum;
+        sum += k;
+      }
+    }
+#pragma omp parallel for num_threads(T) schedule(static, 1) if (T > 1)
+    for (int t = 0; t < T; ++t) {
+      uint32_t* c = count.data() + kBuckets * t;
+      for (size_t i = n * t / T; i < n * (t + 1) / T; ++i)
+        dst[c[(src[i].code >> shift) & 0xFFFF]++] = src[i];
+    }
     std::swap(src, dst);
   }
   if (src != cells.data()) std::copy(src, src + n, cells.data());
@@ -272,7 +297,7 @@ inline size_t apply_updates(octomap::OcTree& tree, std::vector<CellUpdate>& cell
                             std::vector<CellUpdate>& scratch, int n_threads = 1) {
   using namespace batch_detail;
   if (cells.empty()) return 0;
-  sort_by_code(cells, scratch);
+  sort_by_code(cells, scratch, n_threads);
   size_t first = 0, applied = 0;
   if (tree.getRoot() == nullptr) {  // liboctomap's updateNode creates the root
     tree.updateNode(morton_key(cells[0].code), cells[0].update, false);

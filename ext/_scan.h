@@ -43,6 +43,7 @@ constexpr uint64_t kMaxRegionCells = 1 << 28;  // larger scan key boxes are not 
 constexpr uint64_t kMaxDenseCells = 1 << 24;   // up to this, free counts live in arrays
 constexpr ptrdiff_t kMinThreadRays = 64;       // fewer rays per thread: fewer threads
 constexpr int kMaxThreads = 256;
+constexpr ptrdiff_t kMinParallelCollect = 1 << 16;  // fewer cells: collected on one thread
 constexpr int kChunksPerThread = 16;  // the rays are handed out in chunks, first come first served
 }  // namespace scan_detail
 
@@ -577,6 +578,8 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   using namespace scan_detail;
   using octomap::OcTreeKey;
   using octomap::point3d;
+  // the threads that collect the cells (the walk may get fewer, by the dense limit)
+  const int collect_threads = diagnose ? 1 : std::max(1, std::min(n_threads, kMaxThreads));
   const bool weighted = weights != nullptr;
   std::vector<uint32_t> ray_ids, ray_weights;  // the rays to traverse, super rays
   ptrdiff_t n_trav = n;
@@ -752,17 +755,22 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     counts_dirty = false;
     return Status::too_many_cells;  // nothing changed: the caller reports it
   }
-  // one update per cell: the traversed cells, then end cells no ray crossed
+  // one update per cell: the traversed cells (on the threads: each row its own), then
+  // end cells no ray crossed
+  const ptrdiff_t n_touched = static_cast<ptrdiff_t>(touched.size());
   cells.reserve(touched.size() + table.size());
-  ScanCell cell;
-  for (const uint64_t idx : touched) {
-    key = box_key(idx, lo, dims);
-    const KeyCounts* entry = table.find(pack_key(key));
-    cell.key = pack_key(key);
-    cell.update = update_value(counts[idx], entry != nullptr ? entry->n_hit : 0, ray_mode,
-                               l_hit, l_miss);
-    cells.push_back(cell);
+  cells.resize(touched.size());
+#pragma omp parallel for num_threads(collect_threads) schedule(static) \
+    if (collect_threads > 1 && n_touched >= kMinParallelCollect)
+  for (ptrdiff_t t = 0; t < n_touched; ++t) {
+    const uint64_t idx = touched[t];
+    const uint64_t packed = pack_key(box_key(idx, lo, dims));
+    const KeyCounts* entry = table.find(packed);
+    cells[t].key = packed;
+    cells[t].update = update_value(counts[idx], entry != nullptr ? entry->n_hit : 0, ray_mode,
+                                   l_hit, l_miss);
   }
+  ScanCell cell;
   for (size_t slot = 0; slot < table.capacity(); ++slot) {
     if (table.slot(slot).key == KeyTable::kEmpty) continue;
     key = unpack_key(table.slot(slot).key);
@@ -775,7 +783,9 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     cell.update = update_value(n_free, table.slot(slot).n_hit, ray_mode, l_hit, l_miss);
     cells.push_back(cell);
   }
-  for (const uint64_t idx : touched) counts[idx] = 0;
+#pragma omp parallel for num_threads(collect_threads) schedule(static) \
+    if (collect_threads > 1 && n_touched >= kMinParallelCollect)
+  for (ptrdiff_t t = 0; t < n_touched; ++t) counts[touched[t]] = 0;
   counts_dirty = false;
   stats->rays = n_trav;
   if (diagnose) {
