@@ -48,6 +48,7 @@ cdef extern from "_octree_batch.h" namespace "occgp" nogil:
         float update
     uint64_t morton_code(unsigned x, unsigned y, unsigned z)
     uint64_t morton_of_packed(uint64_t packed)
+    size_t keep_in_box(vector[CellUpdate]& cells, const int* lo, const int* hi)
     OcTreeKey morton_key(uint64_t code)
     void sort_by_code(vector[CellUpdate]& cells, vector[CellUpdate]& scratch) except +
     size_t apply_updates(OcTree& tree, vector[CellUpdate]& cells,
@@ -187,7 +188,6 @@ cdef class _OcTree(_TreeCore):
         cdef vector[ScanCell] found
         cdef vector[CellUpdate] cells, scratch
         cdef ScanStats stats
-        cdef OcTreeKey key
         cdef timespec done
         cdef bint boxed = key_box is not None
         cdef int lo[3]
@@ -205,26 +205,15 @@ cdef class _OcTree(_TreeCore):
                     tree[0], scan_points(points), points.shape[0], o, max_range, ray_mode,
                     culling, w, superray_threshold, _fully_free, tree, self._counts,
                     self._counts_dirty, found, &stats, diagnose, max_cells, n_threads, fo)
-                if status == Status.ok and not boxed:
-                    # each row its own: on the threads for large scans
-                    m = found.size()
+                if status == Status.ok:
+                    m = found.size()   # each row its own: on the threads for large scans
                     cells.resize(m)
                     for j in prange(<Py_ssize_t>m, num_threads=max(n_threads, 1),
                                     schedule="static", use_threads_if=m >= 65536):
                         cells[j].code = morton_of_packed(found[j].key)
                         cells[j].update = found[j].update
-                    self._apply_tracked(tree, cells, scratch, n_threads)
-                elif status == Status.ok:
-                    cells.resize(found.size())
-                    for j in range(<Py_ssize_t>found.size()):
-                        key = _unpack(found[j].key)
-                        if boxed and not (lo[0] <= key[0] <= hi[0] and lo[1] <= key[1] <= hi[1]
-                                          and lo[2] <= key[2] <= hi[2]):
-                            continue
-                        cells[m].code = morton_code(key[0], key[1], key[2])
-                        cells[m].update = found[j].update
-                        m += 1
-                    cells.resize(m)
+                    if boxed:
+                        m = keep_in_box(cells, lo, hi)
                     self._apply_tracked(tree, cells, scratch, n_threads)
                 clock_gettime(CLOCK_MONOTONIC, &done)
         return scan_result(status, stats, m, done)

@@ -69,6 +69,19 @@ inline octomap::OcTreeKey morton_key(uint64_t code) {
                             static_cast<octomap::key_type>(gather_bits3(code >> 2)));
 }
 
+// Keep the cells whose keys lie in [lo, hi] on every axis, in order; returns how many.
+inline size_t keep_in_box(std::vector<CellUpdate>& cells, const int* lo, const int* hi) {
+  size_t m = 0;
+  for (const CellUpdate& cell : cells) {
+    const octomap::OcTreeKey key = morton_key(cell.code);
+    bool in = true;
+    for (int axis = 0; axis < 3; ++axis) in = in && lo[axis] <= key[axis] && key[axis] <= hi[axis];
+    if (in) cells[m++] = cell;
+  }
+  cells.resize(m);
+  return m;
+}
+
 // Sort by code: least significant digit first, three passes of 16 bits (stable; the
 // codes are distinct, so the order is the same for every `n_threads`). With threads,
 // each pass counts and scatters contiguous chunks of the cells, one chunk a thread,
@@ -406,7 +419,8 @@ inline size_t apply_updates(octomap::OcTree& tree, std::vector<CellUpdate>& cell
       if (prefix == last) continue;
       last = prefix;
       Node* node = stack[0];
-      for (int k = 0; k < d; ++k) node = tree.getNodeChild(node, child_index(rest[starts[g]].code, k));
+      const uint64_t code = rest[starts[g]].code;
+      for (int k = 0; k < d; ++k) node = tree.getNodeChild(node, child_index(code, k));
       if (!ops.prune(node)) node->updateOccupancyChildren();
     }
   }

@@ -578,7 +578,6 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   using namespace scan_detail;
   using octomap::OcTreeKey;
   using octomap::point3d;
-  // the threads that collect the cells (the walk may get fewer, by the dense limit)
   const int collect_threads = diagnose ? 1 : std::max(1, std::min(n_threads, kMaxThreads));
   const bool weighted = weights != nullptr;
   std::vector<uint32_t> ray_ids, ray_weights;  // the rays to traverse, super rays
@@ -755,19 +754,15 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     counts_dirty = false;
     return Status::too_many_cells;  // nothing changed: the caller reports it
   }
-  // one update per cell: the traversed cells (on the threads: each row its own), then
-  // end cells no ray crossed
+  // one update per cell: the traversed cells (on the threads), then end cells no ray crossed
   const ptrdiff_t n_touched = static_cast<ptrdiff_t>(touched.size());
   cells.reserve(touched.size() + table.size());
   cells.resize(touched.size());
-#pragma omp parallel for num_threads(collect_threads) schedule(static) \
-    if (collect_threads > 1 && n_touched >= kMinParallelCollect)
+  const int ct = n_touched >= kMinParallelCollect ? collect_threads : 1;  // not the walk's
+#pragma omp parallel for num_threads(ct) schedule(static) if (ct > 1)
   for (ptrdiff_t t = 0; t < n_touched; ++t) {
-    const uint64_t idx = touched[t];
-    const uint64_t packed = pack_key(box_key(idx, lo, dims));
-    const KeyCounts* entry = table.find(packed);
-    cells[t].key = packed;
-    cells[t].update = update_value(counts[idx], entry != nullptr ? entry->n_hit : 0, ray_mode,
+    const KeyCounts* entry = table.find(cells[t].key = pack_key(box_key(touched[t], lo, dims)));
+    cells[t].update = update_value(counts[touched[t]], entry ? entry->n_hit : 0, ray_mode,
                                    l_hit, l_miss);
   }
   ScanCell cell;
@@ -783,8 +778,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     cell.update = update_value(n_free, table.slot(slot).n_hit, ray_mode, l_hit, l_miss);
     cells.push_back(cell);
   }
-#pragma omp parallel for num_threads(collect_threads) schedule(static) \
-    if (collect_threads > 1 && n_touched >= kMinParallelCollect)
+#pragma omp parallel for num_threads(ct) schedule(static) if (ct > 1)
   for (ptrdiff_t t = 0; t < n_touched; ++t) counts[touched[t]] = 0;
   counts_dirty = false;
   stats->rays = n_trav;
