@@ -99,31 +99,40 @@ def _check_cap(sizes, resolution, max_cells, what, cap_name) -> int:
     return total
 
 
-def _expand_leaves(centres, sizes, resolution, max_cells, what, cap_name):
-    """Finest-cell centres of leaves, and for each the index of its leaf.
-
-    A leaf of edge ``resolution * 2**k`` yields ``8**k`` cells whose centres are
-    computed as liboctomap's ``keyToCoord`` at depth 16 computes them:
-    ``(index + 0.5) * resolution``.
-    """
+def leaf_cells(centres: np.ndarray, sizes: np.ndarray,
+               resolution: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The finest cells that leaves cover: their integer indices (the cell of edge
+    `resolution` whose centre is ``(index + 0.5) * resolution``), shape (n, 3), and for
+    each the row of its leaf. A leaf of edge ``resolution * 2**k`` covers ``8**k`` cells;
+    callers check the total first (:func:`_check_cap`)."""
     k, _ = _level_counts(sizes, resolution)
-    total = _check_cap(sizes, resolution, max_cells, what, cap_name)
-    out = np.empty((total, 3))
+    total = int(np.sum(np.left_shift(np.int64(1), 3 * k))) if len(k) else 0
+    index = np.empty((total, 3), dtype=np.int64)
     owner = np.empty(total, dtype=np.int64)
     pos = 0
     for level in np.unique(k):  # at most 17 levels; vectorised within each
         rows = np.flatnonzero(k == level)
         side = 1 << int(level)
         # integer index of each leaf's lowest finest cell (exact: |index| <= 2**15)
-        low = np.rint(centres[rows] / resolution - side / 2.0)
-        ar = np.arange(side, dtype=np.float64)
+        low = np.rint(centres[rows] / resolution - side / 2.0).astype(np.int64)
+        ar = np.arange(side)
         offsets = np.stack(np.meshgrid(ar, ar, ar, indexing="ij"), axis=-1).reshape(-1, 3)
-        block = ((low[:, None, :] + offsets[None]) + 0.5) * resolution
-        n = block.shape[0] * block.shape[1]
-        out[pos:pos + n] = block.reshape(-1, 3)
+        n = len(rows) * len(offsets)
+        index[pos:pos + n] = (low[:, None, :] + offsets[None]).reshape(-1, 3)
         owner[pos:pos + n] = np.repeat(rows, side**3)
         pos += n
-    return out, owner
+    return index, owner
+
+
+def _expand_leaves(centres, sizes, resolution, max_cells, what, cap_name):
+    """Finest-cell centres of leaves, and for each the index of its leaf.
+
+    The centres are computed as liboctomap's ``keyToCoord`` at depth 16 computes
+    them: ``(index + 0.5) * resolution``.
+    """
+    _check_cap(sizes, resolution, max_cells, what, cap_name)
+    index, owner = leaf_cells(centres, sizes, resolution)
+    return (index + 0.5) * resolution, owner
 
 
 def _finest_cells(tree: LogOddsMap, occupied: bool = True,

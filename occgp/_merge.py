@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._export import leaf_cells
 from ._logodds_map import OctreeFace
 from ._validation import as_numeric, check_choice, check_int
 
@@ -153,24 +154,11 @@ def _as_octree(other: Any) -> Any:
 def _finest_cells(tree: Any, cap: int) -> tuple[NDArray[np.int64], NDArray[np.float32]]:
     """The keys (int64, (n, 3)) and log-odds of every finest cell `tree` knows."""
     leaves = tree.leaves()
-    res = tree.resolution
-    side = np.rint(leaves.sizes / res).astype(np.int64)
-    total = int((side.astype(np.float64) ** 3).sum())
+    total = int(np.sum(np.rint(leaves.sizes / tree.resolution) ** 3))
     if total > cap:
         raise ValueError(f"other holds {total} finest cells, more than max_cells={cap}")
-    low = np.rint(leaves.centers / res - side[:, None] / 2.0).astype(np.int64) + _HALF
-    keys = np.empty((total, 3), dtype=np.int64)
-    values = np.empty(total, dtype=np.float32)
-    pos = 0
-    for s in np.unique(side):   # at most 17 sizes; vectorised within each
-        rows = np.flatnonzero(side == s)
-        ar = np.arange(s)
-        offsets = np.stack(np.meshgrid(ar, ar, ar, indexing="ij"), axis=-1).reshape(-1, 3)
-        n = len(rows) * len(offsets)
-        keys[pos:pos + n] = (low[rows, None, :] + offsets[None]).reshape(-1, 3)
-        values[pos:pos + n] = np.repeat(leaves.log_odds[rows], len(offsets))
-        pos += n
-    return keys, values
+    index, owner = leaf_cells(leaves.centers, leaves.sizes, tree.resolution)
+    return index + _HALF, leaves.log_odds[owner]
 
 
 def _resampled(other: Any, keys: NDArray[np.int64], t: NDArray[np.float64],

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._logodds_map import OctreeFace
+from ._octree_queries import pack_keys, unpack_keys
 from ._validation import check_real
 
 __all__ = ["Stamps", "OctreeStamps", "STAMPS_MAGIC", "stamps_block", "read_stamps_block"]
@@ -81,7 +82,6 @@ class OctreeStamps(OctreeFace):
         >>> len(s.keys), s.stamps.tolist()
         (4, [2.0, 2.0, 2.0, 2.0])
         """
-        from ._octree_queries import unpack_keys
         packed, stamps = self._stamp_table()
         order = np.argsort(packed)
         keys = unpack_keys(packed[order])
@@ -108,7 +108,6 @@ class OctreeStamps(OctreeFace):
         >>> m.stamp_at([[0.05, 0.05, 0.05], [1.0, 1.0, 1.0]]).tolist()
         [5.0, nan]
         """
-        from ._octree_queries import pack_keys
         query = pack_keys(self.coord_to_key(points))
         packed, stamps = self._stamp_table()
         order = np.argsort(packed)
@@ -193,7 +192,6 @@ class OctreeStamps(OctreeFace):
             limit = check_real(max_age, "max_age", low=0.0, low_open=False, state_bounds=True)
         else:
             life = check_real(half_life, "half_life", low=0.0, state_bounds=True)
-        from ._octree_queries import unpack_keys
         packed, stamps = self._stamp_table()
         if max_age is not None:
             old = now - stamps > limit
