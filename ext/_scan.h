@@ -34,11 +34,11 @@
 #include "_keytable.h"
 #include "_raywalk.h"
 #include "_status.h"
+#include "_superrays.h"
 
 namespace occgp {
 
 namespace scan_detail {
-constexpr int kMaxVal = 32768;                 // liboctomap's tree_max_val
 constexpr uint64_t kMaxRegionCells = 1 << 28;  // larger scan key boxes are not culled
 constexpr uint64_t kMaxDenseCells = 1 << 24;   // up to this, free counts live in arrays
 constexpr ptrdiff_t kMinThreadRays = 64;       // fewer rays per thread: fewer threads
@@ -106,10 +106,26 @@ __attribute__((noinline, cold)) static void count_free_table(int kx, int ky, int
   table->get(pack_key(key))->n_free += w;
 }
 
+// Count `w` rays through the box cell `idx` of `counts`, appending it to `touched`
+// when it is new. With `shared` (scan mode, every thread counting into one array),
+// the count is a flag: the thread that sets it first, atomically, appends the cell,
+// so each cell is appended once over all threads.
+static inline void count_box(uint32_t* counts, uint64_t idx, uint32_t w, bool shared,
+                             std::vector<uint64_t>* touched) {
+  if (shared) {
+    if (__atomic_load_n(counts + idx, __ATOMIC_RELAXED) == 0 &&
+        __atomic_exchange_n(counts + idx, 1u, __ATOMIC_RELAXED) == 0)
+      touched->push_back(idx);
+  } else {
+    if (counts[idx] == 0) touched->push_back(idx);
+    counts[idx] += w;
+  }
+}
+
 // Count `w` rays through the cell (kx, ky, kz): in the scan's dense box (`free_counts`,
-// new cells appended to `touched`), or the table.
-static inline void count_free(int kx, int ky, int kz, uint32_t w, bool dense, const int* lo,
-                              const uint64_t* dims, uint32_t* free_counts,
+// see count_box), or the table.
+static inline void count_free(int kx, int ky, int kz, uint32_t w, bool dense, bool shared,
+                              const int* lo, const uint64_t* dims, uint32_t* free_counts,
                               std::vector<uint64_t>* touched, KeyTable* table) {
   const uint64_t x = static_cast<uint64_t>(kx - lo[0]);
   const uint64_t y = static_cast<uint64_t>(ky - lo[1]);
@@ -117,9 +133,7 @@ static inline void count_free(int kx, int ky, int kz, uint32_t w, bool dense, co
   // liboctomap's traversal may step past the end cell before its length test stops
   // it: such cells lie outside the box and go to the table
   if (dense && x < dims[0] && y < dims[1] && z < dims[2]) {
-    const uint64_t idx = (z * dims[1] + y) * dims[0] + x;
-    if (free_counts[idx] == 0) touched->push_back(idx);
-    free_counts[idx] += w;
+    count_box(free_counts, (z * dims[1] + y) * dims[0] + x, w, shared, touched);
   } else {
     count_free_table(kx, ky, kz, w, table);
   }
@@ -143,240 +157,7 @@ static inline bool key_checked(double resolution_factor, float coordinate, octom
   return true;
 }
 
-// The murmur3 finaliser: spreads the bits of a signature for hashing.
-static inline uint64_t mix(uint64_t k) {
-  k ^= k >> 33;
-  k *= 0xff51afd7ed558ccdULL;
-  k ^= k >> 33;
-  return k;
-}
-
-static inline double dmin(double a, double b) { return a < b ? a : b; }
-static inline double dmax(double a, double b) { return a > b ? a : b; }
-
-struct Crossing {
-  int axis;       // the axis whose border the rays of a group cross
-  int other;      // the coordinate read at that border
-  double border;  // the border's position on `axis`, in metres
-  int key_lo;     // lowest key `other` may have there
-  int n_keys;     // how many keys `other` may have there
-  int key_min;    // the keys of `other` from the origin's cell to the end cell:
-  int key_max;    // only the borders between them are crossed
-};
-
 }  // namespace scan_detail
-
-// Group the rays of a scan into super rays (Kwon, dissertation 2.3.1-2.3.4).
-//
-// Fills `rays` (indices of the rays to traverse) and `weights` (how many rays each
-// stands for). Rays ending in a cell that holds at least `threshold` end points are
-// classified by their *signature*: at every border a ray crosses between the origin's
-// cell and its end cell, the keys of the other coordinates there; only the crossings
-// where the rays into that end cell can differ ("critical", the mapping lines) are
-// evaluated. Equal signatures mean the same traversed cells, so one ray of each class
-// is traversed with the class size as weight.
-//
-// Exactness against liboctomap's float traversal: a ray joins a class only when it is
-// *certified* -- its end point clears the borders of its cell by more than `delta` =
-// 2^-19 (length + resolution), 4 x the error of liboctomap's float direction, and at
-// every crossing (critical or not) the other coordinate clears the borders of its cell
-// that the ray crosses (those between the origin's cell and the end cell) by more than
-// `delta` plus 2^-21 resolution times the slope |d_b / d_a|, for the single-precision
-// half-cell offset of liboctomap's borders. Its float traversal then equals the exact
-// one. Every other ray is traversed on its own. A crossing is skipped as non-critical
-// only when every certified ray of the group clears the same borders there by that
-// margin: the slopes are bounded over the end cell shrunk by `delta` (where the origin
-// lies on the end cell's face, at t = 0 of the rays' first crossing, rays that end
-// near that face are steep, and the half-cell offset moves their first crossing far
-// along them), and the key ranges are computed in doubles, cut to the keys the rays
-// can have.
-static inline void super_rays(double res, const octomap::point3d& o, const octomap::OcTreeKey& ko,
-                       const std::vector<octomap::point3d>& ends,
-                       const std::vector<octomap::OcTreeKey>& end_keys,
-                       const std::vector<uint8_t>& truncated, KeyTable& table, int threshold,
-                       std::vector<uint32_t>& rays, std::vector<uint32_t>& weights) {
-  using namespace scan_detail;
-  const double rf = 1.0 / res;
-  double oc[3], lo[3], hi[3], pc[3], dp[3], inv[3];
-  const ptrdiff_t n = static_cast<ptrdiff_t>(ends.size());
-  uint32_t n_groups = 0;
-  std::vector<uint32_t> group_of, offsets, order;
-  std::vector<Crossing> crossings;
-  std::vector<uint64_t> class_code;
-  std::vector<uint32_t> class_ray;
-  oc[0] = o.x();
-  oc[1] = o.y();
-  oc[2] = o.z();
-  const double eb = std::ldexp(res, -21);  // 4 x the single-precision offset of the borders
-  // groups of rays by end cell, for the cells with at least `threshold` end points
-  group_of.assign(n, 0);
-  for (ptrdiff_t i = 0; i < n; ++i) {
-    if (truncated[i]) continue;
-    KeyCounts* entry = table.find(pack_key(end_keys[i]));
-    if (entry == nullptr || entry->n_hit < static_cast<uint32_t>(threshold)) continue;
-    if (entry->group == 0) {
-      n_groups += 1;
-      entry->group = n_groups;
-    }
-    group_of[i] = entry->group;
-  }
-  offsets.assign(n_groups + 2, 0);
-  for (ptrdiff_t i = 0; i < n; ++i) {
-    if (group_of[i]) {
-      offsets[group_of[i] + 1] += 1;
-    } else {
-      rays.push_back(static_cast<uint32_t>(i));
-      weights.push_back(1);
-    }
-  }
-  for (ptrdiff_t g = 1; g < static_cast<ptrdiff_t>(n_groups) + 2; ++g) offsets[g] += offsets[g - 1];
-  order.resize(offsets[n_groups + 1]);
-  for (ptrdiff_t i = 0; i < n; ++i) {
-    if (group_of[i]) {
-      order[offsets[group_of[i]]] = static_cast<uint32_t>(i);
-      offsets[group_of[i]] += 1;
-    }
-  }
-  // offsets[g] now ends group g (1-based), i.e. starts group g + 1
-  for (ptrdiff_t g = 1; g < static_cast<ptrdiff_t>(n_groups) + 1; ++g) {
-    const ptrdiff_t first = offsets[g - 1];
-    const octomap::OcTreeKey kv = end_keys[order[first]];
-    double far2 = 0;
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = (static_cast<double>(kv[a]) - kMaxVal) * res;
-      hi[a] = (static_cast<double>(kv[a]) + 1 - kMaxVal) * res;
-      far2 += dmax(std::pow(lo[a] - oc[a], 2.0), std::pow(hi[a] - oc[a], 2.0));
-    }
-    // 2^-19 (length + res): 4 x the error of liboctomap's float32 ray direction
-    const double delta = std::ldexp(std::sqrt(far2) + res, -19);
-    bool ok = true;
-    crossings.clear();
-    int code_bits = 0;
-    for (int a = 0; ok && a < 3; ++a) {
-      const int d_a = static_cast<int>(kv[a]) - static_cast<int>(ko[a]);
-      if (d_a == 0) continue;
-      const int step = d_a > 0 ? 1 : -1;
-      for (int b = a + 1; b < 3; ++b) {
-        if (kv[b] == ko[b]) continue;  // the rays stay in one b-slab: the end margins certify it
-        // the slopes d_b / d_a of the rays into the end cell, extreme at the corners of
-        // the cell shrunk by the end margin `delta` (every other ray is traversed on its
-        // own): finite even where the origin lies on the end cell's a-face, and there as
-        // steep as such rays may be
-        double r_min = 1e300, r_max = -1e300;
-        for (int i = 0; i < 4; ++i) {
-          const double s = ((i & 1) ? hi[a] - delta : lo[a] + delta) - oc[a];
-          if (!(s * step >= 0.5 * delta)) {
-            ok = false;  // degenerate end cell: leave the group plain
-            break;
-          }
-          const double r = (((i & 2) ? hi[b] : lo[b]) - oc[b]) / s;
-          r_min = dmin(r_min, r);
-          r_max = dmax(r_max, r);
-        }
-        if (!ok) break;
-        const double slack = delta + eb * dmax(std::fabs(r_min), std::fabs(r_max));
-        Crossing c;
-        c.key_min = std::min(static_cast<int>(ko[b]), static_cast<int>(kv[b])) - kMaxVal;
-        c.key_max = std::max(static_cast<int>(ko[b]), static_cast<int>(kv[b])) - kMaxVal;
-        for (long jj = 1; jj < std::abs(d_a) + 1; ++jj) {
-          const double border =
-              (static_cast<double>(static_cast<int>(ko[a]) + (step > 0 ? jj : 1 - jj)) - kMaxVal) *
-              res;
-          const double s = border - oc[a];
-          const double b1 = oc[b] + s * r_min;
-          const double b2 = oc[b] + s * r_max;
-          // the keys the rays may have there, in doubles (steep rays give far ends), cut
-          // to the keys between the origin's and the end cell's: the borders outside
-          // are never crossed
-          const double k_first = dmax(std::floor((dmin(b1, b2) - slack) * rf), c.key_min);
-          const double k_last = dmin(std::floor((dmax(b1, b2) + slack) * rf), c.key_max);
-          if (!(k_first <= k_last)) {
-            ok = false;  // no key left (rounding): leave the group plain
-            break;
-          }
-          c.key_lo = static_cast<int>(k_first);
-          const int nk = static_cast<int>(k_last) - c.key_lo + 1;
-          if (nk == 1) continue;  // every ray of the group has the same key here
-          code_bits += 64 - __builtin_clzll(static_cast<uint64_t>(nk - 1));
-          if (code_bits > 62) {
-            ok = false;
-            break;
-          }
-          c.axis = a;
-          c.other = b;
-          c.border = border;
-          c.n_keys = nk;
-          crossings.push_back(c);
-        }
-        if (!ok) break;
-      }
-    }
-    if (ok) {
-      // each crossing where the rays can take nk keys splits them nk ways: when that
-      // alone leaves fewer rays than classes, grouping cannot pay its cost
-      long segments = 1;
-      for (const Crossing& c : crossings) segments += c.n_keys - 1;
-      if (segments >= static_cast<ptrdiff_t>(offsets[g]) - first) ok = false;
-    }
-    if (!ok) {
-      for (ptrdiff_t m = first; m < static_cast<ptrdiff_t>(offsets[g]); ++m) {
-        rays.push_back(order[m]);
-        weights.push_back(1);
-      }
-      continue;
-    }
-    // the classes: equal signatures, found in a small hash table
-    size_t cap = 16;
-    while (cap < static_cast<size_t>(2 * (static_cast<ptrdiff_t>(offsets[g]) - first))) cap <<= 1;
-    class_code.assign(cap, KeyTable::kEmpty);  // signatures have at most 62 bits
-    class_ray.resize(cap);
-    for (ptrdiff_t m = first; m < static_cast<ptrdiff_t>(offsets[g]); ++m) {
-      const uint32_t idx = order[m];
-      pc[0] = ends[idx].x();
-      pc[1] = ends[idx].y();
-      pc[2] = ends[idx].z();
-      ok = true;
-      for (int a = 0; a < 3; ++a) {
-        if (dmin(pc[a] - lo[a], hi[a] - pc[a]) <= delta) ok = false;
-        dp[a] = pc[a] - oc[a];
-        // the rays of a group cross borders of axis a only when dp[a] != 0
-        inv[a] = dp[a] != 0 ? 1.0 / dp[a] : 0.0;
-      }
-      uint64_t code = 0;
-      for (size_t j = 0; ok && j < crossings.size(); ++j) {
-        const Crossing& c = crossings[j];
-        const double r_abs = std::fabs(dp[c.other] * inv[c.axis]);
-        const double y = oc[c.other] + (c.border - oc[c.axis]) * inv[c.axis] * dp[c.other];
-        const double kb = std::floor(y * rf);
-        // the margin to the borders of that key the rays cross
-        double margin = 1e300;
-        if (kb > c.key_min) margin = y - kb * res;
-        if (kb < c.key_max) margin = dmin(margin, (kb + 1) * res - y);
-        if (!(margin > delta + eb * r_abs) || kb < c.key_lo || kb >= c.key_lo + c.n_keys) {
-          ok = false;
-        } else {
-          code = code * static_cast<uint64_t>(c.n_keys) +
-                 static_cast<uint64_t>(static_cast<int>(kb) - c.key_lo);
-        }
-      }
-      if (ok) {
-        size_t h = mix(code) & (cap - 1);
-        while (class_code[h] != KeyTable::kEmpty && class_code[h] != code) h = (h + 1) & (cap - 1);
-        if (class_code[h] == code) {
-          weights[class_ray[h]] += 1;
-        } else {
-          class_code[h] = code;
-          class_ray[h] = static_cast<uint32_t>(rays.size());
-          rays.push_back(idx);
-          weights.push_back(1);
-        }
-      } else {
-        rays.push_back(idx);
-        weights.push_back(1);
-      }
-    }
-  }
-}
 
 // Grow the scan's culling region (Kwon, dissertation 2.3.5, Alg. 3).
 //
@@ -451,6 +232,7 @@ struct Rays {
   const CellBox* region;    // the culling region over the scan's key box
   bool cull;                // the region holds cells
   bool dense;               // counts in box arrays (else in tables)
+  bool shared;              // dense, scan mode: one array of flags for every thread
   const int* lo;            // the scan's key box
   const uint64_t* dims;
   uint64_t max_cells;  // 0: no limit
@@ -491,8 +273,7 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t
         for (size_t j = 0; j < back.size(); ++j) {
           const uint64_t idx = back[j];
           if (s->dense) {
-            if (counts[idx] == 0) touched->push_back(idx);
-            counts[idx] += w;
+            count_box(counts, idx, w, s->shared, touched);
           } else {
             table->get(pack_key(box_key(idx, s->lo, s->dims)))->n_free += w;
           }
@@ -509,8 +290,8 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t
       }
     }
     while (more) {
-      count_free(walker.key(0), walker.key(1), walker.key(2), w, s->dense, s->lo, s->dims,
-                 counts, touched, table);
+      count_free(walker.key(0), walker.key(1), walker.key(2), w, s->dense, s->shared, s->lo,
+                 s->dims, counts, touched, table);
       if (visits != nullptr) {
         octomap::OcTreeKey key;
         key[0] = static_cast<octomap::key_type>(walker.key(0));
@@ -557,11 +338,13 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t
 // stays within one ray per thread of it plus the end cells; the exact count decides).
 //
 // The rays are walked on up to `n_threads` OpenMP threads (fewer for small scans; one
-// with `diagnose`), each into its own counts: a slice of `counts` over the scan's key
-// box (no more threads than slices fit the dense limit), or, where the box alone
-// exceeds the limit, a table of its own. The counts are merged (integer sums) before
-// the cells are collected, so the cells, their updates and the statistics are the same
-// for every `n_threads`; only the order of `cells` may differ.
+// with `diagnose`). In scan mode they share one array of flags over the scan's key box
+// (a cell is collected by the thread that flags it first); in ray mode each counts into
+// a slice of `counts` of its own (no more threads than slices fit the dense limit).
+// Where the box alone exceeds the limit, each thread counts in a table of its own. The
+// counts are merged (integer sums) before the cells are collected, so the cells, their
+// updates and the statistics are the same for every `n_threads`; only the order of
+// `cells` may differ.
 //
 // With `free_only` (nullptr: none), a ray i with free_only[i] != 0 only clears: it is
 // handled as a ray truncated at `max_range` is (octomap_server's ground points) -- its
@@ -655,14 +438,18 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   if (diagnose || n_threads < 1) n_threads = 1;
   n_threads = std::min(std::min(n_threads, kMaxThreads),
                        static_cast<int>(std::max<ptrdiff_t>(n_trav / kMinThreadRays, 1)));
-  // each thread's counts get their own slice of `counts`, within the dense limit: no
-  // more threads than slices fit (counting in tables instead is several times slower);
-  // a box larger than the limit is counted in tables by every thread
+  // in scan mode a cell's update asks only whether a ray crossed it, so every thread
+  // sets flags in one array (count_box); in ray mode each thread's counts get their own
+  // slice of `counts`, within the dense limit: no more threads than slices fit (counting
+  // in tables instead is several times slower). A box larger than the limit is counted
+  // in tables by every thread.
   const bool dense = box_cells <= kMaxDenseCells;
-  if (dense)
+  const bool shared = dense && !ray_mode && n_threads > 1;
+  const uint64_t slices = shared ? 1 : n_threads;
+  if (dense && !shared)
     n_threads = static_cast<int>(std::min<uint64_t>(n_threads, kMaxDenseCells / box_cells));
-  if (dense && (counts_dirty || counts.size() < box_cells * n_threads))
-    counts.assign(std::max<uint64_t>(box_cells * n_threads, counts.size()), 0);
+  if (dense && (counts_dirty || counts.size() < box_cells * slices))
+    counts.assign(std::max<uint64_t>(box_cells * slices, counts.size()), 0);
   counts_dirty = true;
   rays.res = res;
   rays.origin = &o;
@@ -676,6 +463,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   rays.region = &region;
   rays.cull = stats->region_cells > 0;
   rays.dense = dense;
+  rays.shared = shared;
   rays.lo = lo;
   rays.dims = dims;
   rays.max_cells = max_cells;
@@ -701,7 +489,8 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
 #endif
       try {
         walk_rays(&rays, c * n_trav / n_chunks, (c + 1) * n_trav / n_chunks,
-                  dense ? counts.data() + static_cast<uint64_t>(t) * box_cells : nullptr,
+                  dense ? counts.data() + (shared ? 0 : static_cast<uint64_t>(t) * box_cells)
+                        : nullptr,
                   t == 0 ? &touched : &part_touched[t], t == 0 ? &table : &part_tables[t - 1],
                   t == 0 ? hits : 0, nullptr, &part_visits[t], &stop);
       } catch (...) {
@@ -712,10 +501,12 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     }
     if (error) std::rethrow_exception(error);
     // merge into thread 0's counts (integer sums: the order does not matter), leaving
-    // the other slices zero
+    // the other slices zero; shared flags need only the new cells appended
     stats->traversed_cells += part_visits[0];
     for (int t = 1; t < n_threads; ++t) {
-      if (dense) {
+      if (shared) {
+        touched.insert(touched.end(), part_touched[t].begin(), part_touched[t].end());
+      } else if (dense) {
         uint32_t* part = counts.data() + static_cast<uint64_t>(t) * box_cells;
         for (const uint64_t idx : part_touched[t]) {
           if (counts[idx] == 0) touched.push_back(idx);
