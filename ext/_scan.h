@@ -254,6 +254,10 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t
   std::vector<uint64_t> back;
   long n_visits = 0;
   const CellBox* region = s->region;
+  // copies, which the counts' stores cannot alias
+  const bool dense = s->dense, shared = s->shared;
+  const int lo[3] = {s->lo[0], s->lo[1], s->lo[2]};
+  const uint64_t dims[3] = {s->dims[0], s->dims[1], s->dims[2]};
   for (ptrdiff_t r = r0; r < r1; ++r) {
     if (stop->get()) break;
     ptrdiff_t i;
@@ -272,12 +276,12 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t
         // the region's box is the scan's key box, the one `counts` covers
         for (size_t j = 0; j < back.size(); ++j) {
           const uint64_t idx = back[j];
-          if (s->dense) {
-            count_box(counts, idx, w, s->shared, touched);
+          if (dense) {
+            count_box(counts, idx, w, shared, touched);
           } else {
-            table->get(pack_key(box_key(idx, s->lo, s->dims)))->n_free += w;
+            table->get(pack_key(box_key(idx, lo, dims)))->n_free += w;
           }
-          if (visits != nullptr) visits->get(pack_key(box_key(idx, s->lo, s->dims)))->n_free += 1;
+          if (visits != nullptr) visits->get(pack_key(box_key(idx, lo, dims)))->n_free += 1;
         }
         n_visits += back.size();
         more = false;
@@ -289,18 +293,17 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t
           more = walker.next();
       }
     }
-    while (more) {
-      count_free(walker.key(0), walker.key(1), walker.key(2), w, s->dense, s->shared, s->lo,
-                 s->dims, counts, touched, table);
-      if (visits != nullptr) {
-        octomap::OcTreeKey key;
-        key[0] = static_cast<octomap::key_type>(walker.key(0));
-        key[1] = static_cast<octomap::key_type>(walker.key(1));
-        key[2] = static_cast<octomap::key_type>(walker.key(2));
-        visits->get(pack_key(key))->n_free += 1;
-      }
-      n_visits += 1;
-      more = walker.next();
+    if (more) {
+      n_visits += walker.visit_rest([&](int kx, int ky, int kz) {
+        count_free(kx, ky, kz, w, dense, shared, lo, dims, counts, touched, table);
+        if (visits != nullptr) {
+          octomap::OcTreeKey key;
+          key[0] = static_cast<octomap::key_type>(kx);
+          key[1] = static_cast<octomap::key_type>(ky);
+          key[2] = static_cast<octomap::key_type>(kz);
+          visits->get(pack_key(key))->n_free += 1;
+        }
+      });
     }
     if (s->max_cells && touched->size() + (table->size() - table_base) > s->max_cells) {
       stop->set();
