@@ -33,6 +33,11 @@ from _keys cimport (
 from _scan cimport ScanCell, ScanStats, scan_updates_free_only
 from _status cimport Status
 
+
+cdef extern from "_grid_apply.h" namespace "occgp" nogil:
+    void apply_grid_updates(unordered_map[uint64_t, float]& cells, const vector[ScanCell]& found,
+                            float lo, float hi, int n_threads) except +
+
 include "_scan_result.pxi"
 
 import threading
@@ -53,18 +58,6 @@ cdef bool _fully_free(void* view, const OcTreeKey& key) noexcept nogil:
     cdef GridView* v = <GridView*>view
     cdef CellMap.iterator found = v.cells.find(pack_key(key))
     return found != v.cells.end() and deref(found).second <= v.floor
-
-
-cdef inline void _apply(float* value, bint created, float update, float lo,
-                        float hi) noexcept nogil:
-    """liboctomap's ``updateNode(key, update)`` on one cell (`value` is 0 when `created`)."""
-    if not created and ((update >= 0 and value[0] >= hi) or (update <= 0 and value[0] <= lo)):
-        return                                   # already at the bound: no change
-    value[0] += update
-    if value[0] < lo:
-        value[0] = lo
-    elif value[0] > hi:
-        value[0] = hi
 
 
 @cython.auto_pickle(False)
@@ -131,22 +124,21 @@ cdef class _Grid:
         `culling` the scan's culling region is grown over this grid's cells;
         with `weights` (ray mode), ray i counts ``weights[i]`` times; with
         `superray_threshold` > 0 the rays are grouped into super rays first. The rays
-        are walked on up to `n_threads` threads (one with `diagnose`); the grid and the
-        statistics are the same for every `n_threads`. Rays i with ``free_only[i]``
+        are walked, and the updates applied (``ext/_grid_apply.h``), on up to `n_threads`
+        threads (the walk on one with `diagnose`); the grid and the statistics are the
+        same for every `n_threads`. Rays i with ``free_only[i]``
         (None: none) only clear, as rays cut at `max_range`.
 
         Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
         seconds, unnecessary_traversals) as ``OccupancyOctree``'s ``_insert_batch``.
         """
         cdef OcTree* tree = self._get()
-        cdef Py_ssize_t j
         cdef const uint32_t* w = scan_weights(weights, points.shape[0], superray_threshold)
         cdef const uint8_t* fo = scan_free_only(free_only, points.shape[0])
         cdef point3d o = point3d(origin[0], origin[1], origin[2])
         cdef vector[ScanCell] found
         cdef ScanStats stats
         cdef GridView view
-        cdef pair[CellMap.iterator, bool] cell
         cdef float lo = tree.getClampingThresMinLog(), hi = tree.getClampingThresMaxLog()
         cdef timespec done
         cdef Status status = Status.ok
@@ -158,11 +150,7 @@ cdef class _Grid:
                     tree[0], scan_points(points), points.shape[0], o, max_range, ray_mode,
                     culling, w, superray_threshold, _fully_free, &view, self._counts,
                     self._counts_dirty, found, &stats, diagnose, max_cells, n_threads, fo)
-                if self._cells.empty():
-                    self._cells.reserve(found.size())
-                for j in range(<Py_ssize_t>found.size()):
-                    cell = self._cells.insert(Cell(found[j].key, 0.0))
-                    _apply(&deref(cell.first).second, cell.second, found[j].update, lo, hi)
+                apply_grid_updates(self._cells, found, lo, hi, n_threads)
                 clock_gettime(CLOCK_MONOTONIC, &done)
         return scan_result(status, stats, found.size(), done)
 

@@ -72,3 +72,28 @@ def test_threaded_update_into_a_loaded_tree_and_with_a_box():
         one.insert_scan(points, origin, bbox=box, n_jobs=1)
         two.insert_scan(points, origin, bbox=box, n_jobs=2)
     same_tree(two, one)
+
+
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+@pytest.mark.parametrize("method", ["plain", "superray+culling"])
+def test_grid_updates_on_threads_give_the_single_thread_grid(mode, method):
+    """GridMap applies a large scan's updates on the threads (cells it holds updated
+    there, new ones inserted after, at least 32768 cells): every cell's log-odds is the
+    single thread's, over repeated scans that clamp and re-open cells."""
+    from occgp import GridMap
+    scans = room_scans(n_points=4000, seed=3)
+    grids = {n: GridMap(0.05) for n in (1, 2, 3, 8)}
+    sizes = []
+    for points, origin in scans + scans[::-1]:
+        for n, m in grids.items():
+            m.insert_scan(points, origin, mode=mode, method=method, n_jobs=n)
+        sizes.append(grids[1].last_insert_["updated_cells"])
+        ref = grids[1].cells()
+        for n in (2, 3, 8):
+            got = grids[n].cells()
+            assert grids[n].num_cells == grids[1].num_cells
+            np.testing.assert_array_equal(got.centers, ref.centers)
+            np.testing.assert_array_equal(got.log_odds, ref.log_odds)
+    assert max(sizes[1:]) >= 1 << 15       # the threaded path was taken
+    floor = np.log(grids[1].clamping_min / (1 - grids[1].clamping_min))
+    assert np.sum(np.abs(ref.log_odds - floor) < 1e-5) > 100   # clamped cells were updated
