@@ -326,10 +326,10 @@ cdef class _OcTree(_TreeCore):
                            scan_result(Status.ok, sb, found_b.size(), done))
         return near_pts, keys[:m], kinds[:m], point_cell, stats
 
-    def _apply_cells(self, const uint64_t[::1] keys, const float[::1] updates):
+    def _apply_cells(self, const uint64_t[::1] keys, const float[::1] updates, int n_threads=1):
         """Add ``updates[i]`` to the cell of packed key ``keys[i]`` (keys distinct), as
-        liboctomap's updateNode does (clamped), in one pass over the tree; returns the
-        number of cells not aborted early."""
+        updateNode does (clamped), in one pass over the tree on up to `n_threads`
+        threads; returns the number of cells not aborted early."""
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t j, n = keys.shape[0]
         cdef vector[CellUpdate] cells, scratch
@@ -342,7 +342,7 @@ cdef class _OcTree(_TreeCore):
                     key = _unpack(keys[j])
                     cells[j].code = morton_code(key[0], key[1], key[2])
                     cells[j].update = updates[j]
-                applied = self._apply_tracked(tree, cells, scratch)
+                applied = self._apply_tracked(tree, cells, scratch, n_threads)
         return applied
 
     def _key_to_coord(self, const uint16_t[:, ::1] keys, unsigned depth):

@@ -215,9 +215,10 @@ class KNNMap(OccupancyOctree):
         in it give the score inf. The map keeps the last `W` near clouds
         (float64, ``24 * W * n_near`` bytes).
     n_jobs : int or None, default=None
-        Threads for the k-NN queries (``cKDTree.query(workers=)``) and for
-        walking a scan's rays (as ``OccupancyOctree.insert_scan(n_jobs=)``:
-        the map is the same for every `n_jobs`); None: 1, -1: every core.
+        Threads for the k-NN queries (``cKDTree.query(workers=)``), for
+        walking a scan's rays and for the tree update (as
+        ``OccupancyOctree.insert_scan(n_jobs=)``: the map is the same for every
+        `n_jobs`); None: 1, -1: every core.
 
     Attributes
     ----------
@@ -493,7 +494,7 @@ default="auto"
         updates = _cell_updates(kinds, point_cell, values, logodds32(self.p_m),
                                 logodds32(self.p_m_out))
         seconds = time.perf_counter() - t0
-        self._apply_cells(keys, updates)
+        self._apply_cells(keys, updates, workers)
         self._scores = scores
         if self.history:
             self._history = (self._history + [cloud])[-self.history:]

@@ -97,3 +97,19 @@ def test_grid_updates_on_threads_give_the_single_thread_grid(mode, method):
     assert max(sizes[1:]) >= 1 << 15       # the threaded path was taken
     floor = np.log(grids[1].clamping_min / (1 - grids[1].clamping_min))
     assert np.sum(np.abs(ref.log_odds - floor) < 1e-5) > 100   # clamped cells were updated
+
+
+def test_knn_map_updates_its_tree_on_threads_as_on_one():
+    """KNNMap's cell updates go through the threaded tree update with its n_jobs: the
+    tree is the single thread's, node for node, on scans of 4096+ cells."""
+    from occgp import KNNMap
+    scans = room_scans(n_points=3000, seed=5)[:4]
+    maps = {n: KNNMap(0.05, k=3, sensor_range=6.0, n_jobs=n) for n in (1, 2, 3)}
+    sizes = []
+    for points, origin in scans:
+        for m in maps.values():
+            m.insert_scan(points, origin)
+        sizes.append(maps[1].last_insert_["updated_cells"])
+        for n in (2, 3):
+            same_tree(maps[n], maps[1])
+    assert min(sizes) >= 4096
