@@ -10,6 +10,7 @@ cdef enum:
     _SCALE_GRID = 16        # occgp's minimiser: coarse grid of log-scales, then golden section
     _GOLDEN_ITERS = 24
     _GD_EPOCHS = 100        # the reference code's gradient descent
+    _CANDIDATES = 256       # neighbour candidates tested at a time
 cdef double _GD_TOLERANCE = 0.001
 cdef double _GD_RATE = 0.01
 cdef double _COV_NOISE = 0.001
@@ -181,7 +182,9 @@ cdef void _bandwidth_one(
     cdef long cmin[3]
     cdef long cmax[3]
     cdef long cy, cz, first, last
-    cdef int64_t t, row_key
+    cdef int64_t t, row_key, start, stop
+    cdef int inside[_CANDIDATES]
+    cdef int n_in, s_in
     cdef uint8_t lab
     cdef int a, b, m = 0, same = 0, other = 0, k
     cdef uint8_t y = labels[i]
@@ -217,22 +220,33 @@ cdef void _bandwidth_one(
             last = first
             while last < n_cells and cell_keys[last] <= row_key + cmax[0]:
                 last += 1
-            for t in range(cell_start[first], cell_start[last]):
-                for a in range(3):
-                    d[a] = xs_sorted[3 * t + a] - xi[a]
-                if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > r2max:
-                    continue
-                lab = labels_sorted[t]
-                buf[4 * m] = d[0]
-                buf[4 * m + 1] = d[1]
-                buf[4 * m + 2] = d[2]
-                buf[4 * m + 3] = 1.0 if lab == y else 0.0
-                m += 1
-                if lab == y:
-                    same += 1
+            # in chunks: the candidates inside the ball picked without a branch, then
+            # taken in order
+            start = cell_start[first]
+            while start < cell_start[last]:
+                stop = min(start + _CANDIDATES, cell_start[last])
+                n_in = 0
+                for t in range(start, stop):
                     for a in range(3):
-                        for b in range(3):
-                            sig[3 * a + b] += d[a] * d[b]
+                        d[a] = xs_sorted[3 * t + a] - xi[a]
+                    inside[n_in] = <int>(t - start)
+                    n_in += not (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > r2max)
+                for s_in in range(n_in):
+                    t = start + inside[s_in]
+                    for a in range(3):
+                        d[a] = xs_sorted[3 * t + a] - xi[a]
+                    lab = labels_sorted[t]
+                    buf[4 * m] = d[0]
+                    buf[4 * m + 1] = d[1]
+                    buf[4 * m + 2] = d[2]
+                    buf[4 * m + 3] = 1.0 if lab == y else 0.0
+                    m += 1
+                    if lab == y:
+                        same += 1
+                        for a in range(3):
+                            for b in range(3):
+                                sig[3 * a + b] += d[a] * d[b]
+                start = stop
     n_same[i] = same
     if same <= 2:               # isotropic fallback: H = res^2 I (+ floor^2 I)
         for a in range(9):

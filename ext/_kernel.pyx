@@ -65,6 +65,10 @@ cdef extern from "_beta_blocks.h" namespace "occgp" nogil:
     const uint64_t EMPTY_KEY "occgp::kEmptyKey"
 
 
+cdef extern from * nogil:
+    void __builtin_prefetch(const void* address, int rw, int locality)
+
+
 cdef inline uint64_t _block_key(long kx, long ky, long kz) noexcept nogil:
     return (<uint64_t>(kx >> 2)) | ((<uint64_t>(ky >> 2)) << 16) | ((<uint64_t>(kz >> 2)) << 32)
 
@@ -148,13 +152,6 @@ def sparse_kernel(const double[::1] r):
     return out
 
 
-cdef struct Brick:
-    # an update's evidence on one 4x4x4 block of the dense slab (cell c = x | y << 2 |
-    # z << 4, the low two key bits, as BetaBlock)
-    double alpha[64]
-    double beta[64]
-
-
 cdef inline long _floor_key(double v) noexcept nogil:
     """floor(v), v clamped to +-2^40 first (NaN to -2^40): the same as the libm call
     on the keys' range, without it."""
@@ -177,27 +174,28 @@ cdef inline long _row_end(double x0, double a, double p00, double ip00, double r
     """floor (ceil if `upper`) of ``(x0 + a / p00) / res - 0.5``, exactly as written,
     from the products by the reciprocals ip00 = 1 / p00 and ires = 1 / res: they are
     within 12 units in the last place of (|x0| + |a / p00|) / res of the quotients'
-    result, so where a far wider margin about it holds no integer, the quotients
-    give the same key; else they are computed."""
+    result, so where a far wider margin e about it holds no integer, the quotients
+    give the same key; else (or beyond 2^40, or NaN) they are computed."""
     cdef double q = a * ip00
     cdef double v = (x0 + q) * ires - 0.5
     cdef double e = 1e-13 * ((fabs(x0) + fabs(q)) * ires + 1.0)
+    cdef double frac
     cdef long f
+    if fabs(v) < 1099511627776.0:
+        f = <long>v
+        f -= <double>f > v
+        frac = v - <double>f            # in [0, 1), exact
+        if frac > e and frac < 1.0 - e:
+            return f + 1 if upper else f
     if upper:
-        f = _ceil_key(v - e)
-        if f != _ceil_key(v + e):
-            f = _ceil_key((x0 + a / p00) / res - 0.5)
-    else:
-        f = _floor_key(v - e)
-        if f != _floor_key(v + e):
-            f = _floor_key((x0 + a / p00) / res - 0.5)
-    return f
+        return _ceil_key((x0 + a / p00) / res - 0.5)
+    return _floor_key((x0 + a / p00) / res - 0.5)
 
 
 cdef struct Row:
     # one row of a sample's support in the slab: its cells rx, rx + 1, ... (x offsets
-    # in the slab) in the bricks from `cell` (the first brick's alpha of the row's y and
-    # z), and r2 at the first cell with its first difference
+    # in the slab) in the bricks from `cell` (the alpha of the row's first brick, at the
+    # row's y and z), and r2 at the first cell with its first difference
     double* cell
     long rx
     long count
@@ -210,16 +208,16 @@ cdef enum:
 
 
 cdef long _add_rows(const Row* rows, int n_rows, int kind, double wk, double y,
-                    double ddr) noexcept nogil:
-    """Add a sample's kernel over its rows: alpha if kind 1 (label 1), beta if kind 0
-    (label 0), both (times y and 1 - y) if kind 2; returns the number of cells inside
-    the support."""
+                    double ddr, size_t beta_off) noexcept nogil:
+    """Add a sample's kernel over its rows: alpha if kind 1 (label 1), beta (`beta_off`
+    further) if kind 0 (label 0), both (times y and 1 - y) if kind 2; returns the
+    number of cells inside the support."""
     cdef int m
     cdef long j, rx, updates = 0
     cdef double r2, dr, k
     cdef double* cell
     for m in range(n_rows):
-        cell = rows[m].cell + (64 if kind == 0 else 0)
+        cell = rows[m].cell + (beta_off if kind == 0 else 0)
         rx = rows[m].rx
         r2 = rows[m].r2
         dr = rows[m].dr
@@ -230,7 +228,7 @@ cdef long _add_rows(const Row* rows, int n_rows, int kind, double wk, double y,
             # (no change) outside the support, without a branch
             for j in range(rows[m].count):
                 updates += r2 < 1.0
-                cell[(rx >> 2) * 128 + (rx & 3)] += wk * _kernel_r2(min(r2, 1.0))
+                cell[(rx >> 2) * 64 + (rx & 3)] += wk * _kernel_r2(min(r2, 1.0))
                 r2 += dr
                 dr += ddr
                 rx += 1
@@ -238,8 +236,8 @@ cdef long _add_rows(const Row* rows, int n_rows, int kind, double wk, double y,
             for j in range(rows[m].count):
                 if r2 < 1.0:
                     k = wk * _kernel_r2(r2)
-                    cell[(rx >> 2) * 128 + (rx & 3)] += k * y
-                    cell[(rx >> 2) * 128 + (rx & 3) + 64] += k * (1.0 - y)
+                    cell[(rx >> 2) * 64 + (rx & 3)] += k * y
+                    cell[(rx >> 2) * 64 + (rx & 3) + beta_off] += k * (1.0 - y)
                     updates += 1
                 r2 += dr
                 dr += ddr
@@ -250,18 +248,21 @@ cdef long _add_rows(const Row* rows, int n_rows, int kind, double wk, double y,
 cdef long _accumulate_slab(const double* xs, const double* labels, const double* prec,
                            const double* ext, const double* weights, const int64_t* order,
                            Py_ssize_t n, double sf2, double res, long za, long zb,
-                           const long* org, const long* dims, Brick* box,
-                           uint8_t* touched) noexcept nogil:
+                           const long* org, const long* dims, double* box,
+                           size_t beta_off, uint8_t* touched) noexcept nogil:
     """Add the evidence of the samples (in `order`) to the rows za <= kz < zb of the
     dense slab of 4x4x4 bricks whose lowest key is `org` and size `dims` cells
-    (block-aligned; bricks x fastest), flagging the bricks the samples' rows reach;
+    (block-aligned; bricks x fastest, 64 alphas each in `box` and their betas
+    `beta_off` further, cell c = x | y << 2 | z << 4 by the low two key bits, as
+    BetaBlock), flagging the bricks the samples' rows reach;
     returns the number of contributions. A sample's rows are laid out in batches
     first (their ends need a square root and are independent of each other), then
     their cells summed."""
     cdef Py_ssize_t t, i
     cdef long lo[3]
     cdef long hi[3]
-    cdef long ky, kz, row_lo, row_hi, bx, bz_row
+    cdef long ky, kz, row_lo, row_hi, bx, bz_row, rx
+    cdef size_t kind_off
     cdef double d0, d1, d2, qb, qc, disc, p00, ddr, y, wk
     cdef double q01, q02, q12, ip00, ires = 1.0 / res
     cdef const double* x
@@ -282,6 +283,7 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
         # binary labels add to one of alpha and beta only (k * 1 = k, and adding
         # k * 0 = +0 leaves a sum of non-negative terms as it is)
         kind = 1 if y == 1.0 else (0 if y == 0.0 else 2)
+        kind_off = beta_off if kind == 0 else 0
         wk = sf2 * weights[i]
         p00 = p[0]
         ip00 = 1.0 / p00
@@ -313,16 +315,22 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
                 for bx in range((row_lo - org[0]) >> 2, ((row_hi - org[0]) >> 2) + 1):
                     touched[brow + <uint64_t>bx] = 1
                 d0 = (<double>(row_lo - _MAX_VAL) + 0.5) * res - x[0]
-                rows[n_rows].cell = &box[brow].alpha[(ky & 3) << 2 | (kz & 3) << 4]
+                rows[n_rows].cell = box + 64 * brow + <uint64_t>((ky & 3) << 2 | (kz & 3) << 4)
                 rows[n_rows].rx = row_lo - org[0]     # org is block-aligned
                 rows[n_rows].count = row_hi - row_lo + 1
+                # the row's first and last bricks, fetched while the other rows are
+                # laid out
+                rx = row_lo - org[0]
+                __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
+                rx = row_hi - org[0]
+                __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
                 rows[n_rows].r2 = (p00 * d0 + 2.0 * qb) * d0 + qc
                 rows[n_rows].dr = (2.0 * p00 * d0 + 2.0 * qb + p00 * res) * res
                 n_rows += 1
                 if n_rows == _ROWS:
-                    updates += _add_rows(rows, n_rows, kind, wk, y, ddr)
+                    updates += _add_rows(rows, n_rows, kind, wk, y, ddr, beta_off)
                     n_rows = 0
-        updates += _add_rows(rows, n_rows, kind, wk, y, ddr)
+        updates += _add_rows(rows, n_rows, kind, wk, y, ddr, beta_off)
     return updates
 
 
@@ -374,7 +382,8 @@ cdef class _KernelCells:
     cdef BetaBlocks _cells
     cdef double _res
     cdef object _lock
-    cdef vector[Brick] _box         # an update's evidence over one slab, zero between
+    cdef vector[double] _box        # an update's evidence over one slab (alphas, then
+                                    # betas from the middle on), zero between
     cdef vector[uint8_t] _touched   # the slab's 4x4x4 blocks with evidence, zero between
     cdef bint _box_dirty            # an exception left _box / _touched non-zero
 
@@ -438,7 +447,8 @@ cdef class _KernelCells:
         cdef vector[long] counts
         cdef vector[size_t] block_ids
         cdef BetaBlocks* cells = &self._cells
-        cdef Brick* box
+        cdef double* box
+        cdef size_t beta_off
         cdef uint8_t* touched
         cdef double visits = 0.0, boxes
         for a in range(3):
@@ -468,14 +478,15 @@ cdef class _KernelCells:
         cells_in_slab = <uint64_t>(layer * height)
         if self._box_dirty:
             if self._box.size():
-                memset(&self._box[0], 0, self._box.size() * sizeof(Brick))
+                memset(&self._box[0], 0, self._box.size() * sizeof(double))
             self._touched.assign(self._touched.size(), 0)
-        if self._box.size() < cells_in_slab // 64:
-            self._box.resize(cells_in_slab // 64)
+        if self._box.size() < 2 * cells_in_slab:
+            self._box.resize(2 * cells_in_slab)
         if self._touched.size() < cells_in_slab // 64:
             self._touched.resize(cells_in_slab // 64)
         self._box_dirty = True
         box = &self._box[0]
+        beta_off = self._box.size() // 2
         touched = &self._touched[0]
         z0 = org[2]
         while z0 < org[2] + dims[2]:
@@ -500,7 +511,7 @@ cdef class _KernelCells:
                 if za < zb:
                     upd = _accumulate_slab(
                         xs, labels, ps, es, ws, order, n, sf2, res,
-                        za, zb, slab, dims, box, touched)
+                        za, zb, slab, dims, box, beta_off, touched)
                     updates += upd
             # blocks with evidence: created serially, then filled in parallel, one
             # layer of bricks per task
@@ -518,7 +529,7 @@ cdef class _KernelCells:
                     block_ids[b] = cells.get_index(bkey)
             new_cells = 0
             for i in prange((z1 - z0) >> 2, num_threads=nt, schedule="dynamic"):
-                new_cells += _merge_layer(cells, box, &block_ids[0], i, dims)
+                new_cells += _merge_layer(cells, box, beta_off, &block_ids[0], i, dims)
             cells.add_cells(new_cells)
             z0 = z1
         self._box_dirty = False
@@ -636,34 +647,36 @@ cdef void _balanced_splits(const vector[long]& counts, int nt, vector[long]& spl
         t += 1
 
 
-cdef long _merge_layer(BetaBlocks* cells, Brick* box, const size_t* block_ids, long bz,
-                       const long* dims) noexcept nogil:
-    """Add the evidence of the slab's layer bz of 4x4x4 bricks to the map's blocks
-    (`block_ids[b]`: the map's index of the slab's brick b, or -1), zeroing it in the
-    slab; returns the number of cells newly reached."""
+cdef long _merge_layer(BetaBlocks* cells, double* box, size_t beta_off,
+                       const size_t* block_ids, long bz, const long* dims) noexcept nogil:
+    """Add the evidence of the slab's layer bz of 4x4x4 bricks (alphas in `box`, betas
+    `beta_off` further) to the map's blocks (`block_ids[b]`: the map's index of the
+    slab's brick b, or -1), zeroing it in the slab; returns the number of cells newly
+    reached."""
     cdef long per_layer = (dims[0] >> 2) * (dims[1] >> 2), b
     cdef int c
     cdef size_t bid
     cdef long fresh = 0
-    cdef Brick* brick
+    cdef double* al
+    cdef double* be
     cdef BetaBlock* blk
     for b in range(bz * per_layer, (bz + 1) * per_layer):
         bid = block_ids[b]
         if bid == <size_t>-1:
             continue
         blk = cells.block(bid)
-        brick = box + b
+        al = box + 64 * <size_t>b
+        be = al + beta_off
         for c in range(64):
-            if brick.alpha[c] != 0.0 or brick.beta[c] != 0.0:
-                blk.alpha[c] += <float>brick.alpha[c]
-                blk.beta[c] += <float>brick.beta[c]
+            if al[c] != 0.0 or be[c] != 0.0:
+                blk.alpha[c] += <float>al[c]
+                blk.beta[c] += <float>be[c]
                 if not (blk.mask >> c) & 1:
                     blk.mask |= (<uint64_t>1) << c
                     fresh += 1
-                brick.alpha[c] = 0.0
-                brick.beta[c] = 0.0
+                al[c] = 0.0
+                be[c] = 0.0
     return fresh
-
 
 # AKIMap's adaptive bandwidths (its own concern, in its own file; it reads the
 # tabulated kernel above)
