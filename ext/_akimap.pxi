@@ -10,6 +10,7 @@ cdef enum:
     _SCALE_GRID = 16        # occgp's minimiser: coarse grid of log-scales, then golden section
     _GOLDEN_ITERS = 24
     _GD_EPOCHS = 100        # the reference code's gradient descent
+    _CANDIDATES = 256       # neighbour candidates tested at a time
 cdef double _GD_TOLERANCE = 0.001
 cdef double _GD_RATE = 0.01
 cdef double _COV_NOISE = 0.001
@@ -148,8 +149,8 @@ cdef inline void _set_bandwidth(const double* h, Py_ssize_t i, double* precision
     weight[i] = 1.0 / sqrt(det)
 
 
-cdef inline long _cell_find(const int64_t* keys, long n, int64_t key) noexcept nogil:
-    """Index of `key` in the sorted array `keys`, or -1."""
+cdef inline long _lower_bound(const int64_t* keys, long n, int64_t key) noexcept nogil:
+    """Index of the first entry of the sorted array `keys` not below `key` (n if none)."""
     cdef long lo = 0, hi = n, mid
     while lo < hi:
         mid = (lo + hi) >> 1
@@ -157,7 +158,7 @@ cdef inline long _cell_find(const int64_t* keys, long n, int64_t key) noexcept n
             lo = mid + 1
         else:
             hi = mid
-    return lo if lo < n and keys[lo] == key else -1
+    return lo
 
 
 cdef void _bandwidth_one(
@@ -165,10 +166,14 @@ cdef void _bandwidth_one(
         double res, double radius_max, double max_range, bint published, double floor2,
         double cell, const int64_t* grid_lo, const int64_t* grid_dims,
         const int64_t* cell_keys, long n_cells, const int64_t* cell_start,
-        const int64_t* order, double* buf, double* precision, double* extent,
-        double* weight, double* scale, int64_t* n_same) noexcept nogil:
+        const double* xs_sorted, const uint8_t* labels_sorted, double* buf,
+        double* precision, double* extent, double* weight, double* scale,
+        int64_t* n_same) noexcept nogil:
     """Sample i's bandwidth: covariance of its same-label neighbours within the
-    search radius, then the scale of Eq. 3.7 (see AKIMap._bandwidths)."""
+    search radius, then the scale of Eq. 3.7 (see AKIMap._bandwidths). The
+    neighbours are met cube by cube (z, then y, then x), in sample order within a
+    cube: `xs_sorted` and `labels_sorted` hold the samples in that order, the
+    samples of cube `cell_keys[s]` from `cell_start[s]` on."""
     cdef double xi[3]
     cdef double d[3]
     cdef double sig[9]
@@ -176,8 +181,11 @@ cdef void _bandwidth_one(
     cdef double dist, radius, r2max, det, lo_scale, c, w0, q
     cdef long cmin[3]
     cdef long cmax[3]
-    cdef long cx, cy, cz, slot
-    cdef int64_t t, j
+    cdef long cy, cz, first, last
+    cdef int64_t t, row_key, start, stop
+    cdef int inside[_CANDIDATES]
+    cdef int n_in, s_in
+    cdef uint8_t lab
     cdef int a, b, m = 0, same = 0, other = 0, k
     cdef uint8_t y = labels[i]
     cdef double* r2buf = buf
@@ -201,30 +209,44 @@ cdef void _bandwidth_one(
         cmax[a] = min(<long>floor((xi[a] + radius) / cell) - <long>grid_lo[a],
                       <long>grid_dims[a] - 1)
     # pass 1: the neighbours (offsets and labels into buf, 4 doubles each) and the
-    # scatter of the same-label ones about x_i
+    # scatter of the same-label ones about x_i. The cubes cmin[0] .. cmax[0] of a row
+    # (cy, cz) have consecutive keys: their samples are one run of the sorted ones.
     for cz in range(cmin[2], cmax[2] + 1):
         for cy in range(cmin[1], cmax[1] + 1):
-            for cx in range(cmin[0], cmax[0] + 1):
-                slot = _cell_find(cell_keys, n_cells,
-                                  (cz * grid_dims[1] + cy) * grid_dims[0] + cx)
-                if slot < 0:
-                    continue
-                for t in range(cell_start[slot], cell_start[slot + 1]):
-                    j = order[t]
+            if cmin[0] > cmax[0]:
+                continue
+            row_key = (cz * grid_dims[1] + cy) * grid_dims[0]
+            first = _lower_bound(cell_keys, n_cells, row_key + cmin[0])
+            last = first
+            while last < n_cells and cell_keys[last] <= row_key + cmax[0]:
+                last += 1
+            # in chunks: the candidates inside the ball picked without a branch, then
+            # taken in order
+            start = cell_start[first]
+            while start < cell_start[last]:
+                stop = min(start + _CANDIDATES, cell_start[last])
+                n_in = 0
+                for t in range(start, stop):
                     for a in range(3):
-                        d[a] = x[3 * j + a] - xi[a]
-                    if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > r2max:
-                        continue
+                        d[a] = xs_sorted[3 * t + a] - xi[a]
+                    inside[n_in] = <int>(t - start)
+                    n_in += not (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > r2max)
+                for s_in in range(n_in):
+                    t = start + inside[s_in]
+                    for a in range(3):
+                        d[a] = xs_sorted[3 * t + a] - xi[a]
+                    lab = labels_sorted[t]
                     buf[4 * m] = d[0]
                     buf[4 * m + 1] = d[1]
                     buf[4 * m + 2] = d[2]
-                    buf[4 * m + 3] = 1.0 if labels[j] == y else 0.0
+                    buf[4 * m + 3] = 1.0 if lab == y else 0.0
                     m += 1
-                    if labels[j] == y:
+                    if lab == y:
                         same += 1
                         for a in range(3):
                             for b in range(3):
                                 sig[3 * a + b] += d[a] * d[b]
+                start = stop
     n_same[i] = same
     if same <= 2:               # isotropic fallback: H = res^2 I (+ floor^2 I)
         for a in range(9):
@@ -322,10 +344,13 @@ def _akimap_bandwidths(const double[:, ::1] samples, const uint8_t[::1] labels,
     keys, start = np.unique(flat[order], return_index=True)
     start = np.append(start, n).astype(np.int64)
     keys = np.ascontiguousarray(keys, dtype=np.int64)
+    xs_sorted = np.ascontiguousarray(np.asarray(samples)[order])
+    labels_sorted = np.ascontiguousarray(np.asarray(labels)[order])
     lo = np.ascontiguousarray(lo, dtype=np.int64)
     dims = np.ascontiguousarray(dims, dtype=np.int64)
     cdef const int64_t[::1] lo_v = lo, dims_v = dims, keys_v = keys, start_v = start
-    cdef const int64_t[::1] order_v = order
+    cdef const double[:, ::1] xs_v = xs_sorted
+    cdef const uint8_t[::1] lab_v = labels_sorted
     cdef double[:, :, ::1] p_v = precision
     cdef double[:, ::1] e_v = extent
     cdef double[::1] w_v = weight, s_v = scale
@@ -338,7 +363,7 @@ def _akimap_bandwidths(const double[:, ::1] samples, const uint8_t[::1] labels,
         for i in prange(n, schedule="dynamic", chunksize=64, num_threads=n_threads):
             _bandwidth_one(i, &samples[0, 0], &labels[0], &origin[0], res, radius_max,
                            max_range, published, floor * floor, cell, &lo_v[0], &dims_v[0],
-                           &keys_v[0], n_cells, &start_v[0], &order_v[0],
+                           &keys_v[0], n_cells, &start_v[0], &xs_v[0, 0], &lab_v[0],
                            &buf[threadid(), 0],
                            &p_v[0, 0, 0], &e_v[0, 0], &w_v[0], &s_v[0], &n_v[0])
     return precision, extent, weight, scale, n_same

@@ -28,6 +28,7 @@ from cython.operator cimport dereference as deref, preincrement as inc
 from cython.parallel cimport prange, threadid
 from libc.math cimport M_PI, acos, ceil, cos, exp, fabs, floor, isnan, log, sin, sqrt
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint64_t
+from libc.string cimport memset
 from libcpp.vector cimport vector
 
 import threading
@@ -37,11 +38,6 @@ import numpy as np
 cdef enum:
     _MAX_VAL = 32768        # half the number of keys per axis, as liboctomap's 16-bit keys
     _MAX_DENSE = 1 << 22    # an update accumulates in dense slabs of at most this many cells
-
-
-cdef struct Beta:
-    double alpha
-    double beta
 
 
 cdef extern from "_beta_blocks.h" namespace "occgp" nogil:
@@ -69,6 +65,10 @@ cdef extern from "_beta_blocks.h" namespace "occgp" nogil:
     const uint64_t EMPTY_KEY "occgp::kEmptyKey"
 
 
+cdef extern from * nogil:
+    void __builtin_prefetch(const void* address, int rw, int locality)
+
+
 cdef inline uint64_t _block_key(long kx, long ky, long kz) noexcept nogil:
     return (<uint64_t>(kx >> 2)) | ((<uint64_t>(ky >> 2)) << 16) | ((<uint64_t>(kz >> 2)) << 32)
 
@@ -86,14 +86,19 @@ cdef inline double _sparse(double r) noexcept nogil:
 cdef enum:
     _TABLE = 16384          # the kernel tabulated in r^2 on this many intervals of [0, 1]
 
-cdef double _KERNEL_R2[_TABLE + 2]
+# the kernel at r2 = j / _TABLE (entry 2 j) and its difference to the next node (entry
+# 2 j + 1, the interpolation's slope), side by side: one cache line per lookup
+cdef double _KERNEL_R2[2 * _TABLE + 4]
 
 
 cdef void _fill_table() noexcept:
     cdef int j
     for j in range(_TABLE + 1):
-        _KERNEL_R2[j] = _sparse(sqrt(<double>j / _TABLE))
-    _KERNEL_R2[_TABLE + 1] = 0.0
+        _KERNEL_R2[2 * j] = _sparse(sqrt(<double>j / _TABLE))
+    _KERNEL_R2[2 * _TABLE + 2] = 0.0
+    for j in range(_TABLE + 1):
+        _KERNEL_R2[2 * j + 1] = _KERNEL_R2[2 * j + 2] - _KERNEL_R2[2 * j]
+    _KERNEL_R2[2 * _TABLE + 3] = 0.0
 
 
 _fill_table()
@@ -105,7 +110,7 @@ cdef inline double _kernel_r2(double r2) noexcept nogil:
     within 3e-8 of the formula, without its sqrt, sin and cos."""
     cdef double x = r2 * _TABLE
     cdef int j = <int>x
-    return _KERNEL_R2[j] + (x - j) * (_KERNEL_R2[j + 1] - _KERNEL_R2[j])
+    return _KERNEL_R2[2 * j] + (x - j) * _KERNEL_R2[2 * j + 1]
 
 
 def kernel_from_table(const double[::1] r2):
@@ -147,26 +152,126 @@ def sparse_kernel(const double[::1] r):
     return out
 
 
+cdef inline long _floor_key(double v) noexcept nogil:
+    """floor(v), v clamped to +-2^40 first (NaN to -2^40): the same as the libm call
+    on the keys' range, without it."""
+    cdef long t
+    v = min(max(v, -1099511627776.0), 1099511627776.0)
+    t = <long>v
+    return t - 1 if <double>t > v else t
+
+
+cdef inline long _ceil_key(double v) noexcept nogil:
+    """ceil(v), v clamped to +-2^40 first (NaN to -2^40)."""
+    cdef long t
+    v = min(max(v, -1099511627776.0), 1099511627776.0)
+    t = <long>v
+    return t + 1 if <double>t < v else t
+
+
+cdef inline long _row_end(double x0, double a, double p00, double ip00, double res,
+                          double ires, bint upper) noexcept nogil:
+    """floor (ceil if `upper`) of ``(x0 + a / p00) / res - 0.5``, exactly as written,
+    from the products by the reciprocals ip00 = 1 / p00 and ires = 1 / res: they are
+    within 12 units in the last place of (|x0| + |a / p00|) / res of the quotients'
+    result, so where a far wider margin e about it holds no integer, the quotients
+    give the same key; else (or beyond 2^40, or NaN) they are computed."""
+    cdef double q = a * ip00
+    cdef double v = (x0 + q) * ires - 0.5
+    cdef double e = 1e-13 * ((fabs(x0) + fabs(q)) * ires + 1.0)
+    cdef double frac
+    cdef long f
+    if fabs(v) < 1099511627776.0:
+        f = <long>v
+        f -= <double>f > v
+        frac = v - <double>f            # in [0, 1), exact
+        if frac > e and frac < 1.0 - e:
+            return f + 1 if upper else f
+    if upper:
+        return _ceil_key((x0 + a / p00) / res - 0.5)
+    return _floor_key((x0 + a / p00) / res - 0.5)
+
+
+cdef struct Row:
+    # one row of a sample's support in the slab: its cells rx, rx + 1, ... (x offsets
+    # in the slab) in the bricks from `cell` (the alpha of the row's first brick, at the
+    # row's y and z), and r2 at the first cell with its first difference
+    double* cell
+    long rx
+    long count
+    double r2
+    double dr
+
+
+cdef enum:
+    _ROWS = 32              # rows laid out before their cells are summed
+
+
+cdef long _add_rows(const Row* rows, int n_rows, int kind, double wk, double y,
+                    double ddr, size_t beta_off) noexcept nogil:
+    """Add a sample's kernel over its rows: alpha if kind 1 (label 1), beta (`beta_off`
+    further) if kind 0 (label 0), both (times y and 1 - y) if kind 2; returns the
+    number of cells inside the support."""
+    cdef int m
+    cdef long j, rx, updates = 0
+    cdef double r2, dr, k
+    cdef double* cell
+    for m in range(n_rows):
+        cell = rows[m].cell + (beta_off if kind == 0 else 0)
+        rx = rows[m].rx
+        r2 = rows[m].r2
+        dr = rows[m].dr
+        # r2 along the row by second differences: r2(d0 + res) = r2 + dr,
+        # dr(d0 + res) = dr + 2 p00 res^2
+        if kind != 2:
+            # binary labels: every cell of the row gets wk k(min(r2, 1)), which is +0
+            # (no change) outside the support, without a branch
+            for j in range(rows[m].count):
+                updates += r2 < 1.0
+                cell[(rx >> 2) * 64 + (rx & 3)] += wk * _kernel_r2(min(r2, 1.0))
+                r2 += dr
+                dr += ddr
+                rx += 1
+        else:
+            for j in range(rows[m].count):
+                if r2 < 1.0:
+                    k = wk * _kernel_r2(r2)
+                    cell[(rx >> 2) * 64 + (rx & 3)] += k * y
+                    cell[(rx >> 2) * 64 + (rx & 3) + beta_off] += k * (1.0 - y)
+                    updates += 1
+                r2 += dr
+                dr += ddr
+                rx += 1
+    return updates
+
+
 cdef long _accumulate_slab(const double* xs, const double* labels, const double* prec,
                            const double* ext, const double* weights, const int64_t* order,
                            Py_ssize_t n, double sf2, double res, long za, long zb,
-                           const long* org, const long* dims, Beta* box,
-                           uint8_t* touched) noexcept nogil:
+                           const long* org, const long* dims, double* box,
+                           size_t beta_off, uint8_t* touched) noexcept nogil:
     """Add the evidence of the samples (in `order`) to the rows za <= kz < zb of the
-    dense slab whose lowest key is `org` and row size `dims[0] x dims[1]`
-    (block-aligned), flagging the slab's 4x4x4 blocks that get any; returns the
-    number of contributions."""
+    dense slab of 4x4x4 bricks whose lowest key is `org` and size `dims` cells
+    (block-aligned; bricks x fastest, 64 alphas each in `box` and their betas
+    `beta_off` further, cell c = x | y << 2 | z << 4 by the low two key bits, as
+    BetaBlock), flagging the bricks the samples' rows reach;
+    returns the number of contributions. A sample's rows are laid out in batches
+    first (their ends need a square root and are independent of each other), then
+    their cells summed."""
     cdef Py_ssize_t t, i
     cdef long lo[3]
     cdef long hi[3]
-    cdef long kx, ky, kz, row_lo, row_hi, bx
-    cdef double d0, d1, d2, qb, qc, disc, p00, r2, dr, ddr, k, y, wk
+    cdef long ky, kz, row_lo, row_hi, bx, bz_row, rx
+    cdef size_t kind_off
+    cdef double d0, d1, d2, qb, qc, disc, p00, ddr, y, wk
+    cdef double q01, q02, q12, ip00, ires = 1.0 / res
     cdef const double* x
     cdef const double* p
-    cdef uint64_t row, brow
+    cdef uint64_t brow
+    cdef int kind, n_rows
     cdef long updates = 0
     cdef long bdx = dims[0] >> 2, bdy = dims[1] >> 2
-    cdef Beta* cell
+    cdef Row rows[_ROWS]
     for t in range(n):
         i = order[t]
         x = xs + 3 * i
@@ -175,48 +280,57 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
         if hi[2] < za or lo[2] >= zb:
             continue
         y = labels[i]
+        # binary labels add to one of alpha and beta only (k * 1 = k, and adding
+        # k * 0 = +0 leaves a sum of non-negative terms as it is)
+        kind = 1 if y == 1.0 else (0 if y == 0.0 else 2)
+        kind_off = beta_off if kind == 0 else 0
         wk = sf2 * weights[i]
         p00 = p[0]
+        ip00 = 1.0 / p00
+        q01 = p[1] + p[3]
+        q02 = p[2] + p[6]
+        q12 = p[5] + p[7]
         ddr = 2.0 * p00 * res * res
+        n_rows = 0
         for kz in range(max(lo[2], za), min(hi[2], zb - 1) + 1):
             d2 = (<double>(kz - _MAX_VAL) + 0.5) * res - x[2]
+            bz_row = ((kz - org[2]) >> 2) * bdy
             for ky in range(lo[1], hi[1] + 1):
                 d1 = (<double>(ky - _MAX_VAL) + 0.5) * res - x[1]
                 # the row's cells inside the ellipsoid: r2 is quadratic in d0; widened
-                # by a cell each way, the test below decides
-                qb = 0.5 * (p[1] + p[3]) * d1 + 0.5 * (p[2] + p[6]) * d2
-                qc = p[4] * d1 * d1 + (p[5] + p[7]) * d1 * d2 + p[8] * d2 * d2
+                # by a cell each way, the test of r2 < 1 decides
+                qb = 0.5 * q01 * d1 + 0.5 * q02 * d2
+                qc = p[4] * d1 * d1 + q12 * d1 * d2 + p[8] * d2 * d2
                 disc = qb * qb - p00 * (qc - 1.0)
                 if not disc > 0.0:
                     continue
                 disc = sqrt(disc)
-                row_lo = max(lo[0], <long>floor((x[0] + (-qb - disc) / p00) / res - 0.5)
+                row_lo = max(lo[0], _row_end(x[0], -qb - disc, p00, ip00, res, ires, False)
                              + _MAX_VAL)
-                row_hi = min(hi[0], <long>ceil((x[0] + (-qb + disc) / p00) / res - 0.5)
+                row_hi = min(hi[0], _row_end(x[0], -qb + disc, p00, ip00, res, ires, True)
                              + _MAX_VAL)
                 if row_lo > row_hi:
                     continue
-                row = (<uint64_t>(kz - org[2]) * <uint64_t>dims[1]
-                       + <uint64_t>(ky - org[1])) * <uint64_t>dims[0]
-                brow = ((<uint64_t>((kz - org[2]) >> 2) * <uint64_t>bdy
-                         + <uint64_t>((ky - org[1]) >> 2)) * <uint64_t>bdx)
+                brow = <uint64_t>((bz_row + ((ky - org[1]) >> 2)) * bdx)
                 for bx in range((row_lo - org[0]) >> 2, ((row_hi - org[0]) >> 2) + 1):
                     touched[brow + <uint64_t>bx] = 1
-                # r2 along the row by second differences: r2(d0 + res) = r2 + dr,
-                # dr(d0 + res) = dr + 2 p00 res^2
                 d0 = (<double>(row_lo - _MAX_VAL) + 0.5) * res - x[0]
-                r2 = (p00 * d0 + 2.0 * qb) * d0 + qc
-                dr = (2.0 * p00 * d0 + 2.0 * qb + p00 * res) * res
-                cell = box + row + <uint64_t>(row_lo - org[0])
-                for kx in range(row_lo, row_hi + 1):
-                    if r2 < 1.0:
-                        k = wk * _kernel_r2(r2)
-                        cell.alpha += k * y
-                        cell.beta += k * (1.0 - y)
-                        updates += 1
-                    r2 += dr
-                    dr += ddr
-                    cell += 1
+                rows[n_rows].cell = box + 64 * brow + <uint64_t>((ky & 3) << 2 | (kz & 3) << 4)
+                rows[n_rows].rx = row_lo - org[0]     # org is block-aligned
+                rows[n_rows].count = row_hi - row_lo + 1
+                # the row's first and last bricks, fetched while the other rows are
+                # laid out
+                rx = row_lo - org[0]
+                __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
+                rx = row_hi - org[0]
+                __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
+                rows[n_rows].r2 = (p00 * d0 + 2.0 * qb) * d0 + qc
+                rows[n_rows].dr = (2.0 * p00 * d0 + 2.0 * qb + p00 * res) * res
+                n_rows += 1
+                if n_rows == _ROWS:
+                    updates += _add_rows(rows, n_rows, kind, wk, y, ddr, beta_off)
+                    n_rows = 0
+        updates += _add_rows(rows, n_rows, kind, wk, y, ddr, beta_off)
     return updates
 
 
@@ -268,7 +382,8 @@ cdef class _KernelCells:
     cdef BetaBlocks _cells
     cdef double _res
     cdef object _lock
-    cdef vector[Beta] _box          # an update's evidence over one slab, zero between
+    cdef vector[double] _box        # an update's evidence over one slab (alphas, then
+                                    # betas from the middle on), zero between
     cdef vector[uint8_t] _touched   # the slab's 4x4x4 blocks with evidence, zero between
     cdef bint _box_dirty            # an exception left _box / _touched non-zero
 
@@ -332,7 +447,8 @@ cdef class _KernelCells:
         cdef vector[long] counts
         cdef vector[size_t] block_ids
         cdef BetaBlocks* cells = &self._cells
-        cdef Beta* box
+        cdef double* box
+        cdef size_t beta_off
         cdef uint8_t* touched
         cdef double visits = 0.0, boxes
         for a in range(3):
@@ -361,14 +477,16 @@ cdef class _KernelCells:
         height = min(height, dims[2])
         cells_in_slab = <uint64_t>(layer * height)
         if self._box_dirty:
-            self._box.assign(self._box.size(), Beta(0.0, 0.0))
+            if self._box.size():
+                memset(&self._box[0], 0, self._box.size() * sizeof(double))
             self._touched.assign(self._touched.size(), 0)
-        if self._box.size() < cells_in_slab:
-            self._box.resize(cells_in_slab)
+        if self._box.size() < 2 * cells_in_slab:
+            self._box.resize(2 * cells_in_slab)
         if self._touched.size() < cells_in_slab // 64:
             self._touched.resize(cells_in_slab // 64)
         self._box_dirty = True
         box = &self._box[0]
+        beta_off = self._box.size() // 2
         touched = &self._touched[0]
         z0 = org[2]
         while z0 < org[2] + dims[2]:
@@ -393,10 +511,10 @@ cdef class _KernelCells:
                 if za < zb:
                     upd = _accumulate_slab(
                         xs, labels, ps, es, ws, order, n, sf2, res,
-                        za, zb, slab, dims, box, touched)
+                        za, zb, slab, dims, box, beta_off, touched)
                     updates += upd
             # blocks with evidence: created serially, then filled in parallel, one
-            # layer of blocks per task, reading the slab row by row
+            # layer of bricks per task
             nblocks = <uint64_t>((z1 - z0) * layer) >> 6
             block_ids.assign(nblocks, <size_t>-1)
             for b in range(nblocks):
@@ -411,7 +529,7 @@ cdef class _KernelCells:
                     block_ids[b] = cells.get_index(bkey)
             new_cells = 0
             for i in prange((z1 - z0) >> 2, num_threads=nt, schedule="dynamic"):
-                new_cells += _merge_layer(cells, box, &block_ids[0], i, dims)
+                new_cells += _merge_layer(cells, box, beta_off, &block_ids[0], i, dims)
             cells.add_cells(new_cells)
             z0 = z1
         self._box_dirty = False
@@ -529,39 +647,36 @@ cdef void _balanced_splits(const vector[long]& counts, int nt, vector[long]& spl
         t += 1
 
 
-cdef long _merge_layer(BetaBlocks* cells, Beta* box, const size_t* block_ids, long bz,
-                       const long* dims) noexcept nogil:
-    """Add the evidence of the slab's layer bz of 4x4x4 blocks to the map's blocks
-    (`block_ids[b]`: the map's index of the slab's block b, or -1), zeroing it in the
-    slab; returns the number of cells newly reached."""
-    cdef long bdx = dims[0] >> 2, bdy = dims[1] >> 2, kz, ky, bx
-    cdef int c, cx
+cdef long _merge_layer(BetaBlocks* cells, double* box, size_t beta_off,
+                       const size_t* block_ids, long bz, const long* dims) noexcept nogil:
+    """Add the evidence of the slab's layer bz of 4x4x4 bricks (alphas in `box`, betas
+    `beta_off` further) to the map's blocks (`block_ids[b]`: the map's index of the
+    slab's brick b, or -1), zeroing it in the slab; returns the number of cells newly
+    reached."""
+    cdef long per_layer = (dims[0] >> 2) * (dims[1] >> 2), b
+    cdef int c
     cdef size_t bid
     cdef long fresh = 0
-    cdef Beta* cell
+    cdef double* al
+    cdef double* be
     cdef BetaBlock* blk
-    for kz in range(4 * bz, 4 * bz + 4):
-        for ky in range(dims[1]):
-            cell = box + (<uint64_t>kz * <uint64_t>dims[1] + <uint64_t>ky) * <uint64_t>dims[0]
-            for bx in range(bdx):
-                bid = block_ids[(bz * bdy + (ky >> 2)) * bdx + bx]
-                if bid == <size_t>-1:
-                    cell += 4
-                    continue
-                blk = cells.block(bid)
-                c = ((ky & 3) << 2) | ((kz & 3) << 4)
-                for cx in range(4):
-                    if cell.alpha != 0.0 or cell.beta != 0.0:
-                        blk.alpha[c + cx] += <float>cell.alpha
-                        blk.beta[c + cx] += <float>cell.beta
-                        if not (blk.mask >> (c + cx)) & 1:
-                            blk.mask |= (<uint64_t>1) << (c + cx)
-                            fresh += 1
-                        cell.alpha = 0.0
-                        cell.beta = 0.0
-                    cell += 1
+    for b in range(bz * per_layer, (bz + 1) * per_layer):
+        bid = block_ids[b]
+        if bid == <size_t>-1:
+            continue
+        blk = cells.block(bid)
+        al = box + 64 * <size_t>b
+        be = al + beta_off
+        for c in range(64):
+            if al[c] != 0.0 or be[c] != 0.0:
+                blk.alpha[c] += <float>al[c]
+                blk.beta[c] += <float>be[c]
+                if not (blk.mask >> c) & 1:
+                    blk.mask |= (<uint64_t>1) << c
+                    fresh += 1
+                al[c] = 0.0
+                be[c] = 0.0
     return fresh
-
 
 # AKIMap's adaptive bandwidths (its own concern, in its own file; it reads the
 # tabulated kernel above)
