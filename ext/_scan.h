@@ -426,7 +426,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   if (too_short) return Status::ray_too_short;
   if (superray_threshold > 0) {
     super_rays(res, o, ko, ends, end_keys, truncated, table, superray_threshold, ray_ids,
-               ray_weights);
+               ray_weights, collect_threads);
     n_trav = static_cast<ptrdiff_t>(ray_ids.size());
   }
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[2]);

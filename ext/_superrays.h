@@ -4,10 +4,16 @@
 #ifndef OCCGP_SUPERRAYS_H
 #define OCCGP_SUPERRAYS_H
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <exception>
 #include <vector>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 #include <octomap/OcTree.h>
 
@@ -19,6 +25,7 @@ namespace occgp {
 namespace scan_detail {
 
 constexpr int kMaxVal = 32768;  // liboctomap's tree_max_val
+constexpr uint32_t kMinParallelGroups = 256;  // fewer end cells to classify: one thread
 
 // The murmur3 finaliser: spreads the bits of a signature for hashing.
 static inline uint64_t mix(uint64_t k) {
@@ -41,81 +48,21 @@ struct Crossing {
   int key_max;    // only the borders between them are crossed
 };
 
-}  // namespace scan_detail
-
-// Group the rays of a scan into super rays (Kwon, dissertation 2.3.1-2.3.4).
-//
-// Fills `rays` (indices of the rays to traverse) and `weights` (how many rays each
-// stands for). Rays ending in a cell that holds at least `threshold` end points are
-// classified by their *signature*: at every border a ray crosses between the origin's
-// cell and its end cell, the keys of the other coordinates there; only the crossings
-// where the rays into that end cell can differ ("critical", the mapping lines) are
-// evaluated. Equal signatures mean the same traversed cells, so one ray of each class
-// is traversed with the class size as weight.
-//
-// Exactness against liboctomap's float traversal: a ray joins a class only when it is
-// *certified* -- its end point clears the borders of its cell by more than `delta` =
-// 2^-19 (length + resolution), 4 x the error of liboctomap's float direction, and at
-// every crossing (critical or not) the other coordinate clears the borders of its cell
-// that the ray crosses (those between the origin's cell and the end cell) by more than
-// `delta` plus 2^-21 resolution times the slope |d_b / d_a|, for the single-precision
-// half-cell offset of liboctomap's borders. Its float traversal then equals the exact
-// one. Every other ray is traversed on its own. A crossing is skipped as non-critical
-// only when every certified ray of the group clears the same borders there by that
-// margin: the slopes are bounded over the end cell shrunk by `delta` (where the origin
-// lies on the end cell's face, at t = 0 of the rays' first crossing, rays that end
-// near that face are steep, and the half-cell offset moves their first crossing far
-// along them), and the key ranges are computed in doubles, cut to the keys the rays
-// can have.
-static inline void super_rays(double res, const octomap::point3d& o, const octomap::OcTreeKey& ko,
-                       const std::vector<octomap::point3d>& ends,
-                       const std::vector<octomap::OcTreeKey>& end_keys,
-                       const std::vector<uint8_t>& truncated, KeyTable& table, int threshold,
-                       std::vector<uint32_t>& rays, std::vector<uint32_t>& weights) {
-  using namespace scan_detail;
+// Classify the rays of groups g0 <= g < g1 of super_rays (group g: order[offsets[g - 1]]
+// up to order[offsets[g]]), appending the rays to traverse and their weights.
+static inline void classify_groups(double res, const double* oc, const octomap::OcTreeKey& ko,
+                                   const std::vector<octomap::point3d>& ends,
+                                   const std::vector<octomap::OcTreeKey>& end_keys,
+                                   const std::vector<uint32_t>& offsets,
+                                   const std::vector<uint32_t>& order, double eb, ptrdiff_t g0,
+                                   ptrdiff_t g1, std::vector<uint32_t>& rays,
+                                   std::vector<uint32_t>& weights) {
   const double rf = 1.0 / res;
-  double oc[3], lo[3], hi[3], pc[3], dp[3], inv[3];
-  const ptrdiff_t n = static_cast<ptrdiff_t>(ends.size());
-  uint32_t n_groups = 0;
-  std::vector<uint32_t> group_of, offsets, order;
+  double lo[3], hi[3], pc[3], dp[3], inv[3];
   std::vector<Crossing> crossings;
   std::vector<uint64_t> class_code;
   std::vector<uint32_t> class_ray;
-  oc[0] = o.x();
-  oc[1] = o.y();
-  oc[2] = o.z();
-  const double eb = std::ldexp(res, -21);  // 4 x the single-precision offset of the borders
-  // groups of rays by end cell, for the cells with at least `threshold` end points
-  group_of.assign(n, 0);
-  for (ptrdiff_t i = 0; i < n; ++i) {
-    if (truncated[i]) continue;
-    KeyCounts* entry = table.find(pack_key(end_keys[i]));
-    if (entry == nullptr || entry->n_hit < static_cast<uint32_t>(threshold)) continue;
-    if (entry->group == 0) {
-      n_groups += 1;
-      entry->group = n_groups;
-    }
-    group_of[i] = entry->group;
-  }
-  offsets.assign(n_groups + 2, 0);
-  for (ptrdiff_t i = 0; i < n; ++i) {
-    if (group_of[i]) {
-      offsets[group_of[i] + 1] += 1;
-    } else {
-      rays.push_back(static_cast<uint32_t>(i));
-      weights.push_back(1);
-    }
-  }
-  for (ptrdiff_t g = 1; g < static_cast<ptrdiff_t>(n_groups) + 2; ++g) offsets[g] += offsets[g - 1];
-  order.resize(offsets[n_groups + 1]);
-  for (ptrdiff_t i = 0; i < n; ++i) {
-    if (group_of[i]) {
-      order[offsets[group_of[i]]] = static_cast<uint32_t>(i);
-      offsets[group_of[i]] += 1;
-    }
-  }
-  // offsets[g] now ends group g (1-based), i.e. starts group g + 1
-  for (ptrdiff_t g = 1; g < static_cast<ptrdiff_t>(n_groups) + 1; ++g) {
+  for (ptrdiff_t g = g0; g < g1; ++g) {
     const ptrdiff_t first = offsets[g - 1];
     const octomap::OcTreeKey kv = end_keys[order[first]];
     double far2 = 0;
@@ -252,6 +199,104 @@ static inline void super_rays(double res, const octomap::point3d& o, const octom
         weights.push_back(1);
       }
     }
+  }
+}
+
+}  // namespace scan_detail
+
+// Group the rays of a scan into super rays (Kwon, dissertation 2.3.1-2.3.4).
+//
+// Fills `rays` (indices of the rays to traverse) and `weights` (how many rays each
+// stands for). Rays ending in a cell that holds at least `threshold` end points are
+// classified by their *signature*: at every border a ray crosses between the origin's
+// cell and its end cell, the keys of the other coordinates there; only the crossings
+// where the rays into that end cell can differ ("critical", the mapping lines) are
+// evaluated. Equal signatures mean the same traversed cells, so one ray of each class
+// is traversed with the class size as weight. The end cells' groups are classified on
+// up to `n_threads` OpenMP threads, in contiguous ranges whose rays are joined in group
+// order: the rays and weights are the same for every `n_threads`.
+//
+// Exactness against liboctomap's float traversal: a ray joins a class only when it is
+// *certified* -- its end point clears the borders of its cell by more than `delta` =
+// 2^-19 (length + resolution), 4 x the error of liboctomap's float direction, and at
+// every crossing (critical or not) the other coordinate clears the borders of its cell
+// that the ray crosses (those between the origin's cell and the end cell) by more than
+// `delta` plus 2^-21 resolution times the slope |d_b / d_a|, for the single-precision
+// half-cell offset of liboctomap's borders. Its float traversal then equals the exact
+// one. Every other ray is traversed on its own. A crossing is skipped as non-critical
+// only when every certified ray of the group clears the same borders there by that
+// margin: the slopes are bounded over the end cell shrunk by `delta` (where the origin
+// lies on the end cell's face, at t = 0 of the rays' first crossing, rays that end
+// near that face are steep, and the half-cell offset moves their first crossing far
+// along them), and the key ranges are computed in doubles, cut to the keys the rays
+// can have.
+static inline void super_rays(double res, const octomap::point3d& o, const octomap::OcTreeKey& ko,
+                       const std::vector<octomap::point3d>& ends,
+                       const std::vector<octomap::OcTreeKey>& end_keys,
+                       const std::vector<uint8_t>& truncated, KeyTable& table, int threshold,
+                       std::vector<uint32_t>& rays, std::vector<uint32_t>& weights,
+                       int n_threads = 1) {
+  using namespace scan_detail;
+  double oc[3];
+  const ptrdiff_t n = static_cast<ptrdiff_t>(ends.size());
+  uint32_t n_groups = 0;
+  std::vector<uint32_t> group_of, offsets, order;
+  oc[0] = o.x();
+  oc[1] = o.y();
+  oc[2] = o.z();
+  const double eb = std::ldexp(res, -21);  // 4 x the single-precision offset of the borders
+  // groups of rays by end cell, for the cells with at least `threshold` end points
+  group_of.assign(n, 0);
+  for (ptrdiff_t i = 0; i < n; ++i) {
+    if (truncated[i]) continue;
+    KeyCounts* entry = table.find(pack_key(end_keys[i]));
+    if (entry == nullptr || entry->n_hit < static_cast<uint32_t>(threshold)) continue;
+    if (entry->group == 0) {
+      n_groups += 1;
+      entry->group = n_groups;
+    }
+    group_of[i] = entry->group;
+  }
+  offsets.assign(n_groups + 2, 0);
+  for (ptrdiff_t i = 0; i < n; ++i) {
+    if (group_of[i]) {
+      offsets[group_of[i] + 1] += 1;
+    } else {
+      rays.push_back(static_cast<uint32_t>(i));
+      weights.push_back(1);
+    }
+  }
+  for (ptrdiff_t g = 1; g < static_cast<ptrdiff_t>(n_groups) + 2; ++g) offsets[g] += offsets[g - 1];
+  order.resize(offsets[n_groups + 1]);
+  for (ptrdiff_t i = 0; i < n; ++i) {
+    if (group_of[i]) {
+      order[offsets[group_of[i]]] = static_cast<uint32_t>(i);
+      offsets[group_of[i]] += 1;
+    }
+  }
+  // offsets[g] now ends group g (1-based), i.e. starts group g + 1
+  // the groups are classified in contiguous ranges (on the threads when they are many),
+  // each range's rays appended in group order, so the rays come out in the same order
+  // for every n_threads
+  const int threads = n_groups >= kMinParallelGroups ? std::max(1, n_threads) : 1;
+  const ptrdiff_t n_ranges = threads > 1 ? static_cast<ptrdiff_t>(threads) * 8 : 1;
+  std::vector<std::vector<uint32_t>> part_rays(n_ranges), part_weights(n_ranges);
+  std::exception_ptr error;
+#pragma omp parallel for num_threads(threads) schedule(dynamic) if (threads > 1)
+  for (ptrdiff_t part = 0; part < n_ranges; ++part) {
+    try {
+      classify_groups(res, oc, ko, ends, end_keys, offsets, order, eb,
+                      1 + part * n_groups / n_ranges, 1 + (part + 1) * n_groups / n_ranges,
+                      part_rays[part], part_weights[part]);
+    } catch (...) {
+#pragma omp critical(occgp_superray_error)
+      if (!error) error = std::current_exception();
+    }
+  }
+  if (error) std::rethrow_exception(error);
+  for (ptrdiff_t part = 0; part < n_ranges; ++part) {
+    rays.insert(rays.end(), part_rays[part].begin(), part_rays[part].end());
+    weights.insert(weights.end(), part_weights[part].begin(), part_weights[part].end());
   }
 }
 

@@ -113,3 +113,27 @@ def test_knn_map_updates_its_tree_on_threads_as_on_one():
         for n in (2, 3):
             same_tree(maps[n], maps[1])
     assert min(sizes) >= 4096
+
+
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+def test_super_rays_grouped_on_threads_give_the_single_thread_map(mode):
+    """A dense wall (1600 end cells of about 25 points): the end cells' groups are
+    classified on the threads; the super rays, their weights, the statistics and the
+    tree are the single thread's."""
+    rng = np.random.default_rng(11)
+    scans = []
+    for k in range(3):
+        origin = np.array([0.03, 0.02, 0.01]) + 0.07 * k
+        wall = np.column_stack([np.full(40000, 3.05), rng.uniform(-2, 2, (40000, 2))])
+        scans.append((wall, origin))
+    trees = {n: OccupancyOctree(0.1) for n in (1, 2, 3)}
+    for points, origin in scans:
+        stats = {}
+        for n, m in trees.items():
+            m.insert_scan(points, origin, mode=mode, method="superray", n_jobs=n)
+            stats[n] = {k: m.last_insert_[k] for k in ("rays", "traversed_cells",
+                                                         "updated_cells")}
+        assert stats[1]["rays"] < len(points) - 500         # rays were grouped
+        for n in (2, 3):
+            assert stats[n] == stats[1]
+            same_tree(trees[n], trees[1])
