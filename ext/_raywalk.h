@@ -65,22 +65,8 @@ class RayWalker {
 
   // Step to the next cell of the ray; false when the ray has no more cells.
   bool next() {
-    // the axis of the smallest tMax, ties resolved as computeRayKeys resolves them
-    const bool c01 = t0_ < t1_, c02 = t0_ < t2_, c12 = t1_ < t2_;
-    const bool m0 = c01 & c02;
-    const bool m1 = !c01 & c12;
-    const bool m2 = !(m0 | m1);
-    k0_ += m0 ? s0_ : 0;
-    k1_ += m1 ? s1_ : 0;
-    k2_ += m2 ? s2_ : 0;
-    t0_ += m0 ? d0_ : 0.0;  // adding +0.0 leaves every tMax value unchanged
-    t1_ += m1 ? d1_ : 0.0;
-    t2_ += m2 ? d2_ : 0.0;
-    // keys are 16 bits: compare them modulo 2^16, as OcTreeKey does
-    if ((((k0_ ^ e0_) | (k1_ ^ e1_) | (k2_ ^ e2_)) & 0xFFFF) == 0) return false;
-    const double t01 = t0_ < t1_ ? t0_ : t1_;
-    const double dist = t01 < t2_ ? t01 : t2_;
-    return !(dist > length_);
+    return advance(k0_, k1_, k2_, t0_, t1_, t2_, s0_, s1_, s2_, d0_, d1_, d2_, e0_, e1_, e2_,
+                   length_);
   }
 
   // Visit the current cell and every later one of the ray, `visit(k0, k1, k2)` with
@@ -91,30 +77,13 @@ class RayWalker {
   long visit_rest(Visit&& visit) const {
     int k0 = k0_, k1 = k1_, k2 = k2_;
     double t0 = t0_, t1 = t1_, t2 = t2_;
-    const double d0 = d0_, d1 = d1_, d2 = d2_;
-    const int s0 = s0_, s1 = s1_, s2 = s2_, e0 = e0_, e1 = e1_, e2 = e2_;
-    const float length = length_;
     long n = 0;
-    for (;;) {
+    do {
       visit(k0 & 0xFFFF, k1 & 0xFFFF, k2 & 0xFFFF);
       ++n;
-      // next(), on the local copies
-      const bool c01 = t0 < t1, c02 = t0 < t2, c12 = t1 < t2;
-      const bool m0 = c01 & c02;
-      const bool m1 = !c01 & c12;
-      const bool m2 = !(m0 | m1);
-      k0 += m0 ? s0 : 0;
-      k1 += m1 ? s1 : 0;
-      k2 += m2 ? s2 : 0;
-      t0 += m0 ? d0 : 0.0;
-      t1 += m1 ? d1 : 0.0;
-      t2 += m2 ? d2 : 0.0;
-      if ((((k0 ^ e0) | (k1 ^ e1) | (k2 ^ e2)) & 0xFFFF) == 0) return n;
-      // the smallest tMax, by value (std::min's references would keep t0..t2 in memory)
-      const double t01 = t0 < t1 ? t0 : t1;
-      const double dist = t01 < t2 ? t01 : t2;
-      if (dist > length) return n;
-    }
+    } while (advance(k0, k1, k2, t0, t1, t2, s0_, s1_, s2_, d0_, d1_, d2_, e0_, e1_, e2_,
+                     length_));
+    return n;
   }
 
   // The current cell's key on `axis`.
@@ -205,6 +174,30 @@ class RayWalker {
   }
 
  private:
+  // One step of computeRayKeys's loop on the keys (k) and tMax values (t): along the
+  // axis of the smallest tMax, ties resolved as computeRayKeys resolves them; false
+  // when the end cell (keys e) is reached or the smallest tMax passes `length`.
+  static inline bool advance(int& k0, int& k1, int& k2, double& t0, double& t1, double& t2,
+                             int s0, int s1, int s2, double d0, double d1, double d2, int e0,
+                             int e1, int e2, float length) {
+    const bool c01 = t0 < t1, c02 = t0 < t2, c12 = t1 < t2;
+    const bool m0 = c01 & c02;
+    const bool m1 = !c01 & c12;
+    const bool m2 = !(m0 | m1);
+    k0 += m0 ? s0 : 0;
+    k1 += m1 ? s1 : 0;
+    k2 += m2 ? s2 : 0;
+    t0 += m0 ? d0 : 0.0;  // adding +0.0 leaves every tMax value unchanged
+    t1 += m1 ? d1 : 0.0;
+    t2 += m2 ? d2 : 0.0;
+    // keys are 16 bits: compare them modulo 2^16, as OcTreeKey does
+    if ((((k0 ^ e0) | (k1 ^ e1) | (k2 ^ e2)) & 0xFFFF) == 0) return false;
+    // the smallest tMax, by value (std::min's references would keep t0..t2 in memory)
+    const double t01 = t0 < t1 ? t0 : t1;
+    const double dist = t01 < t2 ? t01 : t2;
+    return !(dist > length);
+  }
+
   static constexpr int kMaxVal = 32768;  // liboctomap's tree_max_val
   int k0_ = 0, k1_ = 0, k2_ = 0;
   int e0_ = 0, e1_ = 0, e2_ = 0;
