@@ -90,8 +90,14 @@ cdef extern from * nogil:
         const double* e = table + 2 * (long)_mm_cvtsi128_si32(ji);
         return e[0] + (x - _mm_cvtsd_f64(_mm_cvtepi32_pd(ji))) * e[1];
     }
+    /* sqrt(x) for x > 0, else 0 (NaN too): one sqrtsd, without libm's errno path */
+    static inline double occgp_sqrt_positive(double x) {
+        __m128d v = _mm_max_sd(_mm_set_sd(x), _mm_setzero_pd());
+        return _mm_cvtsd_f64(_mm_sqrt_sd(v, v));
+    }
     #else
     static inline double occgp_below_one(double x) { return x < 1.0 ? x : 1.0; }
+    static inline double occgp_sqrt_positive(double x) { return x > 0.0 ? sqrt(x) : 0.0; }
     static inline double occgp_below(double x, double t) { return x < t ? x : t; }
     static inline double occgp_interpolate(const double* table, double x) {
         int j = (int)x;
@@ -101,6 +107,7 @@ cdef extern from * nogil:
     #endif
     """
     double _below_one "occgp_below_one" (double x)
+    double _sqrt_positive "occgp_sqrt_positive" (double x)
     double _below "occgp_below" (double x, double t)
     double _interpolate "occgp_interpolate" (const double* table, double x)
 
@@ -317,6 +324,12 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
     cdef long updates = 0
     cdef long bdx = dims[0] >> 2, bdy = dims[1] >> 2
     cdef Row rows[_ROWS]
+    cdef double row_qb[_ROWS]
+    cdef double row_qc[_ROWS]
+    cdef double row_disc[_ROWS]
+    cdef double row_root[_ROWS]
+    cdef long ky0
+    cdef int j, ny
     for t in range(n):
         i = order[t]
         x = xs + 3 * i
@@ -340,48 +353,63 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
         for kz in range(max(lo[2], za), min(hi[2], zb - 1) + 1):
             d2 = (<double>(kz - _MAX_VAL) + 0.5) * res - x[2]
             bz_row = ((kz - org[2]) >> 2) * bdy
-            for ky in range(lo[1], hi[1] + 1):
-                d1 = (<double>(ky - _MAX_VAL) + 0.5) * res - x[1]
-                # the row's cells inside the ellipsoid: r2 is quadratic in d0; widened
-                # by a cell each way, the test of r2 < 1 decides
-                qb = 0.5 * q01 * d1 + 0.5 * q02 * d2
-                qc = p[4] * d1 * d1 + q12 * d1 * d2 + p[8] * d2 * d2
-                disc = qb * qb - p00 * (qc - 1.0)
-                if not disc > 0.0:
-                    continue
-                disc = sqrt(disc)
-                row_lo = max(lo[0], _row_end(x[0], -qb - disc, p00, ip00, res, ires, False)
-                             + _MAX_VAL)
-                row_hi = min(hi[0], _row_end(x[0], -qb + disc, p00, ip00, res, ires, True)
-                             + _MAX_VAL)
-                if row_lo > row_hi:
-                    continue
-                brow = <uint64_t>((bz_row + ((ky - org[1]) >> 2)) * bdx)
-                # the row's bricks b0 .. b1: up to four flagged without a loop
-                b0 = (row_lo - org[0]) >> 2
-                b1 = (row_hi - org[0]) >> 2
-                touched[brow + <uint64_t>b0] = 1
-                touched[brow + <uint64_t>min(b0 + 1, b1)] = 1
-                touched[brow + <uint64_t>min(b0 + 2, b1)] = 1
-                touched[brow + <uint64_t>b1] = 1
-                for bx in range(b0 + 3, b1):
-                    touched[brow + <uint64_t>bx] = 1
-                d0 = (<double>(row_lo - _MAX_VAL) + 0.5) * res - x[0]
-                rows[n_rows].cell = box + 64 * brow + <uint64_t>((ky & 3) << 2 | (kz & 3) << 4)
-                rows[n_rows].rx = row_lo - org[0]     # org is block-aligned
-                rows[n_rows].count = row_hi - row_lo + 1
-                # the row's first and last bricks, fetched while the other rows are
-                # laid out
-                rx = row_lo - org[0]
-                __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
-                rx = row_hi - org[0]
-                __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
-                rows[n_rows].r2 = (p00 * d0 + 2.0 * qb) * d0 + qc
-                rows[n_rows].dr = (2.0 * p00 * d0 + 2.0 * qb + p00 * res) * res
-                n_rows += 1
-                if n_rows == _ROWS:
-                    updates += _add_rows(rows, n_rows, kind, wk, y, ddr, beta_off)
-                    n_rows = 0
+            # in chunks of rows: their discriminants and square roots first (no branch,
+            # no wait on each square root), then the rows the ellipsoid meets
+            ky0 = lo[1]
+            while ky0 <= hi[1]:
+                ny = <int>min(hi[1] - ky0 + 1, <long>_ROWS)
+                for j in range(ny):
+                    d1 = (<double>(ky0 + j - _MAX_VAL) + 0.5) * res - x[1]
+                    # the row's cells inside the ellipsoid: r2 is quadratic in d0;
+                    # widened by a cell each way, the test of r2 < 1 decides
+                    qb = 0.5 * q01 * d1 + 0.5 * q02 * d2
+                    qc = p[4] * d1 * d1 + q12 * d1 * d2 + p[8] * d2 * d2
+                    disc = qb * qb - p00 * (qc - 1.0)
+                    row_qb[j] = qb
+                    row_qc[j] = qc
+                    row_disc[j] = disc
+                    row_root[j] = _sqrt_positive(disc)
+                for j in range(ny):
+                    if not row_disc[j] > 0.0:
+                        continue
+                    ky = ky0 + j
+                    qb = row_qb[j]
+                    qc = row_qc[j]
+                    disc = row_root[j]
+                    row_lo = max(lo[0], _row_end(x[0], -qb - disc, p00, ip00, res, ires,
+                                                 False) + _MAX_VAL)
+                    row_hi = min(hi[0], _row_end(x[0], -qb + disc, p00, ip00, res, ires,
+                                                 True) + _MAX_VAL)
+                    if row_lo > row_hi:
+                        continue
+                    brow = <uint64_t>((bz_row + ((ky - org[1]) >> 2)) * bdx)
+                    # the row's bricks b0 .. b1: up to four flagged without a loop
+                    b0 = (row_lo - org[0]) >> 2
+                    b1 = (row_hi - org[0]) >> 2
+                    touched[brow + <uint64_t>b0] = 1
+                    touched[brow + <uint64_t>min(b0 + 1, b1)] = 1
+                    touched[brow + <uint64_t>min(b0 + 2, b1)] = 1
+                    touched[brow + <uint64_t>b1] = 1
+                    for bx in range(b0 + 3, b1):
+                        touched[brow + <uint64_t>bx] = 1
+                    d0 = (<double>(row_lo - _MAX_VAL) + 0.5) * res - x[0]
+                    rows[n_rows].cell = (box + 64 * brow
+                                         + <uint64_t>((ky & 3) << 2 | (kz & 3) << 4))
+                    rows[n_rows].rx = row_lo - org[0]     # org is block-aligned
+                    rows[n_rows].count = row_hi - row_lo + 1
+                    # the row's first and last bricks, fetched while the other rows are
+                    # laid out
+                    rx = row_lo - org[0]
+                    __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
+                    rx = row_hi - org[0]
+                    __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
+                    rows[n_rows].r2 = (p00 * d0 + 2.0 * qb) * d0 + qc
+                    rows[n_rows].dr = (2.0 * p00 * d0 + 2.0 * qb + p00 * res) * res
+                    n_rows += 1
+                    if n_rows == _ROWS:
+                        updates += _add_rows(rows, n_rows, kind, wk, y, ddr, beta_off)
+                        n_rows = 0
+                ky0 += ny
         updates += _add_rows(rows, n_rows, kind, wk, y, ddr, beta_off)
     return updates
 
