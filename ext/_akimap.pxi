@@ -44,9 +44,34 @@ cdef inline double _scale_loss(const double* r2, const double* target, int m,
     cdef double e, total = 0.0, inv = 1.0 / (c * c)
     cdef int j
     for j in range(m):
-        e = target[j] - (_kernel_r2(r2[j] * inv) if r2[j] * inv < 1.0 else 0.0)
+        e = target[j] - _kernel_r2(_below_one(r2[j] * inv))
         total += e * e
     return total / (c * c * c)
+
+
+cdef void _scale_loss4(const double* r2, const double* target, int m, const double* c,
+                       double* out) noexcept nogil:
+    """`_scale_loss` at the four scales c[0..3] (each sum in the same order: the same
+    values), in one pass over the neighbours."""
+    cdef double e0, e1, e2, e3, t
+    cdef double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0
+    cdef double i0 = 1.0 / (c[0] * c[0]), i1 = 1.0 / (c[1] * c[1])
+    cdef double i2 = 1.0 / (c[2] * c[2]), i3 = 1.0 / (c[3] * c[3])
+    cdef int j
+    for j in range(m):
+        t = target[j]
+        e0 = t - _kernel_r2(_below_one(r2[j] * i0))
+        e1 = t - _kernel_r2(_below_one(r2[j] * i1))
+        e2 = t - _kernel_r2(_below_one(r2[j] * i2))
+        e3 = t - _kernel_r2(_below_one(r2[j] * i3))
+        s0 += e0 * e0
+        s1 += e1 * e1
+        s2 += e2 * e2
+        s3 += e3 * e3
+    out[0] = s0 / (c[0] * c[0] * c[0])
+    out[1] = s1 / (c[1] * c[1] * c[1])
+    out[2] = s2 / (c[2] * c[2] * c[2])
+    out[3] = s3 / (c[3] * c[3] * c[3])
 
 
 cdef double _scale_minimise(const double* r2, const double* target, int m,
@@ -54,16 +79,25 @@ cdef double _scale_minimise(const double* r2, const double* target, int m,
     """The length-scale factor c in [lo, 1] minimising Eq. 3.7: the best of a grid of
     _SCALE_GRID log-spaced values (1 included), refined by golden-section search
     between its grid neighbours (the loss need not be unimodal on [lo, 1])."""
-    cdef double best_c = 1.0, best = _scale_loss(r2, target, m, 1.0), c, f
+    cdef double best_c, best
     cdef double step, a, b, x1, x2, f1, f2
     cdef double g = 0.6180339887498949
+    cdef double grid[_SCALE_GRID]
+    cdef double loss[_SCALE_GRID]
     cdef int j, best_j = _SCALE_GRID - 1
     step = log(lo) / (_SCALE_GRID - 1)
+    # the grid's losses four at a time (c = lo, ..., the last one c = 1), then
+    # compared from 1 on, in the grid's order
     for j in range(_SCALE_GRID - 1):
-        c = exp(log(lo) - j * step) if j else lo
-        f = _scale_loss(r2, target, m, c)
-        if f < best:
-            best, best_c, best_j = f, c, j
+        grid[j] = exp(log(lo) - j * step) if j else lo
+    grid[_SCALE_GRID - 1] = 1.0
+    for j in range(0, _SCALE_GRID, 4):
+        _scale_loss4(r2, target, m, grid + j, loss + j)
+    best_c = 1.0
+    best = loss[_SCALE_GRID - 1]
+    for j in range(_SCALE_GRID - 1):
+        if loss[j] < best:
+            best, best_c, best_j = loss[j], grid[j], j
     # bracket [c_{j-1}, c_{j+1}] in log space
     a = log(lo) - (best_j - 1) * step if best_j > 0 else log(lo)
     b = log(lo) - (best_j + 1) * step if best_j < _SCALE_GRID - 1 else 0.0
@@ -149,6 +183,13 @@ cdef inline void _set_bandwidth(const double* h, Py_ssize_t i, double* precision
     weight[i] = 1.0 / sqrt(det)
 
 
+cdef inline long _floor_cube(double v) noexcept nogil:
+    """floor(v) for |v| < 2^62 (the search cubes' coordinates stay within 2^53), by a
+    cast, without the libm call."""
+    cdef long t = <long>v
+    return t - (<double>t > v)
+
+
 cdef inline long _lower_bound(const int64_t* keys, long n, int64_t key) noexcept nogil:
     """Index of the first entry of the sorted array `keys` not below `key` (n if none)."""
     cdef long lo = 0, hi = n, mid
@@ -178,7 +219,7 @@ cdef void _bandwidth_one(
     cdef double d[3]
     cdef double sig[9]
     cdef double inv[9]
-    cdef double dist, radius, r2max, det, lo_scale, c, w0, q
+    cdef double dist, radius, r2max, det, lo_scale, c, w0, q, lab_t
     cdef long cmin[3]
     cdef long cmax[3]
     cdef long cy, cz, first, last
@@ -205,8 +246,8 @@ cdef void _bandwidth_one(
     for a in range(9):
         sig[a] = 0.0
     for a in range(3):
-        cmin[a] = max(<long>floor((xi[a] - radius) / cell) - <long>grid_lo[a], 0)
-        cmax[a] = min(<long>floor((xi[a] + radius) / cell) - <long>grid_lo[a],
+        cmin[a] = max(_floor_cube((xi[a] - radius) / cell) - <long>grid_lo[a], 0)
+        cmax[a] = min(_floor_cube((xi[a] + radius) / cell) - <long>grid_lo[a],
                       <long>grid_dims[a] - 1)
     # pass 1: the neighbours (offsets and labels into buf, 4 doubles each) and the
     # scatter of the same-label ones about x_i. The cubes cmin[0] .. cmax[0] of a row
@@ -284,13 +325,14 @@ cdef void _bandwidth_one(
         d[2] = buf[4 * t + 2]
         q = (inv[0] * d[0] * d[0] + inv[4] * d[1] * d[1] + inv[8] * d[2] * d[2]
              + 2.0 * (inv[1] * d[0] * d[1] + inv[2] * d[0] * d[2] + inv[5] * d[1] * d[2]))
-        if q < 1.0:
-            if buf[4 * t + 3] == 0.0:
-                other += 1
-            # compact in place: entry k <- (q, target); k <= t so no overwrite ahead
-            r2buf[2 * k] = q
-            r2buf[2 * k + 1] = _kernel_r2(q) if buf[4 * t + 3] != 0.0 else 0.0
-            k += 1
+        # compact in place, without a branch: entry k <- (q, target), kept when q < 1
+        # (k <= t, so nothing ahead is overwritten); the target k(r_j) times the
+        # label 1 or 0 is k(r_j) or +0
+        lab_t = buf[4 * t + 3]
+        r2buf[2 * k] = q
+        r2buf[2 * k + 1] = _kernel_r2(_below_one(q)) * lab_t
+        other += (q < 1.0) & (lab_t == 0.0)
+        k += q < 1.0
     c = 1.0
     if other > 0 and lo_scale < 1.0:
         # de-interleave (r2, target) pairs into two arrays after the k pairs

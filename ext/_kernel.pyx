@@ -69,6 +69,49 @@ cdef extern from * nogil:
     void __builtin_prefetch(const void* address, int rw, int locality)
 
 
+cdef extern from * nogil:
+    """
+    #if defined(__SSE2__)
+    #include <emmintrin.h>
+    /* x where x < 1, else 1 (NaN too), by one minsd: a comparison the compiler can
+       neither split into branches nor fold the constant 1 through */
+    static inline double occgp_below_one(double x) {
+        return _mm_cvtsd_f64(_mm_min_sd(_mm_set_sd(x), _mm_set_sd(1.0)));
+    }
+    /* x where x < t, else t (NaN too) */
+    static inline double occgp_below(double x, double t) {
+        return _mm_cvtsd_f64(_mm_min_sd(_mm_set_sd(x), _mm_set_sd(t)));
+    }
+    /* table[2 j] + (x - j) table[2 j + 1], j = (int)x (truncated): the conversions
+       packed, which write their whole register (the scalar cvtsi2sd would wait for
+       the previous value of its register) */
+    static inline double occgp_interpolate(const double* table, double x) {
+        __m128i ji = _mm_cvttpd_epi32(_mm_set_sd(x));
+        const double* e = table + 2 * (long)_mm_cvtsi128_si32(ji);
+        return e[0] + (x - _mm_cvtsd_f64(_mm_cvtepi32_pd(ji))) * e[1];
+    }
+    /* sqrt(x) for x > 0, else 0 (NaN too): one sqrtsd, without libm's errno path */
+    static inline double occgp_sqrt_positive(double x) {
+        __m128d v = _mm_max_sd(_mm_set_sd(x), _mm_setzero_pd());
+        return _mm_cvtsd_f64(_mm_sqrt_sd(v, v));
+    }
+    #else
+    static inline double occgp_below_one(double x) { return x < 1.0 ? x : 1.0; }
+    static inline double occgp_sqrt_positive(double x) { return x > 0.0 ? sqrt(x) : 0.0; }
+    static inline double occgp_below(double x, double t) { return x < t ? x : t; }
+    static inline double occgp_interpolate(const double* table, double x) {
+        int j = (int)x;
+        const double* e = table + 2 * (long)j;
+        return e[0] + (x - (double)j) * e[1];
+    }
+    #endif
+    """
+    double _below_one "occgp_below_one" (double x)
+    double _sqrt_positive "occgp_sqrt_positive" (double x)
+    double _below "occgp_below" (double x, double t)
+    double _interpolate "occgp_interpolate" (const double* table, double x)
+
+
 cdef inline uint64_t _block_key(long kx, long ky, long kz) noexcept nogil:
     return (<uint64_t>(kx >> 2)) | ((<uint64_t>(ky >> 2)) << 16) | ((<uint64_t>(kz >> 2)) << 32)
 
@@ -108,9 +151,7 @@ cdef inline double _kernel_r2(double r2) noexcept nogil:
     """The sparse kernel at squared normalised distance r2 < 1, by linear interpolation
     in r2, where it is smooth (1 - (2 pi^2 / 3) r2 + O(r2^2) at 0, ~(1 - r)^5 at 1):
     within 3e-8 of the formula, without its sqrt, sin and cos."""
-    cdef double x = r2 * _TABLE
-    cdef int j = <int>x
-    return _KERNEL_R2[2 * j] + (x - j) * _KERNEL_R2[2 * j + 1]
+    return _interpolate(_KERNEL_R2, r2 * _TABLE)
 
 
 def kernel_from_table(const double[::1] r2):
@@ -130,14 +171,21 @@ cdef inline void _support_keys(const double* x, const double* ext, double res,
     sample at x with half-extents ext."""
     cdef int a
     cdef double l, h
+    cdef long kl, kh
     for a in range(3):
-        # clamped in double first: a support wider than the key range casts safely
-        l = ceil((x[a] - ext[a]) / res - 0.5)
-        h = floor((x[a] + ext[a]) / res - 0.5)
+        # clamped in double first (to integers: the same as clamping the rounded
+        # value), so that a support wider than the key range casts safely; then
+        # rounded up (l) and down (h) by a cast, without the libm calls
+        l = (x[a] - ext[a]) / res - 0.5
+        h = (x[a] + ext[a]) / res - 0.5
         l = min(max(l, -_MAX_VAL - 1.0), <double>_MAX_VAL)
         h = min(max(h, -_MAX_VAL - 1.0), <double>_MAX_VAL)
-        lo[a] = max(<long>l + _MAX_VAL, 0)
-        hi[a] = min(<long>h + _MAX_VAL, 2 * _MAX_VAL - 1)
+        kl = <long>l
+        kl += <double>kl < l
+        kh = <long>h
+        kh -= <double>kh > h
+        lo[a] = max(kl + _MAX_VAL, 0)
+        hi[a] = min(kh + _MAX_VAL, 2 * _MAX_VAL - 1)
 
 
 def sparse_kernel(const double[::1] r):
@@ -214,7 +262,7 @@ cdef long _add_rows(const Row* rows, int n_rows, int kind, double wk, double y,
     number of cells inside the support."""
     cdef int m
     cdef long j, rx, updates = 0
-    cdef double r2, dr, k
+    cdef double r2, dr, k, x, dx, ddx = ddr * _TABLE
     cdef double* cell
     for m in range(n_rows):
         cell = rows[m].cell + (beta_off if kind == 0 else 0)
@@ -225,12 +273,16 @@ cdef long _add_rows(const Row* rows, int n_rows, int kind, double wk, double y,
         # dr(d0 + res) = dr + 2 p00 res^2
         if kind != 2:
             # binary labels: every cell of the row gets wk k(min(r2, 1)), which is +0
-            # (no change) outside the support, without a branch
+            # (no change) outside the support, without a branch. r2 and its differences
+            # are carried times _TABLE (a power of two: the same sums, scaled exactly)
+            x = r2 * _TABLE
+            dx = dr * _TABLE
             for j in range(rows[m].count):
-                updates += r2 < 1.0
-                cell[(rx >> 2) * 64 + (rx & 3)] += wk * _kernel_r2(min(r2, 1.0))
-                r2 += dr
-                dr += ddr
+                updates += x < <double>_TABLE
+                cell[(rx >> 2) * 64 + (rx & 3)] += wk * _interpolate(
+                    _KERNEL_R2, _below(x, <double>_TABLE))
+                x += dx
+                dx += ddx
                 rx += 1
         else:
             for j in range(rows[m].count):
@@ -261,7 +313,7 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
     cdef Py_ssize_t t, i
     cdef long lo[3]
     cdef long hi[3]
-    cdef long ky, kz, row_lo, row_hi, bx, bz_row, rx
+    cdef long ky, kz, row_lo, row_hi, bx, b0, b1, bz_row, rx
     cdef size_t kind_off
     cdef double d0, d1, d2, qb, qc, disc, p00, ddr, y, wk
     cdef double q01, q02, q12, ip00, ires = 1.0 / res
@@ -272,6 +324,12 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
     cdef long updates = 0
     cdef long bdx = dims[0] >> 2, bdy = dims[1] >> 2
     cdef Row rows[_ROWS]
+    cdef double row_qb[_ROWS]
+    cdef double row_qc[_ROWS]
+    cdef double row_disc[_ROWS]
+    cdef double row_root[_ROWS]
+    cdef long ky0
+    cdef int j, ny
     for t in range(n):
         i = order[t]
         x = xs + 3 * i
@@ -295,41 +353,63 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
         for kz in range(max(lo[2], za), min(hi[2], zb - 1) + 1):
             d2 = (<double>(kz - _MAX_VAL) + 0.5) * res - x[2]
             bz_row = ((kz - org[2]) >> 2) * bdy
-            for ky in range(lo[1], hi[1] + 1):
-                d1 = (<double>(ky - _MAX_VAL) + 0.5) * res - x[1]
-                # the row's cells inside the ellipsoid: r2 is quadratic in d0; widened
-                # by a cell each way, the test of r2 < 1 decides
-                qb = 0.5 * q01 * d1 + 0.5 * q02 * d2
-                qc = p[4] * d1 * d1 + q12 * d1 * d2 + p[8] * d2 * d2
-                disc = qb * qb - p00 * (qc - 1.0)
-                if not disc > 0.0:
-                    continue
-                disc = sqrt(disc)
-                row_lo = max(lo[0], _row_end(x[0], -qb - disc, p00, ip00, res, ires, False)
-                             + _MAX_VAL)
-                row_hi = min(hi[0], _row_end(x[0], -qb + disc, p00, ip00, res, ires, True)
-                             + _MAX_VAL)
-                if row_lo > row_hi:
-                    continue
-                brow = <uint64_t>((bz_row + ((ky - org[1]) >> 2)) * bdx)
-                for bx in range((row_lo - org[0]) >> 2, ((row_hi - org[0]) >> 2) + 1):
-                    touched[brow + <uint64_t>bx] = 1
-                d0 = (<double>(row_lo - _MAX_VAL) + 0.5) * res - x[0]
-                rows[n_rows].cell = box + 64 * brow + <uint64_t>((ky & 3) << 2 | (kz & 3) << 4)
-                rows[n_rows].rx = row_lo - org[0]     # org is block-aligned
-                rows[n_rows].count = row_hi - row_lo + 1
-                # the row's first and last bricks, fetched while the other rows are
-                # laid out
-                rx = row_lo - org[0]
-                __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
-                rx = row_hi - org[0]
-                __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
-                rows[n_rows].r2 = (p00 * d0 + 2.0 * qb) * d0 + qc
-                rows[n_rows].dr = (2.0 * p00 * d0 + 2.0 * qb + p00 * res) * res
-                n_rows += 1
-                if n_rows == _ROWS:
-                    updates += _add_rows(rows, n_rows, kind, wk, y, ddr, beta_off)
-                    n_rows = 0
+            # in chunks of rows: their discriminants and square roots first (no branch,
+            # no wait on each square root), then the rows the ellipsoid meets
+            ky0 = lo[1]
+            while ky0 <= hi[1]:
+                ny = <int>min(hi[1] - ky0 + 1, <long>_ROWS)
+                for j in range(ny):
+                    d1 = (<double>(ky0 + j - _MAX_VAL) + 0.5) * res - x[1]
+                    # the row's cells inside the ellipsoid: r2 is quadratic in d0;
+                    # widened by a cell each way, the test of r2 < 1 decides
+                    qb = 0.5 * q01 * d1 + 0.5 * q02 * d2
+                    qc = p[4] * d1 * d1 + q12 * d1 * d2 + p[8] * d2 * d2
+                    disc = qb * qb - p00 * (qc - 1.0)
+                    row_qb[j] = qb
+                    row_qc[j] = qc
+                    row_disc[j] = disc
+                    row_root[j] = _sqrt_positive(disc)
+                for j in range(ny):
+                    if not row_disc[j] > 0.0:
+                        continue
+                    ky = ky0 + j
+                    qb = row_qb[j]
+                    qc = row_qc[j]
+                    disc = row_root[j]
+                    row_lo = max(lo[0], _row_end(x[0], -qb - disc, p00, ip00, res, ires,
+                                                 False) + _MAX_VAL)
+                    row_hi = min(hi[0], _row_end(x[0], -qb + disc, p00, ip00, res, ires,
+                                                 True) + _MAX_VAL)
+                    if row_lo > row_hi:
+                        continue
+                    brow = <uint64_t>((bz_row + ((ky - org[1]) >> 2)) * bdx)
+                    # the row's bricks b0 .. b1: up to four flagged without a loop
+                    b0 = (row_lo - org[0]) >> 2
+                    b1 = (row_hi - org[0]) >> 2
+                    touched[brow + <uint64_t>b0] = 1
+                    touched[brow + <uint64_t>min(b0 + 1, b1)] = 1
+                    touched[brow + <uint64_t>min(b0 + 2, b1)] = 1
+                    touched[brow + <uint64_t>b1] = 1
+                    for bx in range(b0 + 3, b1):
+                        touched[brow + <uint64_t>bx] = 1
+                    d0 = (<double>(row_lo - _MAX_VAL) + 0.5) * res - x[0]
+                    rows[n_rows].cell = (box + 64 * brow
+                                         + <uint64_t>((ky & 3) << 2 | (kz & 3) << 4))
+                    rows[n_rows].rx = row_lo - org[0]     # org is block-aligned
+                    rows[n_rows].count = row_hi - row_lo + 1
+                    # the row's first and last bricks, fetched while the other rows are
+                    # laid out
+                    rx = row_lo - org[0]
+                    __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
+                    rx = row_hi - org[0]
+                    __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
+                    rows[n_rows].r2 = (p00 * d0 + 2.0 * qb) * d0 + qc
+                    rows[n_rows].dr = (2.0 * p00 * d0 + 2.0 * qb + p00 * res) * res
+                    n_rows += 1
+                    if n_rows == _ROWS:
+                        updates += _add_rows(rows, n_rows, kind, wk, y, ddr, beta_off)
+                        n_rows = 0
+                ky0 += ny
         updates += _add_rows(rows, n_rows, kind, wk, y, ddr, beta_off)
     return updates
 
