@@ -165,41 +165,6 @@ def kernel_from_table(const double[::1] r2):
     return out
 
 
-cdef inline void _support_keys(const double* x, const double* ext, double res,
-                               long* lo, long* hi) noexcept nogil:
-    """The keys whose centre ``(key - 32768 + 0.5) res`` lies in the support box of the
-    sample at x with half-extents ext."""
-    cdef int a
-    cdef double l, h
-    cdef long kl, kh
-    for a in range(3):
-        # clamped in double first (to integers: the same as clamping the rounded
-        # value), so that a support wider than the key range casts safely; then
-        # rounded up (l) and down (h) by a cast, without the libm calls
-        l = (x[a] - ext[a]) / res - 0.5
-        h = (x[a] + ext[a]) / res - 0.5
-        l = min(max(l, -_MAX_VAL - 1.0), <double>_MAX_VAL)
-        h = min(max(h, -_MAX_VAL - 1.0), <double>_MAX_VAL)
-        kl = <long>l
-        kl += <double>kl < l
-        kh = <long>h
-        kh -= <double>kh > h
-        lo[a] = max(kl + _MAX_VAL, 0)
-        hi[a] = min(kh + _MAX_VAL, 2 * _MAX_VAL - 1)
-
-
-def sparse_kernel(const double[::1] r):
-    """The sparse kernel ``((2 + cos 2 pi r)(1 - r)) / 3 + sin(2 pi r) / (2 pi)`` for
-    r < 1, 0 beyond (Melkumyan and Ramos, 2009), element-wise."""
-    out = np.empty(r.shape[0])
-    cdef double[::1] o = out
-    cdef Py_ssize_t i
-    with nogil:
-        for i in range(r.shape[0]):
-            o[i] = _sparse(r[i] if r[i] >= 0 else -r[i])
-    return out
-
-
 cdef inline long _floor_key(double v) noexcept nogil:
     """floor(v), v clamped to +-2^40 first (NaN to -2^40): the same as the libm call
     on the keys' range, without it."""
@@ -217,6 +182,36 @@ cdef inline long _ceil_key(double v) noexcept nogil:
     return t + 1 if <double>t < v else t
 
 
+cdef inline void _support_keys(const double* x, const double* ext, double res,
+                               long* lo, long* hi) noexcept nogil:
+    """The keys whose centre ``(key - 32768 + 0.5) res`` lies in the support box of the
+    sample at x with half-extents ext."""
+    cdef int a
+    cdef double l, h
+    for a in range(3):
+        # clamped in double first (to integers: the same as clamping the rounded
+        # value), so that a support wider than the key range casts safely; then
+        # rounded up (l) and down (h) without the libm calls
+        l = (x[a] - ext[a]) / res - 0.5
+        h = (x[a] + ext[a]) / res - 0.5
+        l = min(max(l, -_MAX_VAL - 1.0), <double>_MAX_VAL)
+        h = min(max(h, -_MAX_VAL - 1.0), <double>_MAX_VAL)
+        lo[a] = max(_ceil_key(l) + _MAX_VAL, 0)
+        hi[a] = min(_floor_key(h) + _MAX_VAL, 2 * _MAX_VAL - 1)
+
+
+def sparse_kernel(const double[::1] r):
+    """The sparse kernel ``((2 + cos 2 pi r)(1 - r)) / 3 + sin(2 pi r) / (2 pi)`` for
+    r < 1, 0 beyond (Melkumyan and Ramos, 2009), element-wise."""
+    out = np.empty(r.shape[0])
+    cdef double[::1] o = out
+    cdef Py_ssize_t i
+    with nogil:
+        for i in range(r.shape[0]):
+            o[i] = _sparse(r[i] if r[i] >= 0 else -r[i])
+    return out
+
+
 cdef inline long _row_end(double x0, double a, double p00, double ip00, double res,
                           double ires, bint upper) noexcept nogil:
     """floor (ceil if `upper`) of ``(x0 + a / p00) / res - 0.5``, exactly as written,
@@ -230,8 +225,7 @@ cdef inline long _row_end(double x0, double a, double p00, double ip00, double r
     cdef double frac
     cdef long f
     if fabs(v) < 1099511627776.0:
-        f = <long>v
-        f -= <double>f > v
+        f = _floor_key(v)
         frac = v - <double>f            # in [0, 1), exact
         if frac > e and frac < 1.0 - e:
             return f + 1 if upper else f
