@@ -130,7 +130,8 @@ cdef class _Grid:
         (None: none) only clear, as rays cut at `max_range`.
 
         Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
-        seconds, unnecessary_traversals) as ``OccupancyOctree``'s ``_insert_batch``.
+        seconds, unnecessary_traversals, spared_cells) as ``OccupancyOctree``'s
+        ``_insert_batch``.
         """
         cdef OcTree* tree = self._get()
         cdef const uint32_t* w = scan_weights(weights, points.shape[0], superray_threshold)

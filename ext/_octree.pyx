@@ -166,8 +166,9 @@ cdef class _OcTree(_TreeCore):
         (see :func:`_super_rays`) and one ray per class is traversed.
 
         Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
-        seconds, unnecessary_traversals), seconds = (end points, pre-processing
-        (super rays and culling region), traversal, tree update). With `key_box`
+        seconds, unnecessary_traversals, spared_cells), seconds = (end points, super
+        rays, culling region, traversal, tree update), spared_cells = the visits super
+        rays spared (see ``last_insert_``). With `key_box`
         (rows: lowest and highest key), cells outside it are left out. region_cells
         is -1 when culling was off or the scan's key box was too large to cull;
         unnecessary_traversals is -1 unless `diagnose` (slow) asks for it.
@@ -721,7 +722,7 @@ def _sum_stats(a, b):
     """Two traversals' statistics (see :func:`scan_result`) as one scan's."""
     region = -1 if a[0] < 0 and b[0] < 0 else max(a[0], 0) + max(b[0], 0)
     return (region, a[1] + b[1], a[2] + b[2], a[3] + b[3],
-            tuple(x + y for x, y in zip(a[4], b[4])), -1)
+            tuple(x + y for x, y in zip(a[4], b[4])), -1, a[6] + b[6])
 
 
 def _welford(const double[::1] values, long count, double mean, double m2):

@@ -59,6 +59,8 @@ struct ScanStats {
   long region_cells;     // cells in the culling region; -1 without culling
   long rays;             // rays traversed (super rays count once)
   long traversed_cells;  // cell visits that counted a ray
+  long spared_cells;     // the visits super rays spared: per walked ray, its visits x
+                         // the other rays of its class
   long unnecessary;      // with `diagnose`: visits to cells whose update is a no-op
   timespec clock[5];     // start; end points, super rays, culling region, traversal done
 };
@@ -68,6 +70,7 @@ static inline void empty_stats(ScanStats* stats) {
   stats->region_cells = -1;
   stats->rays = 0;
   stats->traversed_cells = 0;
+  stats->spared_cells = 0;
   stats->unnecessary = -1;
   for (int k = 0; k < 5; ++k) clock_gettime(CLOCK_MONOTONIC, &stats->clock[k]);
 }
@@ -240,16 +243,18 @@ struct Rays {
 
 // Walk rays r0 <= r < r1 of a scan (of its super rays when it has them) into one
 // thread's counts: cells of the scan's key box in `counts` (dense; new ones appended
-// to `touched`), other cells in `table`'s n_free. Adds the cell visits to `traversed`;
-// with `visits` (diagnose), counts every visit there too.
+// to `touched`), other cells in `table`'s n_free. Adds the cell visits to `traversed`,
+// and those that super rays spared (each walked ray's visits times the other rays of
+// its class) to `spared`; with `visits` (diagnose), counts every visit there too.
 //
 // With s.max_cells, stops (setting `stop`) once `touched` and the entries of `table`
 // past its first `table_base` ones -- distinct cells of the scan, as no two of them
 // are one -- outnumber it; stops when another thread set `stop`.
 static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t* counts,
                       std::vector<uint64_t>* touched, KeyTable* table, size_t table_base,
-                      KeyTable* visits, long* traversed, StopFlag* stop) {
+                      KeyTable* visits, long* traversed, long* spared, StopFlag* stop) {
   uint32_t w = 1;
+  long n_spared = 0;
   RayWalker walker;
   std::vector<uint64_t> back;
   long n_visits = 0;
@@ -261,6 +266,7 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t
   for (ptrdiff_t r = r0; r < r1; ++r) {
     if (stop->get()) break;
     ptrdiff_t i;
+    const long visits_before = n_visits;
     if (s->ray_ids != nullptr) {
       i = s->ray_ids[r];
       w = s->ray_weights[r];
@@ -305,12 +311,14 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t
         }
       });
     }
+    if (s->ray_ids != nullptr) n_spared += (n_visits - visits_before) * (w - 1);
     if (s->max_cells && touched->size() + (table->size() - table_base) > s->max_cells) {
       stop->set();
       break;
     }
   }
   *traversed += n_visits;
+  *spared += n_spared;
 }
 
 }  // namespace scan_detail
@@ -475,11 +483,12 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   const size_t hits = table.size();
   if (n_threads == 1) {
     walk_rays(&rays, 0, n_trav, dense ? counts.data() : nullptr, &touched, &table, hits,
-              diagnose ? &visits : nullptr, &stats->traversed_cells, &stop);
+              diagnose ? &visits : nullptr, &stats->traversed_cells, &stats->spared_cells,
+              &stop);
   } else {
     std::vector<std::vector<uint64_t>> part_touched(n_threads);  // threads 1, 2, ...: new cells
     std::vector<KeyTable> part_tables(n_threads - 1);             // and their other cells
-    std::vector<long> part_visits(n_threads, 0);
+    std::vector<long> part_visits(n_threads, 0), part_spared(n_threads, 0);
     const ptrdiff_t n_chunks =
         std::min<ptrdiff_t>(n_trav, static_cast<ptrdiff_t>(n_threads) * kChunksPerThread);
     std::exception_ptr error;
@@ -495,7 +504,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
                   dense ? counts.data() + (shared ? 0 : static_cast<uint64_t>(t) * box_cells)
                         : nullptr,
                   t == 0 ? &touched : &part_touched[t], t == 0 ? &table : &part_tables[t - 1],
-                  t == 0 ? hits : 0, nullptr, &part_visits[t], &stop);
+                  t == 0 ? hits : 0, nullptr, &part_visits[t], &part_spared[t], &stop);
       } catch (...) {
 #pragma omp critical(occgp_scan_error)
         if (!error) error = std::current_exception();
@@ -506,6 +515,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     // merge into thread 0's counts (integer sums: the order does not matter), leaving
     // the other slices zero; shared flags need only the new cells appended
     stats->traversed_cells += part_visits[0];
+    stats->spared_cells += part_spared[0];
     for (int t = 1; t < n_threads; ++t) {
       if (shared) {
         touched.insert(touched.end(), part_touched[t].begin(), part_touched[t].end());
@@ -525,6 +535,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
         }
       }
       stats->traversed_cells += part_visits[t];
+      stats->spared_cells += part_spared[t];
     }
   }
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[4]);

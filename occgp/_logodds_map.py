@@ -630,14 +630,17 @@ class LogOddsMap(PlanningMixin):
             return 0
         return threshold
 
-    def _learn_superrays(self, method: str, n_points: int) -> None:
+    def _learn_superrays(self, method: str) -> None:
         """After a "superray+culling" scan that grouped rays: back off when the grouping
         (``superray_seconds``) cost more than the traversal it saved, estimated as the
-        rays it spared times the scan's traversal time per traversed ray."""
+        cell visits it spared times the scan's traversal time per visit (rays into cells
+        near the sensor, which hold the most end points, are short: a ray spared is not
+        an average ray)."""
         stats = self.last_insert_
-        if method != "superray+culling" or not stats["superrays"] or stats["rays"] == 0:
+        if method != "superray+culling" or not stats["superrays"]:
             return
-        saved = (n_points - stats["rays"]) * stats["traversal_seconds"] / stats["rays"]
+        saved = (stats["spared_cells"] * stats["traversal_seconds"]
+                 / max(stats["traversed_cells"], 1))
         if saved < stats["superray_seconds"]:
             self._superray_skip = self._superray_pause
             self._superray_pause = min(2 * self._superray_pause, 8 * self.SUPERRAY_BACKOFF)
@@ -647,8 +650,9 @@ class LogOddsMap(PlanningMixin):
     @staticmethod
     def _insert_statistics(stats: tuple) -> dict[str, float]:
         """``last_insert_`` from what a core's scan insertion returns."""
-        region, cells, rays, traversed, seconds, unnecessary = stats
+        region, cells, rays, traversed, seconds, unnecessary, spared = stats
         out = {"rays": rays, "updated_cells": cells, "traversed_cells": traversed,
+               "spared_cells": spared,
                "region_cells": region, "endpoint_seconds": seconds[0],
                "superray_seconds": seconds[1], "region_seconds": seconds[2],
                "preprocessing_seconds": seconds[1] + seconds[2],
@@ -703,7 +707,7 @@ class LogOddsMap(PlanningMixin):
                          resolution=self.resolution)
         self.last_insert_ = self._insert_statistics(stats)
         self.last_insert_["superrays"] = threshold > 0
-        self._learn_superrays(method, len(pts))
+        self._learn_superrays(method)
 
     def _as_float32_points(self, x: ArrayLike, name: str) -> np.ndarray:
         # beyond float range is beyond every key range: inf, which no key holds

@@ -216,6 +216,36 @@ def test_last_insert_statistics():
 
 
 @pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
+@pytest.mark.parametrize("mode", ["scan", "ray"])
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_spared_cells_are_the_visits_the_grouping_spared(cls, mode, n_jobs):
+    """Every ray of a class crosses its walked ray's cells: the visits traversed plus
+    those spared are the ungrouped method's visits, with and without a culling
+    region."""
+    rng = np.random.default_rng(11)
+    origin = np.array([0.33, -0.21, 0.57])
+    scans = [clustered_scan(rng, origin, 0.2, spread=1.5) for _ in range(8)]
+    grouped, plain = cls(0.2), cls(0.2)
+    for points in scans:
+        for m, method in ((grouped, "superray"), (plain, "culling")):
+            m.insert_scan(points, origin, mode=mode, method=method, superray_threshold=5,
+                          n_jobs=n_jobs)
+        g, p = grouped.last_insert_, plain.last_insert_
+        assert g["rays"] < len(points) and g["spared_cells"] > 0
+        assert p["spared_cells"] == 0
+        if p["region_cells"] <= 0:  # no culling region yet: "culling" walks every cell
+            assert g["traversed_cells"] + g["spared_cells"] == p["traversed_cells"]
+    # a culling region around the sensor: both methods cull the same cells
+    assert plain.last_insert_["region_cells"] > 0
+    grouped.insert_scan(scans[0], origin, mode=mode, method="superray+culling",
+                        superray_threshold=5, n_jobs=n_jobs)
+    plain.insert_scan(scans[0], origin, mode=mode, method="culling", n_jobs=n_jobs)
+    g, p = grouped.last_insert_, plain.last_insert_
+    assert g["superrays"] and g["region_cells"] == p["region_cells"]
+    assert g["traversed_cells"] + g["spared_cells"] == p["traversed_cells"]
+
+
+@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
 def test_superray_culling_backs_off_when_grouping_does_not_pay(cls):
     """A threshold no cell reaches groups nothing: the grouping time bought no saved
     traversal, so the next SUPERRAY_BACKOFF scans skip it, then it is tried again
