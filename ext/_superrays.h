@@ -26,6 +26,10 @@ namespace scan_detail {
 
 constexpr int kMaxVal = 32768;  // liboctomap's tree_max_val
 constexpr uint32_t kMinParallelGroups = 256;  // fewer end cells to classify: one thread
+// a group whose first kProbeRays rays (of more) fall into as many classes is not
+// classified further: its rays rarely share classes, and classifying costs about what
+// traversing does
+constexpr ptrdiff_t kProbeRays = 8;
 
 // The murmur3 finaliser: spreads the bits of a signature for hashing.
 static inline uint64_t mix(uint64_t k) {
@@ -154,7 +158,17 @@ static inline void classify_groups(double res, const double* oc, const octomap::
     while (cap < static_cast<size_t>(2 * (static_cast<ptrdiff_t>(offsets[g]) - first))) cap <<= 1;
     class_code.assign(cap, KeyTable::kEmpty);  // signatures have at most 62 bits
     class_ray.resize(cap);
-    for (ptrdiff_t m = first; m < static_cast<ptrdiff_t>(offsets[g]); ++m) {
+    const ptrdiff_t last = offsets[g];
+    ptrdiff_t joined = 0;  // rays that joined a class of an earlier ray
+    for (ptrdiff_t m = first; m < last; ++m) {
+      if (m - first == kProbeRays && joined == 0) {
+        // the probe found no two rays alike: the rest go on their own
+        for (; m < last; ++m) {
+          rays.push_back(order[m]);
+          weights.push_back(1);
+        }
+        break;
+      }
       const uint32_t idx = order[m];
       pc[0] = ends[idx].x();
       pc[1] = ends[idx].y();
@@ -188,6 +202,7 @@ static inline void classify_groups(double res, const double* oc, const octomap::
         while (class_code[h] != KeyTable::kEmpty && class_code[h] != code) h = (h + 1) & (cap - 1);
         if (class_code[h] == code) {
           weights[class_ray[h]] += 1;
+          ++joined;
         } else {
           class_code[h] = code;
           class_ray[h] = static_cast<uint32_t>(rays.size());
@@ -212,7 +227,9 @@ static inline void classify_groups(double res, const double* oc, const octomap::
 // cell and its end cell, the keys of the other coordinates there; only the crossings
 // where the rays into that end cell can differ ("critical", the mapping lines) are
 // evaluated. Equal signatures mean the same traversed cells, so one ray of each class
-// is traversed with the class size as weight. The end cells' groups are classified on
+// is traversed with the class size as weight. Groups that cannot pay are left plain:
+// those whose crossings alone split them into as many classes as rays, and those whose
+// first kProbeRays rays all differ. The end cells' groups are classified on
 // up to `n_threads` OpenMP threads, in contiguous ranges whose rays are joined in group
 // order: the rays and weights are the same for every `n_threads`.
 //
@@ -247,9 +264,15 @@ static inline void super_rays(double res, const octomap::point3d& o, const octom
   const double eb = std::ldexp(res, -21);  // 4 x the single-precision offset of the borders
   // groups of rays by end cell, for the cells with at least `threshold` end points
   group_of.assign(n, 0);
+  uint64_t last_key = KeyTable::kEmpty;  // consecutive points of a scan often share a cell
+  KeyCounts* entry = nullptr;
   for (ptrdiff_t i = 0; i < n; ++i) {
     if (truncated[i]) continue;
-    KeyCounts* entry = table.find(pack_key(end_keys[i]));
+    const uint64_t key = pack_key(end_keys[i]);
+    if (key != last_key) {
+      entry = table.find(key);
+      last_key = key;
+    }
     if (entry == nullptr || entry->n_hit < static_cast<uint32_t>(threshold)) continue;
     if (entry->group == 0) {
       n_groups += 1;
