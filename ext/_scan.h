@@ -110,25 +110,28 @@ __attribute__((noinline, cold)) static void count_free_table(int kx, int ky, int
 }
 
 // Count `w` rays through the box cell `idx` of `counts`, appending it to `touched`
-// when it is new. With `shared` (scan mode, every thread counting into one array),
-// the count is a flag: the thread that sets it first, atomically, appends the cell,
-// so each cell is appended once over all threads.
-static inline void count_box(uint32_t* counts, uint64_t idx, uint32_t w, bool shared,
+// when it is new. Counts of one byte (scan mode) are flags: 1 once a ray crossed the
+// cell. With `shared` (scan mode, every thread flagging cells in one array), the
+// thread that sets a flag first, atomically, appends the cell, so each cell is
+// appended once over all threads.
+template <class Count>
+static inline void count_box(Count* counts, uint64_t idx, uint32_t w, bool shared,
                              std::vector<uint64_t>* touched) {
   if (shared) {
     if (__atomic_load_n(counts + idx, __ATOMIC_RELAXED) == 0 &&
-        __atomic_exchange_n(counts + idx, 1u, __ATOMIC_RELAXED) == 0)
+        __atomic_exchange_n(counts + idx, Count(1), __ATOMIC_RELAXED) == 0)
       touched->push_back(idx);
   } else {
     if (counts[idx] == 0) touched->push_back(idx);
-    counts[idx] += w;
+    counts[idx] = sizeof(Count) == 1 ? Count(1) : static_cast<Count>(counts[idx] + w);
   }
 }
 
 // Count `w` rays through the cell (kx, ky, kz): in the scan's dense box (`free_counts`,
 // see count_box), or the table.
+template <class Count>
 static inline void count_free(int kx, int ky, int kz, uint32_t w, bool dense, bool shared,
-                              const int* lo, const uint64_t* dims, uint32_t* free_counts,
+                              const int* lo, const uint64_t* dims, Count* free_counts,
                               std::vector<uint64_t>* touched, KeyTable* table) {
   const uint64_t x = static_cast<uint64_t>(kx - lo[0]);
   const uint64_t y = static_cast<uint64_t>(ky - lo[1]);
@@ -250,7 +253,8 @@ struct Rays {
 // With s.max_cells, stops (setting `stop`) once `touched` and the entries of `table`
 // past its first `table_base` ones -- distinct cells of the scan, as no two of them
 // are one -- outnumber it; stops when another thread set `stop`.
-static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t* counts,
+template <class Count>
+static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* counts,
                       std::vector<uint64_t>* touched, KeyTable* table, size_t table_base,
                       KeyTable* visits, long* traversed, long* spared, StopFlag* stop) {
   uint32_t w = 1;
@@ -336,7 +340,8 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, uint32_t
 // `weights` (ray mode; nullptr: none), ray i counts weights[i] times. With
 // `superray_threshold` > 0 the rays are first grouped into super rays (super_rays) and
 // one ray per class is traversed. `counts` is the caller's scratch array, zero between
-// calls unless `counts_dirty` (an exception left it dirty). With `diagnose` (slow),
+// calls unless `counts_dirty` (an exception left it dirty); scan mode keeps one byte of
+// it per cell (a flag). With `diagnose` (slow),
 // stats->unnecessary counts the visits of the walked rays to cells whose update changes
 // nothing: fully free cells that no ray ends in (the dissertation's "unnecessary
 // traversals", Table 2.3).
@@ -459,9 +464,34 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   const uint64_t slices = shared ? 1 : n_threads;
   if (dense && !shared)
     n_threads = static_cast<int>(std::min<uint64_t>(n_threads, kMaxDenseCells / box_cells));
-  if (dense && (counts_dirty || counts.size() < box_cells * slices))
-    counts.assign(std::max<uint64_t>(box_cells * slices, counts.size()), 0);
+  // scan mode asks of a cell only whether a ray crossed it: a byte a cell (flags, in
+  // the storage of `counts`), a quarter of the memory, which the caches hold better
+  const uint64_t words = ray_mode ? box_cells * slices : (box_cells + 3) / 4;
+  if (dense && (counts_dirty || counts.size() < words))
+    counts.assign(std::max<uint64_t>(words, counts.size()), 0);
   counts_dirty = true;
+  uint8_t* const flags = reinterpret_cast<uint8_t*>(counts.data());
+  // a cell's count in the box, and clearing it, in either mode
+  const auto count_at = [&](uint64_t idx) -> uint32_t {
+    return ray_mode ? counts[idx] : flags[idx];
+  };
+  const auto clear_at = [&](uint64_t idx) {
+    if (ray_mode) counts[idx] = 0;
+    else flags[idx] = 0;
+  };
+  // walk rays r0 <= r < r1 into the counts of thread `t` (walk_rays)
+  const auto walk = [&](ptrdiff_t r0, ptrdiff_t r1, int t, std::vector<uint64_t>* t_touched,
+                        KeyTable* t_table, size_t base, KeyTable* t_visits, long* t_traversed,
+                        long* t_spared) {
+    if (ray_mode) {
+      walk_rays(&rays, r0, r1, dense ? counts.data() + static_cast<uint64_t>(t) * box_cells
+                                     : nullptr,
+                t_touched, t_table, base, t_visits, t_traversed, t_spared, &stop);
+    } else {  // one array of flags for every thread
+      walk_rays(&rays, r0, r1, dense ? flags : nullptr, t_touched, t_table, base, t_visits,
+                t_traversed, t_spared, &stop);
+    }
+  };
   rays.res = res;
   rays.origin = &o;
   rays.key_origin = &ko;
@@ -482,9 +512,8 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   // cells), the others into tables of their own
   const size_t hits = table.size();
   if (n_threads == 1) {
-    walk_rays(&rays, 0, n_trav, dense ? counts.data() : nullptr, &touched, &table, hits,
-              diagnose ? &visits : nullptr, &stats->traversed_cells, &stats->spared_cells,
-              &stop);
+    walk(0, n_trav, 0, &touched, &table, hits, diagnose ? &visits : nullptr,
+         &stats->traversed_cells, &stats->spared_cells);
   } else {
     std::vector<std::vector<uint64_t>> part_touched(n_threads);  // threads 1, 2, ...: new cells
     std::vector<KeyTable> part_tables(n_threads - 1);             // and their other cells
@@ -500,11 +529,9 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
       const int t = 0;
 #endif
       try {
-        walk_rays(&rays, c * n_trav / n_chunks, (c + 1) * n_trav / n_chunks,
-                  dense ? counts.data() + (shared ? 0 : static_cast<uint64_t>(t) * box_cells)
-                        : nullptr,
-                  t == 0 ? &touched : &part_touched[t], t == 0 ? &table : &part_tables[t - 1],
-                  t == 0 ? hits : 0, nullptr, &part_visits[t], &part_spared[t], &stop);
+        walk(c * n_trav / n_chunks, (c + 1) * n_trav / n_chunks, t,
+             t == 0 ? &touched : &part_touched[t], t == 0 ? &table : &part_tables[t - 1],
+             t == 0 ? hits : 0, nullptr, &part_visits[t], &part_spared[t]);
       } catch (...) {
 #pragma omp critical(occgp_scan_error)
         if (!error) error = std::current_exception();
@@ -519,7 +546,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     for (int t = 1; t < n_threads; ++t) {
       if (shared) {
         touched.insert(touched.end(), part_touched[t].begin(), part_touched[t].end());
-      } else if (dense) {
+      } else if (dense) {  // ray mode
         uint32_t* part = counts.data() + static_cast<uint64_t>(t) * box_cells;
         for (const uint64_t idx : part_touched[t]) {
           if (counts[idx] == 0) touched.push_back(idx);
@@ -549,13 +576,13 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
       for (size_t slot = 0; slot < table.capacity(); ++slot) {
         if (table.slot(slot).key == KeyTable::kEmpty) continue;
         key = unpack_key(table.slot(slot).key);
-        if (in_box(key, lo, dims) && counts[box_index(key, lo, dims)]) distinct -= 1;
+        if (in_box(key, lo, dims) && count_at(box_index(key, lo, dims))) distinct -= 1;
       }
     }
     too_many = distinct > max_cells;
   }
   if (too_many) {
-    for (const uint64_t idx : touched) counts[idx] = 0;
+    for (const uint64_t idx : touched) clear_at(idx);
     counts_dirty = false;
     return Status::too_many_cells;  // nothing changed: the caller reports it
   }
@@ -567,7 +594,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
 #pragma omp parallel for num_threads(ct) schedule(static) if (ct > 1)
   for (ptrdiff_t t = 0; t < n_touched; ++t) {
     const KeyCounts* entry = table.find(cells[t].key = pack_key(box_key(touched[t], lo, dims)));
-    cells[t].update = update_value(counts[touched[t]], entry ? entry->n_hit : 0, ray_mode,
+    cells[t].update = update_value(count_at(touched[t]), entry ? entry->n_hit : 0, ray_mode,
                                    l_hit, l_miss);
   }
   ScanCell cell;
@@ -576,7 +603,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     key = unpack_key(table.slot(slot).key);
     uint32_t n_free = table.slot(slot).n_free;
     if (dense && in_box(key, lo, dims)) {
-      if (counts[box_index(key, lo, dims)]) continue;  // collected above
+      if (count_at(box_index(key, lo, dims))) continue;  // collected above
       n_free = 0;
     }
     cell.key = pack_key(key);
@@ -584,7 +611,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     cells.push_back(cell);
   }
 #pragma omp parallel for num_threads(ct) schedule(static) if (ct > 1)
-  for (ptrdiff_t t = 0; t < n_touched; ++t) counts[touched[t]] = 0;
+  for (ptrdiff_t t = 0; t < n_touched; ++t) clear_at(touched[t]);
   counts_dirty = false;
   stats->rays = n_trav;
   if (diagnose) {
