@@ -221,8 +221,8 @@ static inline void classify_groups(double res, const double* oc, const octomap::
 
 // Group the rays of a scan into super rays (Kwon, dissertation 2.3.1-2.3.4).
 //
-// Fills `rays` (indices of the rays to traverse) and `weights` (how many rays each
-// stands for). Rays ending in a cell that holds at least `threshold` end points are
+// Fills `rays` (indices of the rays to traverse, ascending) and `weights` (how many
+// rays each stands for). Rays ending in a cell that holds at least `threshold` end points are
 // classified by their *signature*: at every border a ray crosses between the origin's
 // cell and its end cell, the keys of the other coordinates there; only the crossings
 // where the rays into that end cell can differ ("critical", the mapping lines) are
@@ -317,9 +317,22 @@ static inline void super_rays(double res, const octomap::point3d& o, const octom
     }
   }
   if (error) std::rethrow_exception(error);
+  // the rays in the scan's order, where neighbouring rays cross neighbouring cells (the
+  // groups come in the table's order); a ray is in `rays` once, so a weight per point
+  // orders them
+  std::vector<uint32_t>& weight_of = group_of;  // the groups are no longer needed
+  std::fill(weight_of.begin(), weight_of.end(), 0u);
+  for (size_t r = 0; r < rays.size(); ++r) weight_of[rays[r]] = weights[r];
   for (ptrdiff_t part = 0; part < n_ranges; ++part) {
-    rays.insert(rays.end(), part_rays[part].begin(), part_rays[part].end());
-    weights.insert(weights.end(), part_weights[part].begin(), part_weights[part].end());
+    for (size_t r = 0; r < part_rays[part].size(); ++r)
+      weight_of[part_rays[part][r]] = part_weights[part][r];
+  }
+  rays.clear();
+  weights.clear();
+  for (ptrdiff_t i = 0; i < n; ++i) {
+    if (weight_of[i] == 0) continue;
+    rays.push_back(static_cast<uint32_t>(i));
+    weights.push_back(weight_of[i]);
   }
 }
 

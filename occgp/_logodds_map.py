@@ -29,6 +29,10 @@ _SHORTEST_RAY = float(np.sqrt(np.finfo(np.float32).tiny))
 #: Longest ray whose float squared length is finite.
 _LONGEST_RAY = float(np.sqrt(np.finfo(np.float32).max))
 METHODS = ("auto", "plain", "culling", "superray", "superray+culling")
+# A ray's start in the traversal (its direction, steps and borders: divisions and a
+# square root) costs about as much as this many cell visits (timed on geb079 at 1 m,
+# where rays are short); the super-ray back-off weighs the rays it spares with it.
+RAY_VISITS = 10
 #: The settable sensor-model parameters (:meth:`LogOddsMap.set_params`).
 _SENSOR_PARAMS = ("prob_hit", "prob_miss", "clamping_min", "clamping_max",
                   "occupancy_threshold")
@@ -630,17 +634,19 @@ class LogOddsMap(PlanningMixin):
             return 0
         return threshold
 
-    def _learn_superrays(self, method: str) -> None:
+    def _learn_superrays(self, method: str, n_points: int) -> None:
         """After a "superray+culling" scan that grouped rays: back off when the grouping
-        (``superray_seconds``) cost more than the traversal it saved, estimated as the
-        cell visits it spared times the scan's traversal time per visit (rays into cells
-        near the sensor, which hold the most end points, are short: a ray spared is not
-        an average ray)."""
+        (``superray_seconds``) cost more than the traversal it saved, estimated from the
+        scan's traversal time, a ray's start costing RAY_VISITS cell visits: the
+        work it spared (rays, and their cell visits) over the work it did. Rays into
+        cells near the sensor, which hold the most end points, are short: a ray spared
+        is not an average ray."""
         stats = self.last_insert_
         if method != "superray+culling" or not stats["superrays"]:
             return
-        saved = (stats["spared_cells"] * stats["traversal_seconds"]
-                 / max(stats["traversed_cells"], 1))
+        spared = (n_points - stats["rays"]) * RAY_VISITS + stats["spared_cells"]
+        done = stats["rays"] * RAY_VISITS + stats["traversed_cells"]
+        saved = spared * stats["traversal_seconds"] / max(done, 1)
         if saved < stats["superray_seconds"]:
             self._superray_skip = self._superray_pause
             self._superray_pause = min(2 * self._superray_pause, 8 * self.SUPERRAY_BACKOFF)
@@ -707,7 +713,7 @@ class LogOddsMap(PlanningMixin):
                          resolution=self.resolution)
         self.last_insert_ = self._insert_statistics(stats)
         self.last_insert_["superrays"] = threshold > 0
-        self._learn_superrays(method)
+        self._learn_superrays(method, len(pts))
 
     def _as_float32_points(self, x: ArrayLike, name: str) -> np.ndarray:
         # beyond float range is beyond every key range: inf, which no key holds
