@@ -123,7 +123,8 @@ cdef class _Grid:
         applied to the hash map as liboctomap's ``updateNode`` applies it. With
         `culling` the scan's culling region is grown over this grid's cells;
         with `weights` (ray mode), ray i counts ``weights[i]`` times; with
-        `superray_threshold` > 0 the rays are grouped into super rays first. The rays
+        `superray_threshold` != 0 the rays are grouped into super rays first (as the
+        octree's). The rays
         are walked, and the updates applied (``ext/_grid_apply.h``), on up to `n_threads`
         threads (the walk on one with `diagnose`); the grid and the statistics are the
         same for every `n_threads`. Rays i with ``free_only[i]``

@@ -162,8 +162,8 @@ cdef class _OcTree(_TreeCore):
         scan's culling region (see :func:`_build_region`) are skipped: they are
         at the lower clamp and hold no end point, so their update is a no-op.
         With `weights` (ray mode), ray i counts ``weights[i]`` times. With
-        `superray_threshold` > 0, the rays are first grouped into super rays
-        (see :func:`_super_rays`) and one ray per class is traversed.
+        `superray_threshold` != 0, the rays are first grouped into super rays (cells
+        of at least its magnitude; < 0: where it can pay) and one ray a class walked.
 
         Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
         seconds, unnecessary_traversals, spared_cells), seconds = (end points, super

@@ -338,8 +338,9 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
 // on `map`) are skipped: they are at the lower clamp and hold no end point, so their
 // update is a no-op; rays are walked back from their end until they enter it. With
 // `weights` (ray mode; nullptr: none), ray i counts weights[i] times. With
-// `superray_threshold` > 0 the rays are first grouped into super rays (super_rays) and
-// one ray per class is traversed. `counts` is the caller's scratch array, zero between
+// `superray_threshold` != 0 the rays are first grouped into super rays (super_rays, with
+// the threshold's magnitude; adaptive where it is negative) and one ray per class is
+// traversed. `counts` is the caller's scratch array, zero between
 // calls unless `counts_dirty` (an exception left it dirty); scan mode keeps one byte of
 // it per cell (a flag). With `diagnose` (slow),
 // stats->unnecessary counts the visits of the walked rays to cells whose update changes
@@ -437,9 +438,9 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   // nothing changed: the caller reports the bad rows
   if (out_of_range) return Status::out_of_range;
   if (too_short) return Status::ray_too_short;
-  if (superray_threshold > 0) {
-    super_rays(res, o, ko, ends, end_keys, truncated, table, superray_threshold, ray_ids,
-               ray_weights, collect_threads);
+  if (superray_threshold != 0) {  // < 0: adaptive
+    super_rays(res, o, ko, ends, end_keys, truncated, table, std::abs(superray_threshold),
+               ray_ids, ray_weights, collect_threads, superray_threshold < 0);
     n_trav = static_cast<ptrdiff_t>(ray_ids.size());
   }
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[2]);
@@ -498,8 +499,8 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   rays.ends = ends.data();
   rays.end_keys = end_keys.data();
   rays.end_ok = end_ok.data();
-  rays.ray_ids = superray_threshold > 0 ? ray_ids.data() : nullptr;
-  rays.ray_weights = superray_threshold > 0 ? ray_weights.data() : nullptr;
+  rays.ray_ids = superray_threshold != 0 ? ray_ids.data() : nullptr;
+  rays.ray_weights = superray_threshold != 0 ? ray_weights.data() : nullptr;
   rays.weights = weighted ? weights : nullptr;
   rays.region = &region;
   rays.cull = stats->region_cells > 0;

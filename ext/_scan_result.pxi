@@ -13,7 +13,7 @@ cdef inline const uint32_t* scan_weights(const uint32_t[::1] weights, Py_ssize_t
         return NULL
     if weights.shape[0] != n:
         _check_status(<int>Status.weights_length, expected=n, got=weights.shape[0])
-    if superray_threshold > 0:
+    if superray_threshold != 0:
         _check_status(<int>Status.weights_with_superrays)
     return &weights[0] if n else NULL
 

@@ -30,6 +30,10 @@ constexpr uint32_t kMinParallelGroups = 256;  // fewer end cells to classify: on
 // classified further: its rays rarely share classes, and classifying costs about what
 // traversing does
 constexpr ptrdiff_t kProbeRays = 8;
+// costs in cell visits of the traversal (timed on geb079 at 0.2 and 1 m): a ray's start,
+// and a signature's crossing (as RAY_VISITS in occgp/_logodds_map.py)
+constexpr long kRayVisits = 10;
+constexpr double kCrossingVisits = 2.0;
 
 // The murmur3 finaliser: spreads the bits of a signature for hashing.
 static inline uint64_t mix(uint64_t k) {
@@ -58,8 +62,8 @@ static inline void classify_groups(double res, const double* oc, const octomap::
                                    const std::vector<octomap::point3d>& ends,
                                    const std::vector<octomap::OcTreeKey>& end_keys,
                                    const std::vector<uint32_t>& offsets,
-                                   const std::vector<uint32_t>& order, double eb, ptrdiff_t g0,
-                                   ptrdiff_t g1, std::vector<uint32_t>& rays,
+                                   const std::vector<uint32_t>& order, double eb, bool adaptive,
+                                   ptrdiff_t g0, ptrdiff_t g1, std::vector<uint32_t>& rays,
                                    std::vector<uint32_t>& weights) {
   const double rf = 1.0 / res;
   double lo[3], hi[3], pc[3], dp[3], inv[3];
@@ -140,11 +144,23 @@ static inline void classify_groups(double res, const double* oc, const octomap::
       }
     }
     if (ok) {
-      // each crossing where the rays can take nk keys splits them nk ways: when that
-      // alone leaves fewer rays than classes, grouping cannot pay its cost
+      // each crossing where the rays can take nk keys splits them nk ways, so at least
+      // `segments` classes remain: when that leaves no ray to spare, grouping cannot
+      // pay its cost; `adaptive`, nor when the rays that could be spared (each a start
+      // and its cells) cost less to traverse than classifying every ray costs (a
+      // signature's crossings)
       long segments = 1;
       for (const Crossing& c : crossings) segments += c.n_keys - 1;
-      if (segments >= static_cast<ptrdiff_t>(offsets[g]) - first) ok = false;
+      const ptrdiff_t n_rays = static_cast<ptrdiff_t>(offsets[g]) - first;
+      if (segments >= n_rays) ok = false;
+      long cells = 1;  // a ray's cells from the origin's to the end cell
+      for (int a = 0; a < 3; ++a)
+        cells += std::abs(static_cast<int>(kv[a]) - static_cast<int>(ko[a]));
+      const double spare =
+          static_cast<double>(n_rays - segments) * static_cast<double>(kRayVisits + cells);
+      const double cost = kCrossingVisits * static_cast<double>(n_rays) *
+                          static_cast<double>(crossings.size() + 1);
+      if (adaptive && !(spare > cost)) ok = false;
     }
     if (!ok) {
       for (ptrdiff_t m = first; m < static_cast<ptrdiff_t>(offsets[g]); ++m) {
@@ -161,7 +177,7 @@ static inline void classify_groups(double res, const double* oc, const octomap::
     const ptrdiff_t last = offsets[g];
     ptrdiff_t joined = 0;  // rays that joined a class of an earlier ray
     for (ptrdiff_t m = first; m < last; ++m) {
-      if (m - first == kProbeRays && joined == 0) {
+      if (adaptive && m - first == kProbeRays && joined == 0) {
         // the probe found no two rays alike: the rest go on their own
         for (; m < last; ++m) {
           rays.push_back(order[m]);
@@ -227,9 +243,11 @@ static inline void classify_groups(double res, const double* oc, const octomap::
 // cell and its end cell, the keys of the other coordinates there; only the crossings
 // where the rays into that end cell can differ ("critical", the mapping lines) are
 // evaluated. Equal signatures mean the same traversed cells, so one ray of each class
-// is traversed with the class size as weight. Groups that cannot pay are left plain:
-// those whose crossings alone split them into as many classes as rays, and those whose
-// first kProbeRays rays all differ. The end cells' groups are classified on
+// is traversed with the class size as weight. A group whose crossings alone split it
+// into as many classes as rays is left plain; with `adaptive`, so are the groups whose
+// classification would cost more than the traversal it could spare (kRayVisits,
+// kCrossingVisits), and those whose first kProbeRays rays all differ. The end cells'
+// groups are classified on
 // up to `n_threads` OpenMP threads, in contiguous ranges whose rays are joined in group
 // order: the rays and weights are the same for every `n_threads`.
 //
@@ -252,7 +270,7 @@ static inline void super_rays(double res, const octomap::point3d& o, const octom
                        const std::vector<octomap::OcTreeKey>& end_keys,
                        const std::vector<uint8_t>& truncated, KeyTable& table, int threshold,
                        std::vector<uint32_t>& rays, std::vector<uint32_t>& weights,
-                       int n_threads = 1) {
+                       int n_threads = 1, bool adaptive = false) {
   using namespace scan_detail;
   double oc[3];
   const ptrdiff_t n = static_cast<ptrdiff_t>(ends.size());
@@ -308,7 +326,7 @@ static inline void super_rays(double res, const octomap::point3d& o, const octom
 #pragma omp parallel for num_threads(threads) schedule(dynamic) if (threads > 1)
   for (ptrdiff_t part = 0; part < n_ranges; ++part) {
     try {
-      classify_groups(res, oc, ko, ends, end_keys, offsets, order, eb,
+      classify_groups(res, oc, ko, ends, end_keys, offsets, order, eb, adaptive,
                       1 + part * n_groups / n_ranges, 1 + (part + 1) * n_groups / n_ranges,
                       part_rays[part], part_weights[part]);
     } catch (...) {

@@ -628,11 +628,15 @@ class LogOddsMap(PlanningMixin):
         return check_int(self.MAX_SCAN_CELLS, "MAX_SCAN_CELLS", low=1, high=2**62)
 
     def _adaptive_threshold(self, method: str, threshold: int) -> int:
-        """The super-ray threshold for this scan: 0 while "superray+culling" backs off."""
-        if method == "superray+culling" and self._superray_skip > 0:
+        """The super-ray threshold the core takes for this scan: "superray+culling"
+        groups adaptively (negated: only the cells where grouping can pay), and not at
+        all (0) while it backs off."""
+        if method != "superray+culling":
+            return threshold
+        if self._superray_skip > 0:
             self._superray_skip -= 1
             return 0
-        return threshold
+        return -threshold
 
     def _learn_superrays(self, method: str, n_points: int) -> None:
         """After a "superray+culling" scan that grouped rays: back off when the grouping
@@ -712,7 +716,7 @@ class LogOddsMap(PlanningMixin):
             check_status(stats, n_rays=len(pts), max_scan_cells=self.MAX_SCAN_CELLS,
                          resolution=self.resolution)
         self.last_insert_ = self._insert_statistics(stats)
-        self.last_insert_["superrays"] = threshold > 0
+        self.last_insert_["superrays"] = threshold != 0
         self._learn_superrays(method, len(pts))
 
     def _as_float32_points(self, x: ArrayLike, name: str) -> np.ndarray:

@@ -165,7 +165,8 @@ default="auto"
             points that provably cross the same cells). ``"culling"`` skips
             each ray's cells inside the scan's *culling region* [1]_ (fully
             free cells around the sensor, whose updates would change nothing).
-            ``"superray+culling"`` does both, and pauses super rays for
+            ``"superray+culling"`` does both, groups only the cells where
+            grouping can pay, and pauses super rays for
             :attr:`SUPERRAY_BACKOFF` scans (doubling in a row) after a scan
             whose grouping cost more than it saved.
         superray_threshold : int, default=20

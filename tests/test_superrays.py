@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from occgp import GridMap, OccupancyOctree
 from test_culling import build
+from test_grid import assert_same_cells, grid_values
 from test_octree import assert_same_leaves
 
 METHODS = ["superray", "superray+culling"]
@@ -243,6 +244,27 @@ def test_spared_cells_are_the_visits_the_grouping_spared(cls, mode, n_jobs):
     g, p = grouped.last_insert_, plain.last_insert_
     assert g["superrays"] and g["region_cells"] == p["region_cells"]
     assert g["traversed_cells"] + g["spared_cells"] == p["traversed_cells"]
+
+
+@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
+def test_adaptive_grouping_leaves_cells_that_cannot_pay_plain(cls):
+    """"superray+culling" groups only where classifying costs less than the traversal
+    it could spare: of these end cells near the sensor (short rays, many crossings
+    where their rays differ), fewer than "superray" groups, into the same map."""
+    rng = np.random.default_rng(1)
+    origin = np.array([0.33, -0.21, 0.57])
+    points = clustered_scan(rng, origin, 0.2, spread=3.0)
+    every = cls(0.2).insert_scan(points, origin, method="superray", superray_threshold=5)
+    adaptive = cls(0.2).insert_scan(points, origin, method="superray+culling",
+                                    superray_threshold=5)
+    assert every.last_insert_["rays"] < adaptive.last_insert_["rays"] < len(points)
+    assert adaptive.last_insert_["superrays"]
+    plain = cls(0.2).insert_scan(points, origin, method="plain")
+    for m in (every, adaptive):
+        if cls is OccupancyOctree:
+            assert_same_leaves(m, plain)
+        else:
+            assert_same_cells(grid_values(m), grid_values(plain))
 
 
 @pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
