@@ -529,8 +529,14 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
 #else
       const int t = 0;
 #endif
+      // chunks taken one after another lie in different parts of the scan (its rays
+      // split in n_threads parts): threads walking at the same time then flag cells
+      // far apart, not neighbours on one cache line
+      const ptrdiff_t k = n_chunks % n_threads == 0
+                              ? (c % n_threads) * (n_chunks / n_threads) + c / n_threads
+                              : c;
       try {
-        walk(c * n_trav / n_chunks, (c + 1) * n_trav / n_chunks, t,
+        walk(k * n_trav / n_chunks, (k + 1) * n_trav / n_chunks, t,
              t == 0 ? &touched : &part_touched[t], t == 0 ? &table : &part_tables[t - 1],
              t == 0 ? hits : 0, nullptr, &part_visits[t], &part_spared[t]);
       } catch (...) {
