@@ -16,6 +16,7 @@ from ._docfill import fill_doc
 from ._octree import TREE_MAX_VAL
 from ._planning import PlanningMixin
 from ._status import Status, check_status
+from ._superray_policy import learn_superrays
 from ._validation import (
     as_point, as_points, check_bool, check_choice, check_int, check_probability, check_real,
     check_resolution,
@@ -29,10 +30,6 @@ _SHORTEST_RAY = float(np.sqrt(np.finfo(np.float32).tiny))
 #: Longest ray whose float squared length is finite.
 _LONGEST_RAY = float(np.sqrt(np.finfo(np.float32).max))
 METHODS = ("auto", "plain", "culling", "superray", "superray+culling")
-# A ray's start in the traversal (its direction, steps and borders: divisions and a
-# square root) costs about as much as this many cell visits (timed on geb079 at 1 m,
-# where rays are short); the super-ray back-off weighs the rays it spares with it.
-RAY_VISITS = 10
 #: The settable sensor-model parameters (:meth:`LogOddsMap.set_params`).
 _SENSOR_PARAMS = ("prob_hit", "prob_miss", "clamping_min", "clamping_max",
                   "occupancy_threshold")
@@ -627,36 +624,6 @@ class LogOddsMap(PlanningMixin):
         """MAX_SCAN_CELLS, checked (it may be set on the class or the map)."""
         return check_int(self.MAX_SCAN_CELLS, "MAX_SCAN_CELLS", low=1, high=2**62)
 
-    def _adaptive_threshold(self, method: str, threshold: int) -> int:
-        """The super-ray threshold the core takes for this scan: "superray+culling"
-        groups adaptively (negated: only the cells where grouping can pay), and not at
-        all (0) while it backs off."""
-        if method != "superray+culling":
-            return threshold
-        if self._superray_skip > 0:
-            self._superray_skip -= 1
-            return 0
-        return -threshold
-
-    def _learn_superrays(self, method: str, n_points: int) -> None:
-        """After a "superray+culling" scan that grouped rays: back off when the grouping
-        (``superray_seconds``) cost more than the traversal it saved, estimated from the
-        scan's traversal time, a ray's start costing RAY_VISITS cell visits: the
-        work it spared (rays, and their cell visits) over the work it did. Rays into
-        cells near the sensor, which hold the most end points, are short: a ray spared
-        is not an average ray."""
-        stats = self.last_insert_
-        if method != "superray+culling" or not stats["superrays"]:
-            return
-        spared = (n_points - stats["rays"]) * RAY_VISITS + stats["spared_cells"]
-        done = stats["rays"] * RAY_VISITS + stats["traversed_cells"]
-        saved = spared * stats["traversal_seconds"] / max(done, 1)
-        if saved < stats["superray_seconds"]:
-            self._superray_skip = self._superray_pause
-            self._superray_pause = min(2 * self._superray_pause, 8 * self.SUPERRAY_BACKOFF)
-        else:
-            self._superray_pause = self.SUPERRAY_BACKOFF
-
     @staticmethod
     def _insert_statistics(stats: tuple) -> dict[str, float]:
         """``last_insert_`` from what a core's scan insertion returns."""
@@ -717,7 +684,7 @@ class LogOddsMap(PlanningMixin):
                          resolution=self.resolution)
         self.last_insert_ = self._insert_statistics(stats)
         self.last_insert_["superrays"] = threshold != 0
-        self._learn_superrays(method, len(pts))
+        learn_superrays(self, method, len(pts))
 
     def _as_float32_points(self, x: ArrayLike, name: str) -> np.ndarray:
         # beyond float range is beyond every key range: inf, which no key holds

@@ -14,6 +14,7 @@ from ._grid import _Grid
 from ._logodds_map import SENSOR_MODEL, Leaves, LogOddsMap
 from .maps import register
 from ._scan_input import join_free, prefilter
+from ._superray_policy import adaptive_threshold
 from ._validation import check_bool, check_n_jobs, n_threads
 
 if TYPE_CHECKING:
@@ -204,7 +205,7 @@ default="auto"
                                                              name="free_points"))
         if scan is not None:
             pts, org, rng, _, free_only = scan
-            threshold = self._adaptive_threshold(method, threshold)
+            threshold = adaptive_threshold(self, method, threshold)
             self._record_insert(self._insert(
                 pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold,
                 False, self._max_scan_cells(), threads, free_only), pts, org, rng, method,

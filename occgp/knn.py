@@ -29,6 +29,7 @@ from ._knn_scores import (
 )
 from ._octree import _welford
 from ._status import Status
+from ._superray_policy import adaptive_threshold
 from ._validation import (
     check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
 )
@@ -475,7 +476,7 @@ default="auto"
         if scan is None:
             return self
         pts, org, rng, _ = scan
-        threshold = self._adaptive_threshold(method, threshold)
+        threshold = adaptive_threshold(self, method, threshold)
         out = self._knn_cells(pts, org, rng, method.endswith("culling"), threshold,
                               self._max_scan_cells(), n_threads(self._params["n_jobs"]))
         if isinstance(out, Status):

@@ -17,6 +17,7 @@ from ._merge import OctreeMerging
 from ._octree_stamps import OctreeStamps, Stamps
 from .maps import register
 from ._scan_input import join_free, prefilter
+from ._superray_policy import adaptive_threshold
 from ._validation import as_numeric, check_bool, check_choice, check_n_jobs, n_threads
 
 __all__ = ["OccupancyOctree", "Leaves", "Changes", "Nodes", "Stamps"]
@@ -325,7 +326,7 @@ default="auto"
             if len(pts) == 0:
                 self.last_insert_ = {"rays": 0}
                 return self
-        threshold = self._adaptive_threshold(method, threshold)
+        threshold = adaptive_threshold(self, method, threshold)
         # the culling region's cells are observed, so a stamped scan walks them too
         culling = method.endswith("culling") and stamp is None
         with stamping:
