@@ -320,9 +320,15 @@ class AKIMap(KernelMapBase):
         # origin, then the free samples in order) takes no further free one. The free
         # samples are drawn chunk by chunk (the same stream as at once).
         low = np.minimum(hits.min(axis=0), org) - res
-        taken = np.unique(packed_keys(np.vstack([hits, org[None]]), res, "resolution", low))
-        kept = [org[None]]
+        # the cells taken, each once (the hits' are distinct: one hit a cell); a chunk's
+        # new cells join them before the next chunk
+        taken = packed_keys(np.vstack([hits, org[None]]), res, "resolution", low)
+        if (taken[:-1] == taken[-1]).any():
+            taken = taken[:-1]
+        kept, new = [org[None]], None
         for beam, j in beam_chunks(n_free):
+            if new is not None:
+                taken = np.concatenate([taken, new])
             dist = step * (0.5 + j + self._rng.random(len(beam)))
             keep = dist < length[beam]
             beam, dist = beam[keep], dist[keep]
@@ -331,7 +337,7 @@ class AKIMap(KernelMapBase):
             _, first = np.unique(keys, return_index=True)
             first = np.sort(first[~np.isin(keys[first], taken, assume_unique=True)])
             kept.append(frees[first])
-            taken = np.union1d(taken, keys[first])
+            new = keys[first]
         frees = np.vstack(kept)
         samples = np.vstack([frees, hits])
         labels = np.concatenate([np.zeros(len(frees)), np.ones(len(hits))])
