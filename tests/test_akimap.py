@@ -487,3 +487,18 @@ def test_huge_n_jobs_uses_the_cores():
     c = BGKMap(0.1, n_jobs=-2**40).update(points, origin)
     for x, y in zip(c.cells(), BGKMap(0.1).update(points, origin).cells()):
         assert_array_equal(x, y)
+
+
+@pytest.mark.parametrize("spread", [2.0, 2000.0])     # few cubes (dense count), many
+def test_candidate_pairs_counts_the_neighbour_cubes_samples(spread):
+    """The guard's count of the neighbour search's work: for each sample, the samples in
+    the 3 x 3 x 3 cubes around its own, by brute force."""
+    from occgp.kernel._kernel_samples import candidate_pairs
+    rng = np.random.default_rng(3)
+    xs = rng.normal(size=(400, 3)) * spread
+    xs[7::7] = xs[1:-6:7]                            # repeated points share a cube
+    cell = 0.75
+    ck = np.floor(xs / cell)
+    expected = (np.abs(ck[:, None, :] - ck[None, :, :]).max(axis=2) <= 1).sum()
+    assert candidate_pairs(xs, cell) == float(expected)
+    assert candidate_pairs(xs[:0], cell) == 0.0
