@@ -31,7 +31,7 @@ constexpr uint32_t kMinParallelGroups = 256;  // fewer end cells to classify: on
 // traversing does
 constexpr ptrdiff_t kProbeRays = 8;
 // costs in cell visits of the traversal (timed on geb079 at 0.2 and 1 m): a ray's start,
-// and a signature's crossing (as RAY_VISITS in occgp/_logodds_map.py)
+// and a signature's crossing (RAY_VISITS in occgp/_superray_policy.py is the first)
 constexpr long kRayVisits = 10;
 constexpr double kCrossingVisits = 2.0;
 
@@ -238,18 +238,18 @@ static inline void classify_groups(double res, const double* oc, const octomap::
 // Group the rays of a scan into super rays (Kwon, dissertation 2.3.1-2.3.4).
 //
 // Fills `rays` (indices of the rays to traverse, ascending) and `weights` (how many
-// rays each stands for). Rays ending in a cell that holds at least `threshold` end points are
-// classified by their *signature*: at every border a ray crosses between the origin's
-// cell and its end cell, the keys of the other coordinates there; only the crossings
-// where the rays into that end cell can differ ("critical", the mapping lines) are
-// evaluated. Equal signatures mean the same traversed cells, so one ray of each class
-// is traversed with the class size as weight. A group whose crossings alone split it
-// into as many classes as rays is left plain; with `adaptive`, so are the groups whose
-// classification would cost more than the traversal it could spare (kRayVisits,
-// kCrossingVisits), and those whose first kProbeRays rays all differ. The end cells'
-// groups are classified on
-// up to `n_threads` OpenMP threads, in contiguous ranges whose rays are joined in group
-// order: the rays and weights are the same for every `n_threads`.
+// rays each stands for). Rays ending in a cell that holds at least `threshold` end
+// points are classified by their *signature*: at every border a ray crosses between the
+// origin's cell and its end cell, the keys of the other coordinates there; only the
+// crossings where the rays into that end cell can differ ("critical", the mapping
+// lines) are evaluated. Equal signatures mean the same traversed cells, so one ray of
+// each class is traversed with the class size as weight. A group whose crossings alone
+// split it into as many classes as rays is left plain; with `adaptive`, so are the
+// groups whose classification would cost more than the traversal it could spare
+// (kRayVisits, kCrossingVisits), and those whose first kProbeRays rays all differ. The
+// end cells' groups are classified on up to `n_threads` OpenMP threads, in contiguous
+// ranges whose rays are joined: the rays and weights are the same for every
+// `n_threads`.
 //
 // Exactness against liboctomap's float traversal: a ray joins a class only when it is
 // *certified* -- its end point clears the borders of its cell by more than `delta` =
