@@ -340,11 +340,10 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
 // `weights` (ray mode; nullptr: none), ray i counts weights[i] times. With
 // `superray_threshold` != 0 the rays are first grouped into super rays (super_rays, with
 // the threshold's magnitude; adaptive where it is negative) and one ray per class is
-// traversed. `counts` is the caller's scratch array, zero between
-// calls unless `counts_dirty` (an exception left it dirty); scan mode keeps one byte of
-// it per cell (a flag). With `diagnose` (slow),
-// stats->unnecessary counts the visits of the walked rays to cells whose update changes
-// nothing: fully free cells that no ray ends in (the dissertation's "unnecessary
+// traversed. `counts` is the caller's scratch array, zero between calls unless
+// `counts_dirty` (an exception left it dirty); scan mode keeps one byte of it per cell
+// (a flag). With `diagnose` (slow), stats->unnecessary counts the visits of the walked
+// rays to cells whose update changes nothing: fully free cells that no ray ends in (the dissertation's "unnecessary
 // traversals", Table 2.3).
 //
 // Returns Status::out_of_range when a ray's end (after truncation) lies outside the key

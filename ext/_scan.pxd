@@ -52,3 +52,8 @@ cdef extern from "_scan.h" namespace "occgp" nogil:
         int superray_threshold, FreeTest fully_free, void* map, vector[uint32_t]& counts,
         bool& counts_dirty, vector[ScanCell]& cells, ScanStats* stats, bool diagnose,
         uint64_t max_cells, int n_threads, const uint8_t* free_only) except +
+
+
+cdef extern from "_superrays.h" namespace "occgp::scan_detail" nogil:
+    # the adaptive super rays' cost model, in cell visits of the traversal: a ray's start
+    const long kRayVisits

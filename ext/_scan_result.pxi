@@ -3,7 +3,12 @@
 
 from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
+from _scan cimport kRayVisits
 from occgp._status import Status as _Status, check_status as _check_status
+
+#: A ray's start in the traversal costs about as much as this many cell visits (the
+#: adaptive super rays' cost model, ext/_superrays.h; occgp/_superray_policy.py).
+RAY_VISITS = kRayVisits
 
 
 cdef inline const uint32_t* scan_weights(const uint32_t[::1] weights, Py_ssize_t n,
@@ -42,8 +47,8 @@ cdef inline object scan_result(Status status, const ScanStats& stats, size_t upd
                                const timespec& done):
     """What the maps' scan insertion returns: (region_cells, updated_cells,
     traversed_rays, traversed_cells, seconds, unnecessary_traversals, spared_cells),
-    seconds = (end points, super rays, culling region, traversal, map update) with the update
-    ending at `done`; the failure's :class:`occgp._status.Status` when the scan was
+    seconds = (end points, super rays, culling region, traversal, map update) with the
+    update ending at `done`; the failure's :class:`occgp._status.Status` when the scan was
     not inserted (a ray end out of range or too short to walk, or more cells than
     its limit: nothing changed)."""
     if status != Status.ok:

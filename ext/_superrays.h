@@ -30,8 +30,9 @@ constexpr uint32_t kMinParallelGroups = 256;  // fewer end cells to classify: on
 // classified further: its rays rarely share classes, and classifying costs about what
 // traversing does
 constexpr ptrdiff_t kProbeRays = 8;
-// costs in cell visits of the traversal (timed on geb079 at 0.2 and 1 m): a ray's start,
-// and a signature's crossing (RAY_VISITS in occgp/_superray_policy.py is the first)
+// costs in cell visits of the traversal (timed on geb079 at 0.2 and 1 m): a ray's start
+// (RAY_VISITS of the compiled maps, which occgp/_superray_policy.py uses too), and a
+// signature's crossing
 constexpr long kRayVisits = 10;
 constexpr double kCrossingVisits = 2.0;
 
@@ -153,14 +154,16 @@ static inline void classify_groups(double res, const double* oc, const octomap::
       for (const Crossing& c : crossings) segments += c.n_keys - 1;
       const ptrdiff_t n_rays = static_cast<ptrdiff_t>(offsets[g]) - first;
       if (segments >= n_rays) ok = false;
-      long cells = 1;  // a ray's cells from the origin's to the end cell
-      for (int a = 0; a < 3; ++a)
-        cells += std::abs(static_cast<int>(kv[a]) - static_cast<int>(ko[a]));
-      const double spare =
-          static_cast<double>(n_rays - segments) * static_cast<double>(kRayVisits + cells);
-      const double cost = kCrossingVisits * static_cast<double>(n_rays) *
-                          static_cast<double>(crossings.size() + 1);
-      if (adaptive && !(spare > cost)) ok = false;
+      if (ok && adaptive) {
+        long cells = 1;  // a ray's cells from the origin's to the end cell
+        for (int a = 0; a < 3; ++a)
+          cells += std::abs(static_cast<int>(kv[a]) - static_cast<int>(ko[a]));
+        const double spare =
+            static_cast<double>(n_rays - segments) * static_cast<double>(kRayVisits + cells);
+        const double cost = kCrossingVisits * static_cast<double>(n_rays) *
+                            static_cast<double>(crossings.size() + 1);
+        if (!(spare > cost)) ok = false;
+      }
     }
     if (!ok) {
       for (ptrdiff_t m = first; m < static_cast<ptrdiff_t>(offsets[g]); ++m) {

@@ -5,6 +5,8 @@ from typing_extensions import disjoint_base
 
 from ._status import Status
 
+RAY_VISITS: int
+
 @disjoint_base
 class _Grid:
     def _set_sensor_model(self, prob_hit: float, prob_miss: float, clamping_min: float,

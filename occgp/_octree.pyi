@@ -8,6 +8,7 @@ from ._status import Status
 TREE_MAX_VAL: int
 TREE_DEPTH: int
 KEYRAY_CELLS: int
+RAY_VISITS: int
 
 @disjoint_base
 class _TreeCore:

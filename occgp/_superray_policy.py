@@ -3,11 +3,7 @@ the threshold the compiled core takes for a scan, and the back-off after a scan 
 grouping did not pay (the state lives on the map: ``_superray_skip``, the scans left
 to insert without super rays, and ``_superray_pause``, the next pause)."""
 
-#: A ray's start in the traversal (its direction, steps and borders: divisions and a
-#: square root) costs about as much as this many cell visits (timed on geb079 at 1 m,
-#: where rays are short); the back-off weighs the rays grouping spared with it, as
-#: kRayVisits in ext/_superrays.h does.
-RAY_VISITS = 10
+from ._octree import RAY_VISITS  # a ray's start, in cell visits (ext/_superrays.h)
 
 
 def adaptive_threshold(m, method: str, threshold: int) -> int:
