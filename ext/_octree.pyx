@@ -159,16 +159,16 @@ cdef class _OcTree(_TreeCore):
         each updated once: in scan mode with ``l_hit`` if any ray ends in it,
         else ``l_miss`` (liboctomap's ``insertPointCloud``); in ray mode with
         ``n_free*l_miss + n_hit*l_hit``. With `culling`, the cells of the
-        scan's culling region (see :func:`_build_region`) are skipped: they are
-        at the lower clamp and hold no end point, so their update is a no-op.
+        scan's culling region (``build_region``) are skipped: a ray's visit changes
+        nothing there (fully free cells without end points; in scan mode, end cells).
         With `weights` (ray mode), ray i counts ``weights[i]`` times. With
         `superray_threshold` != 0, the rays are first grouped into super rays (cells
         of at least its magnitude; < 0: where it can pay) and one ray a class walked.
 
         Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
-        seconds, unnecessary_traversals, spared_cells), seconds = (end points, super
-        rays, culling region, traversal, tree update), spared_cells = the visits super
-        rays spared (see ``last_insert_``). With `key_box`
+        seconds, unnecessary_traversals, spared_cells, culled_rays), seconds = (end
+        points, super rays, culling region, traversal, tree update), spared_cells and
+        culled_rays as in ``last_insert_``. With `key_box`
         (rows: lowest and highest key), cells outside it are left out. region_cells
         is -1 when culling was off or the scan's key box was too large to cull;
         unnecessary_traversals is -1 unless `diagnose` (slow) asks for it.
@@ -722,7 +722,7 @@ def _sum_stats(a, b):
     """Two traversals' statistics (see :func:`scan_result`) as one scan's."""
     region = -1 if a[0] < 0 and b[0] < 0 else max(a[0], 0) + max(b[0], 0)
     return (region, a[1] + b[1], a[2] + b[2], a[3] + b[3],
-            tuple(x + y for x, y in zip(a[4], b[4])), -1, a[6] + b[6])
+            tuple(x + y for x, y in zip(a[4], b[4])), -1, a[6] + b[6], a[7] + b[7])
 
 
 def _welford(const double[::1] values, long count, double mean, double m2):

@@ -89,6 +89,55 @@ class RayWalker {
   // The current cell's key on `axis`.
   int key(int axis) const { return (axis == 0 ? k0_ : axis == 1 ? k1_ : k2_) & 0xFFFF; }
 
+  // Whether the ray from `origin` (in the cell `key_origin`) to `end` (in the cell
+  // `key_end`, the ray's last) has no cell outside `region`, which holds the cells
+  // next to its end cell on the origin's side -- told without start()'s divisions.
+  // `region` is closed under a step toward the origin on any axis (walk_back), and its
+  // box holds the box of the two cells. A ray that computeRayKeys walks from `origin`
+  // to `end` (walkable, keys in range) then gives no cells outside `region`:
+  //
+  // The walk is a path of steps toward the end on each axis, and it stops when it
+  // reaches the end cell (whose cell is not the ray's). Until it leaves the box of the
+  // two cells, its cells lie in the box, which the region holds but for the end cell:
+  // each such cell lies between the origin's cell and one of the end cell's neighbours
+  // toward it (where the keys differ), which the region holds with all the cells
+  // between it and the origin's. The walk leaves the box only by crossing out of the
+  // end cell's slab on an axis before it has crossed into the end cell's slab on
+  // another. The walk's crossings on each axis lie at t0 + j d (start()), within
+  // (count + 3) 2^-52 |t| of the exact values (walk_back), and those values are the
+  // crossings of the segment from `origin` along the float direction d for the float
+  // length L, whose end origin + L d lies within 2^-23 |end - origin| of `end` on each
+  // axis (d = (end - origin) / L, both rounded once); start()'s cell borders lie
+  // within 2^-25 of the resolution of the cells' (its half resolution is a float).
+  // So when `end` lies further than all of this (bounded by `delta` several times
+  // over) from every face of its cell, each crossing into the end cell's slabs
+  // comes before L and before each crossing out of them, in the walk's values too:
+  // the walk reaches the end cell without leaving the box.
+  static bool hidden(const CellBox& region, double resolution, double inv_resolution,
+                     const octomap::point3d& origin, const octomap::OcTreeKey& key_origin,
+                     const octomap::point3d& end, const octomap::OcTreeKey& key_end) {
+    int next_to_end[3];
+    for (int i = 0; i < 3; ++i) {
+      const int d = static_cast<int>(key_end[i]) - static_cast<int>(key_origin[i]);
+      next_to_end[i] = static_cast<int>(key_end[i]) - (d > 0) + (d < 0);
+    }
+    for (int i = 0; i < 3; ++i) {
+      if (next_to_end[i] == static_cast<int>(key_end[i])) continue;  // the keys agree
+      int cell[3] = {key_end[0], key_end[1], key_end[2]};
+      cell[i] = next_to_end[i];
+      if (!region.test(cell[0], cell[1], cell[2])) return false;
+    }
+    double span = 0;  // |end - origin|, 1-norm
+    for (int i = 0; i < 3; ++i) span += std::fabs(static_cast<double>(end(i)) - origin(i));
+    const double delta = 1e-6 * (resolution + span) + 1e-15 * (span * inv_resolution + 4) * span;
+    for (int i = 0; i < 3; ++i) {
+      const double face = (static_cast<double>(key_end[i]) - kMaxVal) * resolution;
+      const double inside = static_cast<double>(end(i)) - face;
+      if (!(inside >= delta && inside <= resolution - delta)) return false;
+    }
+    return true;
+  }
+
   // The culling region's shortcut (Kwon, dissertation 2.3.5): right after start(),
   // append to `cells` the cells of the ray that lie outside `region`, as indices
   // into the region's box (CellBox::index), found walking back from the end

@@ -61,6 +61,7 @@ struct ScanStats {
   long traversed_cells;  // cell visits that counted a ray
   long spared_cells;     // the visits super rays spared: per walked ray, its visits x
                          // the other rays of its class
+  long culled_rays;      // rays the culling region hid whole (RayWalker::hidden): not walked
   long unnecessary;      // with `diagnose`: visits to cells whose update is a no-op
   timespec clock[5];     // start; end points, super rays, culling region, traversal done
 };
@@ -71,6 +72,7 @@ static inline void empty_stats(ScanStats* stats) {
   stats->rays = 0;
   stats->traversed_cells = 0;
   stats->spared_cells = 0;
+  stats->culled_rays = 0;
   stats->unnecessary = -1;
   for (int k = 0; k < 5; ++k) clock_gettime(CLOCK_MONOTONIC, &stats->clock[k]);
 }
@@ -168,18 +170,25 @@ static inline bool key_checked(double resolution_factor, float coordinate, octom
 // Grow the scan's culling region (Kwon, dissertation 2.3.5, Alg. 3).
 //
 // Breadth first over Manhattan levels from the sensor's cell, inside the key box of
-// the scan: a cell joins when it is fully free (log-odds at the lower clamp), holds no
-// end point of the scan (occgp's exactness rule), and each of its test cells (one step
-// toward the origin on every axis where its key differs from the origin's) is already
-// in. Returns the number of cells, or -1 when the box is too large (no culling).
+// the scan: a cell joins when each of its test cells (one step toward the origin on
+// every axis where its key differs from the origin's) is already in, and a ray's visit
+// cannot change its update: it is fully free (log-odds at the lower clamp) and holds no
+// end point of the scan (`ends`, occgp's exactness rule), or, with `ends_in` (scan
+// mode, where such a cell gets l_hit whatever crosses it), holds one. Returns the
+// number of cells, or -1 when the box is too large (no culling).
 static inline long build_region(FreeTest fully_free, void* map, const octomap::OcTreeKey& ko,
                          const int* lo, const int* hi, int max_level, const KeyTable& ends,
-                         CellBox& region) {
+                         CellBox& region, bool ends_in = false) {
   using namespace scan_detail;
   CellBox seen;
   std::vector<octomap::OcTreeKey> frontier, next_frontier;
   if (!region.reset(lo, hi, kMaxRegionCells) || !seen.reset(lo, hi, kMaxRegionCells)) return -1;
-  if (!fully_free(map, ko) || ends.contains(pack_key(ko))) return 0;
+  // a cell joins when its update would change nothing after a ray's visit
+  const auto no_op = [&](const octomap::OcTreeKey& key) {
+    if (ends.contains(pack_key(key))) return ends_in;
+    return fully_free(map, key);
+  };
+  if (!no_op(ko)) return 0;
   region.set(ko[0], ko[1], ko[2]);
   seen.set(ko[0], ko[1], ko[2]);
   frontier.push_back(ko);
@@ -208,8 +217,7 @@ static inline long build_region(FreeTest fully_free, void* map, const octomap::O
               break;
             }
           }
-          if (!ok || ends.contains(pack_key(nb))) continue;
-          if (!fully_free(map, nb)) continue;
+          if (!ok || !no_op(nb)) continue;
           region.set(nb[0], nb[1], nb[2]);
           next_frontier.push_back(nb);
           count += 1;
@@ -247,8 +255,9 @@ struct Rays {
 // Walk rays r0 <= r < r1 of a scan (of its super rays when it has them) into one
 // thread's counts: cells of the scan's key box in `counts` (dense; new ones appended
 // to `touched`), other cells in `table`'s n_free. Adds the cell visits to `traversed`,
-// and those that super rays spared (each walked ray's visits times the other rays of
-// its class) to `spared`; with `visits` (diagnose), counts every visit there too.
+// those that super rays spared (each walked ray's visits times the other rays of its
+// class) to `spared`, and the rays the culling region hid whole to `culled`; with
+// `visits` (diagnose), counts every visit there too.
 //
 // With s.max_cells, stops (setting `stop`) once `touched` and the entries of `table`
 // past its first `table_base` ones -- distinct cells of the scan, as no two of them
@@ -256,13 +265,15 @@ struct Rays {
 template <class Count>
 static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* counts,
                       std::vector<uint64_t>* touched, KeyTable* table, size_t table_base,
-                      KeyTable* visits, long* traversed, long* spared, StopFlag* stop) {
+                      KeyTable* visits, long* traversed, long* spared, long* culled,
+                      StopFlag* stop) {
   uint32_t w = 1;
-  long n_spared = 0;
+  long n_spared = 0, n_culled = 0;
   RayWalker walker;
   std::vector<uint64_t> back;
   long n_visits = 0;
   const CellBox* region = s->region;
+  const double inv_res = 1.0 / s->res;
   // copies, which the counts' stores cannot alias
   const bool dense = s->dense, shared = s->shared;
   const int lo[3] = {s->lo[0], s->lo[1], s->lo[2]};
@@ -279,6 +290,13 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
       if (s->weights != nullptr) w = s->weights[i];
     }
     if (!s->end_ok[i]) continue;  // computeRayKeys's out-of-range check
+    // a ray whose cells all lie in the region (the most, once it has grown) is done
+    // without its start()
+    if (s->cull && RayWalker::hidden(*region, s->res, inv_res, *s->origin, *s->key_origin,
+                                     s->ends[i], s->end_keys[i])) {
+      ++n_culled;
+      continue;
+    }
     bool more = walker.start(s->res, *s->origin, *s->key_origin, s->ends[i], s->end_keys[i]);
     if (more && s->cull) {
       back.clear();
@@ -323,6 +341,7 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
   }
   *traversed += n_visits;
   *spared += n_spared;
+  *culled += n_culled;
 }
 
 }  // namespace scan_detail
@@ -335,8 +354,10 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
 // each gets one update: in scan mode l_hit if any ray ends in it, else l_miss
 // (liboctomap's insertPointCloud); in ray mode n_free*l_miss + n_hit*l_hit. With
 // `culling`, the cells of the scan's culling region (build_region, using `fully_free`
-// on `map`) are skipped: they are at the lower clamp and hold no end point, so their
-// update is a no-op; rays are walked back from their end until they enter it. With
+// on `map`) are skipped: a ray's visit changes nothing there (fully free cells
+// without end points; in scan mode, end cells too); rays are walked back from their
+// end until they enter it, or not walked at all where RayWalker::hidden tells that
+// all their cells lie in it (stats->culled_rays). With
 // `weights` (ray mode; nullptr: none), ray i counts weights[i] times. With
 // `superray_threshold` != 0 the rays are first grouped into super rays (super_rays, with
 // the threshold's magnitude; adaptive where it is negative) and one ray per class is
@@ -444,7 +465,8 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   }
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[2]);
   if (culling)
-    stats->region_cells = build_region(fully_free, map, ko, lo, hi, max_level, table, region);
+    stats->region_cells =
+        build_region(fully_free, map, ko, lo, hi, max_level, table, region, !ray_mode);
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[3]);
   for (int axis = 0; axis < 3; ++axis) {
     dims[axis] = static_cast<uint64_t>(hi[axis] - lo[axis] + 1);
@@ -482,14 +504,14 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   // walk rays r0 <= r < r1 into the counts of thread `t` (walk_rays)
   const auto walk = [&](ptrdiff_t r0, ptrdiff_t r1, int t, std::vector<uint64_t>* t_touched,
                         KeyTable* t_table, size_t base, KeyTable* t_visits, long* t_traversed,
-                        long* t_spared) {
+                        long* t_spared, long* t_culled) {
     if (ray_mode) {
       walk_rays(&rays, r0, r1, dense ? counts.data() + static_cast<uint64_t>(t) * box_cells
                                      : nullptr,
-                t_touched, t_table, base, t_visits, t_traversed, t_spared, &stop);
+                t_touched, t_table, base, t_visits, t_traversed, t_spared, t_culled, &stop);
     } else {  // one array of flags for every thread
       walk_rays(&rays, r0, r1, dense ? flags : nullptr, t_touched, t_table, base, t_visits,
-                t_traversed, t_spared, &stop);
+                t_traversed, t_spared, t_culled, &stop);
     }
   };
   rays.res = res;
@@ -513,11 +535,12 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   const size_t hits = table.size();
   if (n_threads == 1) {
     walk(0, n_trav, 0, &touched, &table, hits, diagnose ? &visits : nullptr,
-         &stats->traversed_cells, &stats->spared_cells);
+         &stats->traversed_cells, &stats->spared_cells, &stats->culled_rays);
   } else {
     std::vector<std::vector<uint64_t>> part_touched(n_threads);  // threads 1, 2, ...: new cells
     std::vector<KeyTable> part_tables(n_threads - 1);             // and their other cells
-    std::vector<long> part_visits(n_threads, 0), part_spared(n_threads, 0);
+    std::vector<long> part_visits(n_threads, 0), part_spared(n_threads, 0),
+        part_culled(n_threads, 0);
     const ptrdiff_t n_chunks =
         std::min<ptrdiff_t>(n_trav, static_cast<ptrdiff_t>(n_threads) * kChunksPerThread);
     std::exception_ptr error;
@@ -537,7 +560,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
       try {
         walk(k * n_trav / n_chunks, (k + 1) * n_trav / n_chunks, t,
              t == 0 ? &touched : &part_touched[t], t == 0 ? &table : &part_tables[t - 1],
-             t == 0 ? hits : 0, nullptr, &part_visits[t], &part_spared[t]);
+             t == 0 ? hits : 0, nullptr, &part_visits[t], &part_spared[t], &part_culled[t]);
       } catch (...) {
 #pragma omp critical(occgp_scan_error)
         if (!error) error = std::current_exception();
@@ -549,6 +572,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     // the other slices zero; shared flags need only the new cells appended
     stats->traversed_cells += part_visits[0];
     stats->spared_cells += part_spared[0];
+    stats->culled_rays += part_culled[0];
     for (int t = 1; t < n_threads; ++t) {
       if (shared) {
         touched.insert(touched.end(), part_touched[t].begin(), part_touched[t].end());
@@ -569,6 +593,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
       }
       stats->traversed_cells += part_visits[t];
       stats->spared_cells += part_spared[t];
+      stats->culled_rays += part_culled[t];
     }
   }
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[4]);

@@ -627,9 +627,9 @@ class LogOddsMap(PlanningMixin):
     @staticmethod
     def _insert_statistics(stats: tuple) -> dict[str, float]:
         """``last_insert_`` from what a core's scan insertion returns."""
-        region, cells, rays, traversed, seconds, unnecessary, spared = stats
+        region, cells, rays, traversed, seconds, unnecessary, spared, culled = stats
         out = {"rays": rays, "updated_cells": cells, "traversed_cells": traversed,
-               "spared_cells": spared,
+               "spared_cells": spared, "culled_rays": culled,
                "region_cells": region, "endpoint_seconds": seconds[0],
                "superray_seconds": seconds[1], "region_seconds": seconds[2],
                "preprocessing_seconds": seconds[1] + seconds[2],

@@ -76,8 +76,10 @@ class OccupancyOctree(OctreeStamps, OctreeMerging, OctreeFiles, OctreeQueries, _
         ``updated_cells``, ``traversed_cells`` (cell visits that counted a
         ray: those the culling region spares are not walked or not counted),
         ``spared_cells`` (the visits super rays spared: each walked ray's
-        visits times the other rays of its class), ``region_cells`` (-1 without culling), ``superrays`` (whether rays
-        were grouped) and the seconds spent on the end points, on super rays,
+        visits times the other rays of its class), ``culled_rays`` (rays
+        whose cells all lie in the culling region, told from their end cells
+        and not walked), ``region_cells`` (-1 without culling), ``superrays``
+        (whether rays were grouped) and the seconds spent on the end points, on super rays,
         on the culling region, on traversal and on the tree update:
         ``endpoint_seconds``, ``superray_seconds``, ``region_seconds``
         (``preprocessing_seconds`` is their sum), ``traversal_seconds``,

@@ -118,6 +118,66 @@ def test_batch_update_with_end_points_on_cell_corners(seed):
             assert_same_leaves(got, plain)
 
 
+def _near_borders(rng, points, res):
+    """Half of `points` moved onto their cells' borders, edges and corners, and next
+    to them (the float32 values around each, and points 1e-7 to 1e-5 of a cell inside)."""
+    on = np.round(points / res) * res
+    pick = (rng.uniform(size=points.shape) < 0.5) & (rng.uniform(size=(len(points), 1)) < 0.5)
+    moved = np.where(pick, on, points).astype(np.float32)
+    ulp = rng.integers(-2, 3, points.shape).astype(np.float32)
+    moved = np.where(rng.uniform(size=points.shape) < 0.3,
+                     np.nextafter(moved, moved + ulp), moved)
+    inside = rng.choice([1e-7, 1e-6, 1e-5], points.shape) * res * rng.choice([-1, 1], points.shape)
+    return np.where(rng.uniform(size=points.shape) < 0.2, moved + inside, moved)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
+def test_rays_culled_whole_give_plain_maps_near_cell_borders(cls, seed):
+    """A ray whose end cell's neighbours toward the sensor are in the region is not
+    walked (``culled_rays``): exact even for end points on and next to cell borders,
+    once the region has grown (the scans repeat until space saturates)."""
+    rng = np.random.default_rng(seed)
+    res = 0.2
+    scans = room_sequence(rng, n_scans=3, n_points=20000)
+    shift = np.array([0.037, -0.051, 0.023])                    # walls off the borders
+    scans = [(_near_borders(rng, p + shift, res), o + shift if seed % 2 else
+              np.round(o / res) * res) for p, o in scans]
+    scans = scans * 4                                           # free space saturates
+    for mode in ("scan", "ray"):
+        plain = cls(res)
+        for points, origin in scans:
+            plain.insert_scan(points, origin, mode=mode, method="plain")
+        for method in ("culling", "superray+culling"):
+            m = cls(res)
+            culled = 0
+            for points, origin in scans:
+                m.insert_scan(points, origin, mode=mode, method=method, superray_threshold=2)
+                culled += m.last_insert_["culled_rays"]
+            assert culled > 0
+            if cls is GridMap:
+                assert_array_equal_cells(m.cells(), plain.cells())
+            else:
+                assert_same_leaves(m, plain)
+
+
+def test_scan_mode_region_holds_end_cells():
+    """In scan mode a cell an end point lies in gets ``l_hit`` whatever crosses it, so
+    the culling region takes it (and grows past it); ray counting keeps it out."""
+    scans = room_sequence(np.random.default_rng(4), n_scans=7)
+    regions = {}
+    for mode in ("scan", "ray"):
+        m = build(scans[:-1], 0.1, mode="scan")
+        points, origin = scans[-1]
+        regions[mode] = m._insert_batch(points.astype(np.float32), origin.astype(np.float32),
+                                        -1.0, mode == "ray", True)[0]
+        plain = build(scans[:-1], 0.1, mode="scan")
+        plain._insert_batch(points.astype(np.float32), origin.astype(np.float32), -1.0,
+                            mode == "ray", False)
+        assert_same_leaves(m, plain)
+    assert regions["scan"] > regions["ray"] > 100
+
+
 # ----------------------------------------------------------------- real data, every method
 METHODS = ("culling", "superray", "superray+culling")
 
