@@ -86,54 +86,101 @@ class RayWalker {
     return n;
   }
 
+  // visit_rest() for a ray that stays in the box of its two cells (hidden() tells when:
+  // its end point clears its cell's borders), by the cells' indices in a box array:
+  // `index` the current cell's, `end` the end cell's, `stride` the index's step on each
+  // axis (signed: a step of the ray). `visit(index)` for each cell; returns how many.
+  template <class Visit>
+  long visit_rest_indexed(uint64_t index, uint64_t end, const int64_t* stride,
+                          Visit&& visit) const {
+    double t0 = t0_, t1 = t1_, t2 = t2_;
+    const uint64_t a0 = static_cast<uint64_t>(stride[0]), a1 = static_cast<uint64_t>(stride[1]),
+                   a2 = static_cast<uint64_t>(stride[2]);
+    const double length = length_;
+    long n = 0;
+    while (true) {
+      visit(index);
+      ++n;
+      const bool c01 = t0 < t1, c02 = t0 < t2, c12 = t1 < t2;
+      const bool m0 = c01 & c02;
+      const bool m1 = !c01 & c12;
+      const bool m2 = !(m0 | m1);
+      index += (m0 ? a0 : 0) + (m1 ? a1 : 0) + (m2 ? a2 : 0);
+      t0 += m0 ? d0_ : 0.0;
+      t1 += m1 ? d1_ : 0.0;
+      t2 += m2 ? d2_ : 0.0;
+      if (index == end) return n;
+      const double t01 = t0 < t1 ? t0 : t1;
+      const double dist = t01 < t2 ? t01 : t2;
+      if (dist > length) return n;
+    }
+  }
+
   // The current cell's key on `axis`.
   int key(int axis) const { return (axis == 0 ? k0_ : axis == 1 ? k1_ : k2_) & 0xFFFF; }
 
   // Whether the ray from `origin` (in the cell `key_origin`) to `end` (in the cell
-  // `key_end`, the ray's last) has no cell outside `region`, which holds the cells
-  // next to its end cell on the origin's side -- told without start()'s divisions.
-  // `region` is closed under a step toward the origin on any axis (walk_back), and its
-  // box holds the box of the two cells. A ray that computeRayKeys walks from `origin`
-  // to `end` (walkable, keys in range) then gives no cells outside `region`:
+  // `key_end`, the ray's last) has no cell outside `region` -- told without start()'s
+  // divisions and walk. `region` is closed under a step toward the origin on any axis
+  // (walk_back), and its box holds the box of the two cells. The ray's cells then all
+  // lie in `region` when computeRayKeys's walk (walkable, keys in range) reaches the
+  // end cell without leaving that box, from a neighbour of the end cell that
+  // `region` holds: the walk steps toward the end on each axis, so the cells before
+  // lie between the origin's cell and that neighbour.
   //
-  // The walk is a path of steps toward the end on each axis, and it stops when it
-  // reaches the end cell (whose cell is not the ray's). Until it leaves the box of the
-  // two cells, its cells lie in the box, which the region holds but for the end cell:
-  // each such cell lies between the origin's cell and one of the end cell's neighbours
-  // toward it (where the keys differ), which the region holds with all the cells
-  // between it and the origin's. The walk leaves the box only by crossing out of the
-  // end cell's slab on an axis before it has crossed into the end cell's slab on
-  // another. The walk's crossings on each axis lie at t0 + j d (start()), within
-  // (count + 3) 2^-52 |t| of the exact values (walk_back), and those values are the
-  // crossings of the segment from `origin` along the float direction d for the float
-  // length L, whose end origin + L d lies within 2^-23 |end - origin| of `end` on each
-  // axis (d = (end - origin) / L, both rounded once); start()'s cell borders lie
-  // within 2^-25 of the resolution of the cells' (its half resolution is a float).
-  // So when `end` lies further than all of this (bounded by `delta` several times
-  // over) from every face of its cell, each crossing into the end cell's slabs
-  // comes before L and before each crossing out of them, in the walk's values too:
-  // the walk reaches the end cell without leaving the box.
+  // The walk leaves the box only by crossing out of one of the end cell's slabs before
+  // it has crossed into all of them, and it comes from the neighbour across the slab
+  // it crosses into last. Its crossings on each axis lie at t0 + j d (start()),
+  // within (count + 3) 2^-52 |t| of the exact values (walk_back), and those values
+  // are the crossings of the segment from `origin` along the float direction d for the
+  // float length L, whose end origin + L d lies within 2^-23 |end - origin| of `end`
+  // on each axis (d = (end - origin) / L, both rounded once); start()'s cell borders
+  // lie within 2^-25 of the resolution of the cells' (its half resolution is a
+  // float). So when `end` lies further than all of this (`delta`, several times over)
+  // from the faces of its cell the walk could leave it by (those away from the
+  // origin; both on an axis where the keys agree), the walk crosses into the end
+  // cell's slabs before it crosses out of any; and when the segment from `origin` to
+  // `end` crosses into one of them later than into the others by more than all of this
+  // in the segment's fraction (`margin`, several times over), the walk comes from the
+  // neighbour across it. Where that is not certain, every neighbour of the end cell
+  // toward the origin must be in `region`. (The walk may stop at L before it reaches
+  // the end cell when `end` lies next to the face it enters by; its cells then lie
+  // before that neighbour all the same.)
   static bool hidden(const CellBox& region, double resolution, double inv_resolution,
                      const octomap::point3d& origin, const octomap::OcTreeKey& key_origin,
                      const octomap::point3d& end, const octomap::OcTreeKey& key_end) {
-    int next_to_end[3];
-    for (int i = 0; i < 3; ++i) {
-      const int d = static_cast<int>(key_end[i]) - static_cast<int>(key_origin[i]);
-      next_to_end[i] = static_cast<int>(key_end[i]) - (d > 0) + (d < 0);
-    }
-    for (int i = 0; i < 3; ++i) {
-      if (next_to_end[i] == static_cast<int>(key_end[i])) continue;  // the keys agree
-      int cell[3] = {key_end[0], key_end[1], key_end[2]};
-      cell[i] = next_to_end[i];
-      if (!region.test(cell[0], cell[1], cell[2])) return false;
-    }
     double span = 0;  // |end - origin|, 1-norm
     for (int i = 0; i < 3; ++i) span += std::fabs(static_cast<double>(end(i)) - origin(i));
     const double delta = 1e-6 * (resolution + span) + 1e-15 * (span * inv_resolution + 4) * span;
+    double entry[3], margin[3];  // the fraction of the segment where it enters each slab
+    int last = -1;
     for (int i = 0; i < 3; ++i) {
-      const double face = (static_cast<double>(key_end[i]) - kMaxVal) * resolution;
-      const double inside = static_cast<double>(end(i)) - face;
-      if (!(inside >= delta && inside <= resolution - delta)) return false;
+      const double low = (static_cast<double>(key_end[i]) - kMaxVal) * resolution;
+      const double inside = static_cast<double>(end(i)) - low;
+      const int steps = static_cast<int>(key_end[i]) - static_cast<int>(key_origin[i]);
+      // the faces the walk could leave the end cell by: the far ones
+      if (!((steps > 0 || inside >= delta) && (steps < 0 || inside <= resolution - delta)))
+        return false;
+      if (steps == 0) continue;
+      const double face = steps > 0 ? low : low + resolution;  // the face toward the origin
+      const double length = std::fabs(static_cast<double>(end(i)) - origin(i));
+      entry[i] = std::fabs(face - origin(i)) / length;
+      margin[i] = 1e-6 * (1 + resolution / length) + 4e-15 * (span * inv_resolution + 4);
+      if (last < 0 || entry[i] > entry[last]) last = i;
+    }
+    if (last < 0) return true;  // one cell: no cells to walk
+    bool certain = true;
+    for (int i = 0; i < 3; ++i) {
+      if (i != last && key_end[i] != key_origin[i] &&
+          !(entry[last] - entry[i] > margin[last] + margin[i]))
+        certain = false;
+    }
+    for (int i = 0; i < 3; ++i) {
+      const int steps = static_cast<int>(key_end[i]) - static_cast<int>(key_origin[i]);
+      if (steps == 0 || (certain && i != last)) continue;
+      int cell[3] = {key_end[0], key_end[1], key_end[2]};
+      cell[i] -= steps > 0 ? 1 : -1;
+      if (!region.test(cell[0], cell[1], cell[2])) return false;
     }
     return true;
   }
