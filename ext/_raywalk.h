@@ -86,36 +86,6 @@ class RayWalker {
     return n;
   }
 
-  // visit_rest() for a ray that stays in the box of its two cells (hidden() tells when:
-  // its end point clears its cell's borders), by the cells' indices in a box array:
-  // `index` the current cell's, `end` the end cell's, `stride` the index's step on each
-  // axis (signed: a step of the ray). `visit(index)` for each cell; returns how many.
-  template <class Visit>
-  long visit_rest_indexed(uint64_t index, uint64_t end, const int64_t* stride,
-                          Visit&& visit) const {
-    double t0 = t0_, t1 = t1_, t2 = t2_;
-    const uint64_t a0 = static_cast<uint64_t>(stride[0]), a1 = static_cast<uint64_t>(stride[1]),
-                   a2 = static_cast<uint64_t>(stride[2]);
-    const double length = length_;
-    long n = 0;
-    while (true) {
-      visit(index);
-      ++n;
-      const bool c01 = t0 < t1, c02 = t0 < t2, c12 = t1 < t2;
-      const bool m0 = c01 & c02;
-      const bool m1 = !c01 & c12;
-      const bool m2 = !(m0 | m1);
-      index += (m0 ? a0 : 0) + (m1 ? a1 : 0) + (m2 ? a2 : 0);
-      t0 += m0 ? d0_ : 0.0;
-      t1 += m1 ? d1_ : 0.0;
-      t2 += m2 ? d2_ : 0.0;
-      if (index == end) return n;
-      const double t01 = t0 < t1 ? t0 : t1;
-      const double dist = t01 < t2 ? t01 : t2;
-      if (dist > length) return n;
-    }
-  }
-
   // The current cell's key on `axis`.
   int key(int axis) const { return (axis == 0 ? k0_ : axis == 1 ? k1_ : k2_) & 0xFFFF; }
 
