@@ -119,40 +119,50 @@ class RayWalker {
   static bool hidden(const CellBox& region, double resolution, double inv_resolution,
                      const octomap::point3d& origin, const octomap::OcTreeKey& key_origin,
                      const octomap::point3d& end, const octomap::OcTreeKey& key_end) {
+    // the end cell's neighbours toward the origin (on the axes where the keys differ),
+    // and those of them in the region
+    int toward = 0, in = 0;
+    for (int i = 0; i < 3; ++i) {
+      const int steps = static_cast<int>(key_end[i]) - static_cast<int>(key_origin[i]);
+      if (steps == 0) continue;
+      int cell[3] = {key_end[0], key_end[1], key_end[2]};
+      cell[i] -= steps > 0 ? 1 : -1;
+      toward |= 1 << i;
+      if (region.test(cell[0], cell[1], cell[2])) in |= 1 << i;
+    }
+    if (toward == 0) return true;  // one cell: no cells to walk
+    if (in == 0) return false;
     double span = 0;  // |end - origin|, 1-norm
     for (int i = 0; i < 3; ++i) span += std::fabs(static_cast<double>(end(i)) - origin(i));
     const double delta = 1e-6 * (resolution + span) + 1e-15 * (span * inv_resolution + 4) * span;
-    double entry[3], margin[3];  // the fraction of the segment where it enters each slab
-    int last = -1;
+    double reach[3], length[3];  // per axis: to the face toward the origin, to the end
     for (int i = 0; i < 3; ++i) {
       const double low = (static_cast<double>(key_end[i]) - kMaxVal) * resolution;
       const double inside = static_cast<double>(end(i)) - low;
-      const int steps = static_cast<int>(key_end[i]) - static_cast<int>(key_origin[i]);
+      const bool up = key_end[i] > key_origin[i], down = key_end[i] < key_origin[i];
       // the faces the walk could leave the end cell by: the far ones
-      if (!((steps > 0 || inside >= delta) && (steps < 0 || inside <= resolution - delta)))
+      if (!((up || inside >= delta) && (down || inside <= resolution - delta))) return false;
+      reach[i] = std::fabs((up ? low : low + resolution) - origin(i));
+      length[i] = std::fabs(static_cast<double>(end(i)) - origin(i));
+    }
+    if (in == toward) return true;
+    // the slab the segment enters last: the largest reach / length, compared as
+    // products; certain when it leads each other one by margin_a + margin_b, margin_i =
+    // 1e-6 (1 + resolution / length_i) + c (times length_a length_b, as products too)
+    const double c = 4e-15 * (span * inv_resolution + 4);
+    int last = -1;
+    for (int i = 0; i < 3; ++i) {
+      if (!(toward >> i & 1)) continue;
+      if (last < 0 || reach[i] * length[last] > reach[last] * length[i]) last = i;
+    }
+    for (int i = 0; i < 3; ++i) {
+      if (i == last || !(toward >> i & 1)) continue;
+      const double both = length[last] * length[i];
+      if (!(reach[last] * length[i] - reach[i] * length[last] >
+            1e-6 * (2 * both + resolution * (length[last] + length[i])) + 2 * c * both))
         return false;
-      if (steps == 0) continue;
-      const double face = steps > 0 ? low : low + resolution;  // the face toward the origin
-      const double length = std::fabs(static_cast<double>(end(i)) - origin(i));
-      entry[i] = std::fabs(face - origin(i)) / length;
-      margin[i] = 1e-6 * (1 + resolution / length) + 4e-15 * (span * inv_resolution + 4);
-      if (last < 0 || entry[i] > entry[last]) last = i;
     }
-    if (last < 0) return true;  // one cell: no cells to walk
-    bool certain = true;
-    for (int i = 0; i < 3; ++i) {
-      if (i != last && key_end[i] != key_origin[i] &&
-          !(entry[last] - entry[i] > margin[last] + margin[i]))
-        certain = false;
-    }
-    for (int i = 0; i < 3; ++i) {
-      const int steps = static_cast<int>(key_end[i]) - static_cast<int>(key_origin[i]);
-      if (steps == 0 || (certain && i != last)) continue;
-      int cell[3] = {key_end[0], key_end[1], key_end[2]};
-      cell[i] -= steps > 0 ? 1 : -1;
-      if (!region.test(cell[0], cell[1], cell[2])) return false;
-    }
-    return true;
+    return in >> last & 1;
   }
 
   // The culling region's shortcut (Kwon, dissertation 2.3.5): right after start(),
