@@ -111,11 +111,11 @@ class RayWalker {
   // origin; both on an axis where the keys agree), the walk crosses into the end
   // cell's slabs before it crosses out of any; and when the segment from `origin` to
   // `end` crosses into one of them later than into the others by more than all of this
-  // in the segment's fraction (`margin`, several times over), the walk comes from the
-  // neighbour across it. Where that is not certain, every neighbour of the end cell
-  // toward the origin must be in `region`. (The walk may stop at L before it reaches
-  // the end cell when `end` lies next to the face it enters by; its cells then lie
-  // before that neighbour all the same.)
+  // in the segment's fraction (the margins below, several times over), the walk comes
+  // from the neighbour across it. Where that is not certain, every neighbour of the
+  // end cell toward the origin must be in `region`. (The walk may stop at L before it
+  // reaches the end cell when `end` lies next to the face it enters by; its cells then
+  // lie before that neighbour all the same.)
   static bool hidden(const CellBox& region, double resolution, double inv_resolution,
                      const octomap::point3d& origin, const octomap::OcTreeKey& key_origin,
                      const octomap::point3d& end, const octomap::OcTreeKey& key_end) {
