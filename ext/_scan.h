@@ -505,6 +505,18 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     if (ray_mode) counts[idx] = 0;
     else flags[idx] = 0;
   };
+  // scan mode: a cell an end point lies in gets l_hit whatever crosses it, so the end
+  // cells in the box are flagged first (the walk then never collects them, and the
+  // table's pass below does), and a collected cell's update is l_miss
+  const bool ends_flagged = dense && !ray_mode;
+  const auto for_end_cells = [&](auto&& f) {  // f(box index) for the table's cells in the box
+    for (size_t slot = 0; slot < table.capacity(); ++slot) {
+      if (table.slot(slot).key == KeyTable::kEmpty) continue;
+      key = unpack_key(table.slot(slot).key);
+      if (in_box(key, lo, dims)) f(box_index(key, lo, dims));
+    }
+  };
+  if (ends_flagged) for_end_cells([&](uint64_t idx) { flags[idx] = 2; });
   // walk rays r0 <= r < r1 into the counts of thread `t` (walk_rays)
   const auto walk = [&](ptrdiff_t r0, ptrdiff_t r1, int t, std::vector<uint64_t>* t_touched,
                         KeyTable* t_table, size_t base, KeyTable* t_visits, long* t_traversed,
@@ -607,7 +619,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   } else if (max_cells) {
     // the distinct cells: those counted in the box, and the table's others
     uint64_t distinct = touched.size() + table.size();
-    if (dense) {
+    if (dense && !ends_flagged) {
       for (size_t slot = 0; slot < table.capacity(); ++slot) {
         if (table.slot(slot).key == KeyTable::kEmpty) continue;
         key = unpack_key(table.slot(slot).key);
@@ -618,19 +630,26 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   }
   if (too_many) {
     for (const uint64_t idx : touched) clear_at(idx);
+    if (ends_flagged) for_end_cells(clear_at);
     counts_dirty = false;
     return Status::too_many_cells;  // nothing changed: the caller reports it
   }
-  // one update per cell: the traversed cells (on the threads), then end cells no ray crossed
+  // one update per cell: the traversed cells (on the threads), then the table's: end cells
+  // (in scan mode all of them; else those no ray crossed) and cells outside the box
   const ptrdiff_t n_touched = static_cast<ptrdiff_t>(touched.size());
   cells.reserve(touched.size() + table.size());
   cells.resize(touched.size());
   const int ct = n_touched >= kMinParallelCollect ? collect_threads : 1;  // not the walk's
 #pragma omp parallel for num_threads(ct) schedule(static) if (ct > 1)
   for (ptrdiff_t t = 0; t < n_touched; ++t) {
-    const KeyCounts* entry = table.find(cells[t].key = pack_key(box_key(touched[t], lo, dims)));
-    cells[t].update = update_value(count_at(touched[t]), entry ? entry->n_hit : 0, ray_mode,
-                                   l_hit, l_miss);
+    cells[t].key = pack_key(box_key(touched[t], lo, dims));
+    if (ends_flagged) {
+      cells[t].update = l_miss;
+    } else {
+      const KeyCounts* entry = table.find(cells[t].key);
+      cells[t].update = update_value(count_at(touched[t]), entry ? entry->n_hit : 0, ray_mode,
+                                     l_hit, l_miss);
+    }
   }
   ScanCell cell;
   for (size_t slot = 0; slot < table.capacity(); ++slot) {
@@ -638,7 +657,12 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     key = unpack_key(table.slot(slot).key);
     uint32_t n_free = table.slot(slot).n_free;
     if (dense && in_box(key, lo, dims)) {
-      if (count_at(box_index(key, lo, dims))) continue;  // collected above
+      const uint64_t idx = box_index(key, lo, dims);
+      if (ends_flagged) {
+        clear_at(idx);  // an end cell: l_hit
+      } else if (count_at(idx)) {
+        continue;  // collected above
+      }
       n_free = 0;
     }
     cell.key = pack_key(key);
