@@ -196,10 +196,12 @@ default="auto"
             so the tree, node for node, and :attr:`last_insert_`'s counts are
             the same for every `n_jobs`. liboctomap's own ``insertPointCloud``
             (``method="plain"``, ``mode="scan"``), and any scan with
-            :attr:`track_changes` on, update on one thread. Each thread counts densely
-            in 4 bytes per cell of the scan's key box, within 2^24 cells for
-            all threads together; larger boxes run on fewer threads, or count
-            in hash tables.
+            :attr:`track_changes` on, update on one thread. The rays' cells
+            are counted densely over the scan's key box: in scan mode in one
+            array of flags that every thread shares (a byte per cell), in ray
+            mode in 4 bytes per cell for each thread; within 2^24 cells for all
+            threads together (larger boxes run on fewer threads, or count in
+            hash tables).
         min_range : float, default=None
             Points nearer to `origin` than this (and free points, below) are
             dropped before anything else: they cast no ray at all
