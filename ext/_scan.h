@@ -178,11 +178,13 @@ static inline bool key_checked(double resolution_factor, float coordinate, octom
 // every axis where its key differs from the origin's) is already in, and a ray's visit
 // cannot change its update: it is fully free (log-odds at the lower clamp) and holds no
 // end point of the scan (`ends`, occgp's exactness rule), or, with `ends_in` (scan
-// mode, where such a cell gets l_hit whatever crosses it), holds one. Returns the
-// number of cells, or -1 when the box is too large (no culling).
+// mode, where such a cell gets l_hit whatever crosses it), holds one. With
+// `origin_in`, the sensor's cell joins whatever its state (scan mode, where the caller
+// collects it: every ray that leaves it crosses it). Returns the number of cells, or -1
+// when the box is too large (no culling).
 static inline long build_region(FreeTest fully_free, void* map, const octomap::OcTreeKey& ko,
                          const int* lo, const int* hi, int max_level, const KeyTable& ends,
-                         CellBox& region, bool ends_in = false) {
+                         CellBox& region, bool ends_in = false, bool origin_in = false) {
   using namespace scan_detail;
   CellBox seen;
   std::vector<octomap::OcTreeKey> frontier, next_frontier;
@@ -192,7 +194,7 @@ static inline long build_region(FreeTest fully_free, void* map, const octomap::O
     if (ends.contains(pack_key(key))) return ends_in;
     return fully_free(map, key);
   };
-  if (!no_op(ko)) return 0;
+  if (!origin_in && !no_op(ko)) return 0;
   region.set(ko[0], ko[1], ko[2]);
   seen.set(ko[0], ko[1], ko[2]);
   frontier.push_back(ko);
@@ -468,9 +470,12 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     n_trav = static_cast<ptrdiff_t>(ray_ids.size());
   }
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[2]);
+  // scan mode: every ray that leaves the sensor's cell crosses it, so it is collected
+  // below, and the region may start there whatever its state
+  const bool origin_in = culling && !ray_mode && max_level > 0;
   if (culling)
-    stats->region_cells =
-        build_region(fully_free, map, ko, lo, hi, max_level, table, region, !ray_mode);
+    stats->region_cells = build_region(fully_free, map, ko, lo, hi, max_level, table, region,
+                                       !ray_mode, origin_in);
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[3]);
   for (int axis = 0; axis < 3; ++axis) {
     dims[axis] = static_cast<uint64_t>(hi[axis] - lo[axis] + 1);
@@ -517,6 +522,20 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     }
   };
   if (ends_flagged) for_end_cells([&](uint64_t idx) { flags[idx] = 2; });
+  // walking back to a region of the sensor's cell alone would spare one visit a ray and
+  // cost more than the visits it spares
+  const bool cull = stats->region_cells > 1;
+  if (origin_in && cull) {  // no walk visits the sensor's cell now
+    if (dense) {
+      const uint64_t idx = box_index(ko, lo, dims);
+      if (flags[idx] == 0) {
+        flags[idx] = 1;
+        touched.push_back(idx);
+      }
+    } else {
+      table.get(pack_key(ko))->n_free += 1;
+    }
+  }
   // walk rays r0 <= r < r1 into the counts of thread `t` (walk_rays)
   const auto walk = [&](ptrdiff_t r0, ptrdiff_t r1, int t, std::vector<uint64_t>* t_touched,
                         KeyTable* t_table, size_t base, KeyTable* t_visits, long* t_traversed,
@@ -540,7 +559,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   rays.ray_weights = superray_threshold != 0 ? ray_weights.data() : nullptr;
   rays.weights = weighted ? weights : nullptr;
   rays.region = &region;
-  rays.cull = stats->region_cells > 0;
+  rays.cull = cull;
   rays.dense = dense;
   rays.shared = shared;
   rays.lo = lo;

@@ -178,6 +178,32 @@ def test_scan_mode_region_holds_end_cells():
     assert regions["scan"] > regions["ray"] > 100
 
 
+@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
+def test_scan_mode_region_starts_at_a_sensor_cell_not_yet_free(cls):
+    """Every ray that leaves the sensor's cell crosses it, so in scan mode the region
+    starts there whatever its state (the cell is collected once, not walked); ray
+    counting needs the cell fully free."""
+    scans = room_sequence(np.random.default_rng(5), n_scans=7)[:-1]
+    origin = scans[-1][1]
+    points = scans[0][0]
+    for mode in ("scan", "ray"):
+        maps = {}
+        for method in ("plain", "culling"):
+            m = cls(0.1)
+            for p, o in scans:
+                m.insert_scan(p, o, mode=mode, method=method)
+            m.insert_scan([origin], scans[0][1], mode=mode)   # the sensor's cell: hit
+            m.insert_scan(points, origin, mode=mode, method=method)
+            maps[method] = m
+        region = maps["culling"].last_insert_["region_cells"]
+        assert region > 100 if mode == "scan" else region == 0
+        if cls is GridMap:
+            assert_array_equal_cells(maps["culling"].cells(), maps["plain"].cells())
+        else:
+            assert_same_leaves(maps["culling"], maps["plain"])
+        assert maps["culling"].log_odds([origin]) == maps["plain"].log_odds([origin])
+
+
 # ----------------------------------------------------------------- real data, every method
 METHODS = ("culling", "superray", "superray+culling")
 
