@@ -230,8 +230,8 @@ cdef class _OcTree(_TreeCore):
         :func:`scan_updates` (scan mode). Each cell gets one class: 0 if a near
         point lies in it, else 1 if a ray to a near point crosses it, else 2
         (crossed by cut rays only). With `culling`, each traversal skips its
-        culling region: fully free cells holding no near point, whose l_in or
-        l_out update (both <= 0) changes nothing.
+        culling region: fully free cells (l_in, l_out <= 0 change nothing) and
+        cells holding a near point (class 0 whatever crosses them).
 
         Returns (near, keys, kinds, point_cell, stats): near (n_near, 3) float32,
         the near points in scan order; keys
