@@ -30,6 +30,13 @@ threads); the threaded map is checked to equal the single-threaded one. The
 liboctomap ``insertPointCloud`` method (octree, ``mode="scan"``, ``"plain"``) runs
 on one thread whatever ``n_jobs`` says: its ratio stays near 1.
 
+With ``--rounds K``, liboctomap's ``insertPointCloud`` and the octree's scan mode
+(``"auto"``, ``"culling"``) then insert the geb079 trajectory in turn, K times at each
+resolution, each into a new map in a new process: the ratio of each round (median and
+range) and of the fastest runs. Machines here drift between runs (liboctomap's own time
+moves by 10-30 %), so these ratios are the ones to quote; ``--rounds-only`` skips the
+tables.
+
 Run: ``python bench/bench_updates.py [--scans 20] [--resolutions 0.1 0.2 ...] [--threads 2]``
 (the default is the dissertation's tables: 20 geb079 poses and 4 scan.dat poses at
 0.1, 0.2, 0.4, 0.8 and 1 m, whose dense trajectory the targets are set on);
@@ -210,6 +217,32 @@ def print_targets(results):
           f"{'all' if not bad else f'{len(bad)} DIFFER'}")
 
 
+def bench_rounds(scans, resolutions, exe, tmp, rounds):
+    """liboctomap's ``insertPointCloud`` and the octree's scan mode (``"auto"``, and
+    ``"culling"``), each inserting the scans into a new map, in turn, `rounds` times:
+    the ratios of each round and of the fastest runs. On a noisy machine these tell
+    more than the one run of the tables above."""
+    files = [write_scan_bin(Path(tmp) / f"rounds_{i}.bin", p, o) for i, (p, o) in enumerate(scans)]
+    methods = ("auto", "culling")
+    print(f"\n== geb079, {rounds} rounds in turn: liboctomap insertPointCloud / octree "
+          f"mode=scan ({len(scans)} scans each) ==")
+    print(f"{'res':>5}  {'method':<10}{'lib ms':>9}{'occgp ms':>10}{'median':>9}{'range':>14}"
+          f"{'fastest':>9}")
+    for res in resolutions:
+        lib, ours = [], {m: [] for m in methods}
+        for _ in range(rounds):
+            lib.append(np.sum(time_octomap_sequence(exe, files, res)))
+            for m in methods:
+                ours[m].append(run_fresh(scans, res, "octree", "scan", m, False, 1)[1].sum())
+        lib = np.array(lib)
+        for m in methods:
+            t = np.array(ours[m])
+            ratios = lib / t
+            print(f"{res:>5.2f}  {m:<10}{1e3 * lib.min() / len(scans):>9.1f}"
+                  f"{1e3 * t.min() / len(scans):>10.1f}{np.median(ratios):>8.2f}x"
+                  f"{f'{ratios.min():.2f}-{ratios.max():.2f}x':>14}{lib.min() / t.min():>8.2f}x")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scans", type=int, default=None,
@@ -224,7 +257,14 @@ def main(argv=None):
     parser.add_argument("--threads", type=int, default=2,
                         help="n_jobs of the threaded columns (default 2)")
     parser.add_argument("--datasets", nargs="+", default=["geb079", "scan.dat"])
+    parser.add_argument("--rounds", type=int, default=0,
+                        help="then time liboctomap and the octree's scan mode in turn this "
+                             "many times on geb079 (ratios per round; default 0: no)")
+    parser.add_argument("--rounds-only", action="store_true",
+                        help="only the rounds (--rounds, default 5), not the tables")
     args = parser.parse_args(argv)
+    if args.rounds_only and not args.rounds:
+        args.rounds = 5
     quick = args.quick
     args.scans = args.scans if args.scans is not None else (4 if quick else 20)
     args.poses = args.poses if args.poses is not None else (2 if quick else 4)
@@ -237,10 +277,14 @@ def main(argv=None):
         if exe is None:
             sys.exit("no C++ compiler or liboctomap pkg-config file to build the reference")
         results = []
-        for name in args.datasets:
+        for name in args.datasets if not args.rounds_only else ():
             scans = (geb079_trajectory(args.scans) if name == "geb079"
                      else scan_dat_poses(args.poses))
             bench_dataset(name, scans, args.resolutions, exe, tmp, results, args.threads)
+        if args.rounds:
+            bench_rounds(geb079_trajectory(args.scans), args.resolutions, exe, tmp, args.rounds)
+    if args.rounds_only:
+        return
     print("\nvs lib: liboctomap's time over occgp's on the same scans, same run (mode=scan "
           "rows vs insertPointCloud, mode=ray rows vs insertPointCloudRays); vs plain: the "
           "same map's plain method over this one; 1 thr / N thr ms: ms per scan with "
