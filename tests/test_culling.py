@@ -284,8 +284,8 @@ def test_unnecessary_traversals_are_the_visits_of_no_op_cells(method):
     stats = m._insert_batch(points, origin, -1.0, True, method == "culling", diagnose=True)
     if method == "plain":
         assert stats[5] == expected > 0
-    else:                           # the region spares most of them
-        assert 0 <= stats[5] < expected / 2
+    else:       # the region spares some (a small one only hides rays: kMinWalkBackRegion)
+        assert 0 < stats[0] < 128 and 0 <= stats[5] < expected
 
 
 @pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
