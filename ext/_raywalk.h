@@ -121,34 +121,39 @@ class RayWalker {
                      const octomap::point3d& end, const octomap::OcTreeKey& key_end) {
     // the end cell's neighbours toward the origin (on the axes where the keys differ),
     // and those of them in the region
-    int toward = 0, in = 0;
+    int steps[3], toward = 0, in = 0;
     for (int i = 0; i < 3; ++i) {
-      const int steps = static_cast<int>(key_end[i]) - static_cast<int>(key_origin[i]);
-      if (steps == 0) continue;
+      steps[i] = static_cast<int>(key_end[i]) - static_cast<int>(key_origin[i]);
+      if (steps[i] == 0) continue;
       int cell[3] = {key_end[0], key_end[1], key_end[2]};
-      cell[i] -= steps > 0 ? 1 : -1;
+      cell[i] -= steps[i] > 0 ? 1 : -1;
       toward |= 1 << i;
       if (region.test(cell[0], cell[1], cell[2])) in |= 1 << i;
     }
     if (toward == 0) return true;  // one cell: no cells to walk
     if (in == 0) return false;
-    double span = 0;  // |end - origin|, 1-norm
-    for (int i = 0; i < 3; ++i) span += std::fabs(static_cast<double>(end(i)) - origin(i));
-    const double delta = 1e-6 * (resolution + span) + 1e-15 * (span * inv_resolution + 4) * span;
-    double reach[3], length[3];  // per axis: to the face toward the origin, to the end
+    double length[3], span = 0;  // per axis |end - origin|, and their sum
     for (int i = 0; i < 3; ++i) {
-      const double low = (static_cast<double>(key_end[i]) - kMaxVal) * resolution;
-      const double inside = static_cast<double>(end(i)) - low;
-      const bool up = key_end[i] > key_origin[i], down = key_end[i] < key_origin[i];
-      // the faces the walk could leave the end cell by: the far ones
-      if (!((up || inside >= delta) && (down || inside <= resolution - delta))) return false;
-      reach[i] = std::fabs((up ? low : low + resolution) - origin(i));
       length[i] = std::fabs(static_cast<double>(end(i)) - origin(i));
+      span += length[i];
+    }
+    const double delta = 1e-6 * (resolution + span) + 1e-15 * (span * inv_resolution + 4) * span;
+    double low[3];  // the end cell's lower faces
+    for (int i = 0; i < 3; ++i) {
+      low[i] = (static_cast<double>(key_end[i]) - kMaxVal) * resolution;
+      const double inside = static_cast<double>(end(i)) - low[i];
+      // the faces the walk could leave the end cell by: the far ones
+      if (!((steps[i] > 0 || inside >= delta) && (steps[i] < 0 || inside <= resolution - delta)))
+        return false;
     }
     if (in == toward) return true;
-    // the slab the segment enters last: the largest reach / length, compared as
-    // products; certain when it leads each other one by margin_a + margin_b, margin_i =
-    // 1e-6 (1 + resolution / length_i) + c (times length_a length_b, as products too)
+    // the slab the segment enters last: the largest reach / length (reach: from the
+    // origin to the face toward it), compared as products; certain when it leads each
+    // other one by margin_a + margin_b, margin_i = 1e-6 (1 + resolution / length_i) + c
+    // (times length_a length_b, as products too)
+    double reach[3];
+    for (int i = 0; i < 3; ++i)
+      reach[i] = std::fabs((steps[i] > 0 ? low[i] : low[i] + resolution) - origin(i));
     const double c = 4e-15 * (span * inv_resolution + 4);
     int last = -1;
     for (int i = 0; i < 3; ++i) {

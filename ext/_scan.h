@@ -566,7 +566,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   rays.weights = weighted ? weights : nullptr;
   rays.region = &region;
   rays.cull = cull;
-  rays.walk_back = cull && stats->region_cells >= kMinWalkBackRegion;
+  rays.walk_back = stats->region_cells >= kMinWalkBackRegion;
   rays.dense = dense;
   rays.shared = shared;
   rays.lo = lo;
