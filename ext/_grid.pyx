@@ -131,7 +131,7 @@ cdef class _Grid:
         (None: none) only clear, as rays cut at `max_range`.
 
         Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
-        seconds, unnecessary_traversals, spared_cells, culled_rays) as
+        seconds, unnecessary_traversals, spared_cells, culled_rays, region_spared_cells) as
         ``OccupancyOctree``'s
         ``_insert_batch``.
         """

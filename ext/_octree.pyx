@@ -165,10 +165,10 @@ cdef class _OcTree(_TreeCore):
         `superray_threshold` != 0, the rays are first grouped into super rays (cells
         of at least its magnitude; < 0: where it can pay) and one ray a class walked.
 
-        Returns (region_cells, updated_cells, traversed_rays, traversed_cells,
-        seconds, unnecessary_traversals, spared_cells, culled_rays), seconds = (end
-        points, super rays, culling region, traversal, tree update), spared_cells and
-        culled_rays as in ``last_insert_``. With `key_box`
+        Returns (region_cells, updated_cells, traversed_rays, traversed_cells, seconds,
+        unnecessary_traversals, spared_cells, culled_rays, region_spared_cells), seconds
+        = (end points, super rays, culling region, traversal, tree update), the last
+        three as in ``last_insert_``. With `key_box`
         (rows: lowest and highest key), cells outside it are left out. region_cells
         is -1 when culling was off or the scan's key box was too large to cull;
         unnecessary_traversals is -1 unless `diagnose` (slow) asks for it.
@@ -721,8 +721,8 @@ cdef class _OcTree(_TreeCore):
 def _sum_stats(a, b):
     """Two traversals' statistics (see :func:`scan_result`) as one scan's."""
     region = -1 if a[0] < 0 and b[0] < 0 else max(a[0], 0) + max(b[0], 0)
-    return (region, a[1] + b[1], a[2] + b[2], a[3] + b[3],
-            tuple(x + y for x, y in zip(a[4], b[4])), -1, a[6] + b[6], a[7] + b[7])
+    return (region, *(x + y for x, y in zip(a[1:4], b[1:4])),
+            tuple(x + y for x, y in zip(a[4], b[4])), -1, *(x + y for x, y in zip(a[6:], b[6:])))
 
 
 def _welford(const double[::1] values, long count, double mean, double m2):

@@ -67,6 +67,7 @@ struct ScanStats {
   long spared_cells;     // the visits super rays spared: per walked ray, its visits x
                          // the other rays of its class
   long culled_rays;      // rays the culling region hid whole (RayWalker::hidden): not walked
+  long region_spared;    // the visits the culling region spared the walked rays
   long unnecessary;      // with `diagnose`: visits to cells whose update is a no-op
   timespec clock[5];     // start; end points, super rays, culling region, traversal done
 };
@@ -78,11 +79,21 @@ static inline void empty_stats(ScanStats* stats) {
   stats->traversed_cells = 0;
   stats->spared_cells = 0;
   stats->culled_rays = 0;
+  stats->region_spared = 0;
   stats->unnecessary = -1;
   for (int k = 0; k < 5; ++k) clock_gettime(CLOCK_MONOTONIC, &stats->clock[k]);
 }
 
 namespace scan_detail {
+
+// |a - b|_1 over the three keys: the cells a ray from the cell `a` visits before it
+// reaches the cell `b` (one a step; a walk that stops short of `b` visits fewer).
+static inline long key_distance(const octomap::OcTreeKey& a, const octomap::OcTreeKey& b) {
+  long d = 0;
+  for (int axis = 0; axis < 3; ++axis)
+    d += std::abs(static_cast<long>(a[axis]) - static_cast<long>(b[axis]));
+  return d;
+}
 
 static inline bool in_box(const octomap::OcTreeKey& key, const int* lo, const uint64_t* dims) {
   return static_cast<uint64_t>(static_cast<int>(key[0]) - lo[0]) < dims[0] &&
@@ -278,9 +289,9 @@ template <class Count>
 static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* counts,
                       std::vector<uint64_t>* touched, KeyTable* table, size_t table_base,
                       KeyTable* visits, long* traversed, long* spared, long* culled,
-                      StopFlag* stop) {
+                      long* region_spared, StopFlag* stop) {
   uint32_t w = 1;
-  long n_spared = 0, n_culled = 0;
+  long n_spared = 0, n_culled = 0, n_region_spared = 0;
   RayWalker walker;
   std::vector<uint64_t> back;
   long n_visits = 0;
@@ -307,6 +318,7 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
     if (s->cull && RayWalker::hidden(*region, s->res, inv_res, *s->origin, *s->key_origin,
                                      s->ends[i], s->end_keys[i])) {
       ++n_culled;
+      n_region_spared += key_distance(*s->key_origin, s->end_keys[i]);
       continue;
     }
     bool more = walker.start(s->res, *s->origin, *s->key_origin, s->ends[i], s->end_keys[i]);
@@ -324,13 +336,18 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
           if (visits != nullptr) visits->get(pack_key(box_key(idx, lo, dims)))->n_free += 1;
         }
         n_visits += back.size();
+        // the walk back reached the end cell from the origin's: one visit a step
+        n_region_spared +=
+            key_distance(*s->key_origin, s->end_keys[i]) - static_cast<long>(back.size());
         more = false;
       } else {
         // the region is closed under stepping toward the origin, so a ray's cells in
         // it form a prefix of its traversal
         while (more && region->inside(walker.key(0), walker.key(1), walker.key(2)) &&
-               region->test(walker.key(0), walker.key(1), walker.key(2)))
+               region->test(walker.key(0), walker.key(1), walker.key(2))) {
           more = walker.next();
+          ++n_region_spared;
+        }
       }
     }
     if (more) {
@@ -354,6 +371,7 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
   *traversed += n_visits;
   *spared += n_spared;
   *culled += n_culled;
+  *region_spared += n_region_spared;
 }
 
 }  // namespace scan_detail
@@ -545,14 +563,15 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   // walk rays r0 <= r < r1 into the counts of thread `t` (walk_rays)
   const auto walk = [&](ptrdiff_t r0, ptrdiff_t r1, int t, std::vector<uint64_t>* t_touched,
                         KeyTable* t_table, size_t base, KeyTable* t_visits, long* t_traversed,
-                        long* t_spared, long* t_culled) {
+                        long* t_spared, long* t_culled, long* t_region_spared) {
     if (ray_mode) {
       walk_rays(&rays, r0, r1, dense ? counts.data() + static_cast<uint64_t>(t) * box_cells
                                      : nullptr,
-                t_touched, t_table, base, t_visits, t_traversed, t_spared, t_culled, &stop);
+                t_touched, t_table, base, t_visits, t_traversed, t_spared, t_culled,
+                t_region_spared, &stop);
     } else {  // one array of flags for every thread
       walk_rays(&rays, r0, r1, dense ? flags : nullptr, t_touched, t_table, base, t_visits,
-                t_traversed, t_spared, t_culled, &stop);
+                t_traversed, t_spared, t_culled, t_region_spared, &stop);
     }
   };
   rays.res = res;
@@ -577,12 +596,13 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   const size_t hits = table.size();
   if (n_threads == 1) {
     walk(0, n_trav, 0, &touched, &table, hits, diagnose ? &visits : nullptr,
-         &stats->traversed_cells, &stats->spared_cells, &stats->culled_rays);
+         &stats->traversed_cells, &stats->spared_cells, &stats->culled_rays,
+         &stats->region_spared);
   } else {
     std::vector<std::vector<uint64_t>> part_touched(n_threads);  // threads 1, 2, ...: new cells
     std::vector<KeyTable> part_tables(n_threads - 1);             // and their other cells
     std::vector<long> part_visits(n_threads, 0), part_spared(n_threads, 0),
-        part_culled(n_threads, 0);
+        part_culled(n_threads, 0), part_region_spared(n_threads, 0);
     const ptrdiff_t n_chunks =
         std::min<ptrdiff_t>(n_trav, static_cast<ptrdiff_t>(n_threads) * kChunksPerThread);
     std::exception_ptr error;
@@ -602,7 +622,8 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
       try {
         walk(k * n_trav / n_chunks, (k + 1) * n_trav / n_chunks, t,
              t == 0 ? &touched : &part_touched[t], t == 0 ? &table : &part_tables[t - 1],
-             t == 0 ? hits : 0, nullptr, &part_visits[t], &part_spared[t], &part_culled[t]);
+             t == 0 ? hits : 0, nullptr, &part_visits[t], &part_spared[t], &part_culled[t],
+             &part_region_spared[t]);
       } catch (...) {
 #pragma omp critical(occgp_scan_error)
         if (!error) error = std::current_exception();
@@ -615,6 +636,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     stats->traversed_cells += part_visits[0];
     stats->spared_cells += part_spared[0];
     stats->culled_rays += part_culled[0];
+    stats->region_spared += part_region_spared[0];
     for (int t = 1; t < n_threads; ++t) {
       if (shared) {
         touched.insert(touched.end(), part_touched[t].begin(), part_touched[t].end());
@@ -636,6 +658,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
       stats->traversed_cells += part_visits[t];
       stats->spared_cells += part_spared[t];
       stats->culled_rays += part_culled[t];
+      stats->region_spared += part_region_spared[t];
     }
   }
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[4]);

@@ -31,6 +31,7 @@ cdef extern from "_scan.h" namespace "occgp" nogil:
         long traversed_cells   # cell visits that counted a ray
         long spared_cells      # the visits super rays spared
         long culled_rays       # rays the culling region hid whole: not walked
+        long region_spared     # the visits the culling region spared the walked rays
         long unnecessary       # with `diagnose`: visits to cells whose update is a no-op
         timespec clock[5]      # start; end points, super rays, culling region, traversal done
 

@@ -47,7 +47,7 @@ cdef inline object scan_result(Status status, const ScanStats& stats, size_t upd
                                const timespec& done):
     """What the maps' scan insertion returns: (region_cells, updated_cells,
     traversed_rays, traversed_cells, seconds, unnecessary_traversals, spared_cells,
-    culled_rays), seconds = (end points, super rays, culling region, traversal, map
+    culled_rays, region_spared_cells), seconds = (end points, super rays, culling region, traversal, map
     update) with the update ending at `done`; the failure's
     :class:`occgp._status.Status` when the scan was not inserted (a ray end out of range or too short to walk, or more cells than
     its limit: nothing changed)."""
@@ -56,4 +56,4 @@ cdef inline object scan_result(Status status, const ScanStats& stats, size_t upd
     seconds = tuple([_elapsed(stats.clock[k], stats.clock[k + 1]) for k in range(4)]
                     + [_elapsed(stats.clock[4], done)])
     return (stats.region_cells, updated, stats.rays, stats.traversed_cells, seconds,
-            stats.unnecessary, stats.spared_cells, stats.culled_rays)
+            stats.unnecessary, stats.spared_cells, stats.culled_rays, stats.region_spared)

@@ -627,9 +627,10 @@ class LogOddsMap(PlanningMixin):
     @staticmethod
     def _insert_statistics(stats: tuple) -> dict[str, float]:
         """``last_insert_`` from what a core's scan insertion returns."""
-        region, cells, rays, traversed, seconds, unnecessary, spared, culled = stats
+        region, cells, rays, traversed, seconds, unnecessary, spared, culled, region_spared = stats
         out = {"rays": rays, "updated_cells": cells, "traversed_cells": traversed,
                "spared_cells": spared, "culled_rays": culled,
+               "region_spared_cells": region_spared,
                "region_cells": region, "endpoint_seconds": seconds[0],
                "superray_seconds": seconds[1], "region_seconds": seconds[2],
                "preprocessing_seconds": seconds[1] + seconds[2],

@@ -43,7 +43,7 @@ class _OcTree(_TreeCore):
                       key_box: NDArray[np.uint16] | None = None, n_threads: int = 1,
                       free_only: NDArray[np.uint8] | None = None,
                       ) -> tuple[int, int, int, int, tuple[float, float, float, float, float], int,
-                                  int] | Status: ...
+                                  int, int, int] | Status: ...
     def _knn_cells(self, points: NDArray[np.float32], origin: NDArray[np.float32],
                    sensor_range: float, culling: bool, superray_threshold: int = 0,
                    max_cells: int = 0, n_threads: int = 1,

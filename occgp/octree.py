@@ -78,7 +78,10 @@ class OccupancyOctree(OctreeStamps, OctreeMerging, OctreeFiles, OctreeQueries, _
         ``spared_cells`` (the visits super rays spared: each walked ray's
         visits times the other rays of its class), ``culled_rays`` (rays
         whose cells all lie in the culling region, told from their end cells
-        and not walked), ``region_cells`` (-1 without culling), ``superrays``
+        and not walked), ``region_spared_cells`` (the visits the culling region
+        spared: with ``traversed_cells``, those of occgp's walk without the
+        region, a hidden ray counted as reaching its end cell), ``region_cells``
+        (-1 without culling), ``superrays``
         (whether rays were grouped) and the seconds spent on the end points, on super rays,
         on the culling region, on traversal and on the tree update:
         ``endpoint_seconds``, ``superray_seconds``, ``region_seconds``

@@ -312,3 +312,36 @@ def test_ray_ends_out_of_range_leave_the_map_unchanged(cls, mode, method):
 def assert_array_equal_cells(a, b):
     np.testing.assert_array_equal(a.centers, b.centers)
     np.testing.assert_array_equal(a.log_odds, b.log_odds)
+
+
+@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
+@pytest.mark.parametrize("mode", ["ray", "scan"])
+@pytest.mark.parametrize("n_jobs", [1, 2])
+@pytest.mark.parametrize("on_borders", [False, True])
+def test_region_spared_cells_and_traversed_cells_add_up_to_the_walk_without_region(
+        cls, mode, n_jobs, on_borders):
+    """Scan by scan, the visits of the culled insertion and those its region spared
+    (hidden rays, rays walked back, region prefixes walked past) are the visits of
+    occgp's walk without a region: ray mode's "plain" method, and in scan mode super
+    rays with a threshold no cell reaches (every ray walked on its own). With the
+    room's walls on cell borders, a hidden ray whose walk would stop short of its end
+    cell (its end point on the face it enters by) counts as reaching it: at most one
+    visit too many a hidden ray; off the borders, exactly."""
+    scans = room_sequence(np.random.default_rng(3))
+    if not on_borders:
+        shift = np.array([0.0123, 0.0371, 0.0217])
+        scans = [(points + shift, origin + shift) for points, origin in scans]
+    plain, culled = cls(0.1), cls(0.1)
+    without = (dict(method="plain") if mode == "ray"
+               else dict(method="superray", superray_threshold=2**31 - 1))
+    spared = hidden = 0
+    for points, origin in scans:
+        plain.insert_scan(points, origin, mode=mode, n_jobs=n_jobs, **without)
+        culled.insert_scan(points, origin, mode=mode, method="culling", n_jobs=n_jobs)
+        a, b = plain.last_insert_, culled.last_insert_
+        assert a["region_spared_cells"] == 0 and a["rays"] == b["rays"]
+        extra = b["traversed_cells"] + b["region_spared_cells"] - a["traversed_cells"]
+        assert 0 <= extra <= (b["culled_rays"] if on_borders else 0)
+        spared += b["region_spared_cells"]
+        hidden += b["culled_rays"]
+    assert spared > 0 and hidden > 0

@@ -15,7 +15,8 @@ from test_octree import random_scans
 N_JOBS = [1, 2, 3, 4, -1]
 METHODS = ["plain", "culling", "superray", "superray+culling"]
 # the counts of last_insert_ that do not depend on timing (with an explicit method)
-COUNTS = ("rays", "updated_cells", "traversed_cells", "region_cells", "culled_rays")
+COUNTS = ("rays", "updated_cells", "traversed_cells", "region_cells", "culled_rays",
+          "region_spared_cells")
 
 
 def scenes():
