@@ -67,7 +67,7 @@ struct ScanStats {
   long spared_cells;     // the visits super rays spared: per walked ray, its visits x
                          // the other rays of its class
   long culled_rays;      // rays the culling region hid whole (RayWalker::hidden): not walked
-  long region_spared;    // the visits the culling region spared the walked rays
+  long region_spared;    // the visits the culling region spared the walked rays (walk_rays)
   long unnecessary;      // with `diagnose`: visits to cells whose update is a no-op
   timespec clock[5];     // start; end points, super rays, culling region, traversal done
 };
@@ -279,7 +279,9 @@ struct Rays {
 // thread's counts: cells of the scan's key box in `counts` (dense; new ones appended
 // to `touched`), other cells in `table`'s n_free. Adds the cell visits to `traversed`,
 // those that super rays spared (each walked ray's visits times the other rays of its
-// class) to `spared`, and the rays the culling region hid whole to `culled`; with
+// class) to `spared`, the rays the culling region hid whole to `culled`, and the
+// visits the region spared to `region_spared` (a hidden ray's key_distance: one too
+// many where its walk would stop short of its end cell); with
 // `visits` (diagnose), counts every visit there too.
 //
 // With s.max_cells, stops (setting `stop`) once `touched` and the entries of `table`
@@ -336,7 +338,7 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
           if (visits != nullptr) visits->get(pack_key(box_key(idx, lo, dims)))->n_free += 1;
         }
         n_visits += back.size();
-        // the walk back reached the end cell from the origin's: one visit a step
+        // certified to reach the end cell: key_distance visits, `back` of them made
         n_region_spared +=
             key_distance(*s->key_origin, s->end_keys[i]) - static_cast<long>(back.size());
         more = false;
