@@ -86,6 +86,21 @@ static inline void empty_stats(ScanStats* stats) {
 
 namespace scan_detail {
 
+// What one thread's walk of rays counts (walk_rays), added into ScanStats.
+struct WalkCounts {
+  long visits = 0;         // cell visits that counted a ray: traversed_cells
+  long spared = 0;         // spared_cells
+  long culled = 0;         // culled_rays
+  long region_spared = 0;  // region_spared
+};
+
+static inline void add_walk_counts(ScanStats* stats, const WalkCounts& c) {
+  stats->traversed_cells += c.visits;
+  stats->spared_cells += c.spared;
+  stats->culled_rays += c.culled;
+  stats->region_spared += c.region_spared;
+}
+
 // |a - b|_1 over the three keys: the cells a ray from the cell `a` visits before it
 // reaches the cell `b` (one a step; a walk that stops short of `b` visits fewer).
 static inline long key_distance(const octomap::OcTreeKey& a, const octomap::OcTreeKey& b) {
@@ -277,11 +292,11 @@ struct Rays {
 
 // Walk rays r0 <= r < r1 of a scan (of its super rays when it has them) into one
 // thread's counts: cells of the scan's key box in `counts` (dense; new ones appended
-// to `touched`), other cells in `table`'s n_free. Adds the cell visits to `traversed`,
+// to `touched`), other cells in `table`'s n_free. Adds to `tally` the cell visits,
 // those that super rays spared (each walked ray's visits times the other rays of its
-// class) to `spared`, the rays the culling region hid whole to `culled`, and the
-// visits the region spared to `region_spared` (a hidden ray's key_distance: one too
-// many where its walk would stop short of its end cell); with
+// class), the rays the culling region hid whole, and the visits the region spared (a
+// hidden ray's key_distance: one too many where its walk would stop short of its end
+// cell); with
 // `visits` (diagnose), counts every visit there too.
 //
 // With s.max_cells, stops (setting `stop`) once `touched` and the entries of `table`
@@ -290,8 +305,7 @@ struct Rays {
 template <class Count>
 static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* counts,
                       std::vector<uint64_t>* touched, KeyTable* table, size_t table_base,
-                      KeyTable* visits, long* traversed, long* spared, long* culled,
-                      long* region_spared, StopFlag* stop) {
+                      KeyTable* visits, WalkCounts* tally, StopFlag* stop) {
   uint32_t w = 1;
   long n_spared = 0, n_culled = 0, n_region_spared = 0;
   RayWalker walker;
@@ -370,10 +384,10 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
       break;
     }
   }
-  *traversed += n_visits;
-  *spared += n_spared;
-  *culled += n_culled;
-  *region_spared += n_region_spared;
+  tally->visits += n_visits;
+  tally->spared += n_spared;
+  tally->culled += n_culled;
+  tally->region_spared += n_region_spared;
 }
 
 }  // namespace scan_detail
@@ -564,16 +578,15 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   }
   // walk rays r0 <= r < r1 into the counts of thread `t` (walk_rays)
   const auto walk = [&](ptrdiff_t r0, ptrdiff_t r1, int t, std::vector<uint64_t>* t_touched,
-                        KeyTable* t_table, size_t base, KeyTable* t_visits, long* t_traversed,
-                        long* t_spared, long* t_culled, long* t_region_spared) {
+                        KeyTable* t_table, size_t base, KeyTable* t_visits,
+                        WalkCounts* t_tally) {
     if (ray_mode) {
       walk_rays(&rays, r0, r1, dense ? counts.data() + static_cast<uint64_t>(t) * box_cells
                                      : nullptr,
-                t_touched, t_table, base, t_visits, t_traversed, t_spared, t_culled,
-                t_region_spared, &stop);
+                t_touched, t_table, base, t_visits, t_tally, &stop);
     } else {  // one array of flags for every thread
       walk_rays(&rays, r0, r1, dense ? flags : nullptr, t_touched, t_table, base, t_visits,
-                t_traversed, t_spared, t_culled, t_region_spared, &stop);
+                t_tally, &stop);
     }
   };
   rays.res = res;
@@ -597,14 +610,13 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   // cells), the others into tables of their own
   const size_t hits = table.size();
   if (n_threads == 1) {
-    walk(0, n_trav, 0, &touched, &table, hits, diagnose ? &visits : nullptr,
-         &stats->traversed_cells, &stats->spared_cells, &stats->culled_rays,
-         &stats->region_spared);
+    WalkCounts tally;
+    walk(0, n_trav, 0, &touched, &table, hits, diagnose ? &visits : nullptr, &tally);
+    add_walk_counts(stats, tally);
   } else {
     std::vector<std::vector<uint64_t>> part_touched(n_threads);  // threads 1, 2, ...: new cells
     std::vector<KeyTable> part_tables(n_threads - 1);             // and their other cells
-    std::vector<long> part_visits(n_threads, 0), part_spared(n_threads, 0),
-        part_culled(n_threads, 0), part_region_spared(n_threads, 0);
+    std::vector<WalkCounts> part_tally(n_threads);
     const ptrdiff_t n_chunks =
         std::min<ptrdiff_t>(n_trav, static_cast<ptrdiff_t>(n_threads) * kChunksPerThread);
     std::exception_ptr error;
@@ -624,8 +636,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
       try {
         walk(k * n_trav / n_chunks, (k + 1) * n_trav / n_chunks, t,
              t == 0 ? &touched : &part_touched[t], t == 0 ? &table : &part_tables[t - 1],
-             t == 0 ? hits : 0, nullptr, &part_visits[t], &part_spared[t], &part_culled[t],
-             &part_region_spared[t]);
+             t == 0 ? hits : 0, nullptr, &part_tally[t]);
       } catch (...) {
 #pragma omp critical(occgp_scan_error)
         if (!error) error = std::current_exception();
@@ -635,10 +646,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     if (error) std::rethrow_exception(error);
     // merge into thread 0's counts (integer sums: the order does not matter), leaving
     // the other slices zero; shared flags need only the new cells appended
-    stats->traversed_cells += part_visits[0];
-    stats->spared_cells += part_spared[0];
-    stats->culled_rays += part_culled[0];
-    stats->region_spared += part_region_spared[0];
+    add_walk_counts(stats, part_tally[0]);
     for (int t = 1; t < n_threads; ++t) {
       if (shared) {
         touched.insert(touched.end(), part_touched[t].begin(), part_touched[t].end());
@@ -657,10 +665,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
             table.get(part_table.slot(slot).key)->n_free += part_table.slot(slot).n_free;
         }
       }
-      stats->traversed_cells += part_visits[t];
-      stats->spared_cells += part_spared[t];
-      stats->culled_rays += part_culled[t];
-      stats->region_spared += part_region_spared[t];
+      add_walk_counts(stats, part_tally[t]);
     }
   }
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[4]);

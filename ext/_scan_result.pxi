@@ -47,8 +47,8 @@ cdef inline object scan_result(Status status, const ScanStats& stats, size_t upd
                                const timespec& done):
     """What the maps' scan insertion returns: (region_cells, updated_cells,
     traversed_rays, traversed_cells, seconds, unnecessary_traversals, spared_cells,
-    culled_rays, region_spared_cells), seconds = (end points, super rays, culling region, traversal, map
-    update) with the update ending at `done`; the failure's
+    culled_rays, region_spared_cells), seconds = (end points, super rays, culling
+    region, traversal, map update) with the update ending at `done`; the failure's
     :class:`occgp._status.Status` when the scan was not inserted (a ray end out of range or too short to walk, or more cells than
     its limit: nothing changed)."""
     if status != Status.ok:
