@@ -114,36 +114,31 @@ def _is_bag(path) -> bool:
     return path.suffix.lower() in _BAG_SUFFIXES
 
 
+def _is_carmen(path) -> bool:
+    """Whether `path` is a CARMEN laser log (a text file, maybe compressed, with FLASER or
+    ROBOTLASER1 lines)."""
+    from .datasets._carmen import is_carmen_log
+    from .datasets._readers import scan_kind
+
+    path = Path(path)
+    return path.is_file() and scan_kind(path) == "text" and is_carmen_log(path)
+
+
 def _suffix(path: Path) -> str:
     return path.suffix.lower()
 
 
 def _read_poses(path, poses_format):
-    """The (n, 4, 4) poses of a KITTI or TUM file; the format guessed from the first
-    line's column count when `poses_format` is None."""
-    from .datasets import read_kitti_poses, read_tum_trajectory
-    from .datasets._fileio import read_maybe_compressed
+    """The (n, 4, 4) poses of a KITTI or TUM file (:func:`occgp.datasets.read_poses`);
+    a file whose format cannot be told is an error of the `poses` option."""
+    from .datasets import read_poses
 
-    if poses_format is None:
-        try:
-            text = read_maybe_compressed(path).decode("utf-8")
-        except UnicodeDecodeError:
-            raise ValueError(f"{path}: not a text file (invalid UTF-8)") from None
-        first = next(((i, line.split("#", 1)[0].split())
-                      for i, line in enumerate(text.splitlines(), start=1)
-                      if line.split("#", 1)[0].split()), None)
-        if first is None:
-            raise OptionError("poses", f"poses file {str(path)!r} holds no poses")
-        n = len(first[1])
-        if n not in (12, 8):
-            raise OptionError("poses", f"cannot tell the format of poses file {str(path)!r}: "
-                               f"line {first[0]} has {n} columns; expected 12 (kitti: a 3x4 "
-                               f"row-major pose) or 8 (tum: t x y z qx qy qz qw); pass "
-                               f"poses_format")
-        poses_format = "kitti" if n == 12 else "tum"
-    if poses_format == "kitti":
-        return read_kitti_poses(path)
-    return read_tum_trajectory(path)[1]
+    try:
+        return read_poses(path, poses_format)
+    except ValueError as exc:
+        if str(exc).startswith(("cannot tell the format", "poses file")):
+            raise OptionError("poses", str(exc)) from None
+        raise
 
 
 def _check_map_args(paths, output, method, mode, resolution, max_range, knn_params, n_jobs,
@@ -299,9 +294,14 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     Parameters
     ----------
     paths : sequence of str or path-like
-        Scan files or folders, read with :func:`occgp.datasets.read_scans`,
-        and ROS bags (a ``.bag``, ``.db3`` or ``.mcap`` file, or a ROS 2 bag
-        folder holding ``metadata.yaml``), read with
+        Scan files or folders, read lazily, scan by scan, as one
+        :class:`occgp.datasets.ScanSequence` (posed by `poses`; the suffixes
+        of :func:`occgp.datasets.read_scans`); CARMEN 2D laser logs (text
+        files, maybe compressed, with ``FLASER`` or ``ROBOTLASER1`` lines),
+        read with :func:`occgp.datasets.read_carmen` and inserted as planar
+        scans at z = 0 placed by their own poses (no-return readings
+        dropped); and ROS bags (a ``.bag``, ``.db3`` or ``.mcap`` file, or a
+        ROS 2 bag folder holding ``metadata.yaml``), read with
         :func:`occgp.datasets.read_rosbag`. Scans go in in this order.
     output : str or path-like
         The map file; its suffix gives the format: one of the map type's own
@@ -430,7 +430,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     """
     from tqdm.auto import tqdm
 
-    from .datasets import apply_poses, read_rosbag, read_scans
+    from .datasets import Scan, ScanSequence, apply_poses, read_carmen, read_rosbag
 
     t_start = time.perf_counter()
     out = sys.stdout if out is None else out
@@ -458,37 +458,56 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
                                n_jobs, input_path)
         if input_path is not None:
             bar.update()
-        sources = []
-        for path in paths:
-            bar.set_description(f"reading {Path(path).name}")
-            if _is_bag(path):
-                source = read_rosbag(path, topic, fixed_frame=fixed_frame,
-                                     sensor_frame=sensor_frame, tf_tolerance=tf_tolerance)
-            else:
-                source = read_scans(path, fields=fields)
-            sources.append(source)
-            bar.total += len(source)
-            bar.update()
-        n_scans = sum(len(s) for s in sources)
+        sources = []          # (input, scans)
+        if not any(_is_bag(p) or _is_carmen(p) for p in paths):
+            # scan files only: one sequence, posed by the pose file: the Python API's reader
+            bar.set_description("listing scan files")
+            files = ScanSequence(paths, fields=fields, progress=False)
+            if pose_array is not None and len(pose_array) != len(files):
+                raise OptionError("poses", f"poses file {str(poses)!r} holds "
+                                  f"{len(pose_array)} poses for {len(files)} scans; expected "
+                                  f"one pose per scan, in input order")
+            if pose_array is not None:
+                files = files.with_poses(pose_array)
+            sources.append((", ".join(map(str, paths)), files))
+            bar.total += len(files)
+            bar.update(len(paths))
+        else:
+            for path in paths:
+                bar.set_description(f"reading {Path(path).name}")
+                if _is_bag(path):
+                    source = read_rosbag(path, topic, fixed_frame=fixed_frame,
+                                         sensor_frame=sensor_frame, tf_tolerance=tf_tolerance)
+                elif _is_carmen(path):
+                    source = read_carmen(path).scans_3d()
+                else:
+                    source = ScanSequence(path, fields=fields, progress=False)
+                sources.append((path, source))
+                bar.total += len(source)
+                bar.update()
+        n_scans = sum(len(s) for _, s in sources)
         if not n_scans:
             raise ValueError("no scans found in " + ", ".join(map(str, paths)))
         if pose_array is not None and len(pose_array) != n_scans:
             raise OptionError("poses", f"poses file {str(poses)!r} holds {len(pose_array)} "
                                f"poses for {n_scans} scans; expected one pose per scan, in "
                                f"input order")
+        if len(sources) == 1 and isinstance(sources[0][1], ScanSequence):
+            pose_array = None      # the sequence carries them
         insert, limit, how = _inserter(mapper, mode, max_range, n_jobs)
         n_points = n_beyond = n_done = n_filtered = n_free = 0
         beams = np.zeros(2, dtype=np.int64)     # BGK's (kept, dropped) beams
         dropped = []
         t0 = time.perf_counter()
         bar.set_description("inserting scans")
-        for path, source in zip(paths, sources):
+        for path, source in sources:
             for scan in source:
+                scan, free = scan if len(scan) == 2 and isinstance(scan[0], Scan) \
+                    else (scan, None)          # a CARMEN scan: (returns, free beam ends)
                 if pose_array is not None:
                     scan = apply_poses([scan], pose_array[n_done:n_done + 1])[0]
                 points = scan.points
                 n_points += len(points)
-                free = None
                 if scan_filter is not None:
                     points, free = scan_filter.apply(points, scan.origin)
                     n_filtered += len(scan.points) - len(points)

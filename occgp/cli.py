@@ -69,8 +69,9 @@ def _parser() -> argparse.ArgumentParser:
                        "posed by TF) and write it.")
     p.set_defaults(map_parser=p)
     p.add_argument("scans", nargs="+", help="scan files or folders (.pcd, .bin, .pcd.bin, "
-                   ".graph, .xyz/.txt, ...) and ROS bags (.bag, .db3, .mcap, a ROS 2 bag "
-                   "folder), inserted in this order")
+                   ".graph, .xyz/.txt, ...), CARMEN 2D laser logs (FLASER / ROBOTLASER1 "
+                   "lines, maybe .gz; planar scans at z = 0) and ROS bags (.bag, .db3, .mcap, "
+                   "a ROS 2 bag folder), inserted in this order")
     p.add_argument("-o", "--output", required=True,
                    help="the map file, format by suffix: .bt/.ot (OctoMap), .ply/.pcd (the "
                    "occupied cells), .npz (bgk, akimap, grid: the map with its evidence, for "

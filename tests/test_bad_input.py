@@ -52,6 +52,8 @@ def make_files() -> dict[str, bytes]:
         "five.bin": np.ones((7, 5), np.float32).tobytes(),   # 140 bytes: 5-float records
         "corrupt.xyz.gz": b"\x1f\x8b\x08\x00garbage",
         "empty.pcd": b"",
+        "truncated.log": b"#\nFLASER 2 1.0 2.0 0\n",            # CARMEN: no pose
+        "negative.log": b"FLASER 2 1.0 -1.0 0 0 0 0 0 0 1.0 host 1.0\n",
     }
 
 

@@ -166,6 +166,20 @@ def _log_texts():
     return out
 
 
+def _carmen_texts():
+    rng = np.random.default_rng(_SEED_RNG)
+    flaser, robot = ["# CARMEN log", "PARAM robot_x 0"], []
+    for k in range(3):
+        r = np.round(rng.uniform(0.1, 30.0, 12), 3)
+        r[k] = 81.83                                   # a no-return code
+        pose = " ".join(f"{v:.6g}" for v in rng.uniform(-5, 5, 3))
+        flaser.append(f"FLASER 12 {' '.join(map(str, r))} {pose} {pose} {k + 0.5} host {k}")
+        flaser.append(f"ODOM {pose} 0 0 0 {k} host {k}")
+        robot.append(f"ROBOTLASER1 0 -1.5 3.0 0.25 20.0 0.01 0 12 {' '.join(map(str, r))} "
+                     f"2 7 9 {pose} {pose} 0 0 0.5 0.3 0 {k + 0.5} host {k}")
+    return ["\n".join(flaser) + "\n", "\n".join(robot) + "\n"]
+
+
 def _tree_seeds(fmt):
     from occgp import OccupancyOctree
 
@@ -420,6 +434,28 @@ def use_scans(scans, workdir, reader):
                    and np.array_equal(a.origin, b.origin), "graph round trip changed a scan")
 
 
+def use_laser_log(log, workdir):
+    """Check a LaserLog's scans and observations, fit the 2D log-odds grid on them."""
+    from occgp.datasets import LaserLog
+    from occgp.gp import OccupancyGrid
+
+    _check(isinstance(log, LaserLog), f"got a {type(log).__name__}")
+    for k, scan in enumerate(log):
+        for name in ("origin", "angles", "ranges"):
+            a = getattr(scan, name)
+            _check(isinstance(a, np.ndarray) and np.isfinite(a).all(),
+                   f"scan {k}: non-finite {name}")
+        _check(np.isfinite(scan.heading) and (scan.ranges >= 0).all(), f"scan {k}: bad values")
+        _check(scan.hit.dtype == bool and len(scan.hit) == len(scan.ranges),
+               f"scan {k}: hit flags")
+        _check(np.isfinite(scan.end_points).all(), f"scan {k}: non-finite end points")
+    hits, starts, ends = log.observations()
+    _check(len(starts) == len(ends) and np.isfinite(ends).all(), "observations")
+    box = np.abs(np.vstack([starts, ends])).max() if len(ends) else 0.0
+    if len(hits) and box < 1e3:
+        OccupancyGrid(0.5).fit(hits, starts, ends)
+
+
 def use_tree(tree):
     """Query a tree, round-trip it through both formats, insert a scan, cast rays."""
     from occgp import OccupancyOctree
@@ -519,8 +555,8 @@ def _one(fn):
 
 def _build_readers():
     from occgp import OccupancyOctree
-    from occgp.datasets import (load_scan_folder, read_kitti_bin, read_scan_graph,
-                                read_scan_log, read_xyz)
+    from occgp.datasets import (load_scan_folder, read_carmen, read_kitti_bin,
+                                read_scan_graph, read_scan_log, read_xyz)
 
     def use_s(name):
         return lambda result, workdir: use_scans(result, workdir, name)
@@ -563,13 +599,16 @@ def _build_readers():
                lambda p: OccupancyOctree.from_bytes(Path(p[0]).read_bytes()), use_t),
         FolderReader("scan_folder", "", None, "raw",
                      lambda p: load_scan_folder(Path(p[0]).parent, None), use_s("folder")),
+        Reader("carmen", ".log", lambda: [t.encode() for t in _carmen_texts()], "text",
+               lambda p: read_carmen(p[0]), lambda result, workdir: use_laser_log(result,
+                                                                                  workdir)),
     ]
     return {r.name: r for r in readers}
 
 
 _NAMES = ["pcd_ascii", "pcd_binary", "pcd_binary_compressed", "kitti_bin", "nuscenes_bin",
           "graph", "xyz", "xyz_gz", "xyz_bz2", "xyz_xz", "scan_log", "bt", "ot", "from_bytes",
-          "scan_folder"]
+          "scan_folder", "carmen"]
 _READER_IDS = {name: k for k, name in enumerate(_NAMES)}
 READERS: dict = {}
 

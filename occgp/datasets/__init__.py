@@ -35,7 +35,11 @@ binary_compressed), :func:`read_kitti_bin`, :func:`read_scan_graph` /
 optionally compressed), :func:`read_scan_log` (OctoMap text logs),
 :func:`load_scan_folder` and :func:`read_scans` (dispatch by suffix).
 Every scan is a :class:`Scan` ``(points, origin)``; a sequence of scans is a
-``list[Scan]``.
+``list[Scan]``. Real logs: :class:`ScanSequence` reads a folder of scans in
+the sensor frame with a KITTI or TUM pose file (:func:`read_poses`) lazily,
+scan by scan, as ``occgp map FOLDER --poses FILE`` does; :func:`read_carmen`
+reads a CARMEN 2D laser log (``FLASER`` / ``ROBOTLASER1`` lines) into a
+:class:`LaserLog` of :class:`LaserScan2D`.
 
 Examples
 --------
@@ -55,6 +59,7 @@ from ._family2d import (
 )
 from ._floorplan import FloorPlan2D, floor_plan_2d
 from ._outdoor import OutdoorScene, outdoor_scene
+from ._carmen import FLASER_NO_RETURN, LaserLog, read_carmen
 from ._pcd import lzf_decompress, read_pcd, write_pcd
 from ._readers import (
     load_scan_folder,
@@ -68,6 +73,7 @@ from ._readers import (
 from ._render import TEXTURES, StereoPair, StereoRig, render_stereo, scene_materials
 from ._rosbag import RosbagScans, read_rosbag
 from ._scan import Scan
+from ._sequence import POSE_FORMATS, ScanSequence, read_poses
 from ._sgbm import (
     disparity_to_points,
     match_stereo,
@@ -118,6 +124,12 @@ __all__ = [
     "TEST_SEEDS",
     "read_pcd",
     "write_pcd",
+    "read_carmen",
+    "LaserLog",
+    "FLASER_NO_RETURN",
+    "ScanSequence",
+    "read_poses",
+    "POSE_FORMATS",
     "lzf_decompress",
     "read_kitti_bin",
     "read_scan_graph",

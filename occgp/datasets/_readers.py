@@ -558,12 +558,12 @@ def _scan_log_from_text(text, path):
 # --------------------------------------------------------------------------- #
 # folders and dispatch
 # --------------------------------------------------------------------------- #
-def _natural_key(path):
+def natural_key(path):
     parts = re.split(r"(\d+)", path.name)
     return [(0, int(p), "") if p.isdigit() else (1, 0, p.lower()) for p in parts]
 
 
-def _kind(path):
+def scan_kind(path):
     """Reader kind from the suffix (compression suffixes looked through)."""
     suffixes = [s.lower() for s in path.suffixes]
     if suffixes and suffixes[-1] in _COMPRESSED:
@@ -631,7 +631,7 @@ def load_scan_folder(path, pattern: str | None = "*.pcd", *, fields=None) -> lis
     if not folder.is_dir():
         raise NotADirectoryError(20, "expected a directory", str(folder))
     if pattern is None:
-        files = [p for p in folder.iterdir() if p.is_file() and _kind(p) is not None]
+        files = [p for p in folder.iterdir() if p.is_file() and scan_kind(p) is not None]
     else:
         try:
             files = [p for p in folder.glob(pattern) if p.is_file()]
@@ -641,7 +641,7 @@ def load_scan_folder(path, pattern: str | None = "*.pcd", *, fields=None) -> lis
         what = "supported scan files" if pattern is None else f"files matching {pattern!r}"
         raise ValueError(f"{folder}: no {what} in the folder")
     scans = []
-    for f in sorted(files, key=_natural_key):
+    for f in sorted(files, key=natural_key):
         scans.extend(read_scans(f, fields=fields))
     return scans
 
@@ -697,7 +697,7 @@ def read_scans(path, *, fields=None) -> list:
         return load_scan_folder(path, pattern=None, fields=fields)
     if not path.exists():
         raise FileNotFoundError(2, "no such file or directory", str(path))
-    kind = _kind(path)
+    kind = scan_kind(path)
     if kind == "pcd":
         return [read_pcd(path)]
     if kind == "bin":

@@ -188,7 +188,7 @@ def read_tum_trajectory(path, *, tol: float = _ROT_TOL):
     return table[:, 0].copy(), poses
 
 
-def _check_poses(poses, n_scans, tol):
+def check_poses(poses, n_scans, tol):
     if isinstance(poses, tuple) and len(poses) == 2 and np.ndim(poses[0]) == 1:
         raise TypeError("poses must be an array of shape (n_scans, 4, 4) or (n_scans, 3, 4), "
                         "got a pair (read_tum_trajectory returns (timestamps, poses): pass "
@@ -278,7 +278,7 @@ def apply_poses(scans, poses: ArrayLike, *, tol: float = _ROT_TOL) -> list:
             raise TypeError(f"scans[{i}] must be a Scan or a (points, origin) pair, got "
                             f"{type(item).__name__}") from None
         checked.append(make_scan(points, origin, f"scans[{i}].points", f"scans[{i}].origin"))
-    poses = _check_poses(poses, len(checked), tol)
+    poses = check_poses(poses, len(checked), tol)
     out = []
     for scan, pose in zip(checked, poses):
         rot, trans = pose[:3, :3], pose[:3, 3]
