@@ -8,6 +8,12 @@ synthetic scene (:func:`grid_test_set` over a box; :func:`exact_test_set` over
 the cells the scans could see, see :func:`cells_in_view`) or, for real scans,
 from the held-out protocol (:func:`held_out_split`), which scores only where
 the sensor looked and so rates every method near perfect on a synthetic scene.
+Real logs with poses (a :class:`~occgp.datasets.LaserLog` or a
+:class:`~occgp.datasets.ScanSequence`) are scored by
+:class:`RealLogBenchmark`: whole scans held out (:func:`log_split`), their
+hits and samples along their beams as test points (:func:`log_test_set`),
+scores with calibration (:func:`score_log`: AUC, accuracy at the map's own
+threshold, Brier score, NLL) and costs (:class:`LogResult`).
 Every method is then built and scored the same way (:func:`run_method`,
 :func:`compare_methods`, :func:`equal_time_comparison`; methods are given as
 factories or as registered map names) and the rows print as a table
@@ -28,6 +34,9 @@ and worst case per method and kind.
 from ._ground_truth import cell_labels, cells_in_view, exact_labels, exact_test_set
 from ._matching import MatchedCounts, matched_counts
 from ._nca import MAX_NCA_BYTES, NCAResult, nca_feature_weights
+from ._real_logs import (
+    NLL_EPS, LogResult, LogTestSet, RealLogBenchmark, log_split, log_test_set, score_log,
+)
 from ._protocols import (
     MapResult, TestSet, compare_methods, equal_time_comparison, evaluate_map, grid_test_set,
     held_out_split, run_method,
@@ -47,4 +56,5 @@ __all__ = ["TestSet", "MapResult", "held_out_split", "grid_test_set", "exact_tes
            "grid_search", "GridSearchResult", "cell_labels", "KNN_GRID", "OCTOMAP_GRID",
            "KNN_WEIGHT_GRID", "THRESHOLDS", "matched_counts", "MatchedCounts",
            "evaluate_scene_set", "summarize_scene_set", "format_scene_set", "fpr_at_tpr",
-           "PeakRSS"]
+           "PeakRSS", "log_split", "log_test_set", "LogTestSet", "score_log", "LogResult",
+           "RealLogBenchmark", "NLL_EPS"]

@@ -158,7 +158,7 @@ def _as_test_set(test_set):
     return TestSet(points, labels)
 
 
-def _disable(progress):
+def disable_bar(progress):
     return None if progress is None else not progress
 
 
@@ -369,7 +369,7 @@ def _run(name, method, checked, test_set, progress, data_fraction=1.0):
     map_ = factory()
     seconds, n_points = 0.0, 0
     for points, origin, _ in tqdm(checked, desc=str(name), unit="scan",
-                                  disable=_disable(progress), leave=False):
+                                  disable=disable_bar(progress), leave=False):
         t0 = _clock()
         map_.insert_scan(points, origin, **options)
         seconds += _clock() - t0
@@ -382,7 +382,7 @@ def _run(name, method, checked, test_set, progress, data_fraction=1.0):
                      sc["unknown_fraction"], data_fraction, map_)
 
 
-def _map_factory(name, spec):
+def map_factory(name, spec, dim=3):
     """(``make_map`` bound to a registered map name, or to ``{"map": name, "insert":
     options, **params}``, and the options of its ``insert_scan``); the name, the
     points' dimension and the parameter names checked now."""
@@ -408,10 +408,10 @@ def _map_factory(name, spec):
     except ValueError:
         raise ValueError(f"method {name!r}: unknown map type {map_name!r}; available: "
                          f"{', '.join(available_maps())}") from None
-    if 3 not in entry.dims:
+    if dim not in entry.dims:
         raise ValueError(f"method {name!r}: the {map_name!r} map takes points of "
                          f"{' or '.join(map(str, entry.dims))} dimensions, the scans here "
-                         f"are 3D; 3D maps: {', '.join(available_maps(dims=3))}")
+                         f"are {dim}D; {dim}D maps: {', '.join(available_maps(dims=dim))}")
     try:
         entry.check_params(params)
     except ValueError as exc:
@@ -447,7 +447,7 @@ def _check_methods(methods):
         if callable(spec):
             factories[name] = (spec, {})
         elif isinstance(spec, (str, Mapping)):
-            factories[name] = _map_factory(name, spec)
+            factories[name] = map_factory(name, spec)
         else:
             raise TypeError(f"the factory of method {name!r} must be callable, got "
                             f"{type(spec).__name__} (or give a registered map name or a "
