@@ -312,3 +312,88 @@ def test_plane_clusters_in_3d():
     assert p.shape == (200,) and ((p > 0) & (p < 1)).all()
     hits = np.vstack([first[0], second[0]])
     assert model.predict_proba(hits).mean() > 0.5
+
+
+def far_wall(x, n_hits=60, distance=8.0):
+    """A 2 m wall at x = `x` (hits, then beams ending at them) seen from `distance` m to
+    its left: its beams' midpoints lie 4 m from its hits, farther than its length."""
+    y = np.linspace(-1.0, 1.0, n_hits)
+    hits = np.column_stack([np.full(n_hits, x), y])
+    origins = np.column_stack([np.full(n_hits, x - distance), np.resize([-0.5, 0.0, 0.5], n_hits)])
+    return hits, origins, hits.copy()
+
+
+def assert_beams_with_their_hits(model, hits, first=0):
+    """Every expert has hits and beams, and each beam is in its hit's expert."""
+    labels = model.labels_[first:]
+    n = len(hits)
+    assert_array_equal(labels[n:2 * n], labels[:n])   # beam i ends at hit i
+    for e, gp in enumerate(model.experts_):
+        cls = np.concatenate([c.obs.labels for c in gp.cells_])
+        assert (cls > 0).any() and (cls < 0).any(), e
+
+
+def test_split_of_a_large_cluster_keeps_beams_with_their_hits():
+    # one cluster of 120 observations, split into experts of at most 40: a median cut of
+    # the hits and the beams' midpoints (4 m apart, the wall 2 m long) put all the hits on
+    # one side and all the beams on the other, and the experts could not fit
+    hits, starts, ends = far_wall(0.0)
+    model = GPMixture(FIXED, clustering=One(), max_cluster_size=40, random_state=0)
+    model.fit(hits, starts, ends)
+    assert model.n_clusters_ == 1 and model.n_experts_ == 4
+    assert np.bincount(model.labels_).max() <= 40
+    assert_beams_with_their_hits(model, hits)
+    assert model.predict_proba(hits).min() > 0.5
+    assert model.predict_proba(0.5 * (starts + ends)).max() < 0.5
+
+
+def test_update_splits_a_large_new_cluster_keeping_beams_with_their_hits():
+    # the first wall fits one expert; the second (a new cluster, right of x = 5) is split
+    model = GPMixture(FIXED, clustering=Halves(5.0), max_cluster_size=40, random_state=0)
+    model.fit(*far_wall(0.0, n_hits=20))
+    assert model.n_experts_ == 1
+    hits, starts, ends = far_wall(20.0)
+    model.update(hits, starts, ends)
+    assert model.n_experts_ == 5
+    assert_array_equal(model.updated_experts_, [1, 2, 3, 4])
+    assert_beams_with_their_hits(model, hits, first=40)
+    assert model.predict_proba(hits).min() > 0.5
+    assert model.predict_proba(0.5 * (starts + ends)).max() < 0.5
+
+
+def test_a_cluster_no_cut_can_split_keeping_both_classes_stays_one_expert():
+    # 5 hits, each the end of 20 beams: every part needs a hit, so parts of at most 10
+    # observations cannot be made; the experts are larger, one cell each (the committee's
+    # leave-one-out classifier with hyperparameters="own" needs it)
+    hits = np.column_stack([np.full(5, 5.0), np.arange(5.0)])
+    starts = np.column_stack([np.zeros(100), np.linspace(-2.0, 6.0, 100)])
+    ends = np.repeat(hits, 20, axis=0)
+    model = GPMixture(FIXED, clustering=One(), max_cluster_size=10, hyperparameters="own",
+                      random_state=0).fit(hits, starts, ends)
+    sizes = np.bincount(model.labels_)
+    assert model.n_experts_ > 1 and sizes.min() > 10
+    assert_array_equal(model.labels_[5:], np.repeat(model.labels_[:5], 20))
+    for gp, size in zip(model.experts_, sizes):
+        assert len(gp.cells_) == 1 and gp.cells_[0].size == size
+        n_hits = int((gp.cells_[0].obs.labels > 0).sum())
+        assert 1 <= n_hits < size
+    assert np.isfinite(model.plsc_).all()
+    assert np.isfinite(model.predict_proba(hits)).all()
+
+
+def test_beams_without_a_return_go_with_the_hit_of_their_most_similar_returning_beam():
+    hits, starts, ends = far_wall(0.0)
+    # six beams without a return, crossing in front of the wall and passing its ends
+    # (y = +-1): three rising past its top, three falling past its bottom; their midpoints
+    # lie in the middle (|y| <= 0.2), the returning beams most like them end near the ends
+    miss_starts = np.array([[-8.0, -2.0], [-8.0, -2.2], [-8.0, -1.8],
+                            [-8.0, 2.0], [-8.0, 2.2], [-8.0, 1.8]])
+    miss_ends = np.array([[2.0, 2.0], [2.0, 2.0], [2.0, 2.2],
+                          [2.0, -2.0], [2.0, -2.0], [2.0, -2.2]])
+    model = GPMixture(FIXED, clustering=One(), max_cluster_size=70, random_state=0)
+    model.fit(hits, np.vstack([starts, miss_starts]), np.vstack([ends, miss_ends]))
+    assert model.n_experts_ == 2
+    assert_beams_with_their_hits(model, hits)
+    top, bottom = model.labels_[np.argmax(hits[:, 1])], model.labels_[np.argmin(hits[:, 1])]
+    assert top != bottom
+    assert_array_equal(model.labels_[-6:], [top] * 3 + [bottom] * 3)

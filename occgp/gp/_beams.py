@@ -23,8 +23,8 @@ from ._kernels import SquaredExponential
 from ._limits import check_coordinates, check_segments, threads
 from ._observations import check_beam_hits
 
-__all__ = ["assign_beams", "merge_small_clusters", "match_beams", "no_return_error",
-           "HIT_TOLERANCE"]
+__all__ = ["assign_beams", "beam_sources", "merge_small_clusters", "match_beams",
+           "no_return_error", "HIT_TOLERANCE"]
 
 #: Default of how far (metres) beyond a beam's end its hit may lie
 #: (:func:`match_beams`): a beam that stops short of its return by up to one
@@ -304,6 +304,20 @@ def assign_beams(hit_labels: ArrayLike, hits: ArrayLike, segment_starts: ArrayLi
     >>> assign_beams([0, 1], hits, starts, ends).tolist()
     [0, 1, 1]
     """
+    return beam_sources(hit_labels, hits, segment_starts, segment_ends, kernel=kernel,
+                        quadrature=quadrature, n_jobs=n_jobs, hit_tolerance=hit_tolerance,
+                        beam_hits=beam_hits)[0]
+
+
+def beam_sources(hit_labels, hits, segment_starts, segment_ends, *, kernel=None,
+                 quadrature=None, n_jobs=None, hit_tolerance=HIT_TOLERANCE, beam_hits=None):
+    """:func:`assign_beams`'s labels, and the hit each beam takes its label from.
+
+    That hit is the beam's own for a beam with a return, the most similar
+    returning beam's for one without. Same parameters and errors as
+    :func:`assign_beams`; returns ``(beam_labels, source_hits)``, both int64
+    of shape (n_beams,), ``beam_labels == hit_labels[source_hits]``.
+    """
     kernel = SquaredExponential(1.0, 1.0) if kernel is None else check_kernel(kernel)
     kernel._checked()
     quadrature = check_quadrature(quadrature)
@@ -324,18 +338,16 @@ def assign_beams(hit_labels: ArrayLike, hits: ArrayLike, segment_starts: ArrayLi
         hit_of = check_beam_hits(beam_hits, len(ends), len(hits))
     else:
         hit_of = _match(hits, starts, ends, hit_tolerance)
-    out = np.full(len(ends), -1, dtype=np.int64)
-    out[hit_of >= 0] = labels[hit_of[hit_of >= 0]]
+    source = np.asarray(hit_of, dtype=np.int64).copy()
     free = np.flatnonzero(hit_of < 0)
     ret = np.flatnonzero(hit_of >= 0)
-    if not len(free):
-        return out
-    if not len(ret):
-        raise no_return_error(len(free), hit_tolerance, beam_hits is not None)
-    best = _most_similar(kernel, quadrature, starts[free], ends[free], starts[ret], ends[ret],
-                         n_threads)
-    out[free] = out[ret[best]]
-    return out
+    if len(free):
+        if not len(ret):
+            raise no_return_error(len(free), hit_tolerance, beam_hits is not None)
+        best = _most_similar(kernel, quadrature, starts[free], ends[free], starts[ret],
+                             ends[ret], n_threads)
+        source[free] = source[ret[best]]
+    return labels[source], source
 
 
 def _erf_diff(a, b):

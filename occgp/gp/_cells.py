@@ -65,8 +65,20 @@ def kl_gain(var, mu, y, noise):
     return 0.5 * (np.log(var / var_after) + (var_after + shift ** 2) / var - 1.0)
 
 
-def spatial_groups(anchors, max_size):
-    """Split indices into groups of at most `max_size` by median bisection of `anchors`."""
+def spatial_groups(anchors, max_size, is_hit=None):
+    """Split indices into groups of at most `max_size` by median bisection of `anchors`.
+
+    A group larger than `max_size` is cut in two at the median of its
+    anchors along its longest axis, and so on until every group fits.
+
+    With `is_hit` (bool, one per anchor: a hit or a beam) the groups are the
+    experts of :class:`~occgp.gp.GPMixture`, and a cut falls only between
+    distinct coordinates along its axis (anchors at one place stay together)
+    and only where both halves keep a hit and a beam (an expert needs both
+    for its classifier): the allowed cut nearest the median along the
+    longest axis, or along the next longest where that axis has none. A
+    group that no cut splits so stays whole, larger than `max_size`.
+    """
     todo, done = [np.arange(len(anchors))], []
     while todo:
         idx = todo.pop()
@@ -74,11 +86,37 @@ def spatial_groups(anchors, max_size):
             done.append(idx)
             continue
         pts = anchors[idx]
-        axis = int(np.argmax(np.ptp(pts, axis=0)))
-        order = idx[np.argsort(pts[:, axis], kind="stable")]
-        half = len(order) // 2
-        todo += [order[half:], order[:half]]
+        extent = np.ptp(pts, axis=0)
+        if is_hit is None:
+            axis = int(np.argmax(extent))
+            order = idx[np.argsort(pts[:, axis], kind="stable")]
+            half = len(order) // 2
+            todo += [order[half:], order[:half]]
+            continue
+        for axis in np.argsort(-extent, kind="stable"):
+            sort = np.argsort(pts[:, axis], kind="stable")
+            cut = _class_cut(pts[sort, axis], is_hit[idx[sort]])
+            if cut is not None:
+                order = idx[sort]
+                todo += [order[cut:], order[:cut]]
+                break
+        else:
+            done.append(idx)
     return done
+
+
+def _class_cut(coord, hit):
+    """The cut ``k`` of sorted `coord` nearest ``len // 2`` with ``coord[k - 1] < coord[k]``
+    and a True and a False of `hit` on each side (``hit[:k]``, ``hit[k:]``); None if none."""
+    hits, beams = np.flatnonzero(hit), np.flatnonzero(~hit)
+    if not (len(hits) and len(beams)):
+        return None
+    lo, hi = max(hits[0], beams[0]) + 1, min(hits[-1], beams[-1])
+    cuts = np.flatnonzero(coord[1:] > coord[:-1]) + 1
+    cuts = cuts[(cuts >= lo) & (cuts <= hi)]
+    if not len(cuts):
+        return None
+    return int(cuts[np.argmin(np.abs(cuts - len(coord) // 2))])
 
 
 def predict_cell(cell, X, kernel, quadrature, n_threads, return_var):

@@ -14,9 +14,9 @@ from ._limits import one_blas_thread, threads
 from ._observations import Observations
 
 __all__ = ["Reach", "QueryIndex", "skip_tolerances", "evaluate_expert", "global_template",
-           "shared_template", "hit_origins", "fit_expert", "predict_expert", "predict_dense",
-           "split_observations", "hits_first", "concat_observations", "order_positions",
-           "downdated"]
+           "shared_template", "hit_origins", "fit_expert", "one_cell", "predict_expert",
+           "predict_dense", "split_observations", "hits_first", "concat_observations",
+           "order_positions", "downdated"]
 
 #: Spacing (in length scales) of the samples along an expert's beams that
 #: bound the distance from a query to its observations.
@@ -220,6 +220,15 @@ def fit_expert(template, obs, seed):
     n_hits = int(np.count_nonzero(obs.labels > 0))
     with one_blas_thread():
         return expert.fit(obs.starts[:n_hits], obs.starts[n_hits:], obs.ends[n_hits:])
+
+
+def one_cell(template, n_obs):
+    """`template` for an expert of `n_obs` observations in one cell: its `max_cell_size`
+    raised to `n_obs` where below it (a part of a cluster that no cut could split keeping
+    hits and beams on both sides; the committee's leave-one-out downdate needs one cell)."""
+    if template.max_cell_size is None or n_obs <= template.max_cell_size:
+        return template
+    return clone(template).set_params(max_cell_size=n_obs)
 
 
 def predict_expert(expert, X):

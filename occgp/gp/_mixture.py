@@ -24,14 +24,14 @@ from .._docfill import fill_doc
 from .._validation import (as_points, check_bool, check_choice, check_int, check_n_jobs,
                            check_probability, check_real)
 from ..maps import register
-from ._beams import (HIT_TOLERANCE, assign_beams, match_beams, merge_small_clusters,
+from ._beams import (HIT_TOLERANCE, beam_sources, match_beams, merge_small_clusters,
                      no_return_error)
 from ._cells import spatial_groups
 from ._clustering import DirichletProcessClustering
 from ._committee import COMBINE_RULES, Committee
 from ._experts import (QueryIndex, Reach, concat_observations, downdated, evaluate_expert,
-                       fit_expert, global_template, hit_origins, hits_first, order_positions,
-                       shared_template, skip_tolerances, split_observations)
+                       fit_expert, global_template, hit_origins, hits_first, one_cell,
+                       order_positions, shared_template, skip_tolerances, split_observations)
 from ._gpomik import GPOMIK
 from ._io import gp_fitted, gp_params, read_gp, write_gp
 from ._limits import generator
@@ -81,7 +81,12 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
        nearest other cluster (every expert needs both classes for its
        classifier, and tiny experts cost more than they add); clusters of
        more than `max_cluster_size` observations are split by median
-       bisection.
+       bisection, each beam with its hit: a beam with a return sits at its
+       hit, one without at the hit of the most similar returning beam (the
+       one it took its cluster from), so the parts are pieces of a wall
+       with the beams that hit them. A cut falls between distinct places
+       only, and only where both parts keep hits and beams (the allowed
+       cut nearest the median, along the longest axis that has one).
     4. **Merging** (``combine``): ``"bcm"`` is the paper's Eq. 13,
        ``"tresp"`` the BCM with its prior correction, ``"rbcm"`` the robust
        BCM, ``"gpoe"`` the generalised product of experts and ``"minvar"``
@@ -134,8 +139,11 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         Fewest observations (hits and beams) of a cluster with its own
         expert.
     max_cluster_size : int, default=1000
-        Most observations of one expert at :meth:`fit`; also the experts'
-        `max_cell_size` in :meth:`update`.
+        Most observations of one expert at :meth:`fit` (of a new one in
+        :meth:`update`), except for a cluster that no cut splits keeping
+        hits and beams on both sides (e.g. one hit with many beams), whose
+        expert is then larger (one cell of that size); also the other
+        experts' `max_cell_size` in :meth:`update`.
     prior_tol : float, default=1e-3
         Tolerance of skipping an expert at a query (see above); 0 skips only
         where the kernel's entries are exactly zero.
@@ -304,9 +312,13 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
                            hit_tolerance=self.hit_tolerance)[len(self._beam_hits):]
 
     def _cluster_labels(self, clustering, obs, n_hits, partial, matched):
-        """Cluster labels (of `clustering`) of the hits and of the beams of `obs`.
+        """Cluster labels (of `clustering`) of the hits and of the beams of `obs`, and
+        where each observation sits for the split of its cluster into experts.
 
-        `matched` is :meth:`_match`'s answer for the beams of `obs`.
+        `matched` is :meth:`_match`'s answer for the beams of `obs`. A hit sits
+        at itself, a beam at the hit it takes its label from (its own, or that
+        of the most similar returning beam), so that a split keeps beams with
+        their hits.
         """
         hits = obs.starts[:n_hits]
         starts, ends = obs.starts[n_hits:], obs.ends[n_hits:]
@@ -324,16 +336,19 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
             old_hit = old.labels > 0
             all_hits = np.vstack([old.starts[old_hit], hits])
             all_labels = np.r_[self._hit_clusters, hit_labels]
-            beam_labels = assign_beams(
+            beam_labels, sources = beam_sources(
                 all_labels, all_hits, np.vstack([old.starts[~old_hit], starts]),
                 np.vstack([old.ends[~old_hit], ends]), kernel=kernel, quadrature=quadrature,
-                n_jobs=self.n_jobs, beam_hits=np.r_[self._beam_hits, matched]
-            )[int(np.count_nonzero(~old_hit)):]
+                n_jobs=self.n_jobs, beam_hits=np.r_[self._beam_hits, matched])
+            n_old = int(np.count_nonzero(~old_hit))
+            beam_labels, sources = beam_labels[n_old:], sources[n_old:]
         else:
-            beam_labels = assign_beams(hit_labels, hits, starts, ends, kernel=kernel,
-                                       quadrature=quadrature, n_jobs=self.n_jobs,
-                                       beam_hits=matched)
-        return hit_labels, np.asarray(beam_labels, dtype=np.int64)
+            all_hits = hits
+            beam_labels, sources = beam_sources(hit_labels, hits, starts, ends, kernel=kernel,
+                                                quadrature=quadrature, n_jobs=self.n_jobs,
+                                                beam_hits=matched)
+        where = np.vstack([hits, all_hits[sources]])
+        return hit_labels, beam_labels, where
 
     # ------------------------------------------------------------------- fit
     def fit(self, hits: ArrayLike | None, segment_starts: ArrayLike | None,
@@ -396,15 +411,16 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         self._template, self._seed = template, seed
         self.kernel_, self.noise_ = None, None
         clustering = self._make_clustering(seed)
-        hit_labels, beam_labels = self._cluster_labels(clustering, obs, n_hits, partial=False,
-                                                       matched=matched)
+        hit_labels, beam_labels, where = self._cluster_labels(clustering, obs, n_hits,
+                                                              partial=False, matched=matched)
         clusters = np.r_[hit_labels, beam_labels]
         merged = merge_small_clusters(clusters, obs.anchors, obs.labels > 0,
                                       min_hits=self.min_hits, min_size=self.min_size)
         groups, expert_of = [], np.empty(len(obs.y), dtype=np.int64)
         for g in np.unique(merged):
             idx = np.flatnonzero(merged == g)
-            for part in sorted(spatial_groups(obs.anchors[idx], self.max_cluster_size),
+            for part in sorted(spatial_groups(where[idx], self.max_cluster_size,
+                                              obs.labels[idx] > 0),
                                key=lambda p: int(p.min())):
                 expert_of[idx[part]] = len(groups)
                 groups.append(np.sort(idx[part]))
@@ -417,7 +433,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
             self.kernel_, self.noise_ = template.kernel, template.noise
         self._expert_template = template  # what update() fits new experts with
         experts = self._parallel()(
-            delayed(fit_expert)(template, hits_first(obs.take(idx)), self._expert_seed(e))
+            delayed(fit_expert)(one_cell(template, len(idx)), hits_first(obs.take(idx)),
+                                self._expert_seed(e))
             for e, idx in enumerate(groups))
         self.experts_ = list(experts)
         self.clustering_ = clustering
@@ -701,8 +718,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         if not len(new.y):
             return self
         clustering = copy.deepcopy(self.clustering_)  # the fitted one stays as it is on failure
-        hit_labels, beam_labels = self._cluster_labels(clustering, new, n_hits, partial=True,
-                                                       matched=matched)
+        hit_labels, beam_labels, where = self._cluster_labels(clustering, new, n_hits,
+                                                              partial=True, matched=matched)
         clusters = np.r_[hit_labels, beam_labels]
         expert_of = np.empty(len(new.y), dtype=np.int64)
         experts, next_id = list(self.experts_), len(self.experts_)
@@ -732,7 +749,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
                 cluster_experts[int(c)] = {target}
                 continue
             cluster_experts[int(c)] = set()
-            for part in sorted(spatial_groups(new.anchors[idx], self.max_cluster_size),
+            for part in sorted(spatial_groups(where[idx], self.max_cluster_size,
+                                              new.labels[idx] > 0),
                                key=lambda p: int(p.min())):
                 expert_of[idx[part]] = next_id
                 cluster_experts[int(c)].add(next_id)
@@ -753,8 +771,9 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
 
         grown = self._parallel()(delayed(grow)(int(e)) for e in old_changed)
         made = self._parallel()(
-            delayed(fit_expert)(template, hits_first(new.take(new_groups[e])),
-                                 self._expert_seed(e)) for e in fresh)
+            delayed(fit_expert)(one_cell(template, len(new_groups[e])),
+                                hits_first(new.take(new_groups[e])), self._expert_seed(e))
+            for e in fresh)
         # every step that can fail is done: now change the model
         for e, gp in zip(old_changed, grown):
             experts[int(e)] = gp
