@@ -397,3 +397,20 @@ def test_beams_without_a_return_go_with_the_hit_of_their_most_similar_returning_
     top, bottom = model.labels_[np.argmax(hits[:, 1])], model.labels_[np.argmin(hits[:, 1])]
     assert top != bottom
     assert_array_equal(model.labels_[-6:], [top] * 3 + [bottom] * 3)
+
+
+@pytest.mark.parametrize("hyperparameters", ["global", "own"])
+def test_random_subsets_of_the_classifiers_keep_both_classes(hyperparameters):
+    # 5 hits among 105 observations: subsets of 10 (the global fit's, each expert's and,
+    # with "own", the committee's) drawn at random would often hold no hit
+    hits = np.column_stack([np.full(5, 5.0), np.arange(5.0)])
+    starts = np.column_stack([np.zeros(100), np.linspace(-2.0, 6.0, 100)])
+    ends = np.repeat(hits, 20, axis=0)
+    expert = clone(FIXED).set_params(max_optimize=10)
+    for seed in range(4):
+        model = GPMixture(expert, clustering=One(), max_cluster_size=10, max_optimize=10,
+                          hyperparameters=hyperparameters, random_state=seed)
+        model.fit(hits, starts, ends)
+        assert np.isfinite(model.plsc_).all()
+        for gp in model.experts_:
+            assert np.isfinite(gp.plsc_).all()

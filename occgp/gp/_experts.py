@@ -11,7 +11,7 @@ from ._beams import row_index
 from ._gpr import optimize_shared_hyperparameters
 from ._integral_kernel import check_quadrature, covariance
 from ._limits import one_blas_thread, threads
-from ._observations import Observations
+from ._observations import Observations, draw_subset
 
 __all__ = ["Reach", "QueryIndex", "skip_tolerances", "evaluate_expert", "global_template",
            "shared_template", "hit_origins", "fit_expert", "one_cell", "predict_expert",
@@ -179,13 +179,11 @@ def global_template(template, obs, seed):
     """`template` with a GPOMIK's hyper-parameters fitted on a random subset, and its PLSC.
 
     The subset holds ``template.max_optimize`` observations of all of `obs`
-    drawn at random (all of them when fewer), so the GPOMIK fits both on the
-    whole subset, as :meth:`GPOMIK.fit` would. Returns ``(template, (a, b))``.
+    drawn at random (all of them when fewer; with hits and beams, see
+    :func:`draw_subset`), so the GPOMIK fits both on the whole subset, as
+    :meth:`GPOMIK.fit` would. Returns ``(template, (a, b))``.
     """
-    rng = np.random.default_rng(seed)
-    take = np.arange(len(obs.y))
-    if len(take) > template.max_optimize:
-        take = np.sort(rng.choice(len(take), template.max_optimize, replace=False))
+    take = draw_subset(obs.labels, template.max_optimize, np.random.default_rng(seed))
     gp = fit_expert(clone(template).set_params(max_cell_size=None), hits_first(obs.take(take)),
                     int(np.random.SeedSequence([seed, 0, 1]).generate_state(1)[0]))
     return (clone(template).set_params(kernel=gp.kernel_, noise=gp.noise_, optimizer=False),

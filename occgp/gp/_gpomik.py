@@ -23,7 +23,7 @@ from ._io import check_gp_fitted, fitted_scalars, gp_fitted, gpomik_cells, read_
 from ._kernels import SquaredExponential
 from ._limits import MAX_RESTARTS, check_coordinates, check_dense, check_segments, generator, threads
 from ._map_protocol import MapProtocol
-from ._observations import Observations, check_beam_hits, make_observations
+from ._observations import Observations, check_beam_hits, draw_subset, make_observations
 from ._plsc import PLSCProba, fit_plsc, loo_predictions
 
 __all__ = ["GPOMIK"]
@@ -84,7 +84,7 @@ default="clenshaw-curtis"
         map makes and is less sensitive to a misspecified kernel.
     max_optimize : int, default=1000
         Hyper-parameters and PLSC are fitted on a random subset of at most
-        this many observations.
+        this many observations (with at least one hit and one beam).
     max_cell_size : int or None, default=2000
         Most observations in one local model. :meth:`fit` splits larger sets
         into spatial cells by median bisection; :meth:`update` starts a new
@@ -265,7 +265,7 @@ default="clenshaw-curtis"
         self._check_cell_size(len(obs.y))
         subset = obs
         if len(obs.y) > self.max_optimize:
-            subset = obs.take(np.sort(rng.choice(len(obs.y), self.max_optimize, replace=False)))
+            subset = obs.take(draw_subset(obs.labels, self.max_optimize, rng))
         lml = np.nan
         if self.optimizer:
             kernel, noise, lml = optimize_hyperparameters(

@@ -37,7 +37,7 @@ from ._io import gp_fitted, gp_params, read_gp, write_gp
 from ._limits import generator
 from ._lines import LineTracking
 from ._map_protocol import MapProtocol
-from ._observations import Observations, check_beam_hits, make_observations
+from ._observations import Observations, check_beam_hits, draw_subset, make_observations
 from ._planes import PlaneClustering
 from ._plsc import PLSCProba, fit_plsc
 
@@ -152,7 +152,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         update with its hyper-parameters as fitted, or a new fit on all of its
         observations.
     max_optimize : int, default=1000
-        Most observations the committee's PLSC is fitted on (a random subset).
+        Most observations the committee's PLSC is fitted on (a random subset,
+        with at least one hit and one beam).
     n_jobs : int, default=None
         Experts fitted and evaluated at once through joblib (threads unless
         the caller chose another backend, e.g.
@@ -646,9 +647,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     # ----------------------------------------------------------------- PLSC
     def _fit_plsc(self, obs, expert_of, groups, rng):
         """PLSC on the committee's leave-one-out predictions (see the class docstring)."""
-        take = np.arange(len(obs.y))
-        if len(take) > self.max_optimize:
-            take = np.sort(rng.choice(len(take), self.max_optimize, replace=False))
+        take = draw_subset(obs.labels, self.max_optimize, rng)
         u = rng.random(len(take))
         X = obs.starts[take] + u[:, None] * (obs.ends[take] - obs.starts[take])
         owner = expert_of[take]

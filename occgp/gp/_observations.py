@@ -10,7 +10,8 @@ from numpy.typing import NDArray
 from .._validation import as_numeric, as_point, as_points, check_bool, check_real
 from ._integral_kernel import as_segments
 
-__all__ = ["Observations", "observations_from_scans", "make_observations", "check_beam_hits"]
+__all__ = ["Observations", "observations_from_scans", "make_observations", "check_beam_hits",
+           "draw_subset"]
 
 
 class Observations(NamedTuple):
@@ -94,6 +95,24 @@ def make_observations(hits, segment_starts, segment_ends, dim=None) -> Observati
         np.r_[np.ones(n_hits), np.where(lengths > 0, -lengths, -1.0)],
         np.r_[np.ones(n_hits), -np.ones(len(starts))],
         np.r_[np.zeros(n_hits), lengths])
+
+
+def draw_subset(labels, size, rng) -> NDArray[np.intp]:
+    """Sorted indices of `size` observations drawn at random (all when fewer), with both
+    classes where `labels` (+1 hit, -1 beam) has both: a classifier is fitted on them.
+
+    Where the draw (``rng.choice`` without replacement) misses a class, one of
+    its entries, drawn at random, is swapped for an observation of that class
+    drawn at random; other draws are ``rng.choice``'s, sorted.
+    """
+    n = len(labels)
+    if n <= size:
+        return np.arange(n)
+    take = rng.choice(n, size, replace=False)
+    for members in (labels > 0, labels < 0):
+        if members.any() and not members[take].any():
+            take[rng.integers(size)] = rng.choice(np.flatnonzero(members))
+    return np.sort(take)
 
 
 def check_beam_hits(beam_hits, n_beams: int, n_hits: int) -> NDArray[np.int64]:
