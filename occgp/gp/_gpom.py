@@ -41,6 +41,8 @@ __all__ = ["GPOM"]
 MAX_FREE_POINTS = 10_000_000
 #: Memory of the local matrices of one batch of queries (the batch is cut to fit).
 _BATCH_BYTES = 2 ** 28
+#: What PLSC is fitted on (see GPOM's `calibration`).
+CALIBRATIONS = ("local-loo", "subset-loo")
 
 
 class _PointsOnly:
@@ -84,6 +86,26 @@ def _discretise(starts, ends, step):
     return starts[seg] + frac[:, None] * delta[seg]
 
 
+def _without(neighbours, own):
+    """Each row of `neighbours` (b, k + 1) less its own index `own` (b,; -1: none), or
+    less its last entry when it does not hold it: shape (b, k)."""
+    hit = neighbours == own[:, None]
+    drop = np.where(hit.any(axis=1), hit.argmax(axis=1), neighbours.shape[1] - 1)
+    keep = np.ones(neighbours.shape, dtype=bool)
+    keep[np.arange(len(neighbours)), drop] = False
+    return neighbours[keep].reshape(len(neighbours), -1)
+
+
+def _balanced(n_hits, n_free, size, rng):
+    """Sorted indices into hits-then-free points: at most `size`, as many hits as free
+    points where both classes have enough (the rest from the larger class)."""
+    half = size // 2
+    k_hit = min(n_hits, max(half, size - n_free))
+    k_free = min(n_free, size - k_hit)
+    return np.sort(np.r_[rng.choice(n_hits, k_hit, replace=False),
+                         n_hits + rng.choice(n_free, k_free, replace=False)])
+
+
 def _subsample(y, size, rng):
     """Sorted indices of at most `size` samples, drawn per class so both classes stay."""
     if len(y) <= size:
@@ -107,8 +129,8 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
     of the training points. At prediction, each query point's latent mean and
     variance come from a GP trained on its `n_hit_neighbors` nearest occupied
     points and `n_free_neighbors` nearest free points; PLSC (fitted on the
-    leave-one-out predictions of the same subset) turns them into a
-    probability of occupancy.
+    leave-one-out predictions of the local GPs at training points, see
+    `calibration`) turns them into a probability of occupancy.
 
     Limits, checked before any work: the data must lie within 1e10 length
     scales of the origin (the kernel's length scales at :meth:`fit`), the
@@ -150,7 +172,18 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
         map makes and is less sensitive to a misspecified kernel.
     max_optimize : int, default=1000
         Most training points (a random subset) used to fit the
-        hyper-parameters and PLSC.
+        hyper-parameters, and to fit PLSC.
+    calibration : {"local-loo", "subset-loo"}, default="local-loo"
+        What PLSC is fitted on. ``"local-loo"``: the leave-one-out
+        predictions of the local GPs that :meth:`predict` uses, at a seeded
+        sample of at most `max_optimize` training points, as many hits as
+        free points (fewer of one class when it has fewer). The classes weigh
+        the same, so the probabilities do not depend on how finely the beams
+        are cut into free points (`free_step`), and they are those of the
+        model that answers the queries. ``"subset-loo"``: the leave-one-out
+        predictions of one GP over the hyper-parameter subset (the
+        classifier of the GPOMIK paper; on the Intel log its probabilities
+        at the walls fall below 0.2: see the user guide).
     random_state : int, RandomState instance or None, default=None
         Seeds the subset and the restarts.
     batch_size : int, default=4096
@@ -212,8 +245,8 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
 
     def __init__(self, kernel=None, *, noise=0.01, noise_bounds=(1e-4, 0.25), free_step=0.5,
                  n_hit_neighbors=10, n_free_neighbors=20, optimizer=True, n_restarts=2,
-                 objective="lml", max_optimize=1000, random_state=None, batch_size=4096,
-                 n_jobs=None, occupancy_threshold=0.5):
+                 objective="lml", max_optimize=1000, calibration="local-loo",
+                 random_state=None, batch_size=4096, n_jobs=None, occupancy_threshold=0.5):
         self.kernel = kernel
         self.noise = noise
         self.noise_bounds = noise_bounds
@@ -224,6 +257,7 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
         self.n_restarts = n_restarts
         self.objective = objective
         self.max_optimize = max_optimize
+        self.calibration = calibration
         self.random_state = random_state
         self.batch_size = batch_size
         self.n_jobs = n_jobs
@@ -240,6 +274,7 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
         if self.n_restarts > MAX_RESTARTS:
             raise ValueError(f"n_restarts must be at most {MAX_RESTARTS}, got {self.n_restarts!r}")
         check_choice(self.objective, "objective", OBJECTIVES)
+        check_choice(self.calibration, "calibration", CALIBRATIONS)
         check_bool(self.optimizer, "optimizer")
         check_probability(self.occupancy_threshold, "occupancy_threshold")
         threads(self.n_jobs)
@@ -339,14 +374,18 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
                 objective=self.objective)
         L, alpha = factorise(kernel, quadrature, noise, Xs, Xs, ys, n_threads,
                              what="the optimisation subset")
-        plsc = fit_plsc(*loo_predictions(L, ys), ys)
-        if not np.isfinite(plsc).all():
-            raise ValueError(f"the classifier's fit on the leave-one-out predictions failed "
-                             f"(PLSC a, b = {plsc}); check the data and the noise")
         self.n_dims_ = dim
         self.X_train_, self.y_train_ = X_train, y_train
         self._hit_tree, self._free_tree = cKDTree(hits), cKDTree(free)
         self.kernel_, self.noise_ = kernel, noise
+        if self.calibration == "subset-loo":
+            plsc = fit_plsc(*loo_predictions(L, ys), ys)
+        else:
+            cal = _balanced(len(hits), len(free), self.max_optimize, rng)
+            plsc = fit_plsc(*self._local_loo(cal), y_train[cal])
+        if not np.isfinite(plsc).all():
+            raise ValueError(f"the classifier's fit on the leave-one-out predictions failed "
+                             f"(PLSC a, b = {plsc}); check the data and the noise")
         self.log_marginal_likelihood_value_ = float(
             -0.5 * ys @ alpha - np.log(np.diag(L)).sum() - 0.5 * len(ys) * np.log(2.0 * np.pi))
         self.plsc_ = plsc
@@ -455,10 +494,41 @@ class GPOM(PLSCProba, MapProtocol, BaseEstimator):
 
     def _predict_batch(self, Q, n_hit, n_free, workers):
         """Latent mean and variance of the local GPs at the query points `Q` (b, D)."""
-        variance = float(self.kernel_.variance)
-        inv_ls = self.kernel_.inverse_length_scales(self.n_dims_)
         _, i_hit = self._hit_tree.query(Q, k=np.arange(1, n_hit + 1), workers=workers)
         _, i_free = self._free_tree.query(Q, k=np.arange(1, n_free + 1), workers=workers)
+        return self._local_gp(Q, i_hit, i_free)
+
+    def _local_loo(self, index):
+        """Leave-one-out latent means and variances of the local GPs at the training points
+        `index` (into `X_train_`): each point's local model is built without it."""
+        n_hits, n_frees = self._hit_tree.n, self._free_tree.n
+        k_hit = min(self.n_hit_neighbors + 1, n_hits)     # one more, then drop the point
+        k_free = min(self.n_free_neighbors + 1, n_frees)
+        if k_hit + k_free < 3:
+            raise ValueError(f"calibration='local-loo' needs at least 3 training points, got "
+                             f"{n_hits} hits and {n_frees} free points; use "
+                             f"calibration='subset-loo'")
+        workers = threads(self.n_jobs)
+        mean, var = np.empty(len(index)), np.empty(len(index))
+        m = k_hit + k_free
+        batch = max(1, min(int(self.batch_size), _BATCH_BYTES // (32 * m * m)))
+        for start in range(0, len(index), batch):
+            part = index[start:start + batch]
+            Q = self.X_train_[part]
+            _, i_hit = self._hit_tree.query(Q, k=np.arange(1, k_hit + 1), workers=workers)
+            _, i_free = self._free_tree.query(Q, k=np.arange(1, k_free + 1), workers=workers)
+            i_hit = _without(i_hit, np.where(part < n_hits, part, -1))
+            i_free = _without(i_free, np.where(part >= n_hits, part - n_hits, -1))
+            mean[start:start + len(part)], var[start:start + len(part)] = self._local_gp(
+                Q, i_hit, i_free)
+        return mean, var
+
+    def _local_gp(self, Q, i_hit, i_free):
+        """Latent mean and variance at `Q` (b, D) of the GPs on the hits `i_hit` (b, n_hit)
+        and the free points `i_free` (b, n_free) of each query."""
+        variance = float(self.kernel_.variance)
+        inv_ls = self.kernel_.inverse_length_scales(self.n_dims_)
+        n_hit, n_free = i_hit.shape[1], i_free.shape[1]
         local = np.concatenate([self._hit_tree.data[i_hit], self._free_tree.data[i_free]],
                                axis=1) * inv_ls                             # (b, m, D)
         Q = Q * inv_ls
