@@ -60,6 +60,9 @@ class BetaBlocks {
   BetaBlock* get(uint64_t bkey) { return block(get_index(bkey)); }
   BetaBlock* block(size_t i) { return &chunks_[i / kChunk][i % kChunk]; }
 
+  // Start fetching the index slot of `bkey` (a hint before get_index / find).
+  void prefetch_index(uint64_t bkey) const { index_.prefetch(bkey); }
+
   const BetaBlock* find(uint64_t bkey) {
     const BlockSlot* s = index_.find(bkey);
     return s == nullptr ? nullptr : block(s->index - 1);

@@ -14,10 +14,12 @@ sparse kernel of Melkumyan and Ramos (times ``sf2``; tabulated in r^2, within
 hashed blocks of 4 x 4 x 4 cells with float32 alpha and beta (``_beta_blocks.h``).
 
 AKIMap's bandwidths (:func:`_akimap_bandwidths`, ``ext/_akimap.pxi``) are
-computed per sample on OpenMP threads; an update's evidence is summed in double
-precision over dense slabs of its key box, each slab's block rows split among the
+computed per sample on OpenMP threads. An update's evidence is summed in double
+precision tile by tile (dense cubes of 64 x 64 x 64 cells of its key box; only
+the tiles that some sample's support box meets), the tiles shared among the
 threads (every cell is summed by one thread, in sample order: the map does not
-depend on the number of threads), then added to the blocks once per cell.
+depend on the number of threads, nor on where the tiles cut the supports), then
+added to the blocks once per cell.
 
 Nothing here validates user input: :mod:`occgp.kernel` checks every array first.
 The loops run without the GIL; a per-map lock serialises operations on one map.
@@ -27,8 +29,9 @@ cimport cython
 from cython.operator cimport dereference as deref, preincrement as inc
 from cython.parallel cimport prange, threadid
 from libc.math cimport M_PI, acos, ceil, cos, exp, fabs, floor, isnan, log, sin, sqrt
-from libc.stdint cimport int64_t, uint8_t, uint16_t, uint64_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 from libc.string cimport memset
+from libcpp.mutex cimport mutex
 from libcpp.vector cimport vector
 
 import threading
@@ -37,7 +40,9 @@ import numpy as np
 
 cdef enum:
     _MAX_VAL = 32768        # half the number of keys per axis, as liboctomap's 16-bit keys
-    _MAX_DENSE = 1 << 22    # an update accumulates in dense slabs of at most this many cells
+    _TILE = 64              # an update accumulates tile by tile, 64 x 64 x 64 cells
+    _TILE_BRICKS = 4096     # (_TILE / 4)^3 bricks of 4 x 4 x 4 cells a tile
+    _MAX_PAIRS = 1 << 22    # (tile, sample) pairs sorted at a time
 
 
 cdef extern from "_beta_blocks.h" namespace "occgp" nogil:
@@ -52,6 +57,7 @@ cdef extern from "_beta_blocks.h" namespace "occgp" nogil:
 
     cdef cppclass BetaBlocks:
         void clear() except +
+        void prefetch_index(uint64_t bkey)
         size_t get_index(uint64_t bkey) except +
         BetaBlock* block(size_t i)
         const BetaBlock* find(uint64_t bkey)
@@ -67,6 +73,35 @@ cdef extern from "_beta_blocks.h" namespace "occgp" nogil:
 
 cdef extern from * nogil:
     void __builtin_prefetch(const void* address, int rw, int locality)
+
+
+cdef extern from * nogil:
+    """
+    #include <mutex>
+    /* out[j] = the block of keys[j] (created empty when absent) for j < n, under
+       `lock`, fetching the index slots a few keys ahead and each block's mask and
+       first cells; false (out undefined) when a block could not be made */
+    static bool occgp_blocks_locked(occgp::BetaBlocks* cells, std::mutex* lock,
+                                    const uint64_t* keys, occgp::BetaBlock** out,
+                                    size_t n) {
+        const size_t ahead = 8;
+        try {
+            std::lock_guard<std::mutex> guard(*lock);
+            for (size_t j = 0; j < n && j < ahead; ++j) cells->prefetch_index(keys[j]);
+            for (size_t j = 0; j < n; ++j) {
+                if (j + ahead < n) cells->prefetch_index(keys[j + ahead]);
+                out[j] = cells->get(keys[j]);
+                __builtin_prefetch(out[j], 1, 3);
+            }
+            return true;
+        } catch (...) {
+            return false;
+        }
+    }
+    """
+    bint _blocks_locked "occgp_blocks_locked" (BetaBlocks* cells, mutex* lock,
+                                               const uint64_t* keys, BetaBlock** out,
+                                               size_t n)
 
 
 cdef extern from * nogil:
@@ -235,11 +270,14 @@ cdef inline long _row_end(double x0, double a, double p00, double ip00, double r
 
 
 cdef struct Row:
-    # one row of a sample's support in the slab: its cells rx, rx + 1, ... (x offsets
-    # in the slab) in the bricks from `cell` (the alpha of the row's first brick, at the
-    # row's y and z), and r2 at the first cell with its first difference
+    # one row of a sample's support in the tile: its cells rx, rx + 1, ... (x offsets
+    # in the tile) in the bricks from `cell` (the alpha of the row's first brick, at the
+    # row's y and z), and r2 at the row's first cell inside the support's box with its
+    # first difference; the first `skip` of those cells lie before the tile (r2 is
+    # carried over them, nothing written), the next `count` are the row's in the tile
     double* cell
     long rx
+    long skip
     long count
     double r2
     double dr
@@ -271,6 +309,9 @@ cdef long _add_rows(const Row* rows, int n_rows, int kind, double wk, double y,
             # are carried times _TABLE (a power of two: the same sums, scaled exactly)
             x = r2 * _TABLE
             dx = dr * _TABLE
+            for j in range(rows[m].skip):
+                x += dx
+                dx += ddx
             for j in range(rows[m].count):
                 updates += x < <double>_TABLE
                 cell[(rx >> 2) * 64 + (rx & 3)] += wk * _interpolate(
@@ -279,6 +320,9 @@ cdef long _add_rows(const Row* rows, int n_rows, int kind, double wk, double y,
                 dx += ddx
                 rx += 1
         else:
+            for j in range(rows[m].skip):
+                r2 += dr
+                dr += ddr
             for j in range(rows[m].count):
                 if r2 < 1.0:
                     k = wk * _kernel_r2(r2)
@@ -291,30 +335,37 @@ cdef long _add_rows(const Row* rows, int n_rows, int kind, double wk, double y,
     return updates
 
 
-cdef long _accumulate_slab(const double* xs, const double* labels, const double* prec,
-                           const double* ext, const double* weights, const int64_t* order,
-                           Py_ssize_t n, double sf2, double res, long za, long zb,
+cdef long _accumulate_tile(const double* xs, const double* labels, const double* prec,
+                           const double* weights, const int32_t* boxes,
+                           const int64_t* members, Py_ssize_t m, double sf2, double res,
                            const long* org, const long* dims, double* box,
                            size_t beta_off, uint8_t* touched) noexcept nogil:
-    """Add the evidence of the samples (in `order`) to the rows za <= kz < zb of the
-    dense slab of 4x4x4 bricks whose lowest key is `org` and size `dims` cells
-    (block-aligned; bricks x fastest, 64 alphas each in `box` and their betas
-    `beta_off` further, cell c = x | y << 2 | z << 4 by the low two key bits, as
-    BetaBlock), flagging the bricks the samples' rows reach;
-    returns the number of contributions. A sample's rows are laid out in batches
-    first (their ends need a square root and are independent of each other), then
-    their cells summed."""
+    """Add the evidence of the samples `members[0 .. m)` (in that order) to the tile of
+    4x4x4 bricks whose lowest key is `org` and size `dims` cells (block-aligned;
+    bricks x fastest, 64 alphas each in `box` and their betas `beta_off` further,
+    cell c = x | y << 2 | z << 4 by the low two key bits, as BetaBlock), flagging
+    the bricks the samples' rows reach; `boxes[6 i ..]` holds sample i's support
+    keys (lowest, then highest, per axis). Returns the number of contributions.
+
+    A sample's rows are those of its support in the tile, each laid out from the
+    first cell of its support's box (its x-extent is the same whatever tile it is
+    cut in: r2 runs over the cells before the tile without writing), so that every
+    cell gets the same terms as from one tile holding the whole support. The rows
+    are laid out in batches first (their ends need a square root and are
+    independent of each other), then their cells summed."""
     cdef Py_ssize_t t, i
     cdef long lo[3]
     cdef long hi[3]
-    cdef long ky, kz, row_lo, row_hi, bx, b0, b1, bz_row, rx
+    cdef long ky, kz, row_lo, row_hi, w_lo, w_hi, bx, b0, b1, bz_row, rx
+    cdef long x_end = org[0] + dims[0] - 1, y_end = org[1] + dims[1] - 1
+    cdef long z_end = org[2] + dims[2] - 1
     cdef size_t kind_off
     cdef double d0, d1, d2, qb, qc, disc, p00, ddr, y, wk
     cdef double q01, q02, q12, ip00, ires = 1.0 / res
     cdef const double* x
     cdef const double* p
     cdef uint64_t brow
-    cdef int kind, n_rows
+    cdef int kind, n_rows, a
     cdef long updates = 0
     cdef long bdx = dims[0] >> 2, bdy = dims[1] >> 2
     cdef Row rows[_ROWS]
@@ -322,15 +373,15 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
     cdef double row_qc[_ROWS]
     cdef double row_disc[_ROWS]
     cdef double row_root[_ROWS]
-    cdef long ky0
+    cdef long ky0, ky1
     cdef int j, ny
-    for t in range(n):
-        i = order[t]
+    for t in range(m):
+        i = members[t]
         x = xs + 3 * i
         p = prec + 9 * i
-        _support_keys(x, ext + 3 * i, res, lo, hi)
-        if hi[2] < za or lo[2] >= zb:
-            continue
+        for a in range(3):
+            lo[a] = boxes[6 * i + a]
+            hi[a] = boxes[6 * i + 3 + a]
         y = labels[i]
         # binary labels add to one of alpha and beta only (k * 1 = k, and adding
         # k * 0 = +0 leaves a sum of non-negative terms as it is)
@@ -344,14 +395,15 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
         q12 = p[5] + p[7]
         ddr = 2.0 * p00 * res * res
         n_rows = 0
-        for kz in range(max(lo[2], za), min(hi[2], zb - 1) + 1):
+        ky1 = min(hi[1], y_end)
+        for kz in range(max(lo[2], org[2]), min(hi[2], z_end) + 1):
             d2 = (<double>(kz - _MAX_VAL) + 0.5) * res - x[2]
             bz_row = ((kz - org[2]) >> 2) * bdy
             # in chunks of rows: their discriminants and square roots first (no branch,
             # no wait on each square root), then the rows the ellipsoid meets
-            ky0 = lo[1]
-            while ky0 <= hi[1]:
-                ny = <int>min(hi[1] - ky0 + 1, <long>_ROWS)
+            ky0 = max(lo[1], org[1])
+            while ky0 <= ky1:
+                ny = <int>min(ky1 - ky0 + 1, <long>_ROWS)
                 for j in range(ny):
                     d1 = (<double>(ky0 + j - _MAX_VAL) + 0.5) * res - x[1]
                     # the row's cells inside the ellipsoid: r2 is quadratic in d0;
@@ -374,12 +426,15 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
                                                  False) + _MAX_VAL)
                     row_hi = min(hi[0], _row_end(x[0], -qb + disc, p00, ip00, res, ires,
                                                  True) + _MAX_VAL)
-                    if row_lo > row_hi:
+                    # the cells of the row in the tile
+                    w_lo = max(row_lo, org[0])
+                    w_hi = min(row_hi, x_end)
+                    if w_lo > w_hi:
                         continue
                     brow = <uint64_t>((bz_row + ((ky - org[1]) >> 2)) * bdx)
                     # the row's bricks b0 .. b1: up to four flagged without a loop
-                    b0 = (row_lo - org[0]) >> 2
-                    b1 = (row_hi - org[0]) >> 2
+                    b0 = (w_lo - org[0]) >> 2
+                    b1 = (w_hi - org[0]) >> 2
                     touched[brow + <uint64_t>b0] = 1
                     touched[brow + <uint64_t>min(b0 + 1, b1)] = 1
                     touched[brow + <uint64_t>min(b0 + 2, b1)] = 1
@@ -389,13 +444,14 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
                     d0 = (<double>(row_lo - _MAX_VAL) + 0.5) * res - x[0]
                     rows[n_rows].cell = (box + 64 * brow
                                          + <uint64_t>((ky & 3) << 2 | (kz & 3) << 4))
-                    rows[n_rows].rx = row_lo - org[0]     # org is block-aligned
-                    rows[n_rows].count = row_hi - row_lo + 1
+                    rows[n_rows].rx = w_lo - org[0]       # org is block-aligned
+                    rows[n_rows].skip = w_lo - row_lo
+                    rows[n_rows].count = w_hi - w_lo + 1
                     # the row's first and last bricks, fetched while the other rows are
                     # laid out
-                    rx = row_lo - org[0]
+                    rx = w_lo - org[0]
                     __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
-                    rx = row_hi - org[0]
+                    rx = w_hi - org[0]
                     __builtin_prefetch(rows[n_rows].cell + (rx >> 2) * 64 + kind_off, 1, 3)
                     rows[n_rows].r2 = (p00 * d0 + 2.0 * qb) * d0 + qc
                     rows[n_rows].dr = (2.0 * p00 * d0 + 2.0 * qb + p00 * res) * res
@@ -408,46 +464,6 @@ cdef long _accumulate_slab(const double* xs, const double* labels, const double*
     return updates
 
 
-cdef long _accumulate_direct(BetaBlocks* cells, const double* xs, const double* labels,
-                             const double* prec, const double* ext, const double* weights,
-                             const int64_t* order, Py_ssize_t n, double sf2,
-                             double res) except -1 nogil:
-    """Add each contribution straight to the blocks in float32 (updates whose key box
-    is too wide for one dense slab of four rows)."""
-    cdef Py_ssize_t t, i
-    cdef long lo[3]
-    cdef long hi[3]
-    cdef long kx, ky, kz
-    cdef double d[3]
-    cdef double r2, k, y
-    cdef const double* x
-    cdef const double* p
-    cdef long updates = 0
-    for t in range(n):
-        i = order[t]
-        x = xs + 3 * i
-        p = prec + 9 * i
-        _support_keys(x, ext + 3 * i, res, lo, hi)
-        y = labels[i]
-        for kz in range(lo[2], hi[2] + 1):
-            d[2] = (<double>(kz - _MAX_VAL) + 0.5) * res - x[2]
-            for ky in range(lo[1], hi[1] + 1):
-                d[1] = (<double>(ky - _MAX_VAL) + 0.5) * res - x[1]
-                for kx in range(lo[0], hi[0] + 1):
-                    d[0] = (<double>(kx - _MAX_VAL) + 0.5) * res - x[0]
-                    r2 = (p[0] * d[0] * d[0] + p[4] * d[1] * d[1] + p[8] * d[2] * d[2]
-                          + (p[1] + p[3]) * d[0] * d[1] + (p[2] + p[6]) * d[0] * d[2]
-                          + (p[5] + p[7]) * d[1] * d[2])
-                    if not r2 < 1.0:
-                        continue
-                    k = sf2 * weights[i] * _kernel_r2(r2)
-                    if k <= 0.0:
-                        continue
-                    cells.add(kx, ky, kz, <float>(k * y), <float>(k * (1.0 - y)))
-                    updates += 1
-    return updates
-
-
 @cython.auto_pickle(False)
 cdef class _KernelCells:
     """Beta evidence on hashed blocks of cells. Use :class:`occgp.BGKMap` or
@@ -456,10 +472,11 @@ cdef class _KernelCells:
     cdef BetaBlocks _cells
     cdef double _res
     cdef object _lock
-    cdef vector[double] _box        # an update's evidence over one slab (alphas, then
-                                    # betas from the middle on), zero between
-    cdef vector[uint8_t] _touched   # the slab's 4x4x4 blocks with evidence, zero between
-    cdef bint _box_dirty            # an exception left _box / _touched non-zero
+    cdef vector[double] _box        # per thread, an update's evidence over one tile
+                                    # (alphas, then betas), zero between
+    cdef vector[uint8_t] _touched   # per thread, the tile's 4x4x4 blocks with evidence,
+                                    # zero between
+    cdef bint _box_dirty            # a failure left _box / _touched non-zero
 
     def __cinit__(self, *args, **kwargs):
         self._lock = threading.Lock()
@@ -472,23 +489,28 @@ cdef class _KernelCells:
 
     def _accumulate(self, const double[:, ::1] samples, const double[::1] labels,
                     const double[:, :, ::1] precision, const double[:, ::1] extent,
-                    const double[::1] weights, double sf2, int n_threads=1):
+                    const double[::1] weights, double sf2, int n_threads=1,
+                    Py_ssize_t max_pairs=_MAX_PAIRS):
         """Add the evidence of each sample to the cells its support reaches.
 
         `precision[i]` is the inverse bandwidth matrix of sample i, `extent[i]`
         the half-size of its support's bounding box per axis (metres),
         `weights[i]` its weight. The update's key box (aligned to blocks) is
-        swept in slabs of whole block rows of at most 2^22 cells; in each slab
-        the evidence is summed in double precision (the slab's rows split among
-        `n_threads` threads, balanced by samples), then added to the blocks once
-        per cell. Returns the number of (sample, cell) contributions.
+        cut in tiles of 64 x 64 x 64 cells; each tile that a sample's support
+        box meets sums its samples' evidence in double precision (in the
+        samples' order below: the same sums whatever tile a support is cut in),
+        then adds it to the blocks once per cell, the tiles shared among
+        `n_threads` threads. The samples go in chunks of at most `max_pairs`
+        (tile, sample) pairs (one chunk unless the supports span very many
+        tiles; each chunk adds to the blocks once per cell). Returns the number
+        of (sample, cell) contributions.
         """
         cdef Py_ssize_t n = samples.shape[0]
         cdef long updates
         if n == 0:
             return 0
         # samples in the order of their cells (z, then y, then x): consecutive samples
-        # then write to the same rows of the slab, which stay in cache
+        # then write to the same rows of the tile, which stay in cache
         cell = np.floor(np.asarray(samples) / self._res).astype(np.int64)
         cell -= cell.min(axis=0)
         order_arr = np.lexsort((cell[:, 0], cell[:, 1], cell[:, 2])).astype(np.int64)
@@ -498,115 +520,156 @@ cdef class _KernelCells:
                 updates = self._accumulate_core(&samples[0, 0], &labels[0],
                                                 &precision[0, 0, 0], &extent[0, 0],
                                                 &weights[0], &order[0], n, sf2,
-                                                max(n_threads, 1))
+                                                max(n_threads, 1), max(max_pairs, 1))
         return updates
 
     cdef long _accumulate_core(self, const double* xs, const double* labels,
                                const double* ps, const double* es, const double* ws,
                                const int64_t* order, Py_ssize_t n, double sf2,
-                               int nt) except -1 nogil:
-        cdef Py_ssize_t i
+                               int nt, Py_ssize_t max_pairs) except -1 nogil:
+        cdef Py_ssize_t i, t, t0, t1, k, n_pairs
         cdef long lo[3]
         cdef long hi[3]
         cdef long org[3]
-        cdef long slab[3]
         cdef long top[3]
         cdef long dims[3]
-        cdef long layer, height, z0, z1, za, zb, nb, kz, bz
-        cdef long updates = 0, upd, new_cells
-        cdef int a, t
+        cdef long tile[3]
+        cdef long n_tile[3]
+        cdef long updates = 0, new_cells = 0
+        cdef int a, failed = 0
+        cdef int* fail = &failed
         cdef double res = self._res
-        cdef uint64_t cells_in_slab, nblocks, b, bkey
-        cdef vector[long] splits
-        cdef vector[long] counts
-        cdef vector[size_t] block_ids
-        cdef BetaBlocks* cells = &self._cells
-        cdef double* box
-        cdef size_t beta_off
-        cdef uint8_t* touched
-        cdef double visits = 0.0, boxes
+        cdef vector[int32_t] boxes
+        cdef vector[Py_ssize_t] per_sample
+        cdef mutex lock
         for a in range(3):
             org[a] = 2 * _MAX_VAL
             top[a] = -1
+        # each sample's support keys, and the key box of them all
+        boxes.resize(6 * n)
         for i in range(n):
             _support_keys(xs + 3 * i, es + 3 * i, res, lo, hi)
-            boxes = 1.0
             for a in range(3):
+                boxes[6 * i + a] = <int32_t>lo[a]
+                boxes[6 * i + 3 + a] = <int32_t>hi[a]
                 org[a] = min(org[a], lo[a])
                 top[a] = max(top[a], hi[a])
-                boxes *= <double>max(hi[a] - lo[a] + 1, 0)
-            visits += boxes
         for a in range(3):
             if top[a] < org[a]:      # no cell centre in any support
                 return 0
             org[a] = org[a] & ~3L
             dims[a] = ((top[a] | 3) + 1) - org[a]
-        layer = dims[0] * dims[1]
-        # the slabs sweep the whole key box (about a tenth of its cells' time each);
-        # where the supports fill little of a wide box, straight to the blocks
-        if 4 * layer > _MAX_DENSE or \
-                <double>layer * <double>dims[2] > 64.0 * visits + <double>_MAX_DENSE:
-            return _accumulate_direct(cells, xs, labels, ps, es, ws, order, n, sf2, res)
-        height = max(((_MAX_DENSE // layer) >> 2) << 2, 4)
-        height = min(height, dims[2])
-        cells_in_slab = <uint64_t>(layer * height)
+            tile[a] = min(<long>_TILE, dims[a])
+            n_tile[a] = (dims[a] + tile[a] - 1) // tile[a]
+        # the (tile, sample) pairs: a sample with every tile its support box meets
+        per_sample.resize(n)
+        for t in range(n):
+            i = order[t]
+            k = 1
+            for a in range(3):
+                if boxes[6 * i + 3 + a] < boxes[6 * i + a]:     # no cell centre inside
+                    k = 0
+                    break
+                k *= ((boxes[6 * i + 3 + a] - org[a]) // tile[a]
+                      - (boxes[6 * i + a] - org[a]) // tile[a] + 1)
+            per_sample[t] = k
+        # the samples in chunks of consecutive ones in `order`, at most max_pairs pairs
+        # each (but one sample at least): one chunk for all but giant supports
+        t0 = 0
+        while t0 < n:
+            n_pairs = per_sample[t0]
+            t1 = t0 + 1
+            while t1 < n and n_pairs + per_sample[t1] <= max_pairs:
+                n_pairs += per_sample[t1]
+                t1 += 1
+            updates += self._accumulate_chunk(
+                xs, labels, ps, ws, &boxes[0], order, t0, t1, n_pairs, sf2, org, tile,
+                n_tile, nt, &new_cells, fail, &lock)
+            t0 = t1
+        self._cells.add_cells(new_cells)
+        if failed:
+            with gil:
+                raise MemoryError("no memory for the kernel map's blocks")
+        return updates
+
+    cdef long _accumulate_chunk(
+            self, const double* xs, const double* labels, const double* ps,
+            const double* ws, const int32_t* boxes, const int64_t* order, Py_ssize_t t0,
+            Py_ssize_t t1, Py_ssize_t n_pairs, double sf2, const long* org,
+            const long* tile, const long* n_tile, int nt, long* new_cells, int* fail,
+            mutex* lock) except -1 nogil:
+        """Add the evidence of the samples order[t0 .. t1) (`n_pairs` (tile, sample)
+        pairs) tile by tile, on `nt` threads; returns the number of contributions."""
+        cdef Py_ssize_t t, i, k, n_tiles
+        cdef long tlo[3]
+        cdef long thi[3]
+        cdef long tx, ty, tz, updates = 0, upd, fresh, fresh_sum = 0
+        cdef int a, tid
+        cdef bint empty
+        cdef uint64_t tkey
+        cdef size_t tile_cells = <size_t>(tile[0] * tile[1] * tile[2])
+        cdef size_t tile_bricks = tile_cells >> 6
+        cdef vector[uint64_t] pairs
+        cdef vector[uint64_t] spare
+        cdef vector[int64_t] members
+        cdef vector[Py_ssize_t] runs
+        cdef double* box
+        cdef uint8_t* touched
+        if n_pairs == 0:
+            return 0
+        # each pair as (tile << 32 | position in `order` from t0), sorted by tile
+        # (stably: in each tile the samples stay in `order`)
+        pairs.reserve(n_pairs)
+        for t in range(t0, t1):
+            i = order[t]
+            empty = False
+            for a in range(3):
+                empty = empty or boxes[6 * i + 3 + a] < boxes[6 * i + a]
+                tlo[a] = (boxes[6 * i + a] - org[a]) // tile[a]
+                thi[a] = (boxes[6 * i + 3 + a] - org[a]) // tile[a]
+            if empty:
+                continue
+            for tz in range(tlo[2], thi[2] + 1):
+                for ty in range(tlo[1], thi[1] + 1):
+                    for tx in range(tlo[0], thi[0] + 1):
+                        tkey = <uint64_t>((tz * n_tile[1] + ty) * n_tile[0] + tx)
+                        pairs.push_back(tkey << 32 | <uint64_t>(t - t0))
+        _sort_by_tile(pairs, spare, <uint64_t>(n_tile[0] * n_tile[1] * n_tile[2]))
+        n_pairs = <Py_ssize_t>pairs.size()
+        if n_pairs == 0:
+            return 0
+        members.resize(n_pairs)
+        runs.push_back(0)
+        for k in range(n_pairs):
+            members[k] = order[t0 + <Py_ssize_t>(pairs[k] & <uint64_t>0xFFFFFFFF)]
+            if k and (pairs[k] >> 32) != (pairs[k - 1] >> 32):
+                runs.push_back(k)
+        runs.push_back(n_pairs)
+        n_tiles = <Py_ssize_t>runs.size() - 1
+        # a scratch tile per thread
+        nt = <int>max(min(<Py_ssize_t>nt, n_tiles), 1)
         if self._box_dirty:
             if self._box.size():
                 memset(&self._box[0], 0, self._box.size() * sizeof(double))
             self._touched.assign(self._touched.size(), 0)
-        if self._box.size() < 2 * cells_in_slab:
-            self._box.resize(2 * cells_in_slab)
-        if self._touched.size() < cells_in_slab // 64:
-            self._touched.resize(cells_in_slab // 64)
+        if self._box.size() < 2 * tile_cells * nt:
+            self._box.resize(2 * tile_cells * nt)
+        if self._touched.size() < tile_bricks * nt:
+            self._touched.resize(tile_bricks * nt)
         self._box_dirty = True
         box = &self._box[0]
-        beta_off = self._box.size() // 2
         touched = &self._touched[0]
-        z0 = org[2]
-        while z0 < org[2] + dims[2]:
-            z1 = min(z0 + height, org[2] + dims[2])
-            # split the slab's block rows among the threads by sample heights
-            nb = (z1 - z0) >> 2
-            counts.assign(nb, 0)
-            for i in range(n):
-                _support_keys(xs + 3 * i, es + 3 * i, res, lo, hi)
-                kz = (lo[2] + hi[2]) // 2
-                if z0 <= kz < z1:
-                    counts[(kz - z0) >> 2] += 1
-            splits.assign(nt + 1, nb)
-            splits[0] = 0
-            _balanced_splits(counts, nt, splits)
-            slab[0] = org[0]
-            slab[1] = org[1]
-            slab[2] = z0
-            for t in prange(nt, num_threads=nt, schedule="static", chunksize=1):
-                za = z0 + 4 * splits[t]
-                zb = z0 + 4 * splits[t + 1]
-                if za < zb:
-                    upd = _accumulate_slab(
-                        xs, labels, ps, es, ws, order, n, sf2, res,
-                        za, zb, slab, dims, box, beta_off, touched)
-                    updates += upd
-            # blocks with evidence: created serially, then filled in parallel, one
-            # layer of bricks per task
-            nblocks = <uint64_t>((z1 - z0) * layer) >> 6
-            block_ids.assign(nblocks, <size_t>-1)
-            for b in range(nblocks):
-                if touched[b]:
-                    touched[b] = 0
-                    bz = <long>(b // <uint64_t>((dims[0] >> 2) * (dims[1] >> 2)))
-                    bkey = _block_key(
-                        org[0] + 4 * <long>(b % <uint64_t>(dims[0] >> 2)),
-                        org[1] + 4 * <long>((b // <uint64_t>(dims[0] >> 2))
-                                            % <uint64_t>(dims[1] >> 2)),
-                        z0 + 4 * bz)
-                    block_ids[b] = cells.get_index(bkey)
-            new_cells = 0
-            for i in prange((z1 - z0) >> 2, num_threads=nt, schedule="dynamic"):
-                new_cells += _merge_layer(cells, box, beta_off, &block_ids[0], i, dims)
-            cells.add_cells(new_cells)
-            z0 = z1
-        self._box_dirty = False
+        for k in prange(n_tiles, num_threads=nt, schedule="dynamic", chunksize=1):
+            tid = threadid()
+            upd, fresh = _tile_update(
+                &self._cells, lock, xs, labels, ps, ws, boxes, &members[0] + runs[k],
+                runs[k + 1] - runs[k], pairs[runs[k]] >> 32, sf2, self._res, org, tile,
+                n_tile, box + 2 * tile_cells * <size_t>tid, tile_cells,
+                touched + tile_bricks * <size_t>tid, fail)
+            updates += upd
+            fresh_sum += fresh
+        new_cells[0] += fresh_sum
+        self._box_dirty = fail[0] != 0
         return updates
 
     def _query(self, const double[:, ::1] points, double prior, int what):
@@ -703,44 +766,83 @@ cdef class _KernelCells:
         return self._cells.memory_bytes()
 
 
-cdef void _balanced_splits(const vector[long]& counts, int nt, vector[long]& splits) noexcept nogil:
-    """Block-row boundaries splitting `counts` (samples per block row) into `nt`
-    consecutive ranges of about equal sums; splits[0] = 0, splits[nt] = len(counts)."""
-    cdef long total = 0, acc = 0
-    cdef size_t r
-    cdef int t = 1
-    for r in range(counts.size()):
-        total += counts[r]
-    for r in range(counts.size()):
-        acc += counts[r]
-        while t < nt and acc * nt >= total * t:
-            splits[t] = <long>r + 1
-            t += 1
-    while t < nt:
-        splits[t] = <long>counts.size()
-        t += 1
+cdef void _sort_by_tile(vector[uint64_t]& pairs, vector[uint64_t]& spare,
+                       uint64_t n_tiles) noexcept nogil:
+    """Sort `pairs` (tile << 32 | position) by tile, stably: least significant digit
+    first, 11 bits of the tile a pass, as many passes as `n_tiles` needs."""
+    cdef size_t n = pairs.size(), j
+    cdef uint64_t shift = 32, d
+    cdef size_t count[2048]
+    cdef size_t total, c
+    spare.resize(n)
+    while (n_tiles - 1) >> (shift - 32) and shift < 64:
+        memset(count, 0, sizeof(count))
+        for j in range(n):
+            count[(pairs[j] >> shift) & 2047] += 1
+        total = 0
+        for d in range(2048):
+            c = count[d]
+            count[d] = total
+            total += c
+        for j in range(n):
+            d = (pairs[j] >> shift) & 2047
+            spare[count[d]] = pairs[j]
+            count[d] += 1
+        pairs.swap(spare)
+        shift += 11
 
 
-cdef long _merge_layer(BetaBlocks* cells, double* box, size_t beta_off,
-                       const size_t* block_ids, long bz, const long* dims) noexcept nogil:
-    """Add the evidence of the slab's layer bz of 4x4x4 bricks (alphas in `box`, betas
-    `beta_off` further) to the map's blocks (`block_ids[b]`: the map's index of the
-    slab's brick b, or -1), zeroing it in the slab; returns the number of cells newly
-    reached."""
-    cdef long per_layer = (dims[0] >> 2) * (dims[1] >> 2), b
+cdef (long, long) _tile_update(
+        BetaBlocks* cells, mutex* lock, const double* xs, const double* labels,
+        const double* ps, const double* ws, const int32_t* boxes, const int64_t* members,
+        Py_ssize_t m, uint64_t tkey, double sf2, double res, const long* org,
+        const long* tile, const long* n_tile, double* box, size_t beta_off,
+        uint8_t* touched, int* fail) noexcept nogil:
+    """Sum the evidence of the samples `members[0 .. m)` over tile `tkey` (in the
+    thread's scratch `box` / `touched`, zero before and after), then add it to the
+    map's blocks (created under `lock`; every brick of a tile is its own block, so
+    the threads never add to the same one). Returns (contributions, cells newly
+    reached); sets fail[0] if a block could not be made."""
+    cdef long torg[3]
+    cdef long tx, ty, tz, updates, fresh = 0
+    cdef long bdx = tile[0] >> 2, bdy = tile[1] >> 2
+    cdef size_t b, j, n_touched = 0, n_bricks = beta_off >> 6
     cdef int c
-    cdef size_t bid
-    cdef long fresh = 0
     cdef double* al
     cdef double* be
     cdef BetaBlock* blk
-    for b in range(bz * per_layer, (bz + 1) * per_layer):
-        bid = block_ids[b]
-        if bid == <size_t>-1:
-            continue
-        blk = cells.block(bid)
-        al = box + 64 * <size_t>b
+    cdef uint32_t bricks[_TILE_BRICKS]
+    cdef uint64_t keys[_TILE_BRICKS]
+    cdef BetaBlock* blocks[_TILE_BRICKS]
+    tx = <long>(tkey % <uint64_t>n_tile[0])
+    ty = <long>((tkey // <uint64_t>n_tile[0]) % <uint64_t>n_tile[1])
+    tz = <long>(tkey // <uint64_t>(n_tile[0] * n_tile[1]))
+    torg[0] = org[0] + tx * tile[0]
+    torg[1] = org[1] + ty * tile[1]
+    torg[2] = org[2] + tz * tile[2]
+    updates = _accumulate_tile(xs, labels, ps, ws, boxes, members, m, sf2, res, torg,
+                               tile, box, beta_off, touched)
+    # the blocks of the bricks with evidence, looked up together (their index slots
+    # and blocks fetched ahead: they are scattered in memory)
+    for b in range(n_bricks):
+        if touched[b]:
+            touched[b] = 0
+            bricks[n_touched] = <uint32_t>b
+            keys[n_touched] = _block_key(
+                torg[0] + 4 * <long>(b % <size_t>bdx),
+                torg[1] + 4 * <long>((b // <size_t>bdx) % <size_t>bdy),
+                torg[2] + 4 * <long>(b // <size_t>(bdx * bdy)))
+            n_touched += 1
+    if not _blocks_locked(cells, lock, keys, blocks, n_touched):
+        fail[0] = 1
+        for j in range(n_touched):
+            memset(box + 64 * <size_t>bricks[j], 0, 64 * sizeof(double))
+            memset(box + 64 * <size_t>bricks[j] + beta_off, 0, 64 * sizeof(double))
+        return updates, 0
+    for j in range(n_touched):
+        al = box + 64 * <size_t>bricks[j]
         be = al + beta_off
+        blk = blocks[j]
         for c in range(64):
             if al[c] != 0.0 or be[c] != 0.0:
                 blk.alpha[c] += <float>al[c]
@@ -750,7 +852,7 @@ cdef long _merge_layer(BetaBlocks* cells, double* box, size_t beta_off,
                     fresh += 1
                 al[c] = 0.0
                 be[c] = 0.0
-    return fresh
+    return updates, fresh
 
 # AKIMap's adaptive bandwidths (its own concern, in its own file; it reads the
 # tabulated kernel above)

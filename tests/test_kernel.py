@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from occgp import BGKMap
+from occgp import AKIMap, BGKMap
 from occgp.kernel import sparse_kernel, voxel_centroids
 
 
@@ -342,8 +342,8 @@ def test_free_samples_in_chunks_equal_all_at_once(monkeypatch):
 
 
 def test_far_apart_samples_in_a_wide_key_box():
-    """Two samples 6 km apart: the update goes straight to the blocks instead of
-    sweeping the key box, and gives the union of their maps."""
+    """Two samples 6 km apart: the update sums only the tiles their supports meet
+    (not the key box between them), and gives the union of their maps."""
     a, b = [[1.0, 1.0, -3000.0]], [[30.0, 30.0, 3000.0]]
     kw = dict(free_resolution=1e6, max_range=None)
     both = BGKMap(0.1, **kw).update(a + b, [0.0, 0.0, 0.0])
@@ -355,6 +355,57 @@ def test_far_apart_samples_in_a_wide_key_box():
     assert_allclose(x.beta[far], y.beta[far], rtol=1e-6)
     assert far.sum() > 0 and (~far).sum() > 0
     assert both.occupancy([[30.0, 30.0, 3000.0]])[0] > 0.5
+
+
+@pytest.mark.parametrize("make", [lambda: BGKMap(0.05, max_range=None),
+                                  lambda: AKIMap(0.05, random_state=0)])
+def test_cells_do_not_depend_on_where_the_tiles_cut(make):
+    """An update sums its evidence in tiles of 64 cells a side counted from the lowest
+    key it reaches; a point far behind the sensor moves every cut (on each axis, by
+    a number of cells that is no multiple of 64), yet no cell of the wall (160 cells
+    wide: cut twice) changes, not even in its last bit."""
+    y, z = np.meshgrid(np.linspace(-4, 4, 41), np.linspace(-1, 1, 11))
+    wall = np.column_stack([np.full(y.size, 3.0), y.ravel(), z.ravel()])
+    origin = np.zeros(3)
+    alone = make().update(wall, origin)
+    behind = make().update(np.vstack([wall, [[-1.7, -5.3, -2.1]]]), origin)
+    a, b = alone.cells(), behind.cells()
+    near = a.centers[:, 0] > 1.5               # away from the origin and the far beam
+    assert near.sum() > 10000
+    idx = np.flatnonzero(np.isin(_keys(b.centers), _keys(a.centers[near])))
+    assert_array_equal(b.centers[idx], a.centers[near])
+    assert_array_equal(b.alpha[idx], a.alpha[near])
+    assert_array_equal(b.beta[idx], a.beta[near])
+
+
+def _keys(centers):
+    k = np.round(centers / 0.05 - 0.5).astype(np.int64) + (1 << 20)
+    return (k[:, 2] << 42) | (k[:, 1] << 21) | k[:, 0]
+
+
+@pytest.mark.parametrize("n_threads", [1, 2])
+def test_samples_in_chunks_of_tile_pairs_give_the_same_map(n_threads):
+    """The accumulation takes the samples in chunks of at most `max_pairs` (tile,
+    sample) pairs; every chunk size (1: one sample a chunk) gives the same cells, up
+    to the float32 rounding of adding each chunk's sums to the cells."""
+    points, origin = wall_scan(41, 6.0)
+    m = BGKMap(0.05, ell=0.4, max_range=None)
+    samples, labels = m.training_data(points, origin)
+    precision, extent, weights, sf2, _ = m._kernels(m._validated_params(), samples,
+                                                    labels, origin)
+    args = (np.ascontiguousarray(samples), labels, precision, extent, weights, sf2)
+    maps = []
+    for max_pairs in (1 << 22, 50, 1):
+        k = BGKMap(0.05)
+        n = k._accumulate(*args, n_threads, max_pairs)
+        maps.append((n, k.cells()))
+    (n0, c0), rest = maps[0], maps[1:]
+    assert n0 > 10000
+    for n, c in rest:
+        assert n == n0
+        assert_array_equal(c.centers, c0.centers)
+        assert_allclose(c.alpha, c0.alpha, rtol=1e-6)
+        assert_allclose(c.beta, c0.beta, rtol=1e-6)
 
 
 @pytest.mark.parametrize("bad, match", [
