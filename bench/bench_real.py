@@ -18,8 +18,10 @@ would build it: ``make_map(name, resolution=R)`` with only the resolution given
 (``--resolutions``, 0.1 m by default); rows named ``name(k=v,...)`` (``--extra``)
 add other parameters. Printed per map: AUC, accuracy at the map's own threshold,
 Brier score, NLL, the accuracy on occupied, free and near-surface free points, the
-unknown fraction, build and query seconds and peak memory (MB), and each map's
-total time over the fastest map of the same log and resolution.
+unknown fraction, build and query seconds, the map's own ``memory_usage()`` and the
+peak resident memory of building and querying it (MB; each map is built in a forked
+process of its own), and each map's total time over the fastest map of the same log
+and resolution.
 
 Run: ``python bench/bench_real.py [--logs intel fr079 hku_mb] [--maps gpom ...]
 [--resolutions 0.1 0.2] [--max-points N] [--extra "bgk(max_range=30)"]
@@ -33,10 +35,12 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # idle BLAS threads spin on
 import argparse
 import ast
 import json
+import multiprocessing
 import re
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 LOGS = {
@@ -47,8 +51,8 @@ LOGS = {
 MAPS_2D = ("gp-grid", "gpom", "gpomik", "gp-mixture")
 MAPS_3D = ("octree", "grid", "bgk", "akimap", "knn")
 COLUMNS = ("method", "auc", "accuracy", "brier", "nll", "acc_occupied", "acc_free",
-           "acc_near", "unknown_fraction", "build_seconds", "query_seconds", "peak_mb",
-           "vs_fastest")
+           "acc_near", "unknown_fraction", "build_seconds", "query_seconds", "map_mb",
+           "peak_mb", "vs_fastest")
 
 
 def load(name):
@@ -77,6 +81,32 @@ def parse_spec(text):
     return m.group(1), params
 
 
+def _child(bench, label, spec, conn):
+    try:
+        row = bench.evaluate(label, spec)._asdict()
+        row.pop("map")
+        conn.send(row)
+    except (ValueError, MemoryError) as exc:
+        conn.send(f"{type(exc).__name__}: {exc}")
+    conn.close()
+
+
+def isolated(bench, label, spec):
+    """bench.evaluate(label, spec) in a forked process of its own (so that its peak
+    memory is its own), as a dict without the map, or the error's text."""
+    ctx = multiprocessing.get_context("fork")
+    parent, child = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(bench, label, spec, child))
+    proc.start()
+    child.close()
+    try:
+        out = parent.recv()
+    except EOFError:
+        out = f"the process died (exit code {proc.exitcode}; out of memory?)"
+    proc.join()
+    return out
+
+
 def run_log(name, args):
     from occgp.evaluation import RealLogBenchmark, format_table
     from occgp.maps import map_type
@@ -90,6 +120,8 @@ def run_log(name, args):
     bench = RealLogBenchmark(log, max_range=args.max_range, max_points=args.max_points,
                              seed=0, progress=False)
     test = bench.test_set
+    if bench.dims == 2:
+        bench.training_observations()           # made once, before the maps' processes fork
     two_d = bench.dims == 2
     maps = args.maps or (MAPS_2D if two_d else MAPS_3D)
     maps = [m for m in maps if (m in MAPS_2D) == two_d or "(" in m]
@@ -109,15 +141,12 @@ def run_log(name, args):
                 spec["resolution"] = res
             label = map_name + ("" if not params else "(" + ", ".join(
                 f"{k}={v}" for k, v in params.items()) + ")")
-            try:
-                row = bench.evaluate(label, spec)
-            except (ValueError, MemoryError) as exc:
-                print(f"  {label} @ {res:g} m: failed: {type(exc).__name__}: {exc}",
-                      flush=True)
+            rec = isolated(bench, label, spec)
+            if isinstance(rec, str):
+                print(f"  {label} @ {res:g} m: failed: {rec}", flush=True)
                 continue
-            rec = row._asdict()
-            rec.pop("map")
             rec.update(log=name, resolution=res)
+            row = SimpleNamespace(**rec)
             rows.append(rec)
             print(f"  {label} @ {res:g} m: AUC {row.auc:.4f}, accuracy {row.accuracy:.3f}, "
                   f"{row.build_seconds:.1f} s + {row.query_seconds:.1f} s", flush=True)

@@ -33,7 +33,8 @@ __all__ = ["log_split", "LogTestSet", "log_test_set", "score_log", "LogResult",
 NLL_EPS = 1e-6
 
 _COLUMNS = ("method", "auc", "accuracy", "brier", "nll", "acc_occupied", "acc_free",
-            "acc_near", "unknown_fraction", "build_seconds", "query_seconds", "peak_mb")
+            "acc_near", "unknown_fraction", "build_seconds", "query_seconds", "map_mb",
+            "peak_mb")
 
 
 def log_split(n_scans: int, *, every: int = 10, offset: int = 5):
@@ -253,8 +254,14 @@ class LogResult(NamedTuple):
     build_seconds, query_seconds : float
         Time in ``fit`` / ``insert_scan`` calls, and in the ``occupancy``
         query of the test points.
+    map_mb : float
+        The built map's own ``memory_usage()``, MB (NaN for a map without it).
     peak_mb : float
-        Peak resident memory above the start, over building and querying (MB).
+        Peak resident memory of the process above its value at the start,
+        over building and querying (MB, sampled every 5 ms). Memory that
+        maps built before in the same process gave back to the allocator is
+        reused without raising the resident size: run each map in a process
+        of its own for a true peak (``bench/bench_real.py`` does).
     n_train_scans, n_test : int
     threshold : float
         The map's occupancy threshold.
@@ -273,6 +280,7 @@ class LogResult(NamedTuple):
     unknown_fraction: float
     build_seconds: float
     query_seconds: float
+    map_mb: float
     peak_mb: float
     n_train_scans: int
     n_test: int
@@ -397,7 +405,22 @@ class RealLogBenchmark:
                                           **self._test_args)
         return self._test_set
 
-    def _observations_2d(self):
+    def training_observations(self):
+        """The hits and beams of the training scans of a 2D log (made once, then kept).
+
+        Returns
+        -------
+        hits : ndarray of shape (n_hits, 2)
+        segment_starts, segment_ends : ndarray of shape (n_beams, 2)
+
+        Raises
+        ------
+        ValueError
+            If the log is 3D.
+        """
+        if self.dims != 2:
+            raise ValueError("training_observations is for 2D logs (a LaserLog), this log "
+                             "is 3D")
         if self._observations is None:
             self._observations = self.scans.observations(self.train_indices) \
                 if isinstance(self.scans, LaserLog) \
@@ -409,7 +432,7 @@ class RealLogBenchmark:
         map_ = factory()
         seconds = 0.0
         if self.dims == 2:
-            observations = self._observations_2d()
+            observations = self.training_observations()
             t0 = time.perf_counter()
             map_.fit(*observations)
             return map_, time.perf_counter() - t0
@@ -461,9 +484,11 @@ class RealLogBenchmark:
             query = time.perf_counter() - t0
         threshold = _threshold(map_)
         s = score_log(test, p, threshold)
+        usage = getattr(map_, "memory_usage", None)
+        map_mb = usage() / 2**20 if callable(usage) else math.nan
         return LogResult(str(name), s["auc"], s["accuracy"], s["brier"], s["nll"],
                          s["acc_occupied"], s["acc_free"], s["acc_near"],
-                         s["unknown_fraction"], build, query, memory.peak,
+                         s["unknown_fraction"], build, query, map_mb, memory.peak,
                          len(self.train_indices), len(test.labels), threshold, map_)
 
     def compare(self, methods: Mapping[str, Any] | Sequence[str]) -> list[LogResult]:
