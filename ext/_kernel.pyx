@@ -477,6 +477,14 @@ cdef class _KernelCells:
     cdef vector[uint8_t] _touched   # per thread, the tile's 4x4x4 blocks with evidence,
                                     # zero between
     cdef bint _box_dirty            # a failure left _box / _touched non-zero
+    # an update's sample boxes, (tile, sample) pairs and the like, kept between
+    # updates so that their memory is not mapped afresh every time
+    cdef vector[int32_t] _boxes
+    cdef vector[Py_ssize_t] _per_sample
+    cdef vector[uint64_t] _pairs
+    cdef vector[uint64_t] _spare
+    cdef vector[int64_t] _members
+    cdef vector[Py_ssize_t] _runs
 
     def __cinit__(self, *args, **kwargs):
         self._lock = threading.Lock()
@@ -539,19 +547,17 @@ cdef class _KernelCells:
         cdef int a, failed = 0
         cdef int* fail = &failed
         cdef double res = self._res
-        cdef vector[int32_t] boxes
-        cdef vector[Py_ssize_t] per_sample
         cdef mutex lock
         for a in range(3):
             org[a] = 2 * _MAX_VAL
             top[a] = -1
         # each sample's support keys, and the key box of them all
-        boxes.resize(6 * n)
+        self._boxes.resize(6 * n)
         for i in range(n):
             _support_keys(xs + 3 * i, es + 3 * i, res, lo, hi)
             for a in range(3):
-                boxes[6 * i + a] = <int32_t>lo[a]
-                boxes[6 * i + 3 + a] = <int32_t>hi[a]
+                self._boxes[6 * i + a] = <int32_t>lo[a]
+                self._boxes[6 * i + 3 + a] = <int32_t>hi[a]
                 org[a] = min(org[a], lo[a])
                 top[a] = max(top[a], hi[a])
         for a in range(3):
@@ -562,28 +568,29 @@ cdef class _KernelCells:
             tile[a] = min(<long>_TILE, dims[a])
             n_tile[a] = (dims[a] + tile[a] - 1) // tile[a]
         # the (tile, sample) pairs: a sample with every tile its support box meets
-        per_sample.resize(n)
+        self._per_sample.resize(n)
         for t in range(n):
             i = order[t]
             k = 1
             for a in range(3):
-                if boxes[6 * i + 3 + a] < boxes[6 * i + a]:     # no cell centre inside
+                # no cell centre inside
+                if self._boxes[6 * i + 3 + a] < self._boxes[6 * i + a]:
                     k = 0
                     break
-                k *= ((boxes[6 * i + 3 + a] - org[a]) // tile[a]
-                      - (boxes[6 * i + a] - org[a]) // tile[a] + 1)
-            per_sample[t] = k
+                k *= ((self._boxes[6 * i + 3 + a] - org[a]) // tile[a]
+                      - (self._boxes[6 * i + a] - org[a]) // tile[a] + 1)
+            self._per_sample[t] = k
         # the samples in chunks of consecutive ones in `order`, at most max_pairs pairs
         # each (but one sample at least): one chunk for all but giant supports
         t0 = 0
         while t0 < n:
-            n_pairs = per_sample[t0]
+            n_pairs = self._per_sample[t0]
             t1 = t0 + 1
-            while t1 < n and n_pairs + per_sample[t1] <= max_pairs:
-                n_pairs += per_sample[t1]
+            while t1 < n and n_pairs + self._per_sample[t1] <= max_pairs:
+                n_pairs += self._per_sample[t1]
                 t1 += 1
             updates += self._accumulate_chunk(
-                xs, labels, ps, ws, &boxes[0], order, t0, t1, n_pairs, sf2, org, tile,
+                xs, labels, ps, ws, &self._boxes[0], order, t0, t1, n_pairs, sf2, org, tile,
                 n_tile, nt, &new_cells, fail, &lock)
             t0 = t1
         self._cells.add_cells(new_cells)
@@ -609,17 +616,18 @@ cdef class _KernelCells:
         cdef uint64_t tkey
         cdef size_t tile_cells = <size_t>(tile[0] * tile[1] * tile[2])
         cdef size_t tile_bricks = tile_cells >> 6
-        cdef vector[uint64_t] pairs
-        cdef vector[uint64_t] spare
-        cdef vector[int64_t] members
-        cdef vector[Py_ssize_t] runs
         cdef double* box
         cdef uint8_t* touched
+        cdef const int64_t* members
+        cdef const Py_ssize_t* runs
+        cdef const uint64_t* pairs
         if n_pairs == 0:
             return 0
         # each pair as (tile << 32 | position in `order` from t0), sorted by tile
         # (stably: in each tile the samples stay in `order`)
-        pairs.reserve(n_pairs)
+        self._pairs.clear()
+        self._runs.clear()
+        self._pairs.reserve(n_pairs)
         for t in range(t0, t1):
             i = order[t]
             empty = False
@@ -633,19 +641,21 @@ cdef class _KernelCells:
                 for ty in range(tlo[1], thi[1] + 1):
                     for tx in range(tlo[0], thi[0] + 1):
                         tkey = <uint64_t>((tz * n_tile[1] + ty) * n_tile[0] + tx)
-                        pairs.push_back(tkey << 32 | <uint64_t>(t - t0))
-        _sort_by_tile(pairs, spare, <uint64_t>(n_tile[0] * n_tile[1] * n_tile[2]))
-        n_pairs = <Py_ssize_t>pairs.size()
+                        self._pairs.push_back(tkey << 32 | <uint64_t>(t - t0))
+        _sort_by_tile(self._pairs, self._spare,
+                      <uint64_t>(n_tile[0] * n_tile[1] * n_tile[2]))
+        n_pairs = <Py_ssize_t>self._pairs.size()
         if n_pairs == 0:
             return 0
-        members.resize(n_pairs)
-        runs.push_back(0)
+        self._members.resize(n_pairs)
+        self._runs.push_back(0)
         for k in range(n_pairs):
-            members[k] = order[t0 + <Py_ssize_t>(pairs[k] & <uint64_t>0xFFFFFFFF)]
-            if k and (pairs[k] >> 32) != (pairs[k - 1] >> 32):
-                runs.push_back(k)
-        runs.push_back(n_pairs)
-        n_tiles = <Py_ssize_t>runs.size() - 1
+            self._members[k] = order[t0 + <Py_ssize_t>(self._pairs[k]
+                                                       & <uint64_t>0xFFFFFFFF)]
+            if k and (self._pairs[k] >> 32) != (self._pairs[k - 1] >> 32):
+                self._runs.push_back(k)
+        self._runs.push_back(n_pairs)
+        n_tiles = <Py_ssize_t>self._runs.size() - 1
         # a scratch tile per thread
         nt = <int>max(min(<Py_ssize_t>nt, n_tiles), 1)
         if self._box_dirty:
@@ -659,10 +669,13 @@ cdef class _KernelCells:
         self._box_dirty = True
         box = &self._box[0]
         touched = &self._touched[0]
+        members = &self._members[0]
+        runs = &self._runs[0]
+        pairs = &self._pairs[0]
         for k in prange(n_tiles, num_threads=nt, schedule="dynamic", chunksize=1):
             tid = threadid()
             upd, fresh = _tile_update(
-                &self._cells, lock, xs, labels, ps, ws, boxes, &members[0] + runs[k],
+                &self._cells, lock, xs, labels, ps, ws, boxes, members + runs[k],
                 runs[k + 1] - runs[k], pairs[runs[k]] >> 32, sf2, self._res, org, tile,
                 n_tile, box + 2 * tile_cells * <size_t>tid, tile_cells,
                 touched + tile_bricks * <size_t>tid, fail)
