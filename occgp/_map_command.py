@@ -329,8 +329,8 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         The update mode (None: ``"scan"``); only for maps whose
         ``insert_scan`` takes it (the octree and the grid).
     max_range : float, default=None
-        Range limit in metres; None means none (and BGKMap's own 8 m for
-        ``method="bgk"``; a loaded BGK map keeps its own). A map whose
+        Range limit in metres; None means none (a loaded BGK map keeps its
+        own). A map whose
         ``insert_scan`` takes ``max_range`` (the octree, the grid) inserts
         longer beams up to it as free space only; one with a ``max_range``
         parameter (BGK) gets it and drops them whole; any other map (AKIMap)
