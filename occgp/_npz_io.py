@@ -27,6 +27,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import tokenize
 import zipfile
 import zlib
 from typing import Any
@@ -40,8 +41,10 @@ from ._validation import as_path
 _MAX_RATIO = 2048
 _SLACK = 1 << 16
 
+# (numpy's .npy header parser lets tokenize.TokenError out of some corrupt headers)
 _READ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error,
-                KeyError, NotImplementedError, RuntimeError, OverflowError)
+                KeyError, NotImplementedError, RuntimeError, OverflowError,
+                tokenize.TokenError)
 
 
 def write_npz(path: Any, format_name: str, version: int, class_name: str,
