@@ -502,3 +502,80 @@ def test_candidate_pairs_counts_the_neighbour_cubes_samples(spread):
     expected = (np.abs(ck[:, None, :] - ck[None, :, :]).max(axis=2) <= 1).sum()
     assert candidate_pairs(xs, cell) == float(expected)
     assert candidate_pairs(xs[:0], cell) == 0.0
+
+
+# ---------------------------------------------------------------------- max_range
+def far_and_near_scan():
+    """A wall 2 m away and a second one 6 m away, seen from the origin."""
+    near, origin = wall_scan()
+    far, _ = wall_scan(x=6.0)
+    return np.vstack([near, far[:, [1, 0, 2]]]), origin
+
+
+def test_max_range_drops_the_beams_beyond_it_whole():
+    points, origin = far_and_near_scan()
+    samples, labels = AKIMap(0.1, max_range=3.0, random_state=0).training_data(points,
+                                                                              origin)
+    hits, frees = samples[labels == 1], samples[labels == 0]
+    assert_array_equal(hits[:, 0], 2.0)                        # only the near wall's
+    # no free sample on a beam to the far wall (those run along +y, x at most 1 / 6)
+    assert np.all(np.linalg.norm(frees - origin, axis=1) < np.sqrt(2 ** 2 + 1 + 0.25))
+    assert not np.any(frees[:, 1] > np.abs(frees[:, 0]) * 6.0 + 0.01)
+    everything, lab = AKIMap(0.1, max_range=None, random_state=0).training_data(points,
+                                                                               origin)
+    assert (lab == 1).sum() == len(np.unique(np.floor(points / 0.1), axis=0))
+
+
+def test_max_range_is_the_map_of_the_pre_filtered_scan():
+    points, origin = far_and_near_scan()
+    origin = np.array([0.03, -0.02, 0.01])
+    for limit in (3.0, 5.9, float(np.linalg.norm(points[-1] - origin))):
+        kept = points[np.linalg.norm(points - origin, axis=1) <= limit]
+        assert 0 < len(kept) <= len(points)
+        got = AKIMap(0.1, max_range=limit, random_state=0, n_jobs=2)
+        want = AKIMap(0.1, random_state=0)
+        for _ in range(2):                                  # the random streams too
+            got.update(points, origin)
+            want.update(kept, origin)
+        for x, y in zip(got.cells(), want.cells()):
+            assert_array_equal(x, y)
+
+
+def test_max_range_none_or_beyond_every_beam_keeps_all():
+    points, origin = far_and_near_scan()
+    default = AKIMap(0.1, random_state=0).update(points, origin)
+    assert default.max_range is None
+    for limit in (None, 1e30):
+        m = AKIMap(0.1, max_range=limit, random_state=0).update(points, origin)
+        for x, y in zip(m.cells(), default.cells()):
+            assert_array_equal(x, y)
+    # every beam dropped: the scan adds nothing (the origin alone is no sample)
+    assert AKIMap(0.1, max_range=1.0, random_state=0).update(points, origin).num_cells == 0
+
+
+@pytest.mark.parametrize("value, exc, match", [
+    (0.0, ValueError, r"max_range must lie in \(0.0, inf\), got 0.0"),
+    (np.inf, ValueError, "max_range must lie in"),
+    (-1.0, ValueError, "max_range must lie in"),
+    ("30", TypeError, "max_range must be a real number, got str"),
+    (True, TypeError, "max_range must be a real number"),
+])
+def test_bad_max_range(value, exc, match):
+    with pytest.raises(exc, match=match):
+        AKIMap(0.1, max_range=value)
+    with pytest.raises(exc, match=match):
+        BGKMap(0.1, max_range=value)
+    m = AKIMap(0.1, random_state=0).update(*wall_scan())
+    before = m.cells()
+    m.max_range = value                                 # set as an attribute: checked on use
+    with pytest.raises(exc, match=match):
+        m.update(*wall_scan())
+    for x, y in zip(m.cells(), before):
+        assert_array_equal(x, y)
+
+
+def test_min_range_must_stay_under_max_range():
+    m = AKIMap(0.1, max_range=2.0, random_state=0)
+    with pytest.raises(ValueError, match=r"min_range must be less than max_range \(2.0\)"):
+        m.insert_scan(*wall_scan(), min_range=3.0)
+    assert m.num_cells == 0

@@ -22,6 +22,7 @@ MAKERS = {
     "bgk": lambda: BGKMap(0.1, ell=0.25),
     "aki-int": lambda: AKIMap(0.1, random_state=3),
     "aki-pcg": lambda: AKIMap(0.1, random_state=np.random.default_rng(5)),
+    "aki-range": lambda: AKIMap(0.1, max_range=2.1, random_state=3),
     "aki-mt": lambda: AKIMap(0.1, variant="published",
                              random_state=np.random.Generator(np.random.MT19937(7))),
     "aki-philox": lambda: AKIMap(0.1, random_state=np.random.Generator(np.random.Philox(1))),
@@ -266,6 +267,29 @@ def test_bad_parameters(saved, tmp_path):
     for params, match in cases:
         with pytest.raises(ValueError, match=r"bad\.npz: .*" + match):
             AKIMap.load(rewrite(path, bad, params=params))
+
+
+def test_akimap_max_range_is_saved_and_older_files_without_it_load_with_none(saved, tmp_path):
+    m, path = saved
+    limited = AKIMap(0.1, max_range=2.1, random_state=0).update(*wall())
+    limited.save(tmp_path / "limited.npz")
+    assert AKIMap.load(tmp_path / "limited.npz").max_range == 2.1
+    with np.load(path) as z:
+        params = json.loads(str(z["params"]))
+    assert params["max_range"] is None
+    del params["max_range"]                    # as written before AKIMap had max_range
+    old = AKIMap.load(rewrite(path, tmp_path / "old.npz", params=np.array(json.dumps(params))))
+    assert old.max_range is None
+    for x, y in zip(old.cells(), m.cells()):
+        assert_array_equal(x, y)
+    with pytest.raises(ValueError, match=r"bad parameters of a AKIMap: max_range must lie"):
+        AKIMap.load(rewrite(path, tmp_path / "bad.npz", params=params_with(path,
+                                                                              max_range=-3.0)))
+    # an old pickle's parameters (no max_range) rebuild the map too
+    from occgp.kernel._kernel_io import restore_kernel_map
+    keys, alpha, beta = m._cells_arrays()
+    back = restore_kernel_map(AKIMap, params, keys, alpha, beta)
+    assert back.max_range is None and back.num_cells == m.num_cells
 
 
 def mt_state(key):

@@ -14,7 +14,8 @@ from .._validation import as_point, as_points, check_real, n_threads
 from ..maps import register
 from ._kernel_map import KernelMapBase
 from ._kernel_samples import (MAX_CELLS_PER_UPDATE, beam_chunks, candidate_pairs,
-                              check_free_count, packed_keys, search_cell, voxel_first)
+                              check_free_count, packed_keys, search_cell, voxel_first,
+                              within_range)
 from ._kernel_utils import Bandwidths
 
 _RANDOM_STATE = "random_state must be None, a non-negative int or a numpy.random.Generator"
@@ -52,7 +53,8 @@ class AKIMap(KernelMapBase):
         R, the largest neighbour search radius, in metres; None means
         `free_sample_distance` (as the reference code).
     sensor_range : float, default=8.0
-        Distance at which the search radius reaches R, in metres.
+        Distance at which the search radius reaches R, in metres (it sets the
+        bandwidths' schedule only: `max_range` limits the beams).
     variant : {"occgp", "published"}, default="occgp"
         How the scale is chosen: "occgp" minimises Eq. 3.7 on a grid of 16
         log-spaced scales refined by golden-section search; "published" runs
@@ -65,6 +67,11 @@ class AKIMap(KernelMapBase):
         for ``variant="published"``.
     prior : float, default=0.001
         Prior alpha and beta of every cell.
+    max_range : float, default=None
+        Beams longer than this are dropped whole, as :class:`BGKMap`'s
+        `max_range` (la3dm's rule): an end point farther than this from the
+        origin gives no occupied sample and no free sample on its beam (the map
+        is the one of the scan without those points); None keeps all.
     random_state : int, numpy.random.Generator or None, default=None
         Seed of the free samples; an int makes every run draw the same ones.
     n_jobs : int, default=None
@@ -94,9 +101,9 @@ class AKIMap(KernelMapBase):
 
     Notes
     -----
-    The samples of a scan are its end points (occupied, label 1; the first
-    point in each cell of edge `resolution`), the sensor origin (always, as
-    the reference code) and one uniformly random point in each
+    The samples of a scan are its end points within `max_range` (occupied,
+    label 1; the first point in each cell of edge `resolution`), the sensor
+    origin (always, as the reference code) and one uniformly random point in each
     `free_sample_distance` interval of every beam (free, label 0; intervals
     start half a distance from the origin, cells already holding a sample
     are skipped). Each sample gets its own bandwidth matrix H:
@@ -164,6 +171,7 @@ class AKIMap(KernelMapBase):
         variant: str = "occgp",
         bandwidth_floor: float | None = None,
         prior: float = 0.001,
+        max_range: float | None = None,
         random_state: int | np.random.Generator | None = None,
         n_jobs: int | None = None,
         max_cells_per_update: int = MAX_CELLS_PER_UPDATE,
@@ -176,6 +184,7 @@ class AKIMap(KernelMapBase):
         self.variant = variant
         self.bandwidth_floor = bandwidth_floor
         self.prior = prior
+        self.max_range = max_range
         self.random_state = random_state
         self.n_jobs = n_jobs
         self.max_cells_per_update = max_cells_per_update
@@ -243,6 +252,7 @@ class AKIMap(KernelMapBase):
                    "bw_scale": (np.float64, ("n_bw",)),
                    "bw_n_same": (np.int64, ("n_bw",))}
     _EXTRA_OPTIONAL = tuple("bw_" + f for f in _BW_FIELDS)
+    _PARAMS_ADDED = KernelMapBase._PARAMS_ADDED + ("max_range",)
 
     def _io_params(self) -> dict:
         params = self.get_params()
@@ -304,6 +314,7 @@ class AKIMap(KernelMapBase):
 
     def _training_data(self, p, pts, org):
         res, step = p.resolution, p.free_sample_distance
+        pts = within_range(pts, org, p.max_range)
         if len(pts) == 0:
             return np.empty((0, 3)), np.empty(0)
         hits = pts[voxel_first(pts, res)]

@@ -10,7 +10,7 @@ from .._validation import check_real
 from ..maps import register
 from ._kernel_map import KernelMapBase
 from ._kernel_samples import (MAX_CELLS_PER_UPDATE, beam_chunks, check_free_count,
-                              cube_sums, merge_cube_sums, packed_keys)
+                              cube_sums, merge_cube_sums, packed_keys, within_range)
 
 
 @register("bgk", formats=(".npz",),
@@ -163,8 +163,6 @@ class BGKMap(KernelMapBase):
         ds = params["ds_resolution"]
         out["ds_resolution"] = None if ds is None else check_real(ds, "ds_resolution",
                                                                   low=0.0)
-        rng = params["max_range"]
-        out["max_range"] = None if rng is None else check_real(rng, "max_range", low=0.0)
         return out
 
     def __repr__(self) -> str:
@@ -197,8 +195,7 @@ class BGKMap(KernelMapBase):
         _, sums, counts = cube_sums(pts, ds, "ds_resolution")
         hits = sums / counts[:, None]
         n_beams = len(hits)
-        if p.max_range is not None:
-            hits = hits[np.linalg.norm(hits - org, axis=1) <= p.max_range]
+        hits = within_range(hits, org, p.max_range)
         self._beams = (len(hits), n_beams - len(hits))
         if len(hits) == 0:
             return np.empty((0, 3)), np.empty(0)

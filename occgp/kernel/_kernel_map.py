@@ -25,7 +25,8 @@ from .._validation import (as_point, as_points, check_bool, check_n_jobs, check_
 from ..octree import OccupancyOctree
 from .._scan_input import prefilter
 from ._kernel_io import KernelMapFiles
-from ._kernel_samples import MAX_VAL, MAX_WEIGHT, check_max_cells, support_cells
+from ._kernel_samples import (MAX_VAL, MAX_WEIGHT, check_max_cells, check_max_range,
+                              support_cells)
 from ._kernel_utils import KernelCells
 
 #: The Parameters section of the queries (see :func:`occgp._docs.fill_doc`).
@@ -48,6 +49,7 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
 
     _SUPPORT_HINT = ""
     n_jobs: int | None
+    max_range: float | None
     max_cells_per_update: int
     prior: float
     occupancy_threshold: float
@@ -77,7 +79,8 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
             n_jobs=check_n_jobs(params["n_jobs"]),
             max_cells_per_update=check_max_cells(params["max_cells_per_update"]),
             occupancy_threshold=check_probability(params["occupancy_threshold"],
-                                                  "occupancy_threshold"))
+                                                  "occupancy_threshold"),
+            max_range=check_max_range(params["max_range"]))
 
     def _validated_params(self, params: dict | None = None) -> SimpleNamespace:
         """The checked parameters (the map's own by default) as attributes."""
@@ -281,8 +284,8 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
             Points nearer to `origin` than this are dropped first: the map is
             the one :meth:`update` gives with the pre-filtered scan (distances
             in double precision, a point at exactly `min_range` kept; None: no
-            filter). Must be finite and >= 0 (and less than ``max_range``
-            for :class:`occgp.BGKMap` when that is set).
+            filter). Must be finite and >= 0 (and less than the map's
+            `max_range` when that is set).
         **options
             None: the kernel maps take no other per-scan option.
 
@@ -300,7 +303,7 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
             raise TypeError(f"{type(self).__name__}.insert_scan takes no options, got "
                             f"{next(iter(options))!r} (only min_range)")
         if min_range is not None:
-            points, _, _ = prefilter(points, origin, min_range, getattr(self, "max_range", None))
+            points, _, _ = prefilter(points, origin, min_range, self.max_range)
         return self.update(points, origin)
 
     # ------------------------------------------------------------ queries

@@ -12,6 +12,8 @@ from numbers import Integral
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import check_real
+
 #: Half the number of keys per axis (liboctomap's tree_max_val).
 MAX_VAL = 32768
 
@@ -91,6 +93,20 @@ def voxel_first(points: NDArray[np.float64], size: float) -> NDArray[np.int64]:
         return np.empty(0, dtype=np.int64)
     _, first = np.unique(packed_keys(points, size), return_index=True)
     return np.sort(first)
+
+
+def check_max_range(value) -> float | None:
+    """A kernel map's `max_range`: None (no limit) or a positive finite float."""
+    return None if value is None else check_real(value, "max_range", low=0.0)
+
+
+def within_range(points: NDArray[np.float64], origin: NDArray[np.float64],
+                 max_range: float | None) -> NDArray[np.float64]:
+    """The points at most `max_range` from `origin` (all of them when None): the end
+    points whose beams a kernel map keeps."""
+    if max_range is None:
+        return points
+    return points[np.linalg.norm(points - origin, axis=1) <= max_range]
 
 
 def check_max_cells(value) -> int:
