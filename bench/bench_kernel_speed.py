@@ -13,8 +13,12 @@ AUC of the map on the test set (:mod:`occgp.evaluation`). Data sets:
 * ``hku_mb``: the real LiDAR sequence ``../shared/data/lidar_seq/hku_mb`` (Livox
   Avia, 457 keyframes of ~5,100 body-frame points, FAST-LIO2 poses; ranges up
   to 349 m), mapped at 0.1 m by ``OccupancyOctree(0.1)`` (its default
-  ``n_jobs``), ``BGKMap(0.1, max_range=30)`` and ``AKIMap(0.1,
-  sensor_range=30, random_state=0)``, scan by scan. Scans ``i % 10 == 5`` are
+  ``n_jobs``), ``BGKMap(0.1)`` and ``AKIMap(0.1, random_state=0)``, each with
+  its defaults otherwise, scan by scan; ``--max-range R`` gives all three the
+  same range limit (the octree's ``insert_scan(..., max_range=R)`` cuts the
+  longer rays there, the kernel maps' ``max_range=R`` drops those beams whole;
+  an AKIMap without ``max_range``, in an older baseline, gets the scans with
+  those points dropped: the same map). Scans ``i % 10 == 5`` are
   held out: their end points are the occupied test points, and each gives one
   free test point drawn uniformly between 0.3 m and 0.2 m before it on its ray
   (seed 0). ``--scans`` picks a slice of the training scans (``::4``: every
@@ -30,7 +34,8 @@ also checks that the two checkouts build the same cells (keys, and the largest
 relative difference of alpha and beta).
 
 Run: ``python bench/bench_kernel_speed.py [--threads 1 2] [--repeats 3]
-[--sets la3dm unstructured hku_mb] [--scans ::4] [--maps ...] [--baseline ../main [--compare]]``.
+[--sets la3dm unstructured hku_mb] [--scans ::4] [--max-range 30] [--maps ...]
+[--baseline ../main [--compare]]``.
 """
 
 import os
@@ -97,30 +102,36 @@ def scans_and_test(name, scans_slice):
     return scene.scan(seed=0), grid_test_set(scene, RES[name])
 
 
-def make(name, kind, threads):
+def make(name, kind, threads, max_range=None):
+    """(the map, insert_scan's keyword arguments, whether to drop the points beyond
+    `max_range` before inserting)."""
+    import inspect
     from occgp import AKIMap, BGKMap, OccupancyOctree
     res = RES[name]
     if kind == "OccupancyOctree":
-        return OccupancyOctree(res)
-    if name == "hku_mb":
-        if kind == "BGKMap":
-            return BGKMap(res, max_range=30.0, n_jobs=threads)
-        return AKIMap(res, sensor_range=30.0, random_state=0, n_jobs=threads)
-    if kind == "BGKMap":
-        return BGKMap(res, n_jobs=threads)
-    return AKIMap(res, random_state=0, n_jobs=threads)
+        return OccupancyOctree(res), ({} if max_range is None
+                                      else {"max_range": max_range}), False
+    cls = BGKMap if kind == "BGKMap" else AKIMap
+    kw = {"n_jobs": threads} if kind == "BGKMap" else {"random_state": 0, "n_jobs": threads}
+    if max_range is None:
+        return cls(res, **kw), {}, False
+    if "max_range" in inspect.signature(cls).parameters:
+        return cls(res, max_range=max_range, **kw), {}, False
+    return cls(res, **kw), {}, True
 
 
-def insert_all(name, kind, threads, train, test, cells_to):
+def insert_all(name, kind, threads, train, test, cells_to, max_range=None):
     """(seconds spent in insert_scan over all scans, AUC, file of the cells or None) of
     one fresh map."""
     import numpy as np
     from occgp.evaluation import evaluate_map
-    m = make(name, kind, threads)
+    m, options, drop = make(name, kind, threads, max_range)
     total = 0.0
     for pts, org in train:
+        if drop:
+            pts = pts[np.linalg.norm(pts - org, axis=1) <= max_range]
         t0 = time.perf_counter()
-        m.insert_scan(pts, org)
+        m.insert_scan(pts, org, **options)
         total += time.perf_counter() - t0
     saved = None
     if cells_to and hasattr(m, "cells"):
@@ -131,7 +142,7 @@ def insert_all(name, kind, threads, train, test, cells_to):
     return total, evaluate_map(m, test)["auc"], saved
 
 
-def worker(sets, scans_slice, cells_to):
+def worker(sets, scans_slice, cells_to, max_range=None):
     """Answer lines ``set map threads`` on stdin with ``[seconds, auc, cells]`` (JSON)."""
     import numpy as np
     data = {}
@@ -142,16 +153,18 @@ def worker(sets, scans_slice, cells_to):
     print("ready", flush=True)
     for line in sys.stdin:
         name, kind, threads = line.split()
-        print(json.dumps(insert_all(name, kind, int(threads), *data[name], cells_to)),
-              flush=True)
+        print(json.dumps(insert_all(name, kind, int(threads), *data[name], cells_to,
+                                    max_range if name == "hku_mb" else None)), flush=True)
 
 
 class Worker:
     """A subprocess timing the occgp of one checkout."""
 
-    def __init__(self, root, sets, scans, cells_to):
+    def __init__(self, root, sets, scans, cells_to, max_range=None):
         cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "--occgp-from",
                str(root), "--sets", *sets, f"--scans={scans}"]
+        if max_range is not None:
+            cmd += ["--max-range", str(max_range)]
         if cells_to:
             cmd += ["--cells-to", cells_to]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
@@ -206,6 +219,8 @@ def main(argv=None):
                     help="time only these maps (default: every map of each set)")
     ap.add_argument("--scans", type=str, default="::1",
                     help="hku_mb: slice start:stop:step of its training scans")
+    ap.add_argument("--max-range", type=float, default=None,
+                    help="hku_mb: every map's range limit, in metres (default: none)")
     ap.add_argument("--baseline", type=Path, default=None,
                     help="a checkout whose occgp (extensions built) to time side by side")
     ap.add_argument("--compare", action="store_true",
@@ -221,7 +236,7 @@ def main(argv=None):
             MAPS[name] = tuple(k for k in MAPS[name] if k in args.maps)
     if args.worker:
         sys.path.insert(0, str(args.occgp_from.resolve()))
-        worker(args.sets, scans_slice, args.cells_to)
+        worker(args.sets, scans_slice, args.cells_to, args.max_range)
         return
     sets = []
     for name in args.sets:
@@ -235,9 +250,11 @@ def main(argv=None):
     tmp = tempfile.TemporaryDirectory() if args.compare and args.baseline else None
     cells_to = tmp.name if tmp else None
     # one worker per checkout; their runs alternate, so that both see the same load
-    workers = {"new": Worker(args.occgp_from.resolve(), sets, args.scans, cells_to)}
+    workers = {"new": Worker(args.occgp_from.resolve(), sets, args.scans, cells_to,
+                             args.max_range)}
     if args.baseline is not None:
-        workers["base"] = Worker(args.baseline.resolve(), sets, args.scans, cells_to)
+        workers["base"] = Worker(args.baseline.resolve(), sets, args.scans, cells_to,
+                                 args.max_range)
     best, ratio, files = {}, {}, {}
     for name in sets:
         for nt in args.threads:
@@ -260,7 +277,8 @@ def main(argv=None):
     print(f"insert seconds over all scans, best of {args.repeats}; AUC of the map; "
           f"/octree: the map's time over the octree's in the same round (each round)")
     if "hku_mb" in sets:
-        print(f"hku_mb training scans: slice {args.scans}")
+        print(f"hku_mb training scans: slice {args.scans}; range limit "
+              f"{'none' if args.max_range is None else f'{args.max_range:g} m'}")
     head = f"{'set':<13}{'map':<16}{'threads':>8}{'seconds':>9}{'AUC':>8}{'/octree':>16}"
     if "base" in workers:
         head += f"{'base s':>9}{'base AUC':>10}{'base /octree':>16}{'new/base':>9}"
