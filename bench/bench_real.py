@@ -25,7 +25,8 @@ and resolution.
 
 Run: ``python bench/bench_real.py [--logs intel fr079 hku_mb] [--maps gpom ...]
 [--resolutions 0.1 0.2] [--max-points N] [--extra "bgk(max_range=30)"]
-[--json out.json]``.
+[--json out.json] [--rst docs/real_log_tables.rst]``; ``--from-json a.json b.json
+--rst ...`` writes the tables of earlier runs (merged) without running anything.
 """
 
 import os
@@ -107,7 +108,7 @@ def isolated(bench, label, spec):
     return out
 
 
-def run_log(name, args):
+def run_log(name, args, headers):
     from occgp.evaluation import RealLogBenchmark, format_table
     from occgp.maps import map_type
 
@@ -127,11 +128,11 @@ def run_log(name, args):
     maps = [m for m in maps if (m in MAPS_2D) == two_d or "(" in m]
     specs = [parse_spec(m) for m in maps] + [parse_spec(e) for e in args.extra
                                              if (parse_spec(e)[0] in MAPS_2D) == two_d]
-    print(f"== {name}: {len(log)} scans, {len(bench.train_indices)} mapped, "
-          f"{len(bench.test_indices)} held out; {int(test.labels.sum()):,} occupied and "
-          f"{int((~test.labels).sum()):,} free test points "
-          f"({int(test.near_surface.sum()):,} near the surface); read in "
-          f"{time.perf_counter() - t0:.1f} s ==", flush=True)
+    headers[name] = (f"{name}: {len(log)} scans, {len(bench.train_indices)} mapped, "
+                     f"{len(bench.test_indices)} held out; {int(test.labels.sum()):,} occupied "
+                     f"and {int((~test.labels).sum()):,} free test points "
+                     f"({int(test.near_surface.sum()):,} near the surface).")
+    print(f"== {headers[name]} Read in {time.perf_counter() - t0:.1f} s ==", flush=True)
     records = []
     for res in args.resolutions:
         rows = []
@@ -145,7 +146,7 @@ def run_log(name, args):
             if isinstance(rec, str):
                 print(f"  {label} @ {res:g} m: failed: {rec}", flush=True)
                 continue
-            rec.update(log=name, resolution=res)
+            rec.update(log=name, resolution=res, header=headers[name])
             row = SimpleNamespace(**rec)
             rows.append(rec)
             print(f"  {label} @ {res:g} m: AUC {row.auc:.4f}, accuracy {row.accuracy:.3f}, "
@@ -162,6 +163,42 @@ def run_log(name, args):
     return records
 
 
+RST_COLUMNS = (("method", "map", "{}"), ("auc", "AUC", "{:.3f}"),
+               ("accuracy", "accuracy", "{:.3f}"), ("brier", "Brier", "{:.3f}"),
+               ("nll", "NLL", "{:.3f}"), ("acc_occupied", "acc occ", "{:.3f}"),
+               ("acc_free", "acc free", "{:.3f}"), ("acc_near", "acc near", "{:.3f}"),
+               ("unknown_fraction", "unknown", "{:.3f}"), ("build_seconds", "build s", "{:.1f}"),
+               ("query_seconds", "query s", "{:.1f}"), ("map_mb", "map MB", "{:.0f}"),
+               ("peak_mb", "peak MB", "{:.0f}"))
+
+
+def rst_table(rows):
+    """The rows as a reStructuredText simple table."""
+    cells = [[head for _, head, _ in RST_COLUMNS]] + [
+        [fmt.format(r[key]) for key, _, fmt in RST_COLUMNS] for r in rows]
+    widths = [max(len(row[j]) for row in cells) for j in range(len(RST_COLUMNS))]
+    rule = "  ".join("=" * w for w in widths)
+    lines = [rule, "  ".join(c.ljust(w) for c, w in zip(cells[0], widths)).rstrip(), rule]
+    lines += ["  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip() for row in cells[1:]]
+    return "\n".join(lines + [rule])
+
+
+def write_rst(path, records, headers):
+    """Every log's tables, one per resolution, under its header line."""
+    out = [".. This file is written by bench/bench_real.py --rst; do not edit it by hand.", ""]
+    for log, header in headers.items():
+        rows = [r for r in records if r["log"] == log]
+        if not rows:
+            continue
+        out += [f".. {log}", "", header, ""]
+        for res in sorted({r["resolution"] for r in rows}):
+            part = [r for r in rows if r["resolution"] == res]
+            if len({r["resolution"] for r in rows}) > 1 or log == "hku_mb":
+                out += [f"Cells of {res:g} m (maps without a resolution: the same rows):", ""]
+            out += [rst_table(part), ""]
+    Path(path).write_text("\n".join(out))
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--logs", nargs="+", default=list(LOGS), choices=list(LOGS))
@@ -175,12 +212,29 @@ def main(argv=None):
     parser.add_argument("--max-points", type=int, default=None,
                         help="at most this many held-out hits (a seeded subsample)")
     parser.add_argument("--json", default=None, help="write the rows to this file")
+    parser.add_argument("--rst", default=None,
+                        help="write the tables as reStructuredText to this file (the docs' "
+                        "docs/real_log_tables.rst)")
+    parser.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
+                        help="run nothing: the rows of these --json files (later files "
+                        "replace the same log, resolution and map) go to --rst and --json")
     args = parser.parse_args(argv)
-    records = []
-    for name in args.logs:
-        records += run_log(name, args)
+    records, headers = [], {}
+    if args.from_json:
+        merged = {}
+        for path in args.from_json:
+            for rec in json.loads(Path(path).read_text()):
+                merged[(rec["log"], rec["resolution"], rec["method"])] = rec
+        order = {name: k for k, name in enumerate(LOGS)}
+        records = sorted(merged.values(), key=lambda r: (order[r["log"]], r["resolution"]))
+        headers = {r["log"]: r["header"] for r in records}
+    else:
+        for name in args.logs:
+            records += run_log(name, args, headers)
     if args.json:
         Path(args.json).write_text(json.dumps(records, indent=1))
+    if args.rst:
+        write_rst(args.rst, records, headers)
     return 0
 
 
