@@ -207,6 +207,7 @@ cdef void _bandwidth_one(
         double res, double radius_max, double max_range, bint published, double floor2,
         double cell, const int64_t* grid_lo, const int64_t* grid_dims,
         const int64_t* cell_keys, long n_cells, const int64_t* cell_start,
+        const int64_t* cube_of, const int64_t* row_first,
         const double* xs_sorted, const uint8_t* labels_sorted, double* buf,
         double* precision, double* extent, double* weight, double* scale,
         int64_t* n_same) noexcept nogil:
@@ -214,7 +215,11 @@ cdef void _bandwidth_one(
     search radius, then the scale of Eq. 3.7 (see AKIMap._bandwidths). The
     neighbours are met cube by cube (z, then y, then x), in sample order within a
     cube: `xs_sorted` and `labels_sorted` hold the samples in that order, the
-    samples of cube `cell_keys[s]` from `cell_start[s]` on."""
+    samples of cube `cell_keys[s]` from `cell_start[s]` on. Sample i lies in cube
+    `cube_of[i]`, and `row_first[9 s + 3 (dz + 1) + dy + 1]` is the first cube of
+    `cell_keys` at or after the cube (x - 1, y + dy, z + dz) of cube s (x, y, z):
+    where the search box stays within the 3 x 3 x 3 cubes about the sample's own
+    (always, but for rounding), each row of cubes starts there."""
     cdef double xi[3]
     cdef double d[3]
     cdef double sig[9]
@@ -222,7 +227,10 @@ cdef void _bandwidth_one(
     cdef double dist, radius, r2max, det, lo_scale, c, w0, q, lab_t
     cdef long cmin[3]
     cdef long cmax[3]
-    cdef long cy, cz, first, last
+    cdef long own[3]
+    cdef long cy, cz, first, last, target
+    cdef int64_t key_own
+    cdef bint near
     cdef int64_t t, row_key, start, stop
     cdef int inside[_CANDIDATES]
     cdef int n_in, s_in
@@ -249,6 +257,14 @@ cdef void _bandwidth_one(
         cmin[a] = max(_floor_cube((xi[a] - radius) / cell) - <long>grid_lo[a], 0)
         cmax[a] = min(_floor_cube((xi[a] + radius) / cell) - <long>grid_lo[a],
                       <long>grid_dims[a] - 1)
+    # the sample's own cube, from its key
+    key_own = cell_keys[cube_of[i]]
+    own[0] = <long>(key_own % grid_dims[0])
+    own[1] = <long>((key_own // grid_dims[0]) % grid_dims[1])
+    own[2] = <long>(key_own // (grid_dims[0] * grid_dims[1]))
+    near = True
+    for a in range(3):
+        near = near and cmin[a] >= own[a] - 1 and cmax[a] <= own[a] + 1
     # pass 1: the neighbours (offsets and labels into buf, 4 doubles each) and the
     # scatter of the same-label ones about x_i. The cubes cmin[0] .. cmax[0] of a row
     # (cy, cz) have consecutive keys: their samples are one run of the sorted ones.
@@ -257,7 +273,15 @@ cdef void _bandwidth_one(
             if cmin[0] > cmax[0]:
                 continue
             row_key = (cz * grid_dims[1] + cy) * grid_dims[0]
-            first = _lower_bound(cell_keys, n_cells, row_key + cmin[0])
+            target = row_key + cmin[0]
+            if near:
+                # the first cube at or after (own x - 1) of the row, then at most a
+                # step to the first at or after cmin[0]: the lower bound of the keys
+                first = row_first[9 * cube_of[i] + 3 * (cz - own[2] + 1) + cy - own[1] + 1]
+                while first < n_cells and cell_keys[first] < target:
+                    first += 1
+            else:
+                first = _lower_bound(cell_keys, n_cells, target)
             last = first
             while last < n_cells and cell_keys[last] <= row_key + cmax[0]:
                 last += 1
@@ -358,39 +382,75 @@ cdef void _bandwidth_one(
     scale[i] = c
 
 
-def _akimap_bandwidths(const double[:, ::1] samples, const uint8_t[::1] labels,
-                       const double[::1] origin, double res, double radius_max,
-                       double max_range, bint published, double floor, int n_threads,
-                       double cell):
-    """Per sample: precision (inverse bandwidth, (n, 3, 3)), support half-extents (n, 3),
-    weight |H|^-1/2, the length-scale factor c (H = c^2 Sigma + floor^2 I) and the
-    number of same-label samples in its search ball (itself included). The samples
-    are bucketed in cubes of edge `cell` (at least `radius_max`; wider where they
-    would span more than 2^20 cubes)."""
-    cdef Py_ssize_t n = samples.shape[0], i
-    precision = np.empty((n, 3, 3))
-    extent = np.empty((n, 3))
-    weight = np.empty(n)
-    scale = np.empty(n)
-    n_same = np.empty(n, dtype=np.int64)
-    if n == 0:
-        return precision, extent, weight, scale, n_same
-    # samples bucketed in cubes of edge cell, the cubes sorted by key
-    cell = max(cell, radius_max)
+def _search_cubes(const double[:, ::1] samples, double cell):
+    """The samples bucketed in cubes of edge `cell`, for the neighbour search:
+    (order (the samples sorted by cube, z then y then x, stably), the occupied
+    cubes' keys (sorted) and first positions in that order (one more: n), each
+    sample's cube, the cubes' row starts (see _bandwidth_one), grid's lowest cube
+    and size, pairs): `pairs` counts, for each sample, the samples in the 3 x 3 x 3
+    cubes about its own (the work the search may do)."""
+    cdef Py_ssize_t n = samples.shape[0]
     ck = np.floor(np.asarray(samples) / cell).astype(np.int64)
     lo = ck.min(axis=0)
     dims = ck.max(axis=0) - lo + 1
     ck -= lo
     flat = (ck[:, 2] * dims[1] + ck[:, 1]) * dims[0] + ck[:, 0]
     order = np.argsort(flat, kind="stable").astype(np.int64)
-    keys, start = np.unique(flat[order], return_index=True)
+    keys, start, inverse = np.unique(flat[order], return_index=True, return_inverse=True)
+    cube_of = np.empty(n, dtype=np.int64)
+    cube_of[order] = inverse.ravel()
+    counts = np.diff(np.append(start, n))
     start = np.append(start, n).astype(np.int64)
-    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    d0, d1, d2 = (int(d) for d in dims)
+    cx, cy, cz = keys % d0, (keys // d0) % d1, keys // (d0 * d1)
+    row_first = np.empty((len(keys), 9), dtype=np.int64)
+    near = np.zeros(len(keys), dtype=np.int64)
+    for dz in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            row = (cz + dz) * d1 + (cy + dy)
+            row_first[:, 3 * (dz + 1) + dy + 1] = np.searchsorted(keys, row * d0 + cx - 1)
+            # the samples of the row's cubes x - 1 .. x + 1 inside the grid
+            inside = (cy + dy >= 0) & (cy + dy < d1) & (cz + dz >= 0) & (cz + dz < d2)
+            first = np.searchsorted(keys, row * d0 + np.maximum(cx - 1, 0))
+            last = np.searchsorted(keys, row * d0 + np.minimum(cx + 1, d0 - 1), side="right")
+            near += np.where(inside, start[last] - start[first], 0)
+    pairs = float(np.dot(counts, near))
+    return (order, np.ascontiguousarray(keys, dtype=np.int64), start, cube_of,
+            np.ascontiguousarray(row_first), np.ascontiguousarray(lo, dtype=np.int64),
+            np.ascontiguousarray(dims, dtype=np.int64), pairs)
+
+
+def _akimap_bandwidths(const double[:, ::1] samples, const uint8_t[::1] labels,
+                       const double[::1] origin, double res, double radius_max,
+                       double max_range, bint published, double floor, int n_threads,
+                       double cell, double max_pairs):
+    """(pairs, bandwidths): the (sample, candidate) pairs the neighbour search
+    examines (for each sample, the samples in the 3 x 3 x 3 search cubes about its
+    own), and, unless they are more than `max_pairs` (then None), per sample:
+    precision (inverse bandwidth, (n, 3, 3)), support half-extents (n, 3), weight
+    |H|^-1/2, the length-scale factor c (H = c^2 Sigma + floor^2 I) and the number
+    of same-label samples in its search ball (itself included). The samples are
+    bucketed in cubes of edge `cell` (at least `radius_max`; wider where they would
+    span more than 2^20 cubes)."""
+    cdef Py_ssize_t n = samples.shape[0], i
+    if n == 0:
+        return 0.0, (np.empty((0, 3, 3)), np.empty((0, 3)), np.empty(0), np.empty(0),
+                     np.empty(0, dtype=np.int64))
+    # samples bucketed in cubes of edge cell, the cubes sorted by key
+    cell = max(cell, radius_max)
+    order, keys, start, cube_of, row_first, lo, dims, pairs = _search_cubes(samples, cell)
+    if pairs > max_pairs:
+        return pairs, None
+    precision = np.empty((n, 3, 3))
+    extent = np.empty((n, 3))
+    weight = np.empty(n)
+    scale = np.empty(n)
+    n_same = np.empty(n, dtype=np.int64)
     xs_sorted = np.ascontiguousarray(np.asarray(samples)[order])
     labels_sorted = np.ascontiguousarray(np.asarray(labels)[order])
-    lo = np.ascontiguousarray(lo, dtype=np.int64)
-    dims = np.ascontiguousarray(dims, dtype=np.int64)
     cdef const int64_t[::1] lo_v = lo, dims_v = dims, keys_v = keys, start_v = start
+    cdef const int64_t[::1] cube_v = cube_of
+    cdef const int64_t[:, ::1] first_v = row_first
     cdef const double[:, ::1] xs_v = xs_sorted
     cdef const uint8_t[::1] lab_v = labels_sorted
     cdef double[:, :, ::1] p_v = precision
@@ -405,7 +465,7 @@ def _akimap_bandwidths(const double[:, ::1] samples, const uint8_t[::1] labels,
         for i in prange(n, schedule="dynamic", chunksize=64, num_threads=n_threads):
             _bandwidth_one(i, &samples[0, 0], &labels[0], &origin[0], res, radius_max,
                            max_range, published, floor * floor, cell, &lo_v[0], &dims_v[0],
-                           &keys_v[0], n_cells, &start_v[0], &xs_v[0, 0], &lab_v[0],
-                           &buf[threadid(), 0],
+                           &keys_v[0], n_cells, &start_v[0], &cube_v[0], &first_v[0, 0],
+                           &xs_v[0, 0], &lab_v[0], &buf[threadid(), 0],
                            &p_v[0, 0, 0], &e_v[0, 0], &w_v[0], &s_v[0], &n_v[0])
-    return precision, extent, weight, scale, n_same
+    return pairs, (precision, extent, weight, scale, n_same)

@@ -25,6 +25,6 @@ class _KernelCells:
 def _akimap_bandwidths(
     samples: NDArray[np.float64], labels: NDArray[np.uint8], origin: NDArray[np.float64],
     res: float, radius_max: float, max_range: float, published: bool, floor: float,
-    n_threads: int, cell: float,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
-           NDArray[np.float64], NDArray[np.int64]]: ...
+    n_threads: int, cell: float, max_pairs: float,
+) -> tuple[float, tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                        NDArray[np.float64], NDArray[np.int64]] | None]: ...

@@ -502,6 +502,13 @@ def test_candidate_pairs_counts_the_neighbour_cubes_samples(spread):
     expected = (np.abs(ck[:, None, :] - ck[None, :, :]).max(axis=2) <= 1).sum()
     assert candidate_pairs(xs, cell) == float(expected)
     assert candidate_pairs(xs[:0], cell) == 0.0
+    # the compiled search counts the same pairs (and does no work beyond a limit)
+    from occgp._kernel import _akimap_bandwidths
+    labels = (np.arange(len(xs)) % 2).astype(np.uint8)
+    args = (xs, labels, np.zeros(3), 0.1, cell, 8.0, False, 0.3, 1, cell)
+    pairs, out = _akimap_bandwidths(*args, float(expected))
+    assert pairs == float(expected) and len(out[0]) == len(xs)
+    assert _akimap_bandwidths(*args, float(expected) - 1) == (float(expected), None)
 
 
 # ---------------------------------------------------------------------- max_range

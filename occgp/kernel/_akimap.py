@@ -13,9 +13,8 @@ from .._kernel import _akimap_bandwidths
 from .._validation import as_point, as_points, check_real, n_threads
 from ..maps import register
 from ._kernel_map import KernelMapBase
-from ._kernel_samples import (MAX_CELLS_PER_UPDATE, beam_chunks, candidate_pairs,
-                              check_free_count, packed_keys, search_cell, voxel_first,
-                              within_range)
+from ._kernel_samples import (MAX_CELLS_PER_UPDATE, beam_chunks, check_free_count,
+                              packed_keys, search_cell, voxel_first, within_range)
 from ._kernel_utils import Bandwidths
 
 _RANDOM_STATE = "random_state must be None, a non-negative int or a numpy.random.Generator"
@@ -395,19 +394,19 @@ class AKIMap(KernelMapBase):
     def _bandwidths(self, p, xs, lab, org) -> Bandwidths:
         radius = p.search_range
         cell = search_cell(xs, radius)
-        pairs = candidate_pairs(xs, cell)
-        if pairs > p.max_cells_per_update:
+        pairs, out = _akimap_bandwidths(np.ascontiguousarray(xs, dtype=np.float64),
+                                        np.ascontiguousarray(lab, dtype=np.uint8), org,
+                                        p.resolution, radius, p.sensor_range,
+                                        p.variant == "published", p.floor,
+                                        n_threads(p.n_jobs), cell,
+                                        float(p.max_cells_per_update))
+        if out is None:
             raise ValueError(
                 f"the bandwidths of these {len(xs)} samples would examine {pairs:.3g} "
                 f"sample pairs (those in the cubes of edge max_search_range="
                 f"{radius:g} m around each), more than max_cells_per_update="
                 f"{p.max_cells_per_update}; use a smaller max_search_range or raise "
                 f"max_cells_per_update; the map is unchanged")
-        out = _akimap_bandwidths(np.ascontiguousarray(xs, dtype=np.float64),
-                                 np.ascontiguousarray(lab, dtype=np.uint8), org,
-                                 p.resolution, radius, p.sensor_range,
-                                 p.variant == "published", p.floor,
-                                 n_threads(p.n_jobs), cell)
         return Bandwidths(*out)
 
     def _kernels(self, p, samples, labels, org):
