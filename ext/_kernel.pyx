@@ -326,17 +326,28 @@ cdef class _KernelCells:
         cdef long updates
         if n == 0:
             return 0
-        # samples in the order of their cells (z, then y, then x): consecutive samples
-        # then write to the same rows of the tile, which stay in cache
+        # samples in the order of their cells (z, then y, then x; stably): consecutive
+        # samples then write to the same rows of the tile, which stay in cache. One
+        # sort of the packed cell keys (the same order as sorting by each in turn).
         cell = np.floor(np.asarray(samples) / self._res).astype(np.int64)
         cell -= cell.min(axis=0)
-        order_arr = np.lexsort((cell[:, 0], cell[:, 1], cell[:, 2])).astype(np.int64)
-        cdef const int64_t[::1] order = order_arr
+        if cell.max() < (1 << 21):
+            order_arr = np.argsort((cell[:, 2] << 42) | (cell[:, 1] << 21) | cell[:, 0],
+                                   kind="stable")
+        else:
+            order_arr = np.lexsort((cell[:, 0], cell[:, 1], cell[:, 2]))
+        # the samples' arrays put in that order, so that each tile reads its samples'
+        # data in sequence
+        cdef const double[:, ::1] xs = np.asarray(samples)[order_arr]
+        cdef const double[::1] ys = np.asarray(labels)[order_arr]
+        cdef const double[:, :, ::1] ps = np.asarray(precision)[order_arr]
+        cdef const double[:, ::1] es = np.asarray(extent)[order_arr]
+        cdef const double[::1] ws = np.asarray(weights)[order_arr]
+        cdef const int64_t[::1] order = np.arange(n, dtype=np.int64)
         with self._lock:
             with nogil:
-                updates = self._accumulate_core(&samples[0, 0], &labels[0],
-                                                &precision[0, 0, 0], &extent[0, 0],
-                                                &weights[0], &order[0], n, sf2,
+                updates = self._accumulate_core(&xs[0, 0], &ys[0], &ps[0, 0, 0], &es[0, 0],
+                                                &ws[0], &order[0], n, sf2,
                                                 max(n_threads, 1), max(max_pairs, 1))
         return updates
 
