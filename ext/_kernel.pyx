@@ -130,9 +130,22 @@ cdef extern from * nogil:
         __m128d v = _mm_max_sd(_mm_set_sd(x), _mm_setzero_pd());
         return _mm_cvtsd_f64(_mm_sqrt_sd(v, v));
     }
+    /* out[j] = occgp_sqrt_positive(x[j]) for j < n, two at a time (sqrtpd rounds
+       each lane as sqrtsd does: the same values, in half the square roots) */
+    static inline void occgp_sqrt_positive_n(const double* x, double* out, int n) {
+        int j = 0;
+        for (; j + 1 < n; j += 2) {
+            __m128d v = _mm_max_pd(_mm_loadu_pd(x + j), _mm_setzero_pd());
+            _mm_storeu_pd(out + j, _mm_sqrt_pd(v));
+        }
+        if (j < n) out[j] = occgp_sqrt_positive(x[j]);
+    }
     #else
     static inline double occgp_below_one(double x) { return x < 1.0 ? x : 1.0; }
     static inline double occgp_sqrt_positive(double x) { return x > 0.0 ? sqrt(x) : 0.0; }
+    static inline void occgp_sqrt_positive_n(const double* x, double* out, int n) {
+        for (int j = 0; j < n; ++j) out[j] = occgp_sqrt_positive(x[j]);
+    }
     static inline double occgp_below(double x, double t) { return x < t ? x : t; }
     static inline double occgp_interpolate(const double* table, double x) {
         int j = (int)x;
@@ -143,6 +156,7 @@ cdef extern from * nogil:
     """
     double _below_one "occgp_below_one" (double x)
     double _sqrt_positive "occgp_sqrt_positive" (double x)
+    void _sqrt_positive_n "occgp_sqrt_positive_n" (const double* x, double* out, int n)
     double _below "occgp_below" (double x, double t)
     double _interpolate "occgp_interpolate" (const double* table, double x)
 

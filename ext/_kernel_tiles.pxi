@@ -150,7 +150,7 @@ cdef long _accumulate_tile(const double* xs, const double* labels, const double*
                     row_qb[j] = qb
                     row_qc[j] = qc
                     row_disc[j] = disc
-                    row_root[j] = _sqrt_positive(disc)
+                _sqrt_positive_n(row_disc, row_root, ny)
                 for j in range(ny):
                     if not row_disc[j] > 0.0:
                         continue
