@@ -16,6 +16,51 @@ cdef double _GD_RATE = 0.01
 cdef double _COV_NOISE = 0.001
 
 
+cdef extern from * nogil:
+    """
+    #if defined(__SSE2__)
+    #include <emmintrin.h>
+    #endif
+    /* The candidates t in [start, stop) of the samples `xs` (x, y, z each) within
+       r2max (squared) of xi, as t - start into `inside` (in order); returns their
+       number. Two at a time where SSE2 is there: each lane's sum of squares is
+       the scalar one's, ((dx dx + dy dy) + dz dz), and "not above r2max" the same
+       test. */
+    static inline int occgp_in_ball(const double* xs, long start, long stop,
+                                    const double* xi, double r2max, int* inside) {
+        int n = 0;
+        long t = start;
+    #if defined(__SSE2__)
+        const __m128d cx = _mm_set1_pd(xi[0]), cy = _mm_set1_pd(xi[1]);
+        const __m128d cz = _mm_set1_pd(xi[2]), r = _mm_set1_pd(r2max);
+        for (; t + 1 < stop; t += 2) {
+            const double* p = xs + 3 * t;
+            __m128d a = _mm_loadu_pd(p), b = _mm_loadu_pd(p + 2), c = _mm_loadu_pd(p + 4);
+            __m128d dx = _mm_sub_pd(_mm_shuffle_pd(a, b, 2), cx);
+            __m128d dy = _mm_sub_pd(_mm_shuffle_pd(a, c, 1), cy);
+            __m128d dz = _mm_sub_pd(_mm_shuffle_pd(b, c, 2), cz);
+            __m128d q = _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy)),
+                                   _mm_mul_pd(dz, dz));
+            int mask = _mm_movemask_pd(_mm_cmpngt_pd(q, r));
+            inside[n] = (int)(t - start);
+            n += mask & 1;
+            inside[n] = (int)(t + 1 - start);
+            n += (mask >> 1) & 1;
+        }
+    #endif
+        for (; t < stop; ++t) {
+            double d0 = xs[3 * t] - xi[0], d1 = xs[3 * t + 1] - xi[1];
+            double d2 = xs[3 * t + 2] - xi[2];
+            inside[n] = (int)(t - start);
+            n += !(d0 * d0 + d1 * d1 + d2 * d2 > r2max);
+        }
+        return n;
+    }
+    """
+    int _in_ball "occgp_in_ball" (const double* xs, long start, long stop,
+                                  const double* xi, double r2max, int* inside)
+
+
 cdef inline double _largest_eigenvalue(const double* s) noexcept nogil:
     """Largest eigenvalue of the symmetric 3x3 matrix s (row-major), in closed form
     (the trigonometric solution of the characteristic cubic)."""
@@ -290,12 +335,7 @@ cdef void _bandwidth_one(
             start = cell_start[first]
             while start < cell_start[last]:
                 stop = min(start + _CANDIDATES, cell_start[last])
-                n_in = 0
-                for t in range(start, stop):
-                    for a in range(3):
-                        d[a] = xs_sorted[3 * t + a] - xi[a]
-                    inside[n_in] = <int>(t - start)
-                    n_in += not (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > r2max)
+                n_in = _in_ball(xs_sorted, start, stop, xi, r2max, inside)
                 for s_in in range(n_in):
                     t = start + inside[s_in]
                     for a in range(3):
@@ -307,11 +347,18 @@ cdef void _bandwidth_one(
                     buf[4 * m + 3] = 1.0 if lab == y else 0.0
                     m += 1
                     if lab == y:
+                        # the upper triangle (the lower one holds the same sums)
                         same += 1
-                        for a in range(3):
-                            for b in range(3):
-                                sig[3 * a + b] += d[a] * d[b]
+                        sig[0] += d[0] * d[0]
+                        sig[1] += d[0] * d[1]
+                        sig[2] += d[0] * d[2]
+                        sig[4] += d[1] * d[1]
+                        sig[5] += d[1] * d[2]
+                        sig[8] += d[2] * d[2]
                 start = stop
+    sig[3] = sig[1]
+    sig[6] = sig[2]
+    sig[7] = sig[5]
     n_same[i] = same
     if same <= 2:               # isotropic fallback: H = res^2 I (+ floor^2 I)
         for a in range(9):
