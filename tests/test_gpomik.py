@@ -468,3 +468,18 @@ def test_fit_rejects_bad_parameters(params, error, match):
 def test_fit_rejects_parameters_of_the_wrong_type(params, error, match):
     with pytest.raises(error, match=match):
         GPOMIK(optimizer=False, **params).fit(*wall())
+
+
+def test_one_cell_fit_reuses_the_factor_of_its_optimisation_subset():
+    # every observation in the subset and in one cell: the factor is built once, and is
+    # the one a separate build of the cell gives, bit for bit
+    rng = np.random.default_rng(0)
+    hits = rng.uniform(-2, 2, (30, 2))
+    starts = np.zeros((30, 2))
+    m = GPOMIK(SquaredExponential(1.0, 0.8), noise=1e-2, optimizer=False).fit(hits, starts, hits)
+    obs = m.cells_[0].obs
+    again = m._make_cells(obs, m.kernel_, m.noise_, m.jitter_, m._quadrature, 1)
+    assert len(m.cells_) == len(again) == 1
+    assert_array_equal(m.cells_[0].L, again[0].L)
+    assert_array_equal(m.cells_[0].alpha, again[0].alpha)
+

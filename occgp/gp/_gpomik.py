@@ -282,7 +282,12 @@ default="clenshaw-curtis"
         if not np.isfinite(plsc).all():
             raise ValueError(f"the classifier's fit on the leave-one-out predictions failed "
                              f"(PLSC a, b = {plsc}); check the data and the noise")
-        cells = self._make_cells(obs, kernel, noise, jitter, quadrature, n_threads)
+        if subset is obs and (self.max_cell_size is None or len(obs.y) <= self.max_cell_size):
+            # one cell of every observation: the factor of the subset is its factor
+            # (the same matrix _make_cells would build, in the same order)
+            cells = [Cell(obs, L, solve_lower(L, obs.y))]
+        else:
+            cells = self._make_cells(obs, kernel, noise, jitter, quadrature, n_threads)
         self.kernel_, self.noise_, self.jitter_ = kernel, noise, jitter
         self.plsc_ = plsc
         self.log_marginal_likelihood_value_ = lml
