@@ -443,3 +443,56 @@ def test_leave_one_out_downdate_equals_refitting_without_the_observation(data):
     full, _ = predict_dense(gp, X)
     assert np.abs(full - mean).max() > 1e-3
 
+
+def test_draw_balanced_takes_as_many_hits_as_beams():
+    from occgp.gp._observations import draw_balanced
+    labels = np.r_[np.ones(30), -np.ones(300)]
+    take = draw_balanced(labels, 40, np.random.default_rng(0))
+    assert_array_equal(take, np.unique(take))
+    assert (labels[take] > 0).sum() == (labels[take] < 0).sum() == 20
+    take = draw_balanced(labels, 100, np.random.default_rng(0))   # too few hits: all of them
+    assert (labels[take] > 0).sum() == 30 and (labels[take] < 0).sum() == 70
+    assert len(draw_balanced(labels, 1000, np.random.default_rng(0))) == len(labels)
+
+
+def test_committee_calibration_is_fitted_on_a_balanced_leave_one_out_sample(data, monkeypatch):
+    import occgp.gp._mixture as mixture_module
+    seen = {}
+    fit = mixture_module.fit_plsc
+
+    def spy(mean, var, labels):
+        seen["labels"] = np.asarray(labels)
+        return fit(mean, var, labels)
+
+    monkeypatch.setattr(mixture_module, "fit_plsc", spy)
+    hits, starts, ends = data
+    # three beams to a hit: a random draw would hold about three beams to a hit
+    beams = np.repeat(np.arange(len(starts)), 3)
+    model = GPMixture(FIXED, max_optimize=200, random_state=0).fit(hits, starts[beams],
+                                                                    ends[beams])
+    labels = seen["labels"]
+    assert len(labels) == 200 and (labels > 0).sum() == (labels < 0).sum() == 100
+    assert np.isfinite(model.plsc_).all()
+
+
+def test_subset_calibration_is_the_global_gpomiks_classifier(data):
+    from occgp.gp._experts import global_template
+    model = GPMixture(GPOMIK(n_restarts=0), calibration="subset-loo", random_state=0)
+    model.fit(*data)
+    default = GPMixture(GPOMIK(n_restarts=0), random_state=0).fit(*data)
+    assert default.kernel_ == model.kernel_
+    assert default.plsc_ != model.plsc_
+    # the subset GPOMIK's classifier, seeded as the fit seeds it
+    from occgp.gp._observations import make_observations
+    _, plsc = global_template(model._check_params(), make_observations(*data), model._seed)
+    assert model.plsc_ == plsc
+
+
+@pytest.mark.parametrize("params, match", [
+    (dict(calibration="held-out"), "calibration must be one of"),
+    (dict(calibration="subset-loo", hyperparameters="own"), "calibration='subset-loo' needs"),
+    (dict(calibration="subset-loo", hyperparameters="shared"), "calibration='subset-loo' needs"),
+])
+def test_bad_calibration(data, params, match):
+    with pytest.raises(ValueError, match=match):
+        GPMixture(FIXED, **params).fit(*data)

@@ -104,12 +104,14 @@ def test_min_size_merges_small_clusters():
 
 
 def test_global_hyperparameters_are_a_gpomik_fit():
-    """hyperparameters='global': the kernel, noise and PLSC of GPOMIK on the same data."""
+    """hyperparameters='global': the kernel and noise of GPOMIK on the same data, and its
+    PLSC with calibration='subset-loo'."""
     from occgp.datasets import room_2d
     from occgp.gp import GPOMIK, GPMixture, observations_from_scans
     data = observations_from_scans(room_2d().scan(n_poses=4))
-    mix = GPMixture(GPOMIK(n_restarts=0), hyperparameters="global", random_state=0).fit(*data)
-    gp = GPOMIK(n_restarts=0, max_cell_size=None).fit(*data)
+    mix = GPMixture(GPOMIK(n_restarts=0), hyperparameters="global", calibration="subset-loo",
+                    random_state=0).fit(*data)
+    gp = GPOMIK(n_restarts=0, max_cell_size=None, calibration="subset-loo").fit(*data)
     assert_allclose(mix.kernel_.theta, gp.kernel_.theta, rtol=1e-8)
     assert_allclose(mix.noise_, gp.noise_, rtol=1e-8)
     assert_allclose(mix.plsc_, gp.plsc_, rtol=1e-6)

@@ -483,3 +483,63 @@ def test_one_cell_fit_reuses_the_factor_of_its_optimisation_subset():
     assert_array_equal(m.cells_[0].L, again[0].L)
     assert_array_equal(m.cells_[0].alpha, again[0].alpha)
 
+
+def _room_observations():
+    from occgp.datasets import room_2d
+    from occgp.gp import observations_from_scans
+    return observations_from_scans(room_2d().scan(n_poses=3))
+
+
+def test_model_loo_is_each_cells_prediction_without_the_observation():
+    from occgp.gp._cells import predict_cell, spatial_groups
+    from occgp.gp._integral_kernel import covariance
+    from occgp.gp._observations import loo_sample, make_observations
+    hits, starts, ends = _room_observations()
+    m = GPOMIK(SquaredExponential(1.7, 0.6), noise=1e-2, optimizer=False, max_cell_size=30)
+    m.fit(hits, starts, ends)
+    assert len(m.cells_) > 2
+    obs = make_observations(hits, starts, ends)
+    groups = spatial_groups(obs.anchors, 30)     # the cells' observations, in order
+    take, X = loo_sample(obs, 40, np.random.default_rng(0))
+    mean, var = m._model_loo(m.cells_, groups, m.kernel_, m._quadrature, 1, take, X)
+    prior = float(m.kernel_.variance)
+    margin = 3.0 / m.kernel_.inverse_length_scales(2)
+    for j, t in enumerate(take):
+        best_m, best_v = 0.0, prior
+        for c, (cell, idx) in enumerate(zip(m.cells_, groups)):
+            lo, hi = cell.bounds(margin)
+            if not np.all((X[j] >= lo) & (X[j] <= hi)):
+                continue
+            if t in idx:   # refit the cell without the observation
+                o = cell.obs.take(np.flatnonzero(idx != t))
+                K = covariance(m.kernel_, m._quadrature, o.starts, o.ends)
+                K[np.diag_indices_from(K)] += m.noise_ + m.jitter_
+                k = covariance(m.kernel_, m._quadrature, o.starts, o.ends, X[j:j + 1],
+                               X[j:j + 1])[:, 0]
+                mu, v = k @ np.linalg.solve(K, o.y), prior - k @ np.linalg.solve(K, k)
+            else:
+                mu, v = (a[0] for a in predict_cell(cell, X[j:j + 1], m.kernel_,
+                                                      m._quadrature, 1, True))
+            if v < best_v:
+                best_m, best_v = mu, v
+        assert_allclose(mean[j], best_m, rtol=1e-8, atol=1e-8)
+        assert_allclose(var[j], best_v, rtol=1e-8, atol=1e-8 * prior)
+
+
+def test_calibrations_share_the_model_and_differ_in_the_classifier():
+    from occgp.gp import fit_plsc, loo_predictions
+    from occgp.gp._observations import make_observations
+    data = _room_observations()
+    kw = dict(kernel=SquaredExponential(1.7, 0.6), noise=1e-2, optimizer=False, random_state=0)
+    model = GPOMIK(calibration="model-loo", **kw).fit(*data)
+    subset = GPOMIK(**kw).fit(*data)      # the default
+    assert_array_equal(model.cells_[0].L, subset.cells_[0].L)
+    assert model.plsc_ != subset.plsc_
+    # subset-loo: leave-one-out over the (whole) subset, beams per unit length
+    obs = make_observations(*data)
+    mu, var = loo_predictions(subset.cells_[0].L, obs.y)
+    scale = np.where(obs.lengths > 0, obs.lengths, 1.0)
+    assert_allclose(subset.plsc_, fit_plsc(mu / scale, var / scale ** 2, obs.labels),
+                    rtol=1e-6)
+    with pytest.raises(ValueError, match="calibration must be one of"):
+        GPOMIK(calibration="held-out", **kw).fit(*data)

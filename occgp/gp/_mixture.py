@@ -37,7 +37,7 @@ from ._io import gp_fitted, gp_params, read_gp, write_gp
 from ._limits import generator
 from ._lines import LineTracking
 from ._map_protocol import MapProtocol
-from ._observations import Observations, check_beam_hits, draw_subset, make_observations
+from ._observations import Observations, check_beam_hits, loo_sample, make_observations
 from ._planes import PlaneClustering
 from ._plsc import PLSCProba, fit_plsc
 
@@ -46,6 +46,8 @@ __all__ = ["GPMixture"]
 _CLUSTERINGS = ("line", "dp", "plane")
 _UPDATES = ("cholesky", "refit")
 _HYPERPARAMETERS = ("global", "shared", "own")
+#: What the committee's PLSC is fitted on (see GPMixture's `calibration`).
+_CALIBRATIONS = ("committee-loo", "subset-loo")
 #: The objects a GPMixture's parameters may hold (besides the kernels and rules).
 _CLASSES = {c.__name__: c for c in (GPOMIK, LineTracking, DirichletProcessClustering,
                                     PlaneClustering)}
@@ -97,23 +99,20 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
        experts whose reach overlaps its own; elsewhere it counts as its
        prior, exactly known. Merged means and variances then differ from
        evaluating every expert everywhere by about `prior_tol` at most.
-    5. **PLSC** (``a``, ``b``): with ``hyperparameters="global"`` (the
-       default), that of the GPOMIK fitted on a random subset of the data,
-       which also gives every expert its hyper-parameters. Otherwise it is
-       fitted on the committee's leave-one-out
-       predictions: at each hit, and at a random point of each beam, every
-       expert predicts and the observation's own expert predicts without it
-       (a rank-one downdate). With a single expert the merged latent mean and
-       variance are that GPOMIK's; the probabilities differ from its own only
-       through this fit (GPOMIK fits PLSC on its beams' integrals per unit
-       length).
+    5. **PLSC** (``a``, ``b``, see `calibration`): fitted on the committee's
+       leave-one-out predictions at a seeded sample of at most `max_optimize`
+       training observations, as many hits as beams (the classes weigh the
+       same whatever their numbers): at each hit, and at a uniformly drawn
+       point of each beam, every expert predicts and the observation's own
+       expert predicts without it (a rank-one downdate).
 
     Parameters
     ----------
     expert : GPOMIK, default=None
         Template of the experts (its kernel is the starting point of every
         expert's hyper-parameter fit); None means ``GPOMIK(n_restarts=0)``.
-        Its `random_state` and `max_cell_size` are replaced per expert.
+        Its `random_state`, `max_cell_size` and `calibration` are replaced
+        per expert (``"subset-loo"``: an expert's own PLSC is unused).
     clustering : {"line", "dp", "plane"} or clustering object, default="line"
         How the hits are clustered: :class:`LineTracking`,
         :class:`DirichletProcessClustering` or :class:`PlaneClustering` with
@@ -123,16 +122,13 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     combine : {"bcm", "tresp", "rbcm", "gpoe", "minvar"}, default="gpoe"
         The committee rule.
     hyperparameters : {"global", "shared", "own"}, default="global"
-        ``"global"``: one set for every expert and the classifier (PLSC)
-        too, both fitted as :meth:`GPOMIK.fit` fits its own on a random
-        subset of the template's `max_optimize` observations of all the
-        data (the classifier on the subset's leave-one-out predictions per
-        unit length); ``"shared"``: one set for every expert, maximising the
-        sum of the experts' log marginal likelihoods (Deisenroth & Ng 2015),
-        fitted on whole experts drawn at random until the template's
-        `max_optimize` observations; ``"own"``: each expert maximises its own
-        (the mixture paper), which over-fits small clusters (see the user
-        guide).
+        ``"global"``: one set for every expert, fitted as :meth:`GPOMIK.fit`
+        fits its own on a random subset of the template's `max_optimize`
+        observations; ``"shared"``: one set for every expert, maximising the
+        sum of the experts' log marginal likelihoods (Deisenroth & Ng 2015)
+        on whole experts drawn at random until the template's `max_optimize`
+        observations; ``"own"``: each expert maximises its own (the mixture
+        paper), which over-fits small clusters (see the user guide).
     min_hits : int, default=5
         Fewest hits of a cluster with its own expert.
     min_size : int, default=1
@@ -152,8 +148,13 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         update with its hyper-parameters as fitted, or a new fit on all of its
         observations.
     max_optimize : int, default=1000
-        Most observations the committee's PLSC is fitted on (a random subset,
-        with at least one hit and one beam).
+        Most observations the committee's PLSC is fitted on (see 5. above).
+    calibration : {"committee-loo", "subset-loo"}, default="committee-loo"
+        What PLSC is fitted on: ``"committee-loo"``, see 5. above;
+        ``"subset-loo"`` (with ``hyperparameters="global"`` only): the
+        classifier of the GPOMIK fitted on the hyper-parameters' subset, on
+        its leave-one-out predictions per unit length (the GPOMIK paper's,
+        the earlier default; see the user guide).
     n_jobs : int, default=None
         Experts fitted and evaluated at once through joblib (threads unless
         the caller chose another backend, e.g.
@@ -161,7 +162,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         core. The map does not depend on it.
     random_state : int, Generator or None, default=None
         Seeds the clustering, every expert (one seed per expert, from its
-        index) and the PLSC subset.
+        index) and the PLSC sample.
     occupancy_threshold : float, default=0.5
         :meth:`is_occupied`'s threshold: a point is occupied when its
         probability is at least this; in (0, 1).
@@ -224,8 +225,9 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
 
     def __init__(self, expert=None, *, clustering="line", combine="gpoe",
                  hyperparameters="global", min_hits=5, min_size=1, max_cluster_size=1000,
-                 prior_tol=1e-3, update_experts="cholesky", max_optimize=1000, n_jobs=None,
-                 random_state=None, occupancy_threshold=0.5, hit_tolerance=HIT_TOLERANCE):
+                 prior_tol=1e-3, update_experts="cholesky", max_optimize=1000,
+                 calibration="committee-loo", n_jobs=None, random_state=None,
+                 occupancy_threshold=0.5, hit_tolerance=HIT_TOLERANCE):
         self.expert = expert
         self.clustering = clustering
         self.combine = combine
@@ -236,6 +238,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         self.prior_tol = prior_tol
         self.update_experts = update_experts
         self.max_optimize = max_optimize
+        self.calibration = calibration
         self.n_jobs = n_jobs
         self.random_state = random_state
         self.occupancy_threshold = occupancy_threshold
@@ -256,6 +259,10 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         check_int(self.min_size, "min_size", low=1)
         check_int(self.max_cluster_size, "max_cluster_size", low=2)
         check_int(self.max_optimize, "max_optimize", low=2)
+        check_choice(self.calibration, "calibration", _CALIBRATIONS)
+        if self.calibration == "subset-loo" and self.hyperparameters != "global":
+            raise ValueError("calibration='subset-loo' needs hyperparameters='global', got "
+                             f"{self.hyperparameters!r}")
         check_real(self.prior_tol, "prior_tol", low=0.0, high=1.0, low_open=False)
         check_n_jobs(self.n_jobs)
         check_probability(self.occupancy_threshold, "occupancy_threshold")
@@ -267,7 +274,9 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
                   and callable(getattr(c, "partial_fit", None))):
             raise TypeError("clustering must be 'line', 'dp', 'plane' or an object with "
                             f"fit_predict and partial_fit, got {type(c).__name__}")
-        template = clone(template).set_params(max_cell_size=self.max_cluster_size)
+        # the experts' own classifiers are not the committee's: the cheapest one
+        template = clone(template).set_params(max_cell_size=self.max_cluster_size,
+                                              calibration="subset-loo")
         return template
 
     def _make_clustering(self, seed):
@@ -452,7 +461,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
             self._cluster_experts.setdefault(c, set()).add(e)
         self._reach = [None] * len(self.experts_)
         self.updated_experts_ = np.arange(len(self.experts_))
-        if plsc is None:
+        if self.calibration == "committee-loo":
             plsc = self._fit_plsc(obs, expert_of, groups, np.random.default_rng(seed))
         self.plsc_ = plsc
         return self
@@ -647,9 +656,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     # ----------------------------------------------------------------- PLSC
     def _fit_plsc(self, obs, expert_of, groups, rng):
         """PLSC on the committee's leave-one-out predictions (see the class docstring)."""
-        take = draw_subset(obs.labels, self.max_optimize, rng)
-        u = rng.random(len(take))
-        X = obs.starts[take] + u[:, None] * (obs.ends[take] - obs.starts[take])
+        take, X = loo_sample(obs, self.max_optimize, rng)
         owner = expert_of[take]
         committee, priors = self._committee(X, skip=owner)
         for e, gp in enumerate(self.experts_):

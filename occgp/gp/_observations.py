@@ -11,7 +11,7 @@ from .._validation import as_numeric, as_point, as_points, check_bool, check_rea
 from ._integral_kernel import as_segments
 
 __all__ = ["Observations", "observations_from_scans", "make_observations", "check_beam_hits",
-           "draw_subset"]
+           "draw_subset", "draw_balanced", "loo_sample"]
 
 
 class Observations(NamedTuple):
@@ -113,6 +113,29 @@ def draw_subset(labels, size, rng) -> NDArray[np.intp]:
         if members.any() and not members[take].any():
             take[rng.integers(size)] = rng.choice(np.flatnonzero(members))
     return np.sort(take)
+
+
+def draw_balanced(labels, size, rng) -> NDArray[np.intp]:
+    """Sorted indices of at most `size` observations, as many hits (+1) as beams (-1) where
+    both classes have enough (the rest from the larger class), each class drawn at random
+    without replacement (``rng.choice``, hits first)."""
+    hits, beams = np.flatnonzero(labels > 0), np.flatnonzero(labels < 0)
+    k_hit = min(len(hits), max(size // 2, size - len(beams)))
+    k_beam = min(len(beams), size - k_hit)
+    return np.sort(np.r_[rng.choice(hits, k_hit, replace=False),
+                         rng.choice(beams, k_beam, replace=False)])
+
+
+def loo_sample(obs, size, rng):
+    """Where the leave-one-out classifiers are fitted: ``(take, X)``.
+
+    `take` (:func:`draw_balanced`) indexes at most `size` observations of
+    `obs`, as many hits as beams; ``X[j]`` is the hit itself, or a point drawn
+    uniformly on the beam (``rng.random``, after the draw of `take`).
+    """
+    take = draw_balanced(obs.labels, size, rng)
+    u = rng.random(len(take))
+    return take, obs.starts[take] + u[:, None] * (obs.ends[take] - obs.starts[take])
 
 
 def check_beam_hits(beam_hits, n_beams: int, n_hits: int) -> NDArray[np.int64]:
