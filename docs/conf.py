@@ -48,7 +48,8 @@ sphinx_gallery_conf = {
 }
 
 templates_path = ["_templates"]
-exclude_patterns = ["_build", "gen_modules/backreferences/*.examples"]
+exclude_patterns = ["_build", "gen_modules/backreferences/*.examples",
+                    "real_log_tables.rst"]   # included by which_map.rst
 html_theme = "pydata_sphinx_theme"
 html_title = f"occgp {release}"
 # a table of contents in the left sidebar of every page (docs/_templates/sidebar-toc.html):
