@@ -469,6 +469,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
                                   f"one pose per scan, in input order")
             if pose_array is not None:
                 files = files.with_poses(pose_array)
+                pose_array = None      # the sequence carries them
             sources.append((", ".join(map(str, paths)), files))
             bar.total += len(files)
             bar.update(len(paths))
@@ -492,8 +493,6 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
             raise OptionError("poses", f"poses file {str(poses)!r} holds {len(pose_array)} "
                                f"poses for {n_scans} scans; expected one pose per scan, in "
                                f"input order")
-        if len(sources) == 1 and isinstance(sources[0][1], ScanSequence):
-            pose_array = None      # the sequence carries them
         insert, limit, how = _inserter(mapper, mode, max_range, n_jobs)
         n_points = n_beyond = n_done = n_filtered = n_free = 0
         beams = np.zeros(2, dtype=np.int64)     # BGK's (kept, dropped) beams

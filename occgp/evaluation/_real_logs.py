@@ -32,10 +32,6 @@ __all__ = ["log_split", "LogTestSet", "log_test_set", "score_log", "LogResult",
 #: Probabilities are clipped to [NLL_EPS, 1 - NLL_EPS] in the negative log-likelihood.
 NLL_EPS = 1e-6
 
-_COLUMNS = ("method", "auc", "accuracy", "brier", "nll", "acc_occupied", "acc_free",
-            "acc_near", "unknown_fraction", "build_seconds", "query_seconds", "map_mb",
-            "peak_mb")
-
 
 def log_split(n_scans: int, *, every: int = 10, offset: int = 5):
     """Indices of the training and the held-out scans of a log.
@@ -512,7 +508,4 @@ class RealLogBenchmark:
             raise TypeError(f"methods must be a mapping or a sequence of map names, got "
                             f"{type(methods).__name__}")
         return [self.evaluate(name, spec) for name, spec in items]
-
-    #: The columns of :func:`~occgp.evaluation.format_table` for these rows.
-    COLUMNS = _COLUMNS
 
