@@ -132,6 +132,22 @@ def test_bgk_alpha_beta_equal_a_slow_reference():
         assert_allclose(got[key], ref[key], rtol=0, atol=1e-7 * 60)
 
 
+@pytest.mark.parametrize("resolution", [0.1, 0.2, 0.05])
+def test_bgk_length_and_free_spacing_follow_the_resolution(resolution):
+    """None means ell = 2 resolution and free_resolution = 5 resolution: la3dm's
+    0.2 m and 0.5 m at 0.1 m cells, the same map bit for bit."""
+    wall, origin = wall60()
+    wall = np.vstack([wall, wall * [1.5, 1.0, 1.0] + [0.0, 0.0, 0.3]])
+    scaled = BGKMap(resolution, ell=2 * resolution, free_resolution=5 * resolution)
+    assert_same_cells(BGKMap(resolution).update(wall, origin), scaled.update(wall, origin))
+    assert BGKMap(resolution).get_params()["ell"] is None
+    # the spacing in use: a beam of 2 m has samples every 5 resolution
+    samples, labels = BGKMap(resolution, ds_resolution=1e-3).training_data(
+        [[2.0, 0.0, 0.0]], origin)
+    along = np.sort(samples[labels == 0][:, 0])
+    assert_allclose(np.diff(along)[:3], 5 * resolution)
+
+
 def test_bgk_map_marks_wall_occupied_and_free_space_free():
     points, origin = wall_scan()
     m = BGKMap(0.1).update(points, origin)
@@ -231,8 +247,8 @@ def assert_same_cells(a, b):
 @pytest.mark.parametrize("kwargs, match", [
     (dict(resolution=0.1, ell=100.0), r"would visit 7.2e\+11 cells .* max_cells_per_update="
                                       r"1073741824; .* a smaller ell; the map is unchanged"),
-    (dict(resolution=1e-4), r"would visit .* cells .*at resolution 0.0001 m\), more than "
-                            r"max_cells_per_update"),
+    (dict(resolution=1e-4, ell=0.2), r"would visit .* cells .*at resolution 0.0001 m\), "
+                                     r"more than max_cells_per_update"),
     (dict(resolution=0.1, max_cells_per_update=1000), "max_cells_per_update=1000"),
     (dict(resolution=0.1, free_resolution=1e-9), r"free_resolution=1e-09 would make 4.39e\+10 "
                                                  r"free samples .* more than the 67108864"),
@@ -243,7 +259,7 @@ def assert_same_cells(a, b):
                                       r"underflow"),
 ])
 def test_too_large_or_degenerate_updates_are_refused_before_any_change(kwargs, match):
-    """BGKMap(0.1, ell=100) or BGKMap(1e-4) on a 60-point wall would take minutes:
+    """BGKMap(0.1, ell=100) or BGKMap(1e-4, ell=0.2) on a 60-point wall would take minutes:
     refused up front, and the map keeps what it had."""
     wall, origin = wall60()
     m = BGKMap(**kwargs)
@@ -282,8 +298,8 @@ def test_bad_max_cells_per_update(value, exc, match):
 
 def test_extreme_parameters_give_the_right_map():
     wall, origin = wall60()
-    # cells of 1e20 m: no cell centre within ell of any sample
-    assert BGKMap(1e20).update(wall, origin).num_cells == 0
+    # cells of 1e20 m and ell in metres: no cell centre within ell of any sample
+    assert BGKMap(1e20, ell=0.2).update(wall, origin).num_cells == 0
     # free samples farther apart than every beam: only the origin is free
     samples, labels = BGKMap(0.1, free_resolution=1e30).training_data(wall, origin)
     assert_array_equal(samples[labels == 0], [[0.0, 0.0, 0.0]])
@@ -307,7 +323,7 @@ def test_far_points_are_outside_the_key_range(point):
 @pytest.mark.parametrize("name, value, exc, match", [
     ("ell", "0.2", TypeError, "ell must be a real number, got str"),
     ("ell", -1.0, ValueError, "ell must lie in"),
-    ("free_resolution", None, TypeError, "free_resolution must be a real number"),
+    ("free_resolution", "0.5", TypeError, "free_resolution must be a real number"),
     ("max_range", np.inf, ValueError, "max_range must lie in"),
     ("prior", 0.0, ValueError, "prior must lie in"),
     ("n_jobs", 1.5, ValueError, "n_jobs must be None"),
