@@ -85,7 +85,9 @@ def test_one_expert_is_gpomik(data, queries, rule, hyperparameters):
     assert mix.experts_[0].kernel_ == single.kernel_
     assert mix.experts_[0].noise_ == single.noise_
     mean, var = mix.predict(queries, return_var=True)
-    assert_allclose(mean, m0, rtol=1e-12, atol=1e-12)
+    # gPoE weighs an expert by its entropy change, 0 where its variance rounds to the
+    # prior: there the committee gives the prior's mean, the expert a mean of ~1e-11
+    assert_allclose(mean, m0, rtol=1e-12, atol=1e-10 if rule == "gpoe" else 1e-12)
     # the mixture's variance is prior - |L^-1 k|^2, GPOMIK's k^T K^-1 k on tiles: rounding
     assert_allclose(var, v0, rtol=1e-10, atol=1e-10 * float(mix.experts_[0].kernel_.variance))
 

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from occgp.gp._thinning import thin_observations
+from occgp.gp import GPMixture, GPOMIK, thin_observations
+from occgp.gp._limits import MAX_MODEL_BYTES
 
 
 def scans(n_spots=30, per_spot=(1, 5, 40), seed=0):
@@ -69,3 +70,52 @@ def test_bad_arguments(kwargs, error, match):
     hits, starts, ends = scans()
     with pytest.raises(error, match=match):
         thin_observations(hits, starts, ends, **kwargs)
+
+
+def test_gpomik_fits_the_observations_thinning_keeps():
+    hits, starts, ends = scans()
+    n = len(hits) + len(ends)
+    budget = n // 3
+    model = GPOMIK(optimizer=False, max_observations=budget, random_state=0).fit(
+        hits, starts, ends)
+    kh, kb = thin_observations(hits, starts, ends, budget,
+                               random_state=np.random.default_rng(0))
+    kept = np.vstack([c.obs.ends for c in model.cells_])
+    assert model.n_accepted_ == len(kh) + len(kb) and model.n_rejected_ == n - model.n_accepted_
+    np.testing.assert_array_equal(kept, np.vstack([hits[kh], ends[kb]]))
+    # within the budget nothing changes: the same model as without one
+    full = GPOMIK(optimizer=False, max_observations=None, random_state=0).fit(hits, starts, ends)
+    same = GPOMIK(optimizer=False, max_observations=n, random_state=0).fit(hits, starts, ends)
+    X = np.column_stack([np.linspace(0, 6, 50), np.linspace(-1, 15, 50)])
+    np.testing.assert_array_equal(full.predict_proba(X), same.predict_proba(X))
+    assert full.n_rejected_ == 0
+
+
+def test_mixture_clusters_the_observations_thinning_keeps():
+    hits, starts, ends = scans()
+    n = len(hits) + len(ends)
+    model = GPMixture(max_observations=n // 3, random_state=0).fit(hits, starts, ends)
+    assert len(model.labels_) <= n // 3
+    assert sum(e.n_accepted_ for e in model.experts_) == len(model.labels_)
+    p = model.predict_proba(hits[:5])
+    assert np.isfinite(p).all()
+    full = GPMixture(max_observations=None, random_state=0).fit(hits, starts, ends)
+    assert len(full.labels_) == n
+
+
+@pytest.mark.parametrize("make", [
+    lambda: GPOMIK(optimizer=False, max_observations=None, max_cell_size=None),
+    lambda: GPMixture(max_observations=None, max_cluster_size=10 ** 9)])
+def test_models_past_the_size_limit_are_refused_before_any_work(make):
+    n = int(np.sqrt(MAX_MODEL_BYTES / 8)) + 1                  # one model of n: just past it
+    hits = np.column_stack([np.full(n, 5.0), np.linspace(0, 100, n)])
+    with pytest.raises(ValueError, match="Cholesky factors.*set max_observations"):
+        make().fit(hits, np.zeros_like(hits), hits)
+
+
+@pytest.mark.parametrize("cls", [GPOMIK, GPMixture])
+@pytest.mark.parametrize("bad, err", [(1, ValueError), (2.5, TypeError), ("10", TypeError)])
+def test_max_observations_is_checked(cls, bad, err):
+    hits, starts, ends = scans()
+    with pytest.raises(err, match="max_observations"):
+        cls(max_observations=bad).fit(hits, starts, ends)

@@ -14,6 +14,8 @@
   :class:`PlaneClustering`, beams assigned by :func:`assign_beams`, tiny
   clusters merged by :func:`merge_small_clusters`, predictions merged by a
   committee rule (:func:`combine_predictions`);
+* :func:`thin_observations`, the policy by which the GP maps keep a budget of
+  observations from a dense log;
 * the log-odds :class:`OccupancyGrid` baseline and :func:`predict_grid`.
 """
 
@@ -32,12 +34,13 @@ from ._kernels import Matern32, SparseKernel, SquaredExponential
 from ._observations import Observations, observations_from_scans
 from ._plsc import fit_plsc, loo_predictions, plsc_proba
 from ._quadrature import ClenshawCurtis, Simpson, clenshaw_curtis, simpson
+from ._thinning import thin_observations
 
 __all__ = [
     "SquaredExponential", "Matern32", "SparseKernel",
     "integral_kernel", "ClenshawCurtis", "Simpson", "clenshaw_curtis", "simpson",
     "GPOMIK", "GPOM", "OccupancyGrid", "grid_points", "predict_grid",
-    "Observations", "observations_from_scans",
+    "Observations", "observations_from_scans", "thin_observations",
     "loo_predictions", "fit_plsc", "plsc_proba",
     "GPMixture", "LineTracking", "DirichletProcessClustering", "PlaneClustering",
     "assign_beams", "merge_small_clusters", "COMBINE_RULES", "combine_predictions",

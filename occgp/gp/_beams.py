@@ -23,7 +23,7 @@ from ._kernels import SquaredExponential
 from ._limits import check_coordinates, check_segments, threads
 from ._observations import check_beam_hits
 
-__all__ = ["assign_beams", "beam_sources", "merge_small_clusters", "match_beams",
+__all__ = ["assign_beams", "beam_sources", "merge_small_clusters", "match_beams", "match_call",
            "no_return_error", "HIT_TOLERANCE"]
 
 #: Default of how far (metres) beyond a beam's end its hit may lie
@@ -632,3 +632,30 @@ def merge_small_clusters(labels: ArrayLike, points: ArrayLike, is_hit: ArrayLike
         into[source] = target
         out = into[cluster]
     return rank[out].astype(np.int64)
+
+
+def match_call(obs, n_hits, beam_hits, matched, old, old_beam_hits, hit_tolerance):
+    """The hit of each beam of `obs` (hits first), indexing the hits of every call so
+    far (-1: none), for a mixture's :meth:`fit` (`old` None) or :meth:`update` (`old`:
+    the earlier calls' observations, `old_beam_hits` their beams' hits).
+
+    `beam_hits` (given to ``fit`` / ``update``) indexes the hits of `obs`;
+    `matched` (a saved model's) is the answer already. Without either, the beams
+    of every call are matched to all the hits (an earlier call's returning beams
+    keep theirs), within `hit_tolerance`.
+    """
+    hits = obs.starts[:n_hits]
+    starts, ends = obs.starts[n_hits:], obs.ends[n_hits:]
+    n_old = 0 if old is None else int(np.count_nonzero(old.labels > 0))
+    if matched is not None:
+        return check_beam_hits(matched, len(starts), n_old + n_hits)
+    if beam_hits is not None:
+        local = check_beam_hits(beam_hits, len(starts), n_hits)
+        return np.where(local >= 0, local + n_old, -1)
+    if old is None:
+        return match_beams(hits, starts, ends, hit_tolerance=hit_tolerance)
+    old_hit = old.labels > 0
+    return match_beams(np.vstack([old.starts[old_hit], hits]),
+                       np.vstack([old.starts[~old_hit], starts]),
+                       np.vstack([old.ends[~old_hit], ends]),
+                       hit_tolerance=hit_tolerance)[len(old_beam_hits):]

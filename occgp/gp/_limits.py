@@ -9,6 +9,9 @@
   lengths in length scales (quadratically for the Matérn and sparse kernels).
 * Dense matrices: the matrices one step builds at once (``n x n`` float64 for
   ``n`` observations, several of them) stay below ``MAX_DENSE_BYTES`` (4 GiB).
+* Models: the local models' Cholesky factors together (``n_i x n_i`` float64
+  for a model of ``n_i`` observations) stay below ``MAX_MODEL_BYTES`` (8 GiB),
+  checked before any is built.
 * Threads: ``n_jobs`` above the number of cores counts as every core.
 """
 
@@ -20,12 +23,13 @@ from threadpoolctl import ThreadpoolController
 from .._validation import check_n_jobs, n_threads
 
 __all__ = ["MAX_SCALED_COORDINATE", "MAX_SCALED_SEGMENT", "MAX_DENSE_BYTES",
-           "MAX_RESTARTS", "check_coordinates", "check_segments", "check_dense", "threads",
+           "MAX_MODEL_BYTES", "MAX_RESTARTS", "check_coordinates", "check_model_size", "check_segments", "check_dense", "threads",
            "generator", "one_blas_thread"]
 
 MAX_SCALED_COORDINATE = 1e10
 MAX_SCALED_SEGMENT = 1e4
 MAX_DENSE_BYTES = 4 * 2 ** 30
+MAX_MODEL_BYTES = 8 * 2 ** 30
 #: Most extra starts of the hyper-parameter optimiser (``n_restarts``).
 MAX_RESTARTS = 1000
 
@@ -67,6 +71,22 @@ def check_dense(n_rows, n_cols, n_matrices, what, fix):
             f"{what} needs {n_matrices} dense {n_rows} x {n_cols} matrices "
             f"({size / 2 ** 30:.3g} GiB), more than the limit of "
             f"{MAX_DENSE_BYTES / 2 ** 30:g} GiB; {fix}")
+
+
+def check_model_size(n_obs, cell_size, fix):
+    """Reject `n_obs` observations in local models of at most `cell_size` (None: one)
+    whose factors would pass ``MAX_MODEL_BYTES`` together."""
+    cell = n_obs if cell_size is None else min(n_obs, cell_size)
+    size = 8.0 * n_obs * cell
+    if size > MAX_MODEL_BYTES:
+        if cell == n_obs:
+            most = f"one model holds at most {int(np.sqrt(MAX_MODEL_BYTES / 8)):,}"
+        else:
+            most = f"models of {cell:,} hold at most {int(MAX_MODEL_BYTES // (8 * cell)):,} together"
+        raise ValueError(
+            f"{n_obs:,} observations in local models of up to {cell:,} need about "
+            f"{size / 2 ** 30:.3g} GiB for their Cholesky factors, more than the limit of "
+            f"{MAX_MODEL_BYTES / 2 ** 30:g} GiB ({most}); {fix}")
 
 
 def threads(n_jobs):

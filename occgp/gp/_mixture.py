@@ -24,7 +24,7 @@ from .._docfill import fill_doc
 from .._validation import (as_points, check_bool, check_choice, check_int, check_n_jobs,
                            check_probability, check_real)
 from ..maps import register
-from ._beams import (HIT_TOLERANCE, beam_sources, match_beams, merge_small_clusters,
+from ._beams import (HIT_TOLERANCE, beam_sources, match_call, merge_small_clusters,
                      no_return_error)
 from ._cells import spatial_groups
 from ._clustering import DirichletProcessClustering
@@ -40,6 +40,7 @@ from ._map_protocol import MapProtocol
 from ._observations import Observations, check_beam_hits, loo_sample, make_observations
 from ._planes import PlaneClustering
 from ._plsc import PLSCProba, fit_plsc
+from ._thinning import thin_to_budget
 
 __all__ = ["GPMixture"]
 
@@ -149,6 +150,13 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         observations.
     max_optimize : int, default=1000
         Most observations the committee's PLSC is fitted on (see 5. above).
+    max_observations : int or None, default=100000
+        Most observations (hits and beams) :meth:`fit` keeps, before it
+        clusters them: past it, the places seen by the most beams keep a
+        random few of them (:func:`~occgp.gp.thin_observations`, seeded by
+        `random_state`); `labels_` then lists the observations kept. None
+        keeps every one, within the model-size limit. :meth:`update` keeps
+        what it is given.
     calibration : {"committee-loo", "subset-loo"}, default="committee-loo"
         What PLSC is fitted on: ``"committee-loo"``, see 5. above;
         ``"subset-loo"`` (with ``hyperparameters="global"`` only): the
@@ -226,7 +234,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
     def __init__(self, expert=None, *, clustering="line", combine="gpoe",
                  hyperparameters="global", min_hits=5, min_size=1, max_cluster_size=1000,
                  prior_tol=1e-3, update_experts="cholesky", max_optimize=1000,
-                 calibration="committee-loo", n_jobs=None, random_state=None,
+                 max_observations=100_000, calibration="committee-loo", n_jobs=None, random_state=None,
                  occupancy_threshold=0.5, hit_tolerance=HIT_TOLERANCE):
         self.expert = expert
         self.clustering = clustering
@@ -238,6 +246,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         self.prior_tol = prior_tol
         self.update_experts = update_experts
         self.max_optimize = max_optimize
+        self.max_observations = max_observations
         self.calibration = calibration
         self.n_jobs = n_jobs
         self.random_state = random_state
@@ -259,6 +268,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         check_int(self.min_size, "min_size", low=1)
         check_int(self.max_cluster_size, "max_cluster_size", low=2)
         check_int(self.max_optimize, "max_optimize", low=2)
+        if self.max_observations is not None:
+            check_int(self.max_observations, "max_observations", low=2)
         check_choice(self.calibration, "calibration", _CALIBRATIONS)
         if self.calibration == "subset-loo" and self.hyperparameters != "global":
             raise ValueError("calibration='subset-loo' needs hyperparameters='global', got "
@@ -276,7 +287,7 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
                             f"fit_predict and partial_fit, got {type(c).__name__}")
         # the experts' own classifiers are not the committee's: the cheapest one
         template = clone(template).set_params(max_cell_size=self.max_cluster_size,
-                                              calibration="subset-loo")
+                                              calibration="subset-loo", max_observations=None)
         return template
 
     def _make_clustering(self, seed):
@@ -296,31 +307,6 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         return int(np.random.SeedSequence([self._seed, e]).generate_state(1)[0])
 
     # ------------------------------------------------------------- clusters
-    def _match(self, obs, n_hits, beam_hits, matched, partial):
-        """The hit of each beam of `obs`, indexing the hits of every call so far (-1: none).
-
-        `beam_hits` (given to :meth:`fit` / :meth:`update`) indexes the hits
-        of `obs`; `matched` (a saved model's) is the answer already. Without
-        either, the beams of every call are matched to all the hits (an
-        earlier call's returning beams keep theirs).
-        """
-        hits = obs.starts[:n_hits]
-        starts, ends = obs.starts[n_hits:], obs.ends[n_hits:]
-        n_old = int(np.count_nonzero(self._observations.labels > 0)) if partial else 0
-        if matched is not None:
-            return check_beam_hits(matched, len(starts), n_old + n_hits)
-        if beam_hits is not None:
-            local = check_beam_hits(beam_hits, len(starts), n_hits)
-            return np.where(local >= 0, local + n_old, -1)
-        if not partial:
-            return match_beams(hits, starts, ends, hit_tolerance=self.hit_tolerance)
-        old = self._observations
-        old_hit = old.labels > 0
-        return match_beams(np.vstack([old.starts[old_hit], hits]),
-                           np.vstack([old.starts[~old_hit], starts]),
-                           np.vstack([old.ends[~old_hit], ends]),
-                           hit_tolerance=self.hit_tolerance)[len(self._beam_hits):]
-
     def _cluster_labels(self, clustering, obs, n_hits, partial, matched):
         """Cluster labels (of `clustering`) of the hits and of the beams of `obs`, and
         where each observation sits for the split of its cluster into experts.
@@ -415,9 +401,14 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         if not (n_hits and n_hits < len(obs.y)):
             raise ValueError(f"GPMixture needs both hits and beams, got {n_hits} hits and "
                              f"{len(obs.y) - n_hits} beams")
-        matched = self._match(obs, n_hits, beam_hits, matched, partial=False)
+        matched = match_call(obs, n_hits, beam_hits, matched, None, None, self.hit_tolerance)
         if not (matched >= 0).any():
             raise no_return_error(len(matched), self.hit_tolerance, beam_hits is not None)
+        obs, matched = thin_to_budget(
+            obs, self.max_observations, matched,
+            np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(1,))),
+            self.max_cluster_size, "max_cluster_size")
+        n_hits = int(np.count_nonzero(obs.labels > 0))
         self._template, self._seed = template, seed
         self.kernel_, self.noise_ = None, None
         clustering = self._make_clustering(seed)
@@ -720,7 +711,8 @@ class GPMixture(PLSCProba, MapProtocol, BaseEstimator):
         template = self._expert_template
         new = make_observations(hits, segment_starts, segment_ends, dim=self.n_dims_)
         n_hits = int(np.count_nonzero(new.labels > 0))
-        matched = self._match(new, n_hits, beam_hits, matched, partial=True)
+        matched = match_call(new, n_hits, beam_hits, matched, self._observations,
+                             self._beam_hits, self.hit_tolerance)
         if not len(new.y):
             return self
         clustering = copy.deepcopy(self.clustering_)  # the fitted one stays as it is on failure

@@ -17,8 +17,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_points, check_real, check_seed
 from ._beams import match_beams
+from ._limits import check_model_size
 
-__all__ = ["thin_observations"]
+__all__ = ["thin_observations", "thin_to_budget"]
 
 
 def _cell_ids(cells):
@@ -153,3 +154,24 @@ def thin_observations(hits: ArrayLike, segment_starts: ArrayLike, segment_ends: 
     keep_beams = np.sort(np.r_[kept_beams, kept_silent]).astype(np.int64)
     keep_hits = np.unique(np.r_[source[kept_beams], orphan]).astype(np.int64)
     return keep_hits, keep_beams
+
+
+def thin_to_budget(obs, budget, beam_hits, rng, model_size, what):
+    """`obs` (:class:`~occgp.gp.Observations`, hits first) thinned to `budget` (None:
+    kept whole) and the beams' hits kept (`beam_hits` renumbered, or None), after the
+    size check of models of at most `model_size` observations (`what`: the name of
+    the parameter that sets it)."""
+    n_hits = int(np.count_nonzero(obs.labels > 0))
+    if budget is not None and len(obs.y) > budget:
+        keep_hits, keep_beams = thin_observations(
+            obs.starts[:n_hits], obs.starts[n_hits:], obs.ends[n_hits:], budget,
+            beam_hits=beam_hits, random_state=rng)
+        if beam_hits is not None:
+            new_index = np.full(n_hits, -1, dtype=np.int64)
+            new_index[keep_hits] = np.arange(len(keep_hits))
+            kept = np.asarray(beam_hits)[keep_beams]
+            beam_hits = np.where(kept >= 0, new_index[np.maximum(kept, 0)], -1)
+        obs = obs.take(np.r_[keep_hits, n_hits + keep_beams])
+    check_model_size(len(obs.y), model_size, "set max_observations" if budget is None
+                     else f"lower max_observations or {what}")
+    return obs, beam_hits
