@@ -13,7 +13,8 @@ from ._distance import (
     closest_and_gradient, finish, grid_of_box, signed_transform,
 )
 from ._logodds_map import LogOddsMap
-from ._validation import as_points, check_bool, check_choice, check_int, check_real
+from ._validation import (as_points, check_bool, check_choice, check_int, check_real,
+                          show_number)
 
 __all__ = ["DistanceMap"]
 
@@ -184,7 +185,8 @@ class DistanceMap:
                                          UNKNOWN_CHOICES) == "occupied"
         b = check_int(self.block_size, "block_size", low=1)
         if b < 4 or b > 128 or b & (b - 1):
-            raise ValueError(f"block_size must be a power of 2 in [4, 128], got {b}")
+            raise ValueError(f"block_size must be a power of 2 in [4, 128], "
+                             f"got {show_number(b)}")
         self._B, self._shift = b, b.bit_length() - 1
         self._res = float(resolution)
         if self.bbox is None:

@@ -19,6 +19,8 @@ import re
 import numpy as np
 from numpy.typing import NDArray
 
+from ._validation import as_float, show_number
+
 __all__ = ["write_ros_map", "read_ros_map", "read_pgm", "OCCUPIED", "FREE", "UNKNOWN",
            "OCCUPIED_THRESH", "FREE_THRESH"]
 
@@ -72,10 +74,10 @@ def _real(doc: dict, key: str, where: str) -> float:
     value = doc[key]
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{where}: {key} must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"{where}: {key} must be finite, got {value!r}")
-    return value
+    number = as_float(value)
+    if not math.isfinite(number):
+        raise ValueError(f"{where}: {key} must be finite, got {show_number(value)}")
+    return number
 
 
 def _read_yaml(path: pathlib.Path) -> dict:

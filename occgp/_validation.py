@@ -6,6 +6,7 @@ input never reaches compiled code (whose own buffer errors are cryptic).
 
 from __future__ import annotations
 
+import math
 import numbers
 import os
 import pathlib
@@ -15,8 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["as_numeric", "as_points", "as_point", "check_real", "check_probability",
-           "check_resolution",
+__all__ = ["as_numeric", "as_float", "show_number", "as_points", "as_point", "check_real",
+           "check_probability", "check_resolution",
            "check_int", "check_bool", "check_choice", "as_path", "check_seed",
            "check_n_jobs", "n_threads", "RESOLUTION_RANGE"]
 
@@ -82,17 +83,42 @@ def as_point(x: ArrayLike, name: str = "origin", dim: int = 3) -> NDArray[np.flo
     return arr
 
 
+def show_number(value: object) -> str:
+    """``repr(value)``, shortened for an int of more than 40 digits (whose ``repr`` may
+    be long, or refused past Python's int-to-text limit)."""
+    if isinstance(value, (numbers.Integral, np.integer)) and not isinstance(value, bool):
+        v = int(value)
+        bits = v.bit_length()
+        if bits > 132:                   # > 40 digits: 2**132 has 40
+            digits = int(bits * math.log10(2)) + 1
+            return f"{'-' if v < 0 else ''}an int of about {digits} digits"
+    return repr(value)
+
+
+def as_float(value: object) -> float:
+    """``float(value)`` for a real number, with ints too large for a float as +-inf (so
+    that a range check refuses them by value rather than ``float`` by OverflowError)."""
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf  # type: ignore[operator]
+
+
 def check_real(value: object, name: str, *, low: float | None = None,
                high: float | None = None, low_open: bool = True,
                high_open: bool = True, state_bounds: bool = False) -> float:
     """Return `value` as a float after checking it is a finite real in the given interval.
 
-    The error names the interval (``"x must lie in (0.0, inf), got 0.0"``), or with
-    `state_bounds` the bounds (``"x must be a finite number > 0, got 0.0"``).
+    Any real number is taken: Python's and numpy's ints and floats (an int too large
+    for a float counts as infinite, so it fails the check with a ValueError, never
+    OverflowError). A bool or any other type raises TypeError. The error names the
+    interval (``"x must lie in (0.0, inf), got 0.0"``), or with `state_bounds` the
+    bounds (``"x must be a finite number > 0, got 0.0"``).
     """
-    if isinstance(value, bool) or not isinstance(value, (numbers.Real, np.floating, np.integer)):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+            value, (numbers.Real, np.floating, np.integer)):
         raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-    v = float(value)
+    v = as_float(value)
     lo_ok = low is None or (v > low if low_open else v >= low)
     hi_ok = high is None or (v < high if high_open else v <= high)
     if not np.isfinite(v) or not lo_ok or not hi_ok:
@@ -100,11 +126,12 @@ def check_real(value: object, name: str, *, low: float | None = None,
             bounds = " and ".join(f"{op} {bound:g}" for op, bound in
                                   ((">" if low_open else ">=", low),
                                    ("<" if high_open else "<=", high)) if bound is not None)
-            raise ValueError(f"{name} must be a finite number {bounds}".rstrip() + f", got {v}")
+            raise ValueError(f"{name} must be a finite number {bounds}".rstrip()
+                             + f", got {show_number(value) if math.isinf(v) else v}")
         lo = "-inf" if low is None else repr(low)
         hi = "inf" if high is None else repr(high)
         interval = f"{'(' if low_open else '['}{lo}, {hi}{')' if high_open else ']'}"
-        raise ValueError(f"{name} must lie in {interval}, got {value!r}")
+        raise ValueError(f"{name} must lie in {interval}, got {show_number(value)}")
     return v
 
 
@@ -119,7 +146,7 @@ def check_resolution(value: object, name: str = "resolution") -> float:
     lo, hi = RESOLUTION_RANGE
     if not lo <= v <= hi:
         raise ValueError(f"{name} must lie in [{lo:g}, {hi:g}] m (the range where liboctomap's "
-                         f"single-precision ray traversal is sound), got {value!r}")
+                         f"single-precision ray traversal is sound), got {show_number(value)}")
     return v
 
 
@@ -138,15 +165,15 @@ def check_int(value: object, name: str, *, low: int | None = None,
     v = int(value)
     if state_bounds:
         if low is not None and v < low:
-            raise ValueError(f"{name} must be >= {low}, got {v}")
+            raise ValueError(f"{name} must be >= {low}, got {show_number(v)}")
         if high is not None and v > high:
-            raise ValueError(f"{name} must be <= {high}, got {v}")
+            raise ValueError(f"{name} must be <= {high}, got {show_number(v)}")
         return v
     if (low is not None and v < low) or (high is not None and v > high):
         if high is None:
-            raise ValueError(f"{name} must be {kind}, got {v}")
+            raise ValueError(f"{name} must be {kind}, got {show_number(v)}")
         lo = "-inf" if low is None else str(low)
-        raise ValueError(f"{name} must lie in [{lo}, {high}], got {v}")
+        raise ValueError(f"{name} must lie in [{lo}, {high}], got {show_number(v)}")
     return v
 
 

@@ -492,9 +492,15 @@ class ScanFilter:
         on_ground = np.zeros(len(pts), dtype=bool)
         if ground != "keep":
             rows = np.flatnonzero(keep)
+            # checked here under this class's names (segment_ground names its own)
             found = segment_ground(
-                pts[rows], distance=self.ground_distance, angle=self.ground_angle,
-                plane_distance=self.ground_plane_distance, ground_height=self.ground_height,
+                pts[rows], distance=check_real(self.ground_distance, "ground_distance",
+                                               low=0.0),
+                angle=check_real(self.ground_angle, "ground_angle", low=0.0,
+                                 high=math.pi / 2, low_open=False, high_open=False),
+                plane_distance=check_real(self.ground_plane_distance,
+                                          "ground_plane_distance", low=0.0, low_open=False),
+                ground_height=check_real(self.ground_height, "ground_height"),
                 max_iterations=self.max_iterations, random_state=self.random_state)
             on_ground[rows[found.mask]] = True
             keep &= ~on_ground

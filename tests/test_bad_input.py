@@ -54,6 +54,10 @@ def make_files() -> dict[str, bytes]:
         "empty.pcd": b"",
         "truncated.log": b"#\nFLASER 2 1.0 2.0 0\n",            # CARMEN: no pose
         "negative.log": b"FLASER 2 1.0 -1.0 0 0 0 0 0 0 1.0 host 1.0\n",
+        # a ROS map whose resolution is an int of 400 digits (YAML reads it as an int)
+        "huge_resolution.yaml": b"image: huge_resolution.pgm\nresolution: " + b"1" * 400
+        + b"\norigin: [0.0, 0.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n",
+        "huge_resolution.pgm": b"P5 2 2 255\n" + bytes(4),
     }
 
 
