@@ -12,7 +12,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .._validation import as_numeric, check_int
+from .._validation import as_float, as_numeric, check_int
 from ._range import LidarModel
 
 __all__ = ["MAX_OUTPUT_PIXELS", "MODEL_NAMES", "torch_models", "pretrained_model", "resolve",
@@ -223,7 +223,7 @@ def as_pose(pose):
             raise TypeError(f"pose heading must be a real number (radians), got "
                             f"{type(heading).__name__}")
         origin = origin.astype(np.float64)
-        heading = float(heading)
+        heading = as_float(heading)     # an int too large for a float: inf, refused
         if not (np.isfinite(origin).all() and np.isfinite(heading)):
             raise ValueError("pose origin and heading must be finite")
         c, s = np.cos(heading), np.sin(heading)

@@ -31,7 +31,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
-from .._validation import as_numeric, as_points, check_choice
+from .._validation import (as_float, as_numeric, as_points, check_bool, check_choice,
+                           show_number)
 from . import _beam_tables as _beams
 from ._sensor_docs import SIZE_SECTIONS as _SIZE_SECTIONS, preset as _preset
 
@@ -57,7 +58,7 @@ def _real(value, name):
     if isinstance(value, (bool, np.bool_)) or not isinstance(
             value, (numbers.Real, np.floating, np.integer)):
         raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-    return float(value)
+    return as_float(value)     # an int too large for a float: inf, refused by the range
 
 
 def _side(value, name):
@@ -142,11 +143,12 @@ class LidarModel:
                              f"got ({low!r}, {high!r})")
         hfov = _real(self.horizontal_fov, "horizontal_fov")
         if not 0.0 < hfov <= 360.0:
-            raise ValueError(f"horizontal_fov must lie in (0, 360] degrees, got {hfov!r}")
+            raise ValueError(f"horizontal_fov must lie in (0, 360] degrees, "
+                             f"got {show_number(self.horizontal_fov)}")
         max_range = _real(self.max_range, "max_range")
         if not 0.0 < max_range <= MAX_RANGE_LIMIT:
             raise ValueError(f"max_range must lie in (0, {MAX_RANGE_LIMIT:g}] metres, "
-                             f"got {max_range!r}")
+                             f"got {show_number(self.max_range)}")
         table = self.beam_elevations
         if table is not None:
             table = _beams.check_table(table, rows)
@@ -170,7 +172,7 @@ class LidarModel:
              "        degree, lower block -8.83 to -24.33 at 1/2 degree (field of view\n"
              "        -24.58 to 2.17).", 64, table=True)
     def hdl64e(cls, rows: int = 64, cols: int = 1024, *, table: bool = False) -> "LidarModel":
-        if not table:
+        if not check_bool(table, "table"):
             return cls(rows, cols, (-24.8, 2.0), 360.0, 120.0)
         return cls._table(_beams.HDL64E_TABLE, rows, cols, 120.0)
 
@@ -179,7 +181,7 @@ class LidarModel:
              "        With `table`, beam centres from +10.67 to -30.67 degrees, 4/3 degree\n"
              "        apart (field of view -31.33 to 11.33).", 32, table=True)
     def hdl32e(cls, rows: int = 32, cols: int = 1024, *, table: bool = False) -> "LidarModel":
-        if not table:
+        if not check_bool(table, "table"):
             return cls(rows, cols, (-30.67, 10.67), 360.0, 100.0)
         return cls._table(_beams.HDL32E_TABLE, rows, cols, 100.0)
 

@@ -30,7 +30,7 @@ import os
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_points, check_choice, check_int
+from .._validation import as_float, as_points, check_choice, check_int, show_number
 from . import _beam_tables
 from ._range import LidarModel, points_to_range_image, range_image_from_points
 
@@ -75,8 +75,8 @@ def scan_rings(points: ArrayLike, jump: float = 90.0) -> NDArray[np.int64]:
     points = as_points(points, "points")
     if isinstance(jump, (bool, np.bool_)) or not isinstance(jump, (int, float, np.number)):
         raise TypeError(f"jump must be a real number (degrees), got {type(jump).__name__}")
-    if not 0.0 < float(jump) < 360.0:
-        raise ValueError(f"jump must lie in (0, 360) degrees, got {jump!r}")
+    if not 0.0 < as_float(jump) < 360.0:
+        raise ValueError(f"jump must lie in (0, 360) degrees, got {show_number(jump)}")
     azim = np.degrees(np.arctan2(points[:, 1], points[:, 0]))
     return _beam_tables.scan_rings(azim, float(jump))
 

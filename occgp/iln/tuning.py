@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_path, check_int, check_real
+from .._validation import as_float, as_path, check_int, check_real
 from ._common import as_lidar, as_size, as_size_list, check_images, out_model
 from ._range import range_image_to_points
 from .metrics import range_mae, voxel_scores
@@ -31,7 +31,7 @@ DEFAULT_NO_RETURN_THRESHOLDS = (0.8, 0.9, 0.95, 1.0)
 
 def _grid(values, name) -> list:
     try:
-        out = [float(v) for v in values]
+        out = [as_float(v) for v in values]     # a huge int: inf, refused below
     except (TypeError, ValueError):
         raise TypeError(f"{name} must be a sequence of numbers, got {values!r}") from None
     if not out or not all(0.0 <= v <= 1.0 for v in out):
