@@ -58,11 +58,9 @@ def methods(seed, threads):
         "AKIMap (published)": lambda: AKIMap(RES, variant="published", random_state=seed,
                                              n_jobs=threads),
         "AKIMap (occgp)": lambda: AKIMap(RES, random_state=seed, n_jobs=threads),
-        # la3dm's values in metres (occgp's defaults scale them with the resolution)
-        "BGK (la3dm defaults)": lambda: BGKMap(RES, ell=0.2, free_resolution=0.5,
-                                               max_range=8.0, n_jobs=threads),
-        "BGK (free every 0.3 m)": lambda: BGKMap(RES, ell=0.2, free_resolution=0.3,
-                                                 max_range=8.0, n_jobs=threads),
+        "BGK (la3dm defaults)": lambda: BGKMap(RES, max_range=8.0, n_jobs=threads),
+        "BGK (free every 0.3 m)": lambda: BGKMap(RES, free_resolution=0.3, max_range=8.0,
+                                                 n_jobs=threads),
         "octree (log-odds)": lambda: OccupancyOctree(RES),
     }
 

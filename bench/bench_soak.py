@@ -27,7 +27,7 @@ MAPS = {
     "octree": "OccupancyOctree(0.05), method='auto' (culling region and super rays)",
     "plain": "OccupancyOctree(0.05), method='plain' (liboctomap's insertPointCloud)",
     "grid": "GridMap(0.05), method='auto'",
-    "bgk": "BGKMap(0.05, ell=0.2, free_resolution=0.5, max_range=8) (la3dm's values)",
+    "bgk": "BGKMap(0.05, max_range=8) (la3dm's defaults)",
 }
 
 
@@ -54,7 +54,7 @@ def make_map(kind: str):
     from occgp import BGKMap, GridMap, OccupancyOctree
 
     if kind == "bgk":
-        m = BGKMap(0.05, ell=0.2, free_resolution=0.5, max_range=8.0)
+        m = BGKMap(0.05, max_range=8.0)
         return m, m.insert_scan, m.memory_usage
     m = GridMap(0.05) if kind == "grid" else OccupancyOctree(0.05)
     method = "plain" if kind == "plain" else "auto"

@@ -132,20 +132,22 @@ def test_bgk_alpha_beta_equal_a_slow_reference():
         assert_allclose(got[key], ref[key], rtol=0, atol=1e-7 * 60)
 
 
-@pytest.mark.parametrize("resolution", [0.1, 0.2, 0.05])
-def test_bgk_length_and_free_spacing_follow_the_resolution(resolution):
-    """None means ell = 2 resolution and free_resolution = 5 resolution: la3dm's
-    0.2 m and 0.5 m at 0.1 m cells, the same map bit for bit."""
+@pytest.mark.parametrize("resolution, ell, free", [(0.05, 0.2, 0.5), (0.1, 0.2, 0.5),
+                                                   (0.2, 0.4, 1.0), (0.25, 0.5, 1.25)])
+def test_bgk_length_and_free_spacing_grow_with_coarse_cells(resolution, ell, free):
+    """None means ell = max(0.2, 2 resolution) and free_resolution = max(0.5, 5
+    resolution): la3dm's 0.2 m and 0.5 m up to 0.1 m cells, scaled beyond; the same
+    map bit for bit as those values given."""
     wall, origin = wall60()
     wall = np.vstack([wall, wall * [1.5, 1.0, 1.0] + [0.0, 0.0, 0.3]])
-    scaled = BGKMap(resolution, ell=2 * resolution, free_resolution=5 * resolution)
-    assert_same_cells(BGKMap(resolution).update(wall, origin), scaled.update(wall, origin))
+    given = BGKMap(resolution, ell=ell, free_resolution=free)
+    assert_same_cells(BGKMap(resolution).update(wall, origin), given.update(wall, origin))
     assert BGKMap(resolution).get_params()["ell"] is None
-    # the spacing in use: a beam of 2 m has samples every 5 resolution
+    # the spacing in use: samples every `free` metres along a beam of 4 m
     samples, labels = BGKMap(resolution, ds_resolution=1e-3).training_data(
-        [[2.0, 0.0, 0.0]], origin)
+        [[4.0, 0.0, 0.0]], origin)
     along = np.sort(samples[labels == 0][:, 0])
-    assert_allclose(np.diff(along)[:3], 5 * resolution)
+    assert_allclose(np.diff(along)[:2], free)
 
 
 def test_bgk_map_marks_wall_occupied_and_free_space_free():

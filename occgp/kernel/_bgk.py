@@ -30,13 +30,15 @@ class BGKMap(KernelMapBase):
         Edge length of the cells, in metres.
     ell : float, default=None
         Kernel length scale (support radius), in metres; None means
-        ``2 * resolution`` (la3dm's 0.2 m at its 0.1 m cells; see Notes).
+        ``max(0.2, 2 * resolution)``: la3dm's 0.2 m, scaled with cells coarser
+        than 0.1 m (see Notes).
     sf2 : float, default=1.0
         Kernel signal variance (scale of the kernel).
     free_resolution : float, default=None
         Spacing of the free samples along each beam, in metres (plus one sample
-        this far before each end point); None means ``5 * resolution``
-        (la3dm's 0.5 m at its 0.1 m cells; see Notes).
+        this far before each end point); None means
+        ``max(0.5, 5 * resolution)``: la3dm's 0.5 m, scaled with cells coarser
+        than 0.1 m (see Notes).
     ds_resolution : float, default=None
         Edge of the cubes that reduce the samples to centroids; None means
         `resolution`.
@@ -92,17 +94,18 @@ class BGKMap(KernelMapBase):
     of a cell is the posterior mean ``alpha / (alpha + beta)`` with `prior`
     added to both.
 
-    Why `ell` and `free_resolution` follow the resolution: the samples are
+    Why `ell` and `free_resolution` grow with coarse cells: the samples are
     reduced to one centroid per cell, so a cell weighs its hits against the
-    free samples that the beams leave in it and its neighbours; la3dm's
-    balance (``ell = 2 resolution``, ``free_resolution = 5 resolution``) was
-    made for 0.1 m cells, and kept in metres at coarser cells it puts more
-    free samples in each cell on a surface. On the ``hku_mb`` LiDAR sequence
-    at 0.2 m (a validation split of the benchmark's training scans only: of
-    its first 205 training scans, every 10th held out) the fixed 0.2 / 0.5 m
-    labelled 75 % of the held-out hits occupied (accuracy at 0.5 0.860,
-    AUC 0.978; the octree 0.903, 0.951), the scaled 0.4 / 1.0 m 89 %
-    (0.913, AUC 0.976); at 0.1 m both rules give the same map.
+    free samples that the beams leave in it and its neighbours. la3dm's
+    0.2 m and 0.5 m are 2 and 5 cells at its 0.1 m; kept in metres at
+    coarser cells, a free sample every 2.5 cells of every beam puts free
+    evidence in most cells on a surface that beams graze. On the ``hku_mb``
+    LiDAR sequence at 0.2 m (a validation split of the benchmark's training
+    scans only: of its first 205 training scans, every 10th held out), 0.2 /
+    0.5 m labelled 75 % of the held-out hits occupied (accuracy at 0.5
+    0.860, AUC 0.978; the octree 0.903, 0.951), 0.4 / 1.0 m 89 % (0.913,
+    AUC 0.976). At 0.1 m and finer the defaults are la3dm's (the maps of
+    ``bench/bench_kernel.py`` at 0.05 m are unchanged).
 
     Parameters are stored as given and checked by the constructor, by
     :meth:`set_params` and again by every update (so that attributes changed
@@ -173,12 +176,13 @@ class BGKMap(KernelMapBase):
         out["free_resolution"] = None if fr is None else check_real(fr, "free_resolution",
                                                                     low=0.0)
         # derived: the length scale and the free-sample spacing in use
-        out["length"] = 2.0 * out["resolution"] if ell is None else out["ell"]
-        out["free_step"] = 5.0 * out["resolution"] if fr is None else out["free_resolution"]
+        res = out["resolution"]
+        out["length"] = max(0.2, 2.0 * res) if ell is None else out["ell"]
+        out["free_step"] = max(0.5, 5.0 * res) if fr is None else out["free_resolution"]
         if out["length"] < 1e-150:
             raise ValueError(f"ell must be at least 1e-150 m (its inverse square must be "
                              f"finite), got {out['length']!r}"
-                             + ("" if ell is not None else " (2 * resolution)"))
+                             + ("" if ell is not None else " (max(0.2, 2 * resolution))"))
         out["sf2"] = check_real(params["sf2"], "sf2", low=0.0)
         ds = params["ds_resolution"]
         out["ds_resolution"] = None if ds is None else check_real(ds, "ds_resolution",
