@@ -91,8 +91,14 @@ def show_number(value: object) -> str:
         bits = v.bit_length()
         if bits > 132:                   # > 40 digits: 2**132 has 40
             digits = int(bits * math.log10(2)) + 1
-            return f"{'-' if v < 0 else ''}an int of about {digits} digits"
+            return f"{'a negative' if v < 0 else 'an'} int of about {digits} digits"
     return repr(value)
+
+
+def _is_real(value: object) -> bool:
+    """Whether `value` is a real number (Python's or numpy's, not a bool)."""
+    return not isinstance(value, (bool, np.bool_)) and isinstance(
+        value, (numbers.Real, np.floating, np.integer))
 
 
 def as_float(value: object) -> float:
@@ -115,8 +121,7 @@ def check_real(value: object, name: str, *, low: float | None = None,
     interval (``"x must lie in (0.0, inf), got 0.0"``), or with `state_bounds` the
     bounds (``"x must be a finite number > 0, got 0.0"``).
     """
-    if isinstance(value, (bool, np.bool_)) or not isinstance(
-            value, (numbers.Real, np.floating, np.integer)):
+    if not _is_real(value):
         raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
     v = as_float(value)
     lo_ok = low is None or (v > low if low_open else v >= low)
@@ -141,8 +146,13 @@ def check_probability(value: object, name: str) -> float:
 
 
 def check_resolution(value: object, name: str = "resolution") -> float:
-    """Return `value` as a float after checking it lies in :data:`RESOLUTION_RANGE`."""
-    v = check_real(value, name, low=0.0)
+    """Return `value` as a float after checking it lies in :data:`RESOLUTION_RANGE`.
+
+    A value that is not a number > 0 (NaN included) gets check_real's message, one > 0
+    (an infinite one, or an int too large for a float, included) the range's.
+    """
+    v = math.inf if _is_real(value) and as_float(value) == math.inf else \
+        check_real(value, name, low=0.0)
     lo, hi = RESOLUTION_RANGE
     if not lo <= v <= hi:
         raise ValueError(f"{name} must lie in [{lo:g}, {hi:g}] m (the range where liboctomap's "

@@ -427,7 +427,8 @@ class KNNMap(OccupancyOctree):
     # ------------------------------------------------------------------ updates
     def insert_scan(self, points: ArrayLike, origin: ArrayLike, *,  # type: ignore[override]
                     method: str = "auto", superray_threshold: int = 20,
-                    min_range: float | None = None) -> "KNNMap":
+                    min_range: float | None = None,
+                    stamp: float | None = None) -> "KNNMap":
         """Integrate one point cloud with the k-NN inverse sensor model.
 
         Parameters
@@ -451,6 +452,13 @@ default="auto"
             its history are those of the pre-filtered scan. Distances in double
             precision, as for :meth:`occgp.OccupancyOctree.insert_scan`; None: no
             filter. Must be finite, >= 0 and less than `sensor_range`.
+        stamp : float, default=None
+            Stamp every cell the scan updates with this time, for
+            :meth:`~occgp.OccupancyOctree.stamps` and
+            :meth:`~occgp.OccupancyOctree.decay` (as for
+            :meth:`occgp.OccupancyOctree.insert_scan`). The culling region is
+            then not used (its cells are observed too, and are stamped); the
+            map is the same.
 
         Returns
         -------
@@ -466,18 +474,22 @@ default="auto"
             `sensor_range`) lies outside the key range, the scan reaches more
             than :attr:`MAX_SCAN_CELLS` cells, `method` is invalid, or
             `min_range` is negative, not finite or not less than
-            `sensor_range`. The map and its statistics are then unchanged.
+            `sensor_range`, or `stamp` is not finite. The map and its
+            statistics are then unchanged.
         """
         points, _, _ = prefilter(points, origin, min_range, self.sensor_range,
                                  range_name="sensor_range")
         method, threshold = self._check_method(method, superray_threshold)
+        stamping = self._stamped(stamp)
         scan = self._validated_scan(points, origin, self.sensor_range, "scan",
                                     check_ends=False)
         if scan is None:
             return self
         pts, org, rng, _ = scan
         threshold = adaptive_threshold(self, method, threshold)
-        out = self._knn_cells(pts, org, rng, method.endswith("culling"), threshold,
+        # the culling region's cells are observed, so a stamped scan walks them too
+        culling = method.endswith("culling") and stamp is None
+        out = self._knn_cells(pts, org, rng, culling, threshold,
                               self._max_scan_cells(), n_threads(self._params["n_jobs"]))
         if isinstance(out, Status):
             self._record_insert(out, pts, org, rng, method, threshold)   # raises
@@ -495,7 +507,8 @@ default="auto"
         updates = _cell_updates(kinds, point_cell, values, logodds32(self.p_m),
                                 logodds32(self.p_m_out))
         seconds = time.perf_counter() - t0
-        self._apply_cells(keys, updates, workers)
+        with stamping:
+            self._apply_cells(keys, updates, workers)
         self._scores = scores
         if self.history:
             self._history = (self._history + [cloud])[-self.history:]

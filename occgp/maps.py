@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import numbers
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -30,6 +31,8 @@ from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from ._validation import check_resolution
 
 __all__ = ["OccupancyMap", "MapType", "CAPABILITIES", "capabilities", "register",
            "available_maps", "map_type", "make_map", "OCTREE_FORMATS"]
@@ -333,7 +336,9 @@ def register(name: str, *, dims: tuple[int, ...] | int = 3,
         If `name` is malformed or taken by another class, `dims` holds
         other than 2 and 3, or a format does not start with a dot.
     TypeError
-        If `name` is not a string.
+        If `name` or `description` is not a string, `dims` is not an int or a
+        tuple of ints (a bool or a float such as ``3.0`` is not), or `formats`
+        is not a tuple of strings.
 
     Examples
     --------
@@ -351,12 +356,16 @@ def register(name: str, *, dims: tuple[int, ...] | int = 3,
             or not name.replace("-", "").replace("_", "").isalnum():
         raise ValueError(f"name must be lower-case letters, digits, '-' and '_', starting "
                          f"with a letter, got {name!r}")
-    dims = (dims,) if isinstance(dims, int) else tuple(dims)
-    if not dims or any(d not in (2, 3) for d in dims):
-        raise ValueError(f"dims must be 2, 3 or a tuple of them, got {dims!r}")
+    dims = _check_dims(dims)
+    if isinstance(formats, (str, bytes)) or not isinstance(formats, (tuple, list)) \
+            or not all(isinstance(s, str) for s in formats):
+        raise TypeError(f"formats must be a tuple of file suffixes such as ('.npz',), got "
+                        f"{formats!r}")
     formats = tuple(formats)
-    if any(not isinstance(s, str) or not s.startswith(".") for s in formats):
+    if any(not s.startswith(".") for s in formats):
         raise ValueError(f"formats must be file suffixes such as '.npz', got {formats!r}")
+    if description is not None and not isinstance(description, str):
+        raise TypeError(f"description must be a str or None, got {type(description).__name__}")
 
     def decorator(cls: C) -> C:
         old = _REGISTRY.get(name)
@@ -369,6 +378,24 @@ def register(name: str, *, dims: tuple[int, ...] | int = 3,
                                   MappingProxyType(dict(defaults)))
         return cls
     return decorator
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, (numbers.Integral, np.integer)) and not isinstance(
+        value, (bool, np.bool_))
+
+
+def _check_dims(dims: Any) -> tuple[int, ...]:
+    """register's `dims` as a tuple of ints, each 2 or 3."""
+    if _is_int(dims):
+        dims = (dims,)
+    elif not isinstance(dims, (tuple, list)) or not all(_is_int(d) for d in dims):
+        what = type(dims).__name__ if not isinstance(dims, (tuple, list)) else repr(dims)
+        raise TypeError(f"dims must be an int or a tuple of ints (2 or 3), got {what}")
+    dims = tuple(int(d) for d in dims)
+    if not dims or any(d not in (2, 3) for d in dims):
+        raise ValueError(f"dims must be 2, 3 or a tuple of them, got {dims!r}")
+    return dims
 
 
 def _qualname(cls: Any) -> str:
@@ -455,9 +482,12 @@ def make_map(name: str, **params: Any) -> Any:
     ------
     ValueError
         If `name` is not registered, a parameter is not one the class takes or
-        one it needs is missing, or the class rejects a value.
+        one it needs is missing, a ``resolution`` lies outside
+        :data:`~occgp._validation.RESOLUTION_RANGE` (``[1e-15, 1e14]`` m, for
+        every map type), or the class rejects a value.
     TypeError
-        If the class rejects a value's type.
+        If a ``resolution`` is not a real number, or the class rejects a
+        value's type.
 
     Examples
     --------
@@ -467,7 +497,11 @@ def make_map(name: str, **params: Any) -> Any:
     """
     entry = map_type(name)
     entry.check_params(params)
-    return entry.cls(**{**entry.defaults, **params})
+    params = {**entry.defaults, **params}
+    if params.get("resolution") is not None:
+        # one range for every map type: beyond it single-precision geometry fails
+        check_resolution(params["resolution"])
+    return entry.cls(**params)
 
 
 def _init_parameters(cls: Callable[..., Any]) -> tuple[str, ...]:

@@ -2,6 +2,7 @@
 type added in one module (docs/toy_map.py, the architecture page's worked example)."""
 
 import importlib.util
+import inspect
 import sys
 import warnings
 from pathlib import Path
@@ -94,6 +95,94 @@ def test_capabilities_are_discoverable():
     assert "variance" in map_type("bgk").capabilities
     assert set(maps.CAPABILITIES) == {"variance", "changed_cells", "distance_field", "colors",
                                       "decay", "merge", "project_2d", "frontiers"}
+
+
+def _insert(m, points, origin, **options):
+    """insert_scan, with grey colours for a map that takes them (ColorOctree)."""
+    if "colors" in inspect.signature(m.insert_scan).parameters:
+        options["colors"] = np.full((len(points), 3), 128, np.uint8)
+    return m.insert_scan(points, origin, **options)
+
+
+@pytest.mark.parametrize("name", available_maps())
+def test_every_listed_capability_works(name):
+    """A capability a registered map lists is one it has: each is exercised on a map of
+    the type (a 2D map lists none of these 3D capabilities)."""
+    entry = map_type(name)
+    listed = entry.capabilities
+    if 3 not in entry.dims:
+        assert not listed
+        return
+    points, origin = _wall_scan()
+    m = make_map(name, resolution=0.2)
+    if "changed_cells" in listed:
+        m.track_changes = True
+    stamped = {"stamp": 1.0} if "decay" in listed else {}
+    # a map listing decay takes stamp= in insert_scan (else nothing could fade)
+    _insert(m, points, origin, **stamped)
+    assert m.is_occupied(points).mean() > 0.8
+    for capability in listed:
+        if capability == "variance":
+            v = m.variance(points)
+            assert v.shape == (len(points),) and np.isfinite(v).all()
+        elif capability == "changed_cells":
+            assert len(m.changed_cells().keys) > 0
+        elif capability == "distance_field":
+            assert m.distance_field([[1.0, -1.0, -1.0], [3.0, 1.0, 1.0]]) is not None
+        elif capability == "colors":
+            colours, known = m.colors(points)
+            assert known.all() and (colours == 128).all()
+        elif capability == "decay":
+            assert len(m.stamps().keys) >= m.num_cells // 2
+            other = clone(m)
+            _insert(other, points, origin, **stamped)
+            assert other.decay(100.0, max_age=1.0) > 0       # cells older than 1 fade
+            assert other.occupancy(points).mean() < m.occupancy(points).mean()
+        elif capability == "merge":
+            merged = clone(m).merge(m)
+            assert merged.num_cells == m.num_cells
+        elif capability == "project_2d":
+            grid = m.project_2d(-1.5, 1.5)
+            assert (grid.states == 1).any()
+        elif capability == "frontiers":
+            assert m.frontiers() is not None
+        else:                                               # a capability not tested here
+            raise AssertionError(f"no check for the capability {capability!r}")
+
+
+@pytest.mark.parametrize("name", [n for n in available_maps()
+                                  if "resolution" in map_type(n).parameters()])
+@pytest.mark.parametrize("resolution", [1e20, 1e-25, 10**400])
+def test_every_map_refuses_resolutions_out_of_range(name, resolution):
+    """The docs' range [1e-15, 1e14] m holds for every map built through the registry
+    (make_map("bgk", resolution=1e20) was built and answered NaN at its own hits)."""
+    with pytest.raises(ValueError, match=r"resolution must lie in \[1e-15, 1e\+14\] m"):
+        make_map(name, resolution=resolution)
+    with pytest.raises(TypeError, match="resolution must be a real number, got bool"):
+        make_map(name, resolution=True)
+
+
+@pytest.mark.parametrize("dims, raises, message", [
+    (3.0, TypeError, r"dims must be an int or a tuple of ints \(2 or 3\), got float"),
+    (True, TypeError, "dims must be an int or a tuple of ints .*got bool"),
+    ((2, 3.0), TypeError, r"dims must be an int or a tuple of ints .*got \(2, 3.0\)"),
+    ("3", TypeError, "dims must be an int or a tuple of ints .*got str"),
+    ((), ValueError, "dims must be 2, 3 or a tuple of them"),
+    ((2, 4), ValueError, "dims must be 2, 3 or a tuple of them"),
+])
+def test_register_names_a_bad_dims(dims, raises, message):
+    with pytest.raises(raises, match=message):
+        register("x", dims=dims)
+    assert "x" not in available_maps()
+
+
+def test_register_names_bad_formats_and_description():
+    with pytest.raises(TypeError, match="formats must be a tuple of file suffixes"):
+        register("x", formats=".npz")
+    with pytest.raises(TypeError, match="formats must be a tuple of file suffixes"):
+        register("x", formats=(3,))
+    with pytest.raises(TypeError, match="description must be a str or None, got int"):
+        register("x", description=3)
 
 
 def test_registry_lists_builds_and_rejects():
