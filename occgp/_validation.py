@@ -91,7 +91,8 @@ def show_number(value: object) -> str:
         bits = v.bit_length()
         if bits > 132:                   # > 40 digits: 2**132 has 40
             digits = int(bits * math.log10(2)) + 1
-            return f"{'a negative' if v < 0 else 'an'} int of about {digits} digits"
+            what = f"{'a negative' if v < 0 else 'an'} int of about {digits} digits"
+            return what + " (beyond a float's range)" if bits > 1024 else what
     return repr(value)
 
 
