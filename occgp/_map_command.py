@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import check_n_jobs, check_real, check_resolution
+from ._validation import check_n_jobs, check_real, check_resolution, show_number
 from .knn import CDFS, KNN_PARAMS, KNNMap, check_knn_params
 from .maps import OCTREE_FORMATS, available_maps, make_map, map_type
 from .octree import OccupancyOctree
@@ -54,6 +54,24 @@ class OptionError(ValueError):
         self.param = param
 
 
+class OptionTypeError(TypeError):
+    """The TypeError of :class:`OptionError`: a value of the wrong type for one argument."""
+
+    def __init__(self, param: str, message: str) -> None:
+        super().__init__(message)
+        self.param = param
+
+
+def _option_error(param: str, exc: Exception) -> Exception:
+    """`exc` (a ValueError or TypeError) as the option error of `param`, same kind."""
+    return (OptionTypeError if isinstance(exc, TypeError) else OptionError)(param, str(exc))
+
+
+#: The map parameters map_scans sets from its own arguments (the options of ``occgp
+#: map``): `params` may not name them (one place for each value).
+OWN_PARAMS = {"resolution": "--resolution", "n_jobs": "--n-jobs", "max_range": "--max-range"}
+
+
 # the option of each map_scans argument an OptionError can name
 OPTION_OF = {"output": "-o/--output", "method": "--method", "mode": "--mode",
               "resolution": "--resolution", "max_range": "--max-range", "n_jobs": "--n-jobs",
@@ -61,7 +79,7 @@ OPTION_OF = {"output": "-o/--output", "method": "--method", "mode": "--mode",
               "fixed_frame": "--fixed-frame", "sensor_frame": "--sensor-frame",
               "project_2d": "--project-2d", "scan_filter": "scan filter options",
               "tf_tolerance": "--tf-tolerance", "input_map": "--input-map",
-              "fields": "--fields", "paths": "scans"}
+              "fields": "--fields", "paths": "scans", "params": "--param"}
 POSE_FORMATS = ("kitti", "tum")
 #: The outputs that are 2D maps (map_server's YAML, with project_2d)
 ROS_MAP_SUFFIXES = (".yaml", ".yml")
@@ -139,6 +157,24 @@ def _read_poses(path, poses_format):
         if str(exc).startswith(("cannot tell the format", "poses file")):
             raise OptionError("poses", str(exc)) from None
         raise
+
+
+def _check_params(params, method) -> dict:
+    """`params` as a dict, refusing a name map_scans sets from an argument of its own."""
+    if params is None:
+        return {}
+    if not isinstance(params, Mapping):
+        raise OptionTypeError("params", f"params must be a mapping of constructor "
+                              f"parameters, got {type(params).__name__}")
+    own = dict(OWN_PARAMS, **({name: option_name(name) for name in KNN_OPTIONS}
+                              if method == "knn" else {}))
+    for name, value in params.items():
+        if name in own:
+            arg = f"{name}=" if name in OWN_PARAMS else "knn_params"
+            raise OptionError("params", f"params names {name!r} (= {show_number(value)[:60]}), which has "
+                              f"its own option: give it there ({own[name]}; map_scans' "
+                              f"{arg})")
+    return dict(params)
 
 
 def _check_map_args(paths, output, method, mode, resolution, max_range, knn_params, n_jobs,
@@ -246,11 +282,12 @@ def _check_band(band) -> tuple[float, float]:
     return z_min, z_max
 
 
-def _new_map(method, resolution, max_range, params, n_jobs, input_map):
-    """The map to insert into: loaded from `input_map` or new (through the registry)."""
+def _new_map(method, resolution, max_range, params, n_jobs, input_map, knn=None):
+    """The map to insert into: loaded from `input_map` or new (through the registry).
+    A value of `params` the map refuses raises the option error of ``params``."""
     entry = map_type(method)
     names = entry.parameters()
-    given = dict(params)
+    given = {**(knn or {}), **params}
     if "n_jobs" in names:
         given["n_jobs"] = n_jobs
     if max_range is not None and "max_range" in names:
@@ -258,18 +295,54 @@ def _new_map(method, resolution, max_range, params, n_jobs, input_map):
     if input_map is None:
         if "resolution" in names:
             given["resolution"] = 0.1 if resolution is None else resolution
-        return make_map(method, **given)
+        try:
+            mapper = make_map(method, **given)
+            if params:
+                _probe(mapper, params)
+        except (ValueError, TypeError) as exc:
+            if params and not isinstance(exc, (OptionError, OptionTypeError)):
+                raise _option_error("params", exc) from None
+            raise
+        return mapper
     try:
         mapper = entry.cls.load(input_map)
+    except ValueError as exc:
+        raise ValueError(f"input_map: cannot continue it as a {method} map: {exc}") from None
+    try:
         if given:
             mapper.set_params(**given)
-    except ValueError as exc:
+    except (ValueError, TypeError) as exc:
+        if params and _names_any(exc, params):
+            raise _option_error("params", exc) from None
         raise ValueError(f"input_map: cannot continue it as a {method} map: {exc}") from None
     if resolution is not None and resolution != mapper.resolution:
         raise OptionError("resolution", f"resolution {resolution:g} differs from that of "
                            f"input_map {str(input_map)!r} ({mapper.resolution:g}); leave it "
                            f"out to continue the map at its own")
     return mapper
+
+
+def _names_any(exc: Exception, params) -> bool:
+    """Whether the message of `exc` names one of the parameters `params`."""
+    return any(re.search(rf"(?<![\w-]){re.escape(name)}(?![\w-])", str(exc))
+               for name in params)
+
+
+def _probe(mapper, params) -> None:
+    """Check the values of `params` on a map type that checks its parameters only at its
+    first update: one zero-length ray into an empty copy (:func:`sklearn.base.clone`).
+    An error naming one of `params` is raised; any other is the real run's to report."""
+    from sklearn.base import clone
+
+    try:
+        probe = clone(mapper)
+    except Exception:                # noqa: BLE001 -- a map clone cannot copy: no probe
+        return
+    try:
+        probe.insert_scan(np.zeros((1, 3)), np.zeros(3))
+    except (ValueError, TypeError) as exc:
+        if _names_any(exc, params):
+            raise
 
 
 def map_scans(paths, output: str | Path, *, resolution: float | None = None,
@@ -375,7 +448,12 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         depend on it.
     params : mapping, default=None
         Further constructor parameters of the map type (e.g.
-        ``{"prob_hit": 0.8}``), checked by the class.
+        ``{"prob_hit": 0.8}``), checked by the class before any scan is read
+        (a map type that checks its parameters at its first update gets one
+        zero-length ray into an empty copy). A parameter set by an argument of
+        its own (`resolution`, `n_jobs`, `max_range`, and with
+        ``method="knn"`` those of `knn_params`) is refused: each value has one
+        place.
     project_2d : (float, float), default=None
         ``(z_min, z_max)``: write a 2D map of that height band instead of
         the 3D map (:meth:`~occgp.OccupancyOctree.project_2d` at the map's
@@ -415,13 +493,16 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         choice; the format of `poses` cannot be guessed, or it does not hold
         one pose per scan; a bag option is given and no bag is among `paths`;
         `input_map` does not fit `method`, holds another class of map, or its
-        resolution differs from `resolution`; a file is malformed; or no scan
+        resolution differs from `resolution`; `params` names a parameter
+        given by an argument of its own, one the map type does not take, or
+        a value it refuses; a file is malformed; or no scan
         is found. The arguments are checked before any file is read; the pose
         count and `input_map` before any scan is inserted. Nothing is written
         when an error is raised.
     TypeError
         If `max_range`, `resolution` or `tf_tolerance` is not a real number,
-        `knn_params` is not a mapping or holds a value of the wrong type.
+        `knn_params` or `params` is not a mapping or holds a value of the
+        wrong type.
     OSError
         If a scan, pose or map file cannot be read, the folder of `output`
         does not exist (checked first) or the output cannot be written.
@@ -439,6 +520,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     output_path, resolution, max_range, n_jobs, input_path = _check_map_args(
         paths, output, method, mode, resolution, max_range, knn_params, n_jobs, poses,
         poses_format, bag_options, input_map, project_2d)
+    params = _check_params(params, method)
     _check_scan_filter(scan_filter, method)
     knn = check_knn_options({} if knn_params is None else knn_params) \
         if method == "knn" else {}
@@ -454,8 +536,8 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     try:
         if input_path is not None:
             bar.set_description(f"loading {input_path.name}")
-        mapper: Any = _new_map(method, resolution, max_range, {**knn, **dict(params or {})},
-                               n_jobs, input_path)
+        mapper: Any = _new_map(method, resolution, max_range, params, n_jobs, input_path,
+                               knn)
         if input_path is not None:
             bar.update()
         sources = []          # (input, scans)

@@ -28,7 +28,8 @@ from .filters import GROUND_MODES
 from .knn import CDFS
 from .maps import map_type
 from ._map_command import (
-    KNN_DEFAULTS, KNN_OPTIONS, OPTION_OF, POSE_FORMATS, OptionError, check_knn_options,
+    KNN_DEFAULTS, KNN_OPTIONS, OPTION_OF, POSE_FORMATS, OptionError, OptionTypeError,
+    check_knn_options,
     knn_error, map_methods, map_scans, option_name, parse_fields, parse_param,
 )
 from ._demo import (  # noqa: F401  (re-exported: occgp.cli is the demo's public home)
@@ -100,7 +101,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    type=parse_param, help="a constructor parameter of the map, repeatable (e.g. "
                    "--param prob_hit=0.8); the value is read as a Python literal, else kept "
-                   "as text (default: the map type's defaults)")
+                   "as text, and checked by the map before any scan is read (a bad value is a "
+                   "usage error); a parameter with an option of its own (--resolution, "
+                   "--n-jobs, --max-range, the k-NN options with --method knn) is refused: "
+                   "give it there (default: the map type's defaults)")
     p.add_argument("--project-2d", type=float, nargs=2, default=None,
                    metavar=("Z_MIN", "Z_MAX"),
                    help="write a 2D map of this height band instead (occupied if any cell "
@@ -246,7 +250,7 @@ def main(argv=None) -> int:
                       fields=args.fields, input_map=args.input_map, n_jobs=args.n_jobs,
                       params=dict(args.param), project_2d=args.project_2d,
                       scan_filter=_scan_filter(args), progress=progress)
-    except OptionError as exc:
+    except (OptionError, OptionTypeError) as exc:
         args.map_parser.error(f"argument {OPTION_OF.get(exc.param, exc.param)}: {exc}")
     except (ValueError, TypeError, OSError, ImportError) as exc:
         print(f"occgp {args.command}: error: {exc}", file=sys.stderr)

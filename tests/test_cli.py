@@ -591,3 +591,69 @@ def test_map_command_reads_bin_records_with_fields(tmp_path, capsys, fields, rec
     expected = OccupancyOctree(0.1).insert_scan(
         pts.astype(np.float32) if fields == "3" else pts, np.zeros(3))
     _assert_same_tree(OccupancyOctree.load(tmp_path / "m.ot"), expected)
+
+
+HUGE = "1" + "0" * 400
+
+
+@pytest.mark.parametrize("args, message", [
+    # a parameter with an option of its own is refused, not silently overwritten
+    (["--param", "resolution=0.5"], r"argument --param: params names 'resolution' \(= 0\.5\), "
+     r"which has its own option: give it there \(--resolution; map_scans' resolution=\)"),
+    (["--param", "resolution=abc"], r"params names 'resolution' .*--resolution"),
+    (["--method", "bgk", "--param", "n_jobs=0"], r"params names 'n_jobs' .*--n-jobs"),
+    (["--method", "bgk", "--param", "max_range=5"], r"params names 'max_range' .*--max-range"),
+    (["--method", "knn", "--param", "k=3"], r"params names 'k' .*\(--k; map_scans' knn_params\)"),
+    # bad values: checked by the map before any scan is read
+    (["--param", f"prob_hit={HUGE}"],
+     r"argument --param: prob_hit must lie in \(0\.5, 1\.0\), got an int of about 401 digits"),
+    (["--param", "prob_hit=abc"], r"argument --param: prob_hit must be a real number, got str"),
+    (["--param", "prob_hit=True"], r"argument --param: prob_hit must be a real number, got bool"),
+    (["--param", "nope=1"], r"argument --param: the 'octree' map takes no parameter 'nope'"),
+    (["--method", "bgk", "--param", "ell=-1"], r"argument --param: ell must lie in \(0\.0, inf\)"),
+    (["--method", "knn", "--param", "history=-1"], r"argument --param: history must"),
+    # a map that checks its parameters at its first update (the GP grid): probed first
+    (["--method", "gp-grid", "--param", "prob_hit=0.2"],
+     r"argument --param: prob_hit must lie in \(0\.5, 1\.0\), got 0\.2"),
+])
+def test_map_command_refuses_bad_params_before_any_work(tmp_path, capsys, monkeypatch, args,
+                                                        message):
+    """--param: exit code 2 and one error line naming the parameter, never a traceback, and
+    before any scan is read (the scan file does not exist)."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        main(["map", "missing.pcd", "-o", "m.bt", "--no-progress", *args])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert lines[0].startswith("usage: occgp map") and "Traceback" not in err
+    assert lines[-1].startswith("occgp map: error: argument --param: ")
+    assert re.search(message, lines[-1]), err
+    assert not (tmp_path / "m.bt").exists()
+
+
+def test_map_command_honours_good_params(tmp_path):
+    paths, scans = _write_scans(tmp_path)
+    out = tmp_path / "m.ot"          # log-odds (a .bt file keeps only the states)
+    assert main(["map", *map(str, paths), "-o", str(out), "--resolution", "0.2", "--param",
+                 "prob_hit=0.9", "--no-progress"]) == 0
+    tree = OccupancyOctree.load(out)
+    expected = OccupancyOctree(0.2, prob_hit=0.9)
+    for scan in scans:
+        expected.insert_scan(scan.points, scan.origin)
+    hits = np.vstack([s.points for s in scans])
+    assert tree.resolution == 0.2
+    # two scans at the default prob_hit=0.7 reach at most p = 0.845
+    assert tree.occupancy(hits).max() >= 0.9 - 1e-6
+    np.testing.assert_allclose(tree.occupancy(hits), expected.occupancy(hits), atol=1e-6)
+
+
+def test_map_scans_refuses_params_set_by_its_own_arguments(tmp_path):
+    write_pcd(tmp_path / "s.pcd", [[1.0, 0.0, 0.0]], [0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"params names 'resolution' \(= 0\.5\)"):
+        map_scans([tmp_path / "s.pcd"], tmp_path / "m.bt", params={"resolution": 0.5})
+    with pytest.raises(TypeError, match="prob_hit must be a real number, got str"):
+        map_scans([tmp_path / "s.pcd"], tmp_path / "m.bt", params={"prob_hit": "0.7"})
+    with pytest.raises(TypeError, match="params must be a mapping of constructor parameters"):
+        map_scans([tmp_path / "s.pcd"], tmp_path / "m.bt", params=[("prob_hit", 0.7)])
+    assert not (tmp_path / "m.bt").exists()
