@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from ._atomic import atomic_open
 
 __all__ = ["demo", "mapping_methods", "noisy_mapping_methods", "gp_mapping_methods",
            "stereo_scans_of_scene"]
@@ -354,7 +355,7 @@ def _plot_slice(rows, scene, scans, path: Path, z: float | None = None) -> None:
     for s in scans:
         axes[0, 0].plot(*s.origin[:2], "r^", ms=6)
     fig.suptitle(f"horizontal slice at z = {z:.2f} m")
-    fig.savefig(path, dpi=110)
+    _save_figure(fig, path)
 
 
 def _panels(panels, extent, size, extra=0):
@@ -407,7 +408,7 @@ def _plot_roc(rows, test, path: Path) -> None:
 
     fig = Figure(figsize=(5.2, 4.8), layout="constrained")
     _roc_axes(fig.subplots(), rows, test, "ROC on the cells in view (exact ground truth)")
-    fig.savefig(path, dpi=110)
+    _save_figure(fig, path)
 
 
 def _plot_2d(rows, room, scans, test, resolution, path: Path) -> None:
@@ -427,4 +428,10 @@ def _plot_2d(rows, room, scans, test, resolution, path: Path) -> None:
     _roc_axes(axes.flat[len(panels)], rows, test, "ROC on the 2D cells in view")
     axes.flat[len(panels)].set_aspect("auto")
     fig.suptitle(f"2D room: GP maps, cells of {res:g} m")
-    fig.savefig(path, dpi=110)
+    _save_figure(fig, path)
+
+
+def _save_figure(fig, path: Path) -> None:
+    """Write `fig` as a PNG at `path`, atomically (the old figure stays if it fails)."""
+    with atomic_open(path) as fh:
+        fig.savefig(fh, dpi=110, format="png")

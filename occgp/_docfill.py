@@ -56,7 +56,9 @@ Parameters
 ----------
 path : str or path-like
     Destination file (overwritten; written at `path` exactly, no suffix is
-    added).""",
+    added). The file is written atomically: a temporary file beside `path`
+    replaces it once complete, so the previous file stays intact if the
+    write fails.""",
     "gp_save_raises": """\
 Raises
 ------

@@ -12,6 +12,7 @@ import importlib
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._atomic import atomic_open
 from ._distance import DistanceField  # noqa: F401  (its public name's import path)
 from ._logodds_map import LogOddsMap
 from ._validation import as_path, check_bool, check_choice, check_int
@@ -207,7 +208,7 @@ def save_ply(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
     if cubes:
         header += [f"element face {len(faces)}", "property list uchar int vertex_indices"]
     header.append("end_header")
-    with open(path, "wb") as fh:  # an OSError names the path
+    with atomic_open(path) as fh:  # an OSError names the path
         fh.write(("\n".join(header) + "\n").encode("ascii"))
         if binary:
             record = np.dtype([(name, "<" + t) for name, t in columns])

@@ -358,6 +358,9 @@ class LogOddsMap(PlanningMixin):
         A ``comment`` line records the map's resolution. Faces are
         ``property list uchar int vertex_indices``.
 
+        The file is written atomically: a temporary file beside `path` replaces
+        it once complete, so the previous file stays intact if the write fails.
+
         Parameters
         ----------
         path : str or os.PathLike
@@ -421,6 +424,9 @@ class LogOddsMap(PlanningMixin):
         leaves without colour.
         Pruned leaves give one point at their centre (see
         :meth:`~occgp.OccupancyOctree.expand` for finest cells).
+
+        The file is written atomically: a temporary file beside `path` replaces
+        it once complete, so the previous file stays intact if the write fails.
 
         Parameters
         ----------

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from ._atomic import atomic_open
 from ._validation import as_path
 
 #: A member may declare at most this many bytes per compressed byte (deflate
@@ -49,13 +50,14 @@ _READ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error,
 
 def write_npz(path: Any, format_name: str, version: int, class_name: str,
               params: dict, arrays: dict[str, np.ndarray]) -> None:
-    """Write the archive at `path` exactly (no ``.npz`` suffix is added)."""
+    """Write the archive at `path` exactly (no ``.npz`` suffix is added), atomically:
+    the previous file stays intact if the write fails."""
     path = os.fspath(as_path(path))
     members: dict[str, Any] = {
         "format": np.array(format_name), "version": np.array(version, dtype=np.int64),
         "class": np.array(class_name), "params": np.array(json_text(params))}
     members.update(arrays)
-    with open(path, "wb") as f:
+    with atomic_open(path) as f:
         np.savez_compressed(f, **members)
 
 

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import numpy as np
 
 from . import _octomap_format as fmt
+from ._atomic import write_bytes
 from ._logodds_map import OctreeFace
 from ._octree import _check_binary_data, _check_full_data
 from ._validation import as_path, check_choice, check_resolution
@@ -84,6 +85,9 @@ class OctreeFiles(OctreeFace):
     def save(self: T, path: str | os.PathLike, format: str | None = None) -> T:
         """Write the map to an OctoMap file (see :meth:`to_bytes`).
 
+        The file is written atomically: a temporary file beside `path` replaces
+        it once complete, so the previous file stays intact if the write fails.
+
         Parameters
         ----------
         path : str or path-like
@@ -100,9 +104,7 @@ class OctreeFiles(OctreeFace):
             format = os.path.splitext(path)[1].lstrip(".").lower()
             if format not in fmt.FORMATS:
                 raise ValueError(f"path must end in .bt or .ot (or pass format=), got {path!r}")
-        data = self.to_bytes(format)
-        with open(path, "wb") as f:
-            f.write(data)
+        write_bytes(path, self.to_bytes(format))
         return self
 
     @classmethod

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._atomic import write_bytes
 from ._docfill import fill_doc
 from . import _octomap_format as fmt
 from ._color import FUSE_AVERAGE, FUSE_MEAN, _ColorOcTree
@@ -425,6 +426,9 @@ class ColorOctree(OctreeFace, _ColorOcTree):
     def save(self, path: str | os.PathLike) -> "ColorOctree":
         """Write the map to a ColorOcTree ``.ot`` file (see :meth:`to_bytes`).
 
+        The file is written atomically: a temporary file beside `path` replaces
+        it once complete, so the previous file stays intact if the write fails.
+
         Parameters
         ----------
         path : str or path-like
@@ -447,9 +451,7 @@ class ColorOctree(OctreeFace, _ColorOcTree):
         if os.path.splitext(path)[1].lower() != ".ot":
             raise ValueError(f"path must end in .ot (a ColorOcTree file; .bt files hold no "
                              f"colours), got {path!r}")
-        data = self.to_bytes()
-        with open(path, "wb") as f:
-            f.write(data)
+        write_bytes(path, self.to_bytes())
         return self
 
     @classmethod

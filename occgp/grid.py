@@ -247,6 +247,9 @@ default="auto"
         ``keys`` (uint16, shape (n_cells, 3), the cells' keys in key order)
         and ``log_odds`` (float32, shape (n_cells,)).
 
+        The file is written atomically: a temporary file beside `path` replaces
+        it once complete, so the previous file stays intact if the write fails.
+
         Parameters
         ----------
         path : str or path-like

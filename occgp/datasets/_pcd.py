@@ -14,6 +14,7 @@ import struct
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._atomic import write_bytes
 from .._docfill import fill_doc
 from .._validation import as_path, check_bool
 from ._fileio import READER_SECTIONS, read_bytes
@@ -446,6 +447,9 @@ def write_pcd(
 ) -> None:
     """Write points (and optional extra fields) to a PCD v0.7 file.
 
+    The file is written atomically: a temporary file beside `path` replaces
+    it once complete, so the previous file stays intact if the write fails.
+
     Parameters
     ----------
     path : str or os.PathLike
@@ -549,6 +553,5 @@ def write_pcd(
         soa = b"".join(np.ascontiguousarray(c).tobytes() for _, c in columns)
         comp = lzf_compress_literal(soa)
         body = struct.pack("<II", len(comp), len(soa)) + comp
-    with open(path, "wb") as fh:
-        fh.write(header.encode("ascii") + body)
+    write_bytes(path, header.encode("ascii") + body)
 

@@ -18,6 +18,7 @@ import warnings
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._atomic import write_bytes
 from .._docfill import fill_doc
 from ._fileio import READER_SECTIONS, as_path, read_bytes, read_text
 from ._pcd import read_pcd
@@ -355,6 +356,9 @@ def write_scan_graph(path, scans) -> None:
     rotation and whose points are stored relative to it (``points -
     origin``); no edges are written.
 
+    The file is written atomically: a temporary file beside `path` replaces
+    it once complete, so the previous file stays intact if the write fails.
+
     Parameters
     ----------
     path : str or os.PathLike
@@ -409,8 +413,7 @@ def write_scan_graph(path, scans) -> None:
         chunks += [struct.pack("<I", len(points)), block.tobytes(), pose.tobytes(),
                    struct.pack("<I", i)]
     chunks.append(struct.pack("<I", 0))
-    with open(path, "wb") as fh:
-        fh.write(b"".join(chunks))
+    write_bytes(path, b"".join(chunks))
 
 
 # --------------------------------------------------------------------------- #

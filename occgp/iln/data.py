@@ -35,13 +35,13 @@ from __future__ import annotations
 import functools
 import json
 import logging
-import os
 import re
 import zipfile
 import zlib
 
 import numpy as np
 
+from .._atomic import atomic_open
 from .._npz_io import read_npy_header
 from .._validation import as_path, check_bool, check_int, check_n_jobs
 from . import _effects
@@ -198,17 +198,15 @@ def _chunk_images(scene_seed, start, stop, n_images, seed, sizes, models, scene_
 
 
 def _write_shard(path, images, seeds, poses, model, record=None):
-    """Write one shard atomically (a temporary file renamed into place)."""
-    tmp = path.with_name(path.name + ".tmp")
+    """Write one shard atomically (see :mod:`occgp._atomic`)."""
     payload = dict(images)
     payload.update(lidar=np.array(model.to_json()), seeds=np.asarray(seeds, dtype=np.int64),
                    poses=np.asarray(poses, dtype=np.float64), format=np.array(FORMAT),
                    version=np.array(VERSION, dtype=np.int64))
     if record is not None:
         payload["simulation"] = np.array(json.dumps(record, sort_keys=True))
-    with open(tmp, "wb") as fh:
+    with atomic_open(path) as fh:
         np.savez_compressed(fh, **payload)
-    os.replace(tmp, path)
 
 
 def _check_progress(progress):
@@ -233,9 +231,9 @@ def make_dataset(folder, n_train: int, n_test: int, sizes=("16x1024", "64x1024")
     the images of one pose at all sizes share the pose. Images are written
     in compressed ``.npz`` shards of up to `images_per_shard` images,
     ``FOLDER/train/shard_00000.npz``, ... and ``FOLDER/test/...``, in the
-    format of the module docs. Each shard is written to a temporary file
-    and renamed into place, so an interrupted run leaves no half-written
-    shard. Nothing is downloaded.
+    format of the module docs. Each shard is written atomically (a temporary
+    file beside it, synced and renamed into place), so an interrupted run
+    leaves no half-written shard. Nothing is downloaded.
 
     The images are exact by default. With `effects` each size's clean
     image of each pose gets its own draw of the sensor effects

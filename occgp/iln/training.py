@@ -68,6 +68,7 @@ import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DistributedSampler
 
+from .._atomic import atomic_open
 from .._validation import check_int
 from ._range import angles_to_pixels, pixel_angles
 from .models import RangeModel, make
@@ -417,10 +418,10 @@ def _step_generator(seed: int, step: int, rank: int) -> torch.Generator:
 
 
 def _save(path: Path, payload: dict) -> None:
+    """Write a checkpoint atomically: the previous one stays intact if the write fails."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(payload, tmp)
-    os.replace(tmp, path)
+    with atomic_open(path) as fh:
+        torch.save(payload, fh)
 
 
 def load_checkpoint(path, map_location="cpu") -> dict:
@@ -524,7 +525,13 @@ def train(config: dict) -> dict:
         If a configuration value has a wrong type or value (the message names it), or the model
         has no parameters to train (``bilinear``).
     OSError
-        If the shard folder, a shard or the checkpoint to resume from cannot be read.
+        If the shard folder, a shard or the checkpoint to resume from cannot be read, or a
+        checkpoint cannot be written.
+
+    Notes
+    -----
+    The checkpoints (``last.pt``, ``model.pt``) are written atomically: the previous file
+    stays intact if the write fails (full disk, interrupted run).
     """
     cfg = _merge(config)
     chk = _check_config(cfg)

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from .._atomic import atomic_open
 from .._validation import as_float, as_path, check_int, check_real
 from ._common import as_lidar, as_size, as_size_list, check_images, out_model
 from ._range import range_image_to_points
@@ -182,6 +183,7 @@ def tune_checkpoint(checkpoint: Any, folder: Any, output: Any, *, split: str = "
     output : str or os.PathLike
         The checkpoint to write: `checkpoint`'s content with the model's two thresholds set,
         and ``threshold_tuning``: the images used, the pairs tried and their IoU and MAE.
+        The file is written atomically: the previous file stays intact if the write fails.
     split : str, default="train"
         The split of `folder` to read.
     skip : int, default=0
@@ -252,7 +254,6 @@ def tune_checkpoint(checkpoint: Any, folder: Any, output: Any, *, split: str = "
                                 no_return_threshold=no_return)
     out["threshold_tuning"] = record
     path = as_path(output, "output")
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(out, tmp)
-    os.replace(tmp, path)
+    with atomic_open(path, name="output") as fh:
+        torch.save(out, fh)
     return record
