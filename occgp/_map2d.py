@@ -186,6 +186,14 @@ class OccupancyGrid2D:
         map_server (ROS 1 and Nav2) reads the three grey levels back as
         occupied, free and unknown. Numbers are written in full precision.
 
+        The files are written atomically: both go to temporary files beside
+        `path` first, then the image replaces ``<stem>.pgm`` and only after it
+        the YAML file replaces `path`, so that a reader never sees a YAML file
+        naming a missing or half-written image; the previous files stay intact
+        if the write fails (when replacing the YAML file fails, the old image
+        is put back). A process killed between the two replacements can leave
+        the new image beside the old YAML file.
+
         Parameters
         ----------
         path : str or os.PathLike

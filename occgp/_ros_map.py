@@ -10,7 +10,6 @@ itself (no image library); YAML is read with PyYAML.
 
 from __future__ import annotations
 
-import json
 import math
 import numbers
 import pathlib
@@ -19,6 +18,7 @@ import re
 import numpy as np
 from numpy.typing import NDArray
 
+from ._atomic import atomic_group
 from ._validation import as_float, show_number
 
 __all__ = ["write_ros_map", "read_ros_map", "read_pgm", "OCCUPIED", "FREE", "UNKNOWN",
@@ -44,14 +44,41 @@ def _yaml_float(x: float) -> str:
     return text
 
 
+def _yaml_string(text: str) -> str:
+    """`text` as a double-quoted YAML scalar: printable characters as they are (the file
+    is UTF-8), the others and YAML's line breaks U+2028 and U+2029 escaped. (JSON's
+    escapes are not YAML's: JSON writes a character beyond the BMP as a surrogate pair,
+    which YAML reads as two characters.)"""
+    out = ['"']
+    for ch in text:
+        o = ord(ch)
+        if ch in '"\\':
+            out.append("\\" + ch)
+        elif (0x20 <= o <= 0x7E or (0xA0 <= o <= 0xD7FF and o not in (0x2028, 0x2029))
+              or (0xE000 <= o <= 0xFFFD and o != 0xFEFF) or o >= 0x10000):
+            out.append(ch)
+        elif o <= 0xFF:
+            out.append(f"\\x{o:02x}")
+        else:
+            out.append(f"\\u{o:04x}")
+    return "".join(out) + '"'
+
+
 def write_ros_map(path: pathlib.Path, image: NDArray[np.uint8], resolution: float,
                   origin: NDArray[np.float64]) -> tuple[pathlib.Path, pathlib.Path]:
     """Write `image` (rows from the largest y down) as ``<stem>.pgm`` beside the YAML
-    file `path`, and the YAML file; return both paths."""
+    file `path`, and the YAML file; return both paths.
+
+    Both files are written to temporary files first (see :mod:`occgp._atomic`);
+    then the image replaces ``<stem>.pgm`` and only after it the YAML file
+    replaces `path`, so that the YAML file never names a missing or half-written
+    image. If a write or the first replacement fails, both old files stay; if
+    replacing the YAML file fails, the old image is put back.
+    """
     pgm = path.with_suffix(".pgm")
     height, width = image.shape
     header = f"P5\n# CREATOR: occgp {resolution:.3f} m/pix\n{width} {height}\n255\n"
-    name = pgm.name if _PLAIN_NAME.match(pgm.name) else json.dumps(pgm.name)
+    name = pgm.name if _PLAIN_NAME.match(pgm.name) else _yaml_string(pgm.name)
     text = (f"image: {name}\n"
             "mode: trinary\n"
             f"resolution: {_yaml_float(resolution)}\n"
@@ -59,11 +86,13 @@ def write_ros_map(path: pathlib.Path, image: NDArray[np.uint8], resolution: floa
             "negate: 0\n"
             f"occupied_thresh: {OCCUPIED_THRESH}\n"
             f"free_thresh: {FREE_THRESH}\n")
-    with open(pgm, "wb") as fh:
-        fh.write(header.encode("ascii"))
-        fh.write(np.ascontiguousarray(image, dtype=np.uint8).tobytes())
-    with open(path, "w", encoding="utf-8") as fh:
-        fh.write(text)
+    # image first, then the YAML file that names it
+    with atomic_group(pgm, path) as (pgm_tmp, yaml_tmp):
+        with open(pgm_tmp, "wb") as fh:
+            fh.write(header.encode("ascii"))
+            fh.write(np.ascontiguousarray(image, dtype=np.uint8).tobytes())
+        with open(yaml_tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
     return path, pgm
 
 
