@@ -155,6 +155,9 @@ class OccupancyMap(Protocol):
     def save(self, path: str | os.PathLike) -> Any:
         """Write the map with its evidence.
 
+        The file is written atomically: a temporary file beside `path` replaces
+        it once complete, so the previous file stays intact if the write fails.
+
         Parameters
         ----------
         path : str or path-like
