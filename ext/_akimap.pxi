@@ -429,6 +429,25 @@ cdef void _bandwidth_one(
     scale[i] = c
 
 
+def _merge_search(const int64_t[::1] keys, queries, bint right):
+    """np.searchsorted(keys, queries, side="right" if right else "left") for
+    non-decreasing `queries` (keys sorted), by one merge of the two."""
+    cdef const int64_t[::1] q = np.ascontiguousarray(queries, dtype=np.int64)
+    cdef Py_ssize_t n = keys.shape[0], m = q.shape[0], j, k = 0
+    out = np.empty(m, dtype=np.int64)
+    cdef int64_t[::1] o = out
+    with nogil:
+        for j in range(m):
+            if right:
+                while k < n and keys[k] <= q[j]:
+                    k += 1
+            else:
+                while k < n and keys[k] < q[j]:
+                    k += 1
+            o[j] = k
+    return out
+
+
 def _search_cubes(const double[:, ::1] samples, double cell):
     """The samples bucketed in cubes of edge `cell`, for the neighbour search:
     (order (the samples sorted by cube, z then y then x, stably), the occupied
@@ -443,9 +462,16 @@ def _search_cubes(const double[:, ::1] samples, double cell):
     ck -= lo
     flat = (ck[:, 2] * dims[1] + ck[:, 1]) * dims[0] + ck[:, 0]
     order = np.argsort(flat, kind="stable").astype(np.int64)
-    keys, start, inverse = np.unique(flat[order], return_index=True, return_inverse=True)
+    # the occupied cubes, their first positions in that order and each sample's cube,
+    # from the sorted keys' runs (what np.unique gives, without sorting them again)
+    sorted_flat = flat[order]
+    new = np.empty(n, dtype=bool)
+    new[0] = True
+    np.not_equal(sorted_flat[1:], sorted_flat[:-1], out=new[1:])
+    start = np.flatnonzero(new)
+    keys = sorted_flat[start]
     cube_of = np.empty(n, dtype=np.int64)
-    cube_of[order] = inverse.ravel()
+    cube_of[order] = np.cumsum(new) - 1
     counts = np.diff(np.append(start, n))
     start = np.append(start, n).astype(np.int64)
     d0, d1, d2 = (int(d) for d in dims)
@@ -455,11 +481,15 @@ def _search_cubes(const double[:, ::1] samples, double cell):
     for dz in (-1, 0, 1):
         for dy in (-1, 0, 1):
             row = (cz + dz) * d1 + (cy + dy)
-            row_first[:, 3 * (dz + 1) + dy + 1] = np.searchsorted(keys, row * d0 + cx - 1)
+            # the queries below grow with the keys (each is the key shifted by a
+            # constant, give or take the clamps at the grid's x ends): searched by a
+            # merge, as np.searchsorted finds them
+            row_first[:, 3 * (dz + 1) + dy + 1] = _merge_search(keys, row * d0 + cx - 1,
+                                                                False)
             # the samples of the row's cubes x - 1 .. x + 1 inside the grid
             inside = (cy + dy >= 0) & (cy + dy < d1) & (cz + dz >= 0) & (cz + dz < d2)
-            first = np.searchsorted(keys, row * d0 + np.maximum(cx - 1, 0))
-            last = np.searchsorted(keys, row * d0 + np.minimum(cx + 1, d0 - 1), side="right")
+            first = _merge_search(keys, row * d0 + np.maximum(cx - 1, 0), False)
+            last = _merge_search(keys, row * d0 + np.minimum(cx + 1, d0 - 1), True)
             near += np.where(inside, start[last] - start[first], 0)
     pairs = float(np.dot(counts, near))
     return (order, np.ascontiguousarray(keys, dtype=np.int64), start, cube_of,

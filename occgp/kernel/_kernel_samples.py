@@ -12,6 +12,7 @@ from numbers import Integral
 import numpy as np
 from numpy.typing import NDArray
 
+from .._kernel import _support_cells
 from .._validation import check_real
 
 #: Half the number of keys per axis (liboctomap's tree_max_val).
@@ -120,12 +121,11 @@ def check_max_cells(value) -> int:
 
 def support_cells(samples, extent, res) -> float:
     """Cells in the support boxes of the samples (as the accumulation visits them:
-    cell centres within `extent` of each sample, keys clamped to the key range)."""
-    with np.errstate(over="ignore", invalid="ignore"):
-        lo = np.maximum(np.ceil((samples - extent) / res - 0.5) + MAX_VAL, 0)
-        hi = np.minimum(np.floor((samples + extent) / res - 0.5) + MAX_VAL,
-                        2 * MAX_VAL - 1)
-    return float(np.sum(np.prod(np.clip(hi - lo + 1, 0, None), axis=1)))
+    cell centres within `extent` of each sample, keys clamped to the key range),
+    counted by the compiled core in one pass."""
+    return float(_support_cells(np.ascontiguousarray(samples, dtype=np.float64),
+                                np.ascontiguousarray(extent, dtype=np.float64),
+                                float(res)))
 
 
 def search_cell(xs, radius) -> float:
@@ -133,8 +133,10 @@ def search_cell(xs, radius) -> float:
     search radius, widened where the samples would span more than 2^20 cubes."""
     if len(xs) == 0:
         return radius
-    span = float(np.max(np.ptp(xs, axis=0)))
-    return max(radius, span / (1 << 20), float(np.max(np.abs(xs))) / (1 << 52))
+    lo, hi = xs.min(axis=0), xs.max(axis=0)
+    span = float(np.max(hi - lo))
+    largest = float(max(np.max(np.abs(lo)), np.max(np.abs(hi))))
+    return max(radius, span / (1 << 20), largest / (1 << 52))
 
 
 def candidate_pairs(xs, cell) -> float:
