@@ -286,6 +286,32 @@ def test_wall_is_occupied_and_the_space_before_it_free():
         assert m.memory_usage() / m.num_cells < 64
 
 
+@pytest.mark.parametrize("resolution, step, floor", [(0.01, 0.5, 0.03), (0.05, 0.5, 0.15),
+                                                      (0.1, 0.5, 0.15), (0.2, 1.0, 0.3),
+                                                      (0.4, 2.0, 0.6)])
+def test_free_sample_distance_and_floor_grow_with_coarse_cells(resolution, step, floor):
+    """None means a free sample per max(0.5, 5 resolution) metres, R the same, and a
+    floor of 3 resolution, at most 0.3 times that distance: the same map bit for bit
+    as those values given."""
+    points, origin = wall_scan(x=2.05)
+    points = np.vstack([points, points * [1.6, 1.0, 1.0] + [0.0, 0.0, 0.4]])
+    m = AKIMap(resolution, random_state=0)
+    assert m.get_params()["free_sample_distance"] is None
+    assert_allclose(m.floor_, floor, rtol=1e-15)
+    given = AKIMap(resolution, free_sample_distance=step, max_search_range=step,
+                   bandwidth_floor=floor, random_state=0)
+    a, b = m.update(points, origin).cells(), given.update(points, origin).cells()
+    for x, y in zip(a, b):
+        assert_array_equal(x, y)
+    # the published variant: the same free samples, no floor
+    assert AKIMap(resolution, variant="published").floor_ == 0.0
+    s1, l1 = AKIMap(resolution, variant="published", random_state=1).training_data(
+        points, origin)
+    s2, l2 = AKIMap(resolution, free_sample_distance=step,
+                    random_state=1).training_data(points, origin)
+    assert_array_equal(s1, s2)
+
+
 def test_bandwidth_floor_keeps_a_flat_wall_between_cell_centres():
     """A wall on a cell boundary: the published flat kernels (thickness sqrt(0.001) m)
     miss the centres 5 cm away; the floor's do not."""
@@ -387,7 +413,7 @@ def wall60():
                                                       r"make 4.39e\+10 free samples"),
     (dict(resolution=0.1, max_search_range=100.0, max_cells_per_update=1000),
      r"would examine .* sample pairs .*max_search_range=100 m"),
-    (dict(resolution=1e20), r"kernel weights of this update fall to 3.16e-62 .* underflow"),
+    (dict(resolution=1e20), r"kernel weights of this update fall to 1.71e-61 .* underflow"),
     (dict(resolution=1e-12), r"kernel weights of this update reach .* overflow"),
 ])
 def test_too_large_or_degenerate_updates_change_nothing(kwargs, match):

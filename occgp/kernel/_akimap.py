@@ -46,11 +46,13 @@ class AKIMap(KernelMapBase):
     resolution : float, default=0.1
         Edge length of the cells, in metres; also the isotropic fallback's
         bandwidth and the down-sampling cell of the samples.
-    free_sample_distance : float, default=0.5
-        One random free sample per this many metres of each beam.
+    free_sample_distance : float, default=None
+        One random free sample per this many metres of each beam; None means
+        ``max(0.5, 5 * resolution)``: the reference code's 0.5 m, scaled with
+        cells coarser than 0.1 m (see Notes).
     max_search_range : float, default=None
-        R, the largest neighbour search radius, in metres; None means
-        `free_sample_distance` (as the reference code).
+        R, the largest neighbour search radius, in metres; None means the
+        free-sample distance in use (as the reference code).
     sensor_range : float, default=8.0
         Distance at which the search radius reaches R, in metres (it sets the
         bandwidths' schedule only: `max_range` limits the beams).
@@ -61,9 +63,11 @@ class AKIMap(KernelMapBase):
         100 epochs, tolerance 0.001, the code's gradient as published).
     bandwidth_floor : float, default=None
         f, in metres: ``f^2 I`` is added to every bandwidth after its scale is
-        chosen, so no kernel is thinner than about f (see Notes). None means
-        ``3 * resolution`` for ``variant="occgp"`` and 0 (none, as published)
-        for ``variant="published"``.
+        chosen, so no kernel is thinner than about f (see Notes). None means,
+        for ``variant="occgp"``, ``3 * resolution`` but at most 0.3 times the
+        free-sample distance in use (so ``3 * resolution`` up to 0.05 m cells,
+        0.15 m up to 0.1 m, ``1.5 * resolution`` beyond), and 0 (none, as
+        published) for ``variant="published"``.
     prior : float, default=0.001
         Prior alpha and beta of every cell.
     max_range : float, default=None
@@ -127,7 +131,24 @@ class AKIMap(KernelMapBase):
     Why the floor: a covariance of samples on a surface is nearly flat, and
     its kernel then falls between cell centres; the floor gives such kernels
     the thickness of a few cells (AUC 0.938 -> 0.980 on the la3dm structured
-    scene at 0.05 m with the default ``3 * resolution``).
+    scene at 0.05 m with the default, 3 cells there). Beyond about a third of
+    the spacing of the free samples it smooths free space into surfaces: of
+    floors from 0.05 m to 0.3 m, 0.15 m scored best on the synthetic rooms
+    against their exact occupancy at both 0.05 m and 0.1 m cells (at 0.1 m,
+    AUC 0.810 -> 0.867 structured, 0.796 -> 0.864 unstructured, against the
+    former ``3 * resolution``; the la3dm scene's held-out AUC 0.983 ->
+    0.970), and on the ``hku_mb`` LiDAR sequence at 0.1 m (a validation
+    split of the real-log benchmark's training scans only: of its first 205
+    training scans, every 10th held out) accuracy at 0.5 0.912 -> 0.933,
+    AUC 0.990 -> 0.991, in a third of the accumulation's time.
+
+    Why the free-sample distance grows with coarse cells: a free sample
+    every 0.5 m of every beam, 2.5 cells of 0.2 m, puts free evidence in
+    most cells on a surface that beams graze, and their posterior mean
+    falls below 0.5. On the same validation split at 0.2 m, 0.5 m (floor
+    0.6 m) labelled 69 % of the held-out hits occupied (accuracy at 0.5
+    0.831, AUC 0.972; the octree 0.903, 0.951), 1.0 m (floor 0.3 m) 93 %
+    (accuracy 0.929, AUC 0.978).
 
     Parameters are stored as given and checked by the constructor, by
     :meth:`set_params` and again by every update (so that attributes changed
@@ -164,7 +185,7 @@ class AKIMap(KernelMapBase):
         self,
         resolution: float = 0.1,
         *,
-        free_sample_distance: float = 0.5,
+        free_sample_distance: float | None = None,
         max_search_range: float | None = None,
         sensor_range: float = 8.0,
         variant: str = "occgp",
@@ -196,8 +217,9 @@ class AKIMap(KernelMapBase):
 
     def _check_values(self, params: dict) -> dict:
         out = super()._check_values(params)
-        out["free_sample_distance"] = check_real(params["free_sample_distance"],
-                                                 "free_sample_distance", low=0.0)
+        d = params["free_sample_distance"]
+        out["free_sample_distance"] = None if d is None else check_real(
+            d, "free_sample_distance", low=0.0)
         r = params["max_search_range"]
         out["max_search_range"] = None if r is None else check_real(r, "max_search_range",
                                                                     low=0.0)
@@ -210,11 +232,14 @@ class AKIMap(KernelMapBase):
         out["bandwidth_floor"] = None if f is None else check_real(f, "bandwidth_floor",
                                                                    low=0.0, low_open=False)
         out["random_state"] = _check_random_state(params["random_state"])
-        # derived: the neighbour search radius R and the floor f in use
-        out["search_range"] = (out["free_sample_distance"] if r is None
-                               else out["max_search_range"])
+        # derived: the free-sample distance, the neighbour search radius R and the
+        # floor f in use
+        out["free_step"] = (max(0.5, 5.0 * out["resolution"]) if d is None
+                            else out["free_sample_distance"])
+        out["search_range"] = out["free_step"] if r is None else out["max_search_range"]
         out["floor"] = (out["bandwidth_floor"] if f is not None else
-                        3.0 * out["resolution"] if variant == "occgp" else 0.0)
+                        min(3.0 * out["resolution"], 0.3 * out["free_step"])
+                        if variant == "occgp" else 0.0)
         return out
 
     def _set_checked_params(self, params, p) -> None:
@@ -312,7 +337,7 @@ class AKIMap(KernelMapBase):
         return samples, labels
 
     def _training_data(self, p, pts, org):
-        res, step = p.resolution, p.free_sample_distance
+        res, step = p.resolution, p.free_step
         pts = within_range(pts, org, p.max_range)
         if len(pts) == 0:
             return np.empty((0, 3)), np.empty(0)
