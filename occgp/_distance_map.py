@@ -60,6 +60,14 @@ class DistanceMap:
     bit-identical distances and the same nearest cells (every block is always
     computed by the same steps on the same window).
 
+    An empty map (or one that knows no cell inside `bbox`) is a valid start:
+    the field then has no block, :meth:`query` answers NaN (unknown)
+    everywhere and :meth:`dense` an empty grid; :meth:`update` allocates the
+    blocks as the map learns cells, so "fit the empty map, update after each
+    scan" gives exactly the field of a fit after the scans. Known space
+    without any obstacle (only free cells, ``unknown="free"``) holds inf, or
+    `max_distance` when truncated.
+
     Parameters
     ----------
     max_distance : float, default=None
@@ -302,7 +310,7 @@ class DistanceMap:
         allb = _unpack(np.unique(_pack(np.concatenate(blocks))))
         keep = ((allb * B < dhi) & (allb * B + B > dlo)).all(axis=1)
         self._allocate(allb[keep])
-        flat = self._state.reshape(len(self._state), -1)
+        flat = self._state.reshape(len(self._state), B**3)   # no blocks: shape (0, B**3)
         value = occupied.astype(np.uint8)
         for s in np.unique(side[small]):
             rows = np.flatnonzero(side == s)
@@ -647,7 +655,8 @@ class DistanceMap:
         ----------
         bbox : array-like of shape (2, 3), default=None
             Box of the grid (snapped outwards to the cells); None: the box of
-            the allocated blocks.
+            the allocated blocks (a grid of shape (0, 0, 0) when there are
+            none).
         return_closest : bool, default=False
             Also return the closest cells' centres, shape (nx, ny, nz, 3)
             (see :meth:`query`).
@@ -683,8 +692,8 @@ class DistanceMap:
                 dlo, dhi = self._domain
                 first = np.maximum(first, dlo)
                 shape = tuple(int(v) for v in np.minimum(first + shape, dhi) - first)
-            else:
-                first, shape = np.zeros(3, dtype=np.int64), (1, 1, 1)
+            else:                   # nothing known: an empty grid
+                first, shape = np.zeros(3, dtype=np.int64), (0, 0, 0)
             if np.prod(np.array(shape, dtype=np.float64)) > max_cells:
                 raise ValueError(f"the allocated blocks span {shape} cells, more than "
                                  f"max_cells={max_cells}; pass a smaller bbox")

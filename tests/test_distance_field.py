@@ -351,3 +351,73 @@ def test_bad_calls():
         field.query([[0, 0, 0]], return_closest=1)
     with pytest.raises(ValueError, match="more than max_cells=10"):
         field.dense(max_cells=10)
+
+
+# --------------------------------------------------------------------------- #
+# empty maps (issue 40): a valid start, empty in, empty out
+# --------------------------------------------------------------------------- #
+EMPTY_CASES = {
+    "empty octree": (lambda: OccupancyOctree(0.25), None),
+    "empty grid map": (lambda: GridMap(0.25), None),
+    # every known cell lies outside the box
+    "known cells outside bbox": (
+        lambda: OccupancyOctree(0.25).insert_scan([[1.0, 0.1, 0.1]], [0.1, 0.1, 0.1]),
+        [[5.0, 5.0, 5.0], [6.0, 6.0, 6.0]]),
+}
+
+
+@pytest.mark.parametrize("case", list(EMPTY_CASES))
+@pytest.mark.parametrize("cfg", CONFIGS[:3])
+def test_fit_of_an_empty_map_is_an_empty_field(case, cfg):
+    make, bbox = EMPTY_CASES[case]
+    field = DistanceMap(**cfg, bbox=bbox).fit(make())
+    assert field.num_blocks_ == 0 and field.memory_usage() == 0
+    assert field.last_update_["blocks"] == field.last_update_["recomputed"] == 0
+    d, closest, grad = field.query([[0.1, 0.1, 0.1], [5.5, 5.5, 5.5]], return_closest=True,
+                                   return_gradient=True)
+    assert np.isnan(d).all() and np.isnan(closest).all() and np.isnan(grad).all()
+    dense, closest = field.dense(return_closest=True)
+    assert dense.distances.shape == (0, 0, 0) and closest.shape == (0, 0, 0, 3)
+    boxed = field.dense([[5.0, 5.0, 5.0], [5.5, 5.5, 5.5]])
+    assert boxed.distances.shape == (2, 2, 2) and np.isnan(boxed.distances).all()
+
+
+def test_known_free_space_without_obstacles_is_inf_or_max_distance():
+    m = OccupancyOctree(0.25).set_cells([[0.1, 0.1, 0.1]], [-2.0])
+    assert_array_equal(DistanceMap(unknown="free", block_size=4).fit(m)
+                       .query([[0.1, 0.1, 0.1]]), [np.inf])
+    assert_array_equal(DistanceMap(0.5, unknown="free", block_size=4).fit(m)
+                       .query([[0.1, 0.1, 0.1]]), [0.5])
+
+
+@pytest.mark.parametrize("cfg", CONFIGS)
+@pytest.mark.parametrize("with_box", [False, True])
+def test_start_empty_fit_then_update_after_each_scan_equals_a_fit(cfg, with_box):
+    """The robot's workflow: an empty map, a field fitted on it, then a scan and an
+    update at a time; after each, every cell equals a new fit's."""
+    rng = np.random.default_rng(7)
+    kw = dict(cfg, bbox=BOX if with_box else None)
+    m = OccupancyOctree(0.25)
+    m.track_changes = True
+    field = DistanceMap(**kw).fit(m)
+    grid = np.stack(np.meshgrid(*[np.arange(-2.5, 2.5, 0.25) + 0.125] * 3, indexing="ij"),
+                    -1).reshape(-1, 3)
+    for _ in range(2):
+        m.insert_scan(rng.uniform(-2.0, 2.0, (30, 3)), rng.uniform(-0.3, 0.3, 3))
+        field.update(m)
+        m.reset_changes()
+        fresh = DistanceMap(**kw).fit(m)
+        assert field.num_blocks_ == fresh.num_blocks_ > 0
+        assert_same_field(field, fresh)
+        for a, b in zip(field.query(grid, return_closest=True),
+                        fresh.query(grid, return_closest=True)):
+            assert_array_equal(a, b)                         # every cell, NaN included
+
+
+def test_grid_map_starts_empty_and_updates_from_points():
+    g = GridMap(0.5)
+    field = DistanceMap(unknown="free", block_size=4).fit(g)
+    g.insert_scan([[2.25, 0.25, 0.25]], [0.25, 0.25, 0.25])
+    field.update(g, [[x + 0.25, 0.25, 0.25] for x in np.arange(0.0, 2.5, 0.5)])
+    assert_same_field(field, DistanceMap(unknown="free", block_size=4).fit(g))
+    assert_array_equal(field.query([[0.25, 0.25, 0.25]]), [2.0])
