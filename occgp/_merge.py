@@ -76,6 +76,10 @@ class OctreeMerging(OctreeFace):
         Transforms by whole cells (and quarter turns about the axes through
         cell corners) map cells onto cells exactly.
 
+        Empty maps are valid on either side: an empty `other` (with or
+        without `transform`) leaves this map unchanged, and merging into an
+        empty map gives it `other`'s cells (clamped to this map's limits).
+
         Parameters
         ----------
         other : OccupancyOctree or map with ``to_octree()``
@@ -120,7 +124,7 @@ class OctreeMerging(OctreeFace):
         rule = check_choice(rule, "rule", MERGE_RULES)
         cap = MAX_MERGE_CELLS if max_cells is None else check_int(max_cells, "max_cells", low=1)
         keys, values = _finest_cells(other, cap)
-        if t is not None and not np.array_equal(t, np.eye(4)):
+        if len(keys) and t is not None and not np.array_equal(t, np.eye(4)):
             keys, values = _resampled(other, keys, t, self.resolution)
         if len(keys) == 0:
             return self

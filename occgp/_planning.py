@@ -181,7 +181,8 @@ class PlanningMixin:
         bbox : array-like of shape (2, 2), default=None
             ``[[x_min, y_min], [x_max, y_max]]``: the area, extended outward to
             whole grid cells. Default: the map's ``bounds`` in x and y (a grid
-            of shape (0, 0) when the map is empty).
+            of shape (0, 0) when the map is empty). A box where the map knows
+            no cell gives a grid of unknown cells.
         max_cells : int, default=None
             The most cells the grid may have (None: 2**25, about 10 bytes each
             at peak); past it a ValueError is raised before any allocation.
@@ -272,7 +273,7 @@ class PlanningMixin:
         bbox : array-like of shape (2, 3), default=None
             ``[min_corner, max_corner]``, metres, extended outward to whole
             cells. Default: the map's ``bounds`` (no frontier when the map
-            is empty).
+            is empty; nor in a box where it knows no cell).
         min_size : int, default=1
             The fewest cells a cluster keeps.
         max_cells : int, default=None

@@ -109,6 +109,24 @@ def test_empty_map_and_unknown_box():
         f.cluster(0)
 
 
+@pytest.mark.parametrize("kind", ["octree", "grid", "color"])
+def test_empty_maps_and_cells_outside_the_box_have_no_frontier(kind):
+    """Empty in, empty out (issue 40), on every log-odds map."""
+    make = {"octree": OccupancyOctree, "grid": GridMap, "color": ColorOctree}[kind]
+    empty = make(0.1)
+    for f in (empty.frontiers(), empty.frontiers(bbox=[[0, 0, 0], [0.5, 0.5, 0.5]],
+                                                min_size=3)):
+        assert f.cells.shape == (0, 3) and f.labels.shape == (0,) and f.n_clusters == 0
+    known = make(0.1)
+    if kind == "color":
+        known.insert_scan([[1.0, 0.05, 0.05]], [0.05, 0.05, 0.05], colors=[[1.0, 0, 0]])
+    else:
+        known.insert_scan([[1.0, 0.05, 0.05]], [0.05, 0.05, 0.05])
+    assert known.frontiers().n_clusters > 0                  # the ray's free cells
+    far = known.frontiers(bbox=[[5.0, 5.0, 5.0], [5.5, 5.5, 5.5]])
+    assert far.cells.shape == (0, 3) and far.centroids.shape == (0, 3)
+
+
 # --------------------------------------------------------------------------- #
 # brute force on random maps
 # --------------------------------------------------------------------------- #

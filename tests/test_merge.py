@@ -77,6 +77,35 @@ def test_identity_and_whole_cell_transforms_are_exact():
     assert same_leaves(copy(a).merge(b, t), expected)
 
 
+ROTATION = np.array([[np.cos(0.3), -np.sin(0.3), 0.0, 1.234],
+                     [np.sin(0.3), np.cos(0.3), 0.0, -0.5],
+                     [0.0, 0.0, 1.0, 0.05], [0.0, 0.0, 0.0, 1.0]])
+
+
+@pytest.mark.parametrize("rule", ["add", "max"])
+@pytest.mark.parametrize("transform", [None, "shift", "rotation"], ids=str)
+def test_merging_empty_maps(rule, transform):
+    """Empty is a valid state (issue 40): an empty map merged into any map leaves it
+    unchanged, and a map merged into an empty one gives the map's evidence."""
+    t = {None: None, "shift": np.diag([1.0, 1.0, 1.0, 1.0]) + np.eye(4, k=3) * 0.3,
+         "rotation": ROTATION}[transform]
+    rng = np.random.default_rng(5)
+    a = OccupancyOctree(RES).insert_scan(rng.uniform(-1.0, 1.0, (200, 3)), [0.0, 0.0, 0.0])
+    for empty in (OccupancyOctree(RES), GridMap(RES)):
+        merged = OccupancyOctree(RES).merge(empty, t, rule=rule)
+        assert merged.num_leaves == 0 and np.isnan(merged.log_odds([[0.05] * 3])).all()
+        assert copy(a).merge(empty, t, rule=rule).to_bytes("ot") == a.to_bytes("ot")
+    # into an empty map: as into a map that knows nothing (a fresh copy of the
+    # reference's parameters), the whole of a's evidence, nothing else
+    fresh = OccupancyOctree(RES).merge(a, t, rule=rule)
+    centres, values = finest(fresh)
+    if t is None:
+        assert same_leaves(fresh, a)
+    else:
+        pre = (centres - t[:3, 3]) @ t[:3, :3]
+        assert np.array_equal(values.astype(np.float64), a.log_odds(pre))
+
+
 def test_any_rotation_resamples_every_cell_once():
     a, b = two_maps()
     angle = 0.3

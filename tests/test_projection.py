@@ -393,3 +393,35 @@ def test_save_ros_map_rejects_bad_paths_and_empty_grids(tmp_path):
         grid.save_ros_map(tmp_path / "no" / "such" / "map.yaml")
     with pytest.raises(ValueError, match=r"cannot write an empty grid"):
         OccupancyOctree(0.1).project_2d(0, 1).save_ros_map(tmp_path / "e.yaml")
+
+
+EMPTY_KINDS = {
+    "octree": lambda: OccupancyOctree(0.1),
+    "grid": lambda: GridMap(0.1),
+    "color": lambda: ColorOctree(0.1),
+}
+
+
+@pytest.mark.parametrize("kind", list(EMPTY_KINDS))
+def test_empty_maps_project_to_empty_or_unknown_grids(kind):
+    """Empty in, empty out (issue 40): no bbox gives a (0, 0) grid whose every view
+    is empty; a bbox gives its cells, all unknown."""
+    m = EMPTY_KINDS[kind]()
+    grid = m.project_2d(0.0, 1.0)
+    assert grid.shape == (0, 0) and grid.states.dtype == np.int8
+    assert grid.to_ros_array().shape == (0, 0) and grid.occupancy_image().shape == (0, 0)
+    assert grid.cell_centers().shape == (0, 0, 2)
+    assert grid.frontiers().cells.shape == (0, 2) and grid.frontiers().n_clusters == 0
+    boxed = m.project_2d(0.0, 1.0, resolution=0.2, bbox=[[-0.3, 0.0], [0.3, 0.2]])
+    assert boxed.shape == (4, 1) and (boxed.states == -1).all()
+    assert (boxed.to_ros_array() == -1).all()
+    assert boxed.frontiers().n_clusters == 0
+
+
+def test_known_cells_outside_the_box_or_band_project_to_unknown():
+    m = OccupancyOctree(0.1).insert_scan([[1.0, 0.05, 0.05]], [0.05, 0.05, 0.05])
+    outside = m.project_2d(0.0, 1.0, bbox=[[5.0, 5.0], [5.5, 5.3]])
+    assert outside.shape == (5, 3) and (outside.states == -1).all()
+    above = m.project_2d(3.0, 4.0)      # the map's x-y bounds, no cell in the band
+    assert above.shape[0] > 0 and (above.states == -1).all()
+    assert above.frontiers().n_clusters == 0
