@@ -12,6 +12,7 @@ from . import _octomap_format as fmt
 from ._atomic import write_bytes
 from ._logodds_map import OctreeFace
 from ._octree import _check_binary_data, _check_full_data
+from ._reading import read_regular
 from ._validation import as_path, check_choice, check_resolution
 
 __all__ = ["OctreeFiles", "check_format"]
@@ -125,13 +126,13 @@ class OctreeFiles(OctreeFace):
         Raises
         ------
         OSError
-            If the file cannot be read.
+            If the file cannot be read, or is not a regular file (a named pipe,
+            a device such as ``/dev/zero``: refused before it is opened).
         ValueError
             If it is not an OcTree file, or is truncated or corrupt.
         """
         path = os.fspath(as_path(path))
-        with open(path, "rb") as f:
-            data = f.read()
+        data = read_regular(path, what="an OctoMap file")
         return cls._from_data(data, path, params)
 
     @classmethod

@@ -15,6 +15,7 @@ from ._color import FUSE_AVERAGE, FUSE_MEAN, _ColorOcTree
 from ._logodds_map import OCTREE_ATTRIBUTES, SENSOR_MODEL, OctreeFace
 from .maps import register
 from ._octree import KEYRAY_CELLS, _check_full_data
+from ._reading import read_regular
 from ._scan_input import prefilter
 from ._validation import as_path, check_bool, check_choice, check_resolution
 
@@ -471,13 +472,13 @@ class ColorOctree(OctreeFace, _ColorOcTree):
         Raises
         ------
         OSError
-            If the file cannot be read.
+            If the file cannot be read, or is not a regular file (a named pipe,
+            a device such as ``/dev/zero``: refused before it is opened).
         ValueError
             As :meth:`from_bytes`, naming the file.
         """
         path = os.fspath(as_path(path))
-        with open(path, "rb") as f:
-            data = f.read()
+        data = read_regular(path, what="an OctoMap file")
         return cls._from_data(data, path, params)
 
     @classmethod

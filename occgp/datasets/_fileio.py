@@ -7,6 +7,7 @@ import lzma
 import zlib
 from pathlib import Path
 
+from .._reading import read_regular
 from .._validation import as_path
 
 __all__ = ["as_path", "read_bytes", "read_maybe_compressed", "read_text", "READER_SECTIONS"]
@@ -16,7 +17,8 @@ READER_SECTIONS = {
     "raises_oserror": """Raises
 ------
 OSError
-    If the file is missing or unreadable.""",
+    If the file is missing or unreadable, or is not a regular file (a named
+    pipe, a device such as ``/dev/zero``).""",
     "path_type_error": """TypeError
     If `path` is not a str or os.PathLike.""",
     "unwritable": """OSError
@@ -39,10 +41,14 @@ def _check_file(path: Path) -> None:
 
 
 def read_bytes(path) -> bytes:
-    """Read a whole file; OSError (FileNotFoundError, ...) naming the path."""
+    """Read a whole regular file; OSError (FileNotFoundError, ...) naming the path.
+
+    A named pipe, a device (``/dev/zero``) or a socket is refused before it is
+    opened (:func:`occgp._reading.open_regular`), so a reader never hangs on a
+    pipe nor reads an endless device."""
     path = as_path(path)
     _check_file(path)
-    return path.read_bytes()
+    return read_regular(path)
 
 
 def read_maybe_compressed(path) -> bytes:
