@@ -116,8 +116,10 @@ def resample_table(table, fov, rows):
 def scan_rings(azimuth, jump=90.0):
     """Ring index of points in scan order: a new ring starts where the azimuth jumps by more
     than `jump` degrees (the sweep of one beam ends and the next beam's begins)."""
-    d = np.diff(np.asarray(azimuth, dtype=np.float64))
-    starts = np.abs(d) > jump
+    azimuth = np.asarray(azimuth, dtype=np.float64)
+    if azimuth.size == 0:       # no points, no rings
+        return np.zeros(0, dtype=np.int64)
+    starts = np.abs(np.diff(azimuth)) > jump
     return np.concatenate([[0], np.cumsum(starts)]).astype(np.int64)
 
 

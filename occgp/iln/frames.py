@@ -30,7 +30,10 @@ import os
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_float, as_points, check_choice, check_int, show_number
+from .._reading import read_regular
+from .._validation import (
+    as_float, as_path, as_points, check_choice, check_int, show_number,
+)
 from . import _beam_tables
 from ._range import LidarModel, points_to_range_image, range_image_from_points
 
@@ -56,7 +59,7 @@ def scan_rings(points: ArrayLike, jump: float = 90.0) -> NDArray[np.int64]:
     Returns
     -------
     ring : ndarray of int64, shape (n_points,)
-        0 for the first sweep, then 1, 2, ...
+        0 for the first sweep, then 1, 2, ...; empty for no points.
 
     Raises
     ------
@@ -71,6 +74,8 @@ def scan_rings(points: ArrayLike, jump: float = 90.0) -> NDArray[np.int64]:
     >>> pts = [[1, 0.1, 0], [1, 0.5, 0], [1, -0.5, 0.1], [1, -0.1, 0.1]]
     >>> scan_rings(np.array(pts) * [[-1, 1, 1]]).tolist()
     [0, 0, 1, 1]
+    >>> scan_rings(np.zeros((0, 3))).shape
+    (0,)
     """
     points = as_points(points, "points")
     if isinstance(jump, (bool, np.bool_)) or not isinstance(jump, (int, float, np.number)):
@@ -170,13 +175,19 @@ def read_lidar_frame(path: str | os.PathLike, sensor: str, *, cols: int | None =
     Raises
     ------
     ValueError
-        If `sensor` or `beams` is not one of the names, the file's size is
-        not a whole number of records (of 64 records per column for the
-        OS1-64), or it holds NaN or inf.
+        If `sensor` or `beams` is not one of the names; or, naming the file,
+        if the file is empty, its size is not a whole number of 16-byte
+        records (stray trailing bytes), it holds not a whole number of
+        64-record columns (OS1-64), or NaN or inf; with ``beams="scan"`` also
+        if the frame holds no returns (every record at the origin), or fewer
+        scan-order rings (HDL-64E), beams with a return (OS1-64) or distinct
+        elevations than the sensor's 64 beams, so that the beams cannot be
+        measured from it.
     TypeError
-        If `cols` is not an int.
+        If `path` is not a str or path-like, or `cols` is not an int.
     OSError
-        If the file cannot be read.
+        If the file cannot be read, or is not a regular file (a named pipe,
+        a device such as ``/dev/zero``: refused before it is opened).
 
     Examples
     --------
@@ -188,15 +199,19 @@ def read_lidar_frame(path: str | os.PathLike, sensor: str, *, cols: int | None =
     check_choice(beams, "beams", ("scan", "table"))
     rows, default_cols, max_range = SENSORS[sensor]
     cols = default_cols if cols is None else check_int(cols, "cols", low=1)
-    raw = np.fromfile(os.fspath(path), dtype=np.float32)
-    if raw.size % 4:
-        raise ValueError(f"path: {os.fspath(path)!r} does not hold whole records of 4 float32 "
-                         f"(x y z intensity), got {raw.size} values")
-    records = raw.reshape(-1, 4)[:, :3].astype(np.float64)
+    path = as_path(path)
+    raw = read_regular(path, what="a LiDAR frame")
+    if len(raw) % 16:
+        raise ValueError(f"{path}: a LiDAR frame holds whole records of 4 float32 (x y z "
+                         f"intensity, 16 bytes each), got {len(raw)} bytes: "
+                         f"{len(raw) // 16} records and {len(raw) % 16} stray bytes")
+    if not raw:
+        raise ValueError(f"{path}: the LiDAR frame is empty (a file of 0 bytes)")
+    records = np.frombuffer(raw, dtype="<f4").reshape(-1, 4)[:, :3].astype(np.float64)
     if not np.isfinite(records).all():
-        raise ValueError(f"path: {os.fspath(path)!r} holds NaN or inf coordinates")
+        raise ValueError(f"{path}: the LiDAR frame holds NaN or inf coordinates")
     if sensor == "os1-64" and len(records) % rows:
-        raise ValueError(f"path: an OS1-64 frame holds 64 records per column, got "
+        raise ValueError(f"{path}: an OS1-64 frame holds 64 records per column, got "
                          f"{len(records)} records")
     if beams == "table":
         nominal = LidarModel.hdl64e(table=True) if sensor == "hdl64e" else LidarModel.os1_64()
@@ -206,4 +221,33 @@ def read_lidar_frame(path: str | os.PathLike, sensor: str, *, cols: int | None =
         ring = np.arange(len(records)) % rows
     else:
         ring = scan_rings(records)
-    return frame_range_image(records, rows, ring=ring, cols=cols, max_range=max_range)
+    _check_measurable(path, sensor, records, ring, rows)
+    try:
+        return frame_range_image(records, rows, ring=ring, cols=cols, max_range=max_range)
+    except ValueError as exc:   # the rings' elevations do not give `rows` distinct beams
+        raise ValueError(f"{path}: the {sensor}'s {rows} beam elevations cannot be measured "
+                         f"from the frame ({exc}); read it with beams='table' for the "
+                         "nominal table") from None
+
+
+def _check_measurable(path, sensor, records, ring, rows):
+    """ValueError naming the file when a frame holds too few returns, rings or
+    elevations to measure `rows` beams from."""
+    hit = np.einsum("ij,ij->i", records, records) > 0
+    n_hit = int(hit.sum())
+    what = "scan-order rings" if sensor == "hdl64e" else "beams with a return"
+    hint = "; read it with beams='table' for the sensor's nominal table"
+    if n_hit == 0:
+        raise ValueError(f"{path}: the LiDAR frame's {len(records)} records are all at the "
+                         f"origin (no returns): no beam elevation can be measured{hint}")
+    n_rings = len(np.unique(ring[hit]))
+    if n_rings < rows:
+        raise ValueError(f"{path}: the LiDAR frame's {n_hit} returns lie in {n_rings} "
+                         f"{what}, fewer than the {sensor}'s {rows} beams{hint}")
+    pts = records[hit]
+    elev = np.degrees(np.arcsin(np.clip(pts[:, 2] / np.linalg.norm(pts, axis=1), -1, 1)))
+    n_elev = len(np.unique(np.round(elev, 2)))
+    if n_elev < rows:
+        raise ValueError(f"{path}: the LiDAR frame's returns hold {n_elev} distinct "
+                         f"elevation(s) (to 0.01 degree), fewer than the {sensor}'s {rows} "
+                         f"beams{hint}")
