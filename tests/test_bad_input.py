@@ -58,7 +58,46 @@ def make_files() -> dict[str, bytes]:
         "huge_resolution.yaml": b"image: huge_resolution.pgm\nresolution: " + b"1" * 400
         + b"\norigin: [0.0, 0.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n",
         "huge_resolution.pgm": b"P5 2 2 255\n" + bytes(4),
+        # hostile ROS maps: nested aliases ("billion laughs"), a 5,000-digit width,
+        # 10^10 pixels announced, an image name that is a list of 100,000 items
+        "laughs.yaml": _laughs() + b"image: laughs.pgm\n" + _ROS_KEYS,
+        "wide.yaml": b"image: wide.pgm\n" + _ROS_KEYS,
+        "wide.pgm": b"P5 " + b"9" * 5000 + b" 2 255\n" + bytes(4),
+        "many.yaml": b"image: many.pgm\n" + _ROS_KEYS,
+        "many.pgm": b"P5 100000 100000 255\n" + bytes(4),
+        "list.yaml": b"image: [" + b",".join([b"1"] * 100_000) + b"]\n" + _ROS_KEYS,
+        # LiDAR frames: stray trailing bytes, empty, one point, no returns, one elevation,
+        # an OS1-64 column with one beam's return
+        "stray1.bin": _records(64) + b"\x00",
+        "stray3.bin": _records(64) + b"\x00" * 3,
+        "empty.bin": b"",
+        "one.bin": _records(1),
+        "zeros.bin": np.zeros((128, 4), np.float32).tobytes(),
+        "flat.bin": _records(256, flat=True),
+        "column.bin": np.r_[[[3.0, 1.0, 0.5, 1.0]], np.zeros((63, 4))].astype(np.float32)
+        .tobytes(),
     }
+
+
+_ROS_KEYS = (b"resolution: 0.1\norigin: [0.0, 0.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\n"
+             b"free_thresh: 0.196\n")
+
+
+def _laughs() -> bytes:
+    """A YAML mapping of 9 levels of nested aliases (9**9 'lol's when expanded)."""
+    lines = [b'a: &a ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]']
+    for i in range(1, 9):
+        prev, cur = chr(96 + i).encode(), chr(97 + i).encode()
+        lines.append(cur + b": &" + cur + b" [" + b",".join([b"*" + prev] * 9) + b"]")
+    return b"\n".join(lines) + b"\n"
+
+
+def _records(n: int, flat: bool = False) -> bytes:
+    """`n` KITTI records (x y z intensity): one sweep around the sensor, or if `flat`
+    n / 4 sweeps of 4 points (as many scan-order rings), all at one elevation."""
+    a = np.tile(np.linspace(-3, 3, 4), n // 4) if flat else np.linspace(-3, 3, n)
+    z = np.zeros(len(a)) if flat else np.linspace(-1, 1, n)
+    return np.c_[5 * np.cos(a), 5 * np.sin(a), z, np.ones(n)].astype("<f4").tobytes()
 
 
 def state(value):
