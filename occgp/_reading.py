@@ -145,6 +145,9 @@ def load_yaml_mapping(path: Any, what: str = "YAML file", *,
         raise ValueError(f"{path}: not a valid YAML file ({_short(str(exc), 400)})") from None
     except RecursionError:
         raise ValueError(f"{path}: not a {what}: its YAML nesting is too deep") from None
+    except (ValueError, OverflowError) as exc:  # e.g. an int of more than 4300 digits
+        raise ValueError(f"{path}: a value of the {what} cannot be read "
+                         f"({_short(str(exc), 200)})") from None
     if not isinstance(doc, dict):
         raise ValueError(f"{path}: a {what} must hold a mapping of keys, got "
                          f"{type(doc).__name__}")
