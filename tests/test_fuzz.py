@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 TOOL = Path(__file__).resolve().parents[1] / "tools" / "fuzz.py"
-CASES = 300  # per reader: 15 readers, ~2 ms a case, in two child processes
+CASES = 300  # per reader: 19 readers, ~2 ms a case, in two child processes
 
 
 @pytest.fixture(scope="module")
@@ -41,6 +41,38 @@ def test_mutations_change_header_fields(fuzz):
     assert len(edited) > 20
     assert all(e[fuzz._header_end(e, "pcd"):] == seed[fuzz._header_end(seed, "pcd"):]
                for e in edited if b"DATA ascii\n" in e)
+
+
+def test_ros_map_and_stamps_mutations_reach_their_targets(fuzz):
+    ros = fuzz.readers()["ros_map"]
+    seeds = {fuzz._split_pair(d) for d in ros.seeds()}
+    cases = [tuple(ros.case(0, i).values()) for i in range(len(seeds), len(seeds) + 200)]
+    yaml_seeds, pgm_seeds = {y for y, _ in seeds}, {p for _, p in seeds}
+    assert sum(y not in yaml_seeds for y, _ in cases) > 50      # YAML files mutated
+    assert sum(p not in pgm_seeds for _, p in cases) > 50       # PGM images mutated
+    assert any(b"*a" in y for y, _ in cases)                    # aliases tried
+    from occgp._octree_stamps import STAMPS_MAGIC
+
+    stamps = fuzz.readers()["stamps_ot"]
+    assert all(STAMPS_MAGIC in seed for seed in stamps.seeds()[:3])
+    heads = {seed[:seed.find(STAMPS_MAGIC)] for seed in stamps.seeds()}
+    cases = [stamps.case(0, i)["case.ot"] for i in range(10, 210)]
+    in_block = [c for c in cases if c[:c.find(STAMPS_MAGIC)] in heads]
+    assert len(in_block) > 80      # most cases keep the OctoMap data, edit the block
+
+
+def test_hostile_ros_maps_are_rejected(fuzz, tmp_path):
+    keys = (b"resolution: 0.1\norigin: [0.0, 0.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\n"
+            b"free_thresh: 0.196\n")
+    laughs = b'a: &a [1, 1]\nb: &b [*a, *a]\nimage: case.pgm\n' + keys
+    for yaml_text in (laughs, b"image: /dev/zero\n" + keys, b"image: /dev/stdin\n" + keys,
+                      b"image: .\n" + keys, b"mode: " + b"9" * 5000 + b"\nimage: case.pgm\n"
+                      + keys):
+        files = {"case.yaml": yaml_text, "case.pgm": b"P5 " + b"9" * 5000 + b" 1 255\n"}
+        assert fuzz.run_case("ros_map", files, tmp_path)["outcome"] == "rejected", yaml_text
+    files = {"case.yaml": b"image: case.pgm\n" + keys, "case.pgm": b"P5 " + b"9" * 5000}
+    assert fuzz.run_case("ros_map", files, tmp_path) == {"outcome": "rejected",
+                                                         "type": "ValueError"}
 
 
 def test_outcomes_are_classified(fuzz, tmp_path):

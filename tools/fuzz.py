@@ -5,6 +5,12 @@ Every reader gets valid seed files written by occgp's own writers (or built
 here byte by byte), mutated by truncations, bit and byte flips, byte
 insertions and deletions, and edits of header fields (sizes, counts, widths,
 resolutions, node counts, the ``POINTS`` / ``WIDTH`` / ``DATA`` lines, ...).
+The ROS map reader (``ros_map``: ``OccupancyGrid2D.load_ros_map``) gets a YAML
+file and its PGM image per case, one or both mutated: YAML values replaced by
+hostile ones (aliases, ``/dev/zero``, huge numbers, tags, flow collections),
+the PGM header's fields edited; the stamped octree files (``stamps_ot``,
+``stamps_bt``) are mutated mostly in their stamps block (its count, decay time,
+keys and stamps).
 Each parsed result is then *used*: checked (shapes, finiteness), written and
 read back where a writer exists, inserted into an ``OccupancyOctree``,
 queried with ``occupancy`` and ``cast_rays``; trees go through ``to_bytes`` /
@@ -193,6 +199,57 @@ def _tree_seeds(fmt):
     return out
 
 
+#: Between a ROS map case's YAML file and its PGM image in one seed / atheris input.
+_PAIR_SEP = b"\n#--occgp-fuzz-pgm--\n"
+
+
+def _ros_map_seeds():
+    """map_server pairs: occgp's own (8-bit P5), and hand-made P2, 16-bit, negated,
+    commented and mode-less variants; each as YAML + _PAIR_SEP + PGM."""
+    from occgp import OccupancyGrid2D
+
+    rng = np.random.default_rng(_SEED_RNG)
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for shape, res, origin in (((5, 4), 0.1, (0.0, 0.0)), ((1, 1), 0.05, (-3.5, 2.25)),
+                                   ((12, 7), 1.0e-3, (1e3, -1e3))):
+            states = rng.integers(-1, 2, shape)
+            yaml_path, pgm = OccupancyGrid2D(states, origin, res).save_ros_map(
+                Path(tmp) / "case.yaml")
+            out.append(yaml_path.read_bytes() + _PAIR_SEP + pgm.read_bytes())
+    keys = (b"resolution: 0.25\norigin: [-1.0, 0.5, 0.0]\noccupied_thresh: 0.65\n"
+            b"free_thresh: 0.196\n")
+    out.append(b"image: case.pgm\nmode: trinary\nnegate: 0\n" + keys + _PAIR_SEP
+               + b"P2\n# plain\n3 2\n255\n0 254 205\n254 0 100\n")
+    out.append(b"image: case.pgm\nnegate: 1\n" + keys + _PAIR_SEP
+               + b"P5 2 2\n65535\n" + np.array([0, 65535, 30000, 9], ">u2").tobytes())
+    out.append(b"# a comment\nimage: 'case.pgm'\nnegate: 0\n" + keys + _PAIR_SEP
+               + b"P5\n# CREATOR: GIMP\n4 1\n# x\n255\n" + bytes([0, 254, 205, 17]))
+    return out
+
+
+def _split_pair(data):
+    yaml_text, sep, pgm = data.partition(_PAIR_SEP)
+    return yaml_text, pgm
+
+
+def _stamp_seeds(fmt):
+    """Trees with a stamps block (stamped updates; a half-life decay time)."""
+    from occgp import OccupancyOctree
+
+    rng = np.random.default_rng(_SEED_RNG)
+    out = []
+    for res, n, decay in ((0.1, 30, False), (0.25, 8, True), (0.05, 2, True), (0.1, 0, True)):
+        tree = OccupancyOctree(res)
+        if n:
+            tree.insert_scan(rng.uniform(-1, 1, (n, 3)), [0.0, 0.0, 0.0], stamp=1.5)
+            tree.update_cells(rng.uniform(-1, 1, (3, 3)), occupied=True, stamp=7.0)
+        if decay:
+            tree.decay(9.0, half_life=4.0)
+        out.append(tree.to_bytes(fmt))
+    return out
+
+
 _COMPRESS = {".gz": lambda b: gzip.compress(b, mtime=0), ".bz2": bz2.compress,
              ".xz": lzma.compress}
 _DECOMPRESS = {".gz": gzip.decompress, ".bz2": bz2.decompress, ".xz": lzma.decompress}
@@ -347,6 +404,93 @@ def _mutate_bytes(rng, data, fmt="raw"):
     return data
 
 
+_YAML_TOKENS = ["*a", "&a x", "[*a, *a]", "/dev/zero", "/dev/stdin", ".", "..", "''", '""',
+                "[", "{", "]", "!!binary AA==", "!!python/object:os.system", "!!set {a}", ".nan",
+                ".inf", "-.inf", "0x10", "0o17", "1_000", "~", "null", "true", "yes", "[0, 0]",
+                "[0.0, 0.0, 0.0, 0.0]", "[0, 0, 1e400]", "{a: 1}", "1" * 400, "9" * 5000,
+                "1e-320", "-1", "2", "case.pgm", "case.pgm/", "\"case\\0.pgm\"", "é.pgm",
+                "\"\\U0001F600.pgm\"", "|\n  x", ">-\n  y"]
+
+
+def _mutate_yaml(rng, data):
+    """Replace the value of one ``key: value`` line of a YAML file (or add a key)."""
+    lines = data.split(b"\n")
+    keyed = [k for k, line in enumerate(lines) if b":" in line]
+    value = _YAML_TOKENS[rng.integers(len(_YAML_TOKENS))] if rng.random() < 0.7 \
+        else _token(rng)
+    value = value.encode("utf-8", "surrogateescape")
+    if not keyed or rng.random() < 0.1:
+        key = [b"image", b"mode", b"resolution", b"origin", b"negate", b"x"][rng.integers(6)]
+        lines.insert(int(rng.integers(len(lines) + 1)), key + b": " + value)
+    else:
+        k = keyed[rng.integers(len(keyed))]
+        lines[k] = lines[k].split(b":", 1)[0] + b": " + value
+    if rng.random() < 0.1:  # an anchor defined before its aliases
+        lines.insert(0, b"a: &a [1, 2, 3]")
+    return b"\n".join(lines)
+
+
+def _pgm_header_end(data):
+    """Offset just past a PGM header (its magic, width, height and maxval)."""
+    pos, fields = 2, 0
+    while fields < 3 and pos < len(data):
+        while pos < len(data) and (data[pos:pos + 1].isspace() or data[pos:pos + 1] == b"#"):
+            if data[pos:pos + 1] == b"#":
+                end = data.find(b"\n", pos)
+                pos = len(data) if end < 0 else end + 1
+            else:
+                pos += 1
+        while pos < len(data) and data[pos:pos + 1].isdigit():
+            pos += 1
+        fields += 1
+    return min(len(data), pos + 1)
+
+
+def mutate_ros_map(rng, data):
+    """1 to 3 mutations of the YAML file (its values, its text) or of the PGM image
+    (its header fields, its bytes) of a ROS map case."""
+    yaml_text, pgm = _split_pair(data)
+    for _ in range(min(3, int(rng.geometric(0.55)))):
+        r = rng.random()
+        if r < 0.35:
+            yaml_text = _mutate_yaml(rng, yaml_text)
+        elif r < 0.5:
+            yaml_text = _mutate_bytes(rng, yaml_text, "text")
+        elif r < 0.75:
+            pgm = _edit_text_field(rng, pgm, _pgm_header_end(pgm))
+        else:
+            pgm = _mutate_bytes(rng, pgm)
+    return yaml_text + _PAIR_SEP + pgm
+
+
+def mutate_stamps(rng, data):
+    """1 to 4 mutations, most inside the stamps block after the OctoMap data: its
+    count, its decay time, its keys and stamps, truncations and extra bytes."""
+    from occgp._octree_stamps import STAMPS_MAGIC
+
+    start = data.find(STAMPS_MAGIC)
+    if start < 0:
+        return mutate(rng, data, "octomap")
+    head, block = data[:start], data[start:]
+    at = len(STAMPS_MAGIC)
+    for _ in range(min(4, int(rng.geometric(0.55)))):
+        r = rng.random()
+        if r < 0.3 and len(block) >= at + 16:      # the count or the decay time
+            if rng.random() < 0.5:
+                v = _INTS[rng.integers(len(_INTS))] % 2**64
+                block = block[:at] + struct.pack("<Q", v) + block[at + 8:]
+            else:
+                v = float(_FLOATS[rng.integers(len(_FLOATS))].replace("-nan", "nan"))
+                block = block[:at + 8] + struct.pack("<d", v) + block[at + 16:]
+        elif r < 0.45:                             # the magic line
+            block = _edit_text_field(rng, block, at)
+        elif r < 0.9:
+            block = _mutate_bytes(rng, block)
+        else:
+            head = _mutate_bytes(rng, head, "octomap")
+    return head + block
+
+
 def mutate(rng, data, fmt, compressed=None):
     """1 to 4 mutations; `compressed` (a suffix) mutates the text inside or the stream."""
     if compressed is not None and rng.random() < 0.6:
@@ -456,6 +600,45 @@ def use_laser_log(log, workdir):
         OccupancyGrid(0.5).fit(hits, starts, ends)
 
 
+def use_grid(grid, workdir):
+    """Check a ROS map's grid, write it and read it back, find its frontiers."""
+    from occgp import OccupancyGrid2D
+
+    _check(isinstance(grid, OccupancyGrid2D), f"got a {type(grid).__name__}")
+    st = grid.states
+    _check(isinstance(st, np.ndarray) and st.dtype == np.int8 and st.ndim == 2 and st.size
+           and np.isin(st, (-1, 0, 1)).all(), f"states {st.dtype} {st.shape}")
+    _check(np.isfinite(grid.origin).all() and grid.origin.shape == (2,), "origin")
+    _check(np.isfinite(grid.resolution) and grid.resolution > 0, "resolution")
+    yaml_path, _ = grid.save_ros_map(workdir / "rt.yaml")
+    back = OccupancyGrid2D.load_ros_map(yaml_path)
+    _check(np.array_equal(back.states, st) and np.array_equal(back.origin, grid.origin)
+           and back.resolution == grid.resolution, "ROS map round trip changed the grid")
+    grid.frontiers()
+
+
+def use_stamped_tree(tree):
+    """use_tree, and the stamps: round trip through both formats, queries, a decay."""
+    from occgp import OccupancyOctree
+
+    stamps = tree.stamps()
+    _check(np.isfinite(stamps.stamps).all() and len(stamps.keys) == len(stamps.stamps),
+           "stamps")
+    for fmt in ("ot", "bt"):
+        again = OccupancyOctree.from_bytes(tree.to_bytes(fmt))
+        s2 = again.stamps()
+        _check(np.array_equal(s2.keys, stamps.keys) and np.array_equal(s2.stamps, stamps.stamps),
+               f".{fmt} round trip changed the stamps")
+    if len(stamps.keys):
+        got = tree.stamp_at(stamps.centers[:20])
+        _check(np.array_equal(got, stamps.stamps[:20]), "stamp_at disagrees with stamps()")
+        now = float(np.max(stamps.stamps))
+        if np.isfinite(now + 1.0):
+            tree.decay(now + 1.0, max_age=0.5)
+            tree.decay(now + 2.0, half_life=3.0)
+    use_tree(tree)
+
+
 def use_tree(tree):
     """Query a tree, round-trip it through both formats, insert a scan, cast rays."""
     from occgp import OccupancyOctree
@@ -506,9 +689,13 @@ class Reader:
         if index < len(seeds):
             return self.files(seeds[index], rng, mutated=False)
         data = seeds[int(rng.integers(len(seeds)))]
-        return self.files(mutate(rng, data, self.fmt, self.compressed), rng)
+        return self.files(self.mutate(rng, data), rng)
 
-    def files(self, data, rng, mutated=True):
+    def mutate(self, rng, data):
+        """One mutated input (bytes) from `data`."""
+        return mutate(rng, data, self.fmt, self.compressed)
+
+    def files(self, data, rng=None, mutated=True):
         return {"case" + self.suffix: data}
 
 
@@ -537,6 +724,25 @@ class FolderReader(Reader):
         return files
 
 
+class PairReader(Reader):
+    """OccupancyGrid2D.load_ros_map: a YAML file and the PGM image it names, one of
+    them mutated (a seed is YAML + _PAIR_SEP + PGM, so atheris mutates one blob)."""
+
+    def mutate(self, rng, data):
+        return mutate_ros_map(rng, data)
+
+    def files(self, data, rng=None, mutated=True):
+        yaml_text, pgm = _split_pair(data)
+        return {"case.yaml": yaml_text, "case.pgm": pgm}
+
+
+class StampsReader(Reader):
+    """OccupancyOctree.load of stamped maps, mutated mostly in the stamps block."""
+
+    def mutate(self, rng, data):
+        return mutate_stamps(rng, data)
+
+
 def _read_pcd(paths):
     from occgp.datasets import read_pcd
 
@@ -554,7 +760,7 @@ def _one(fn):
 
 
 def _build_readers():
-    from occgp import OccupancyOctree
+    from occgp import OccupancyGrid2D, OccupancyOctree
     from occgp.datasets import (load_scan_folder, read_carmen, read_kitti_bin,
                                 read_scan_graph, read_scan_log, read_xyz)
 
@@ -602,13 +808,19 @@ def _build_readers():
         Reader("carmen", ".log", lambda: [t.encode() for t in _carmen_texts()], "text",
                lambda p: read_carmen(p[0]), lambda result, workdir: use_laser_log(result,
                                                                                   workdir)),
+        PairReader("ros_map", ".yaml", _ros_map_seeds, "text",
+                   lambda p: OccupancyGrid2D.load_ros_map(p[0]), use_grid),
+        StampsReader("stamps_ot", ".ot", lambda: _stamp_seeds("ot"), "octomap",
+                     lambda p: OccupancyOctree.load(p[0]), lambda t, w: use_stamped_tree(t)),
+        StampsReader("stamps_bt", ".bt", lambda: _stamp_seeds("bt"), "octomap",
+                     lambda p: OccupancyOctree.load(p[0]), lambda t, w: use_stamped_tree(t)),
     ]
     return {r.name: r for r in readers}
 
 
 _NAMES = ["pcd_ascii", "pcd_binary", "pcd_binary_compressed", "kitti_bin", "nuscenes_bin",
           "graph", "xyz", "xyz_gz", "xyz_bz2", "xyz_xz", "scan_log", "bt", "ot", "from_bytes",
-          "scan_folder", "carmen"]
+          "scan_folder", "carmen", "ros_map", "stamps_ot", "stamps_bt"]
 _READER_IDS = {name: k for k, name in enumerate(_NAMES)}
 READERS: dict = {}
 
@@ -953,13 +1165,13 @@ def _atheris_main(name, runs, corpus, counts_path, timeout):
     reader = readers()[name]
     workdir = Path(tempfile.mkdtemp(prefix="occgp-fuzz-a-", dir=_scratch()))
     counts = dict.fromkeys(OUTCOMES, 0)
-    fmt, compressed = reader.fmt, reader.compressed
+    fmt = reader.fmt
 
     def files_of(data):
         if isinstance(reader, FolderReader):
             seeds = reader.seeds()
             return {"scan_0.pcd": seeds[0][1], "scan_1.xyz": seeds[3][1], "scan_2.bin": data}
-        return {"case" + reader.suffix: data}
+        return reader.files(data)
 
     def one_input(data):
         res = run_case(name, files_of(bytes(data)), workdir)
@@ -976,7 +1188,7 @@ def _atheris_main(name, runs, corpus, counts_path, timeout):
             out = atheris.Mutate(data, max_size)
         else:
             try:
-                out = mutate(rng, bytes(data), fmt, compressed)
+                out = reader.mutate(rng, bytes(data))
             except Exception:  # noqa: BLE001 - a seed the inner mutator cannot open
                 out = _mutate_bytes(rng, bytes(data), fmt)
         return out[:max_size]
