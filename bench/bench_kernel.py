@@ -55,9 +55,12 @@ COLUMNS = ("method", "data_fraction", "auc", "mse", "acc_occupied", "acc_free", 
 
 def methods(seed, threads):
     return {
+        # the search radius reaches R at the simulated sensors' 8 m (AKIMap's default
+        # is a 30 m LiDAR's range)
         "AKIMap (published)": lambda: AKIMap(RES, variant="published", random_state=seed,
-                                             n_jobs=threads),
-        "AKIMap (occgp)": lambda: AKIMap(RES, random_state=seed, n_jobs=threads),
+                                             sensor_range=8.0, n_jobs=threads),
+        "AKIMap (occgp)": lambda: AKIMap(RES, random_state=seed, sensor_range=8.0,
+                                         n_jobs=threads),
         "BGK (la3dm defaults)": lambda: BGKMap(RES, max_range=8.0, n_jobs=threads),
         "BGK (free every 0.3 m)": lambda: BGKMap(RES, free_resolution=0.3, max_range=8.0,
                                                  n_jobs=threads),

@@ -37,8 +37,10 @@ resolution = 0.1
 maps = {
     "octree": OccupancyOctree(resolution),
     "BGK": BGKMap(resolution),
-    "AKIMap (published)": AKIMap(resolution, variant="published", random_state=0),
-    "AKIMap": AKIMap(resolution, random_state=0),
+    # the room's simulated sensor reaches 8 m (AKIMap's default sensor_range: 30 m)
+    "AKIMap (published)": AKIMap(resolution, variant="published", random_state=0,
+                                 sensor_range=8.0),
+    "AKIMap": AKIMap(resolution, random_state=0, sensor_range=8.0),
 }
 seconds = {}
 for name, m in maps.items():

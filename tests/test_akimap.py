@@ -16,7 +16,8 @@ def wall_scan(ny=21, nz=11, x=2.0):
 
 
 def neighbours(samples, labels, i, origin, res, big_r=0.5, sensor_range=8.0):
-    """Indices of the samples within sample i's search radius (brute force)."""
+    """Indices of the samples within sample i's search radius (brute force; the
+    reference code's 8 m schedule, which the tests give the maps)."""
     d = np.linalg.norm(samples[i] - origin)
     radius = min((big_r - res) / sensor_range * d + res, big_r)
     near = np.flatnonzero(np.sum((samples - samples[i]) ** 2, axis=1) <= radius ** 2)
@@ -101,7 +102,7 @@ def test_plane_covariance_has_the_normal_as_smallest_eigenvector(variant):
     ab = rng.uniform(-0.4, 0.4, (300, 2))
     samples = ab[:, :1] * u + ab[:, 1:] * v + [5.0, 0.0, 0.0]
     labels = np.ones(len(samples))
-    m = AKIMap(0.05, variant=variant)
+    m = AKIMap(0.05, variant=variant, sensor_range=8.0)
     bw = m.bandwidths(samples, labels, [0.0, 0.0, 0.0])
     central = np.flatnonzero(np.all(np.abs(ab) < 0.15, axis=1))
     assert len(central) > 20 and np.all(bw.n_same[central] > 10)
@@ -136,6 +137,19 @@ def scene_samples():
     return samples, labels, origin
 
 
+def test_search_radius_reaches_r_at_30_m_by_default():
+    """sensor_range defaults to 30 m (a 30 m LiDAR; the reference code's 8 m for its
+    simulated sensor): the neighbour counts are those of that schedule."""
+    samples, labels, origin = scene_samples()
+    assert AKIMap().sensor_range == 30.0
+    bw = AKIMap(0.05).bandwidths(samples, labels, origin)
+    eight = AKIMap(0.05, sensor_range=8.0).bandwidths(samples, labels, origin)
+    for i in np.random.default_rng(3).choice(len(samples), 100, replace=False):
+        same, _ = neighbours(samples, labels, i, origin, 0.05, sensor_range=30.0)
+        assert bw.n_same[i] == len(same)
+    assert np.mean(bw.n_same) < np.mean(eight.n_same)
+
+
 @pytest.mark.parametrize("variant", ["published", "occgp"])
 def test_covariance_and_scale_against_a_direct_computation(variant):
     """Sigma = scatter of the same-label neighbours about the sample / (n - 2) + 0.001 I;
@@ -143,8 +157,8 @@ def test_covariance_and_scale_against_a_direct_computation(variant):
     value at 1."""
     samples, labels, origin = scene_samples()
     res = 0.05
-    bw = AKIMap(res, variant=variant, bandwidth_floor=0.0).bandwidths(samples, labels,
-                                                                      origin)
+    bw = AKIMap(res, variant=variant, bandwidth_floor=0.0,
+                sensor_range=8.0).bandwidths(samples, labels, origin)
     rng = np.random.default_rng(1)
     checked = lowered = 0
     for i in rng.choice(len(samples), 300, replace=False):
@@ -176,7 +190,8 @@ def test_covariance_and_scale_against_a_direct_computation(variant):
 def test_occgp_minimiser_is_never_worse_than_a_fine_grid_by_much():
     samples, labels, origin = scene_samples()
     res = 0.05
-    bw = AKIMap(res, bandwidth_floor=0.0).bandwidths(samples, labels, origin)
+    bw = AKIMap(res, bandwidth_floor=0.0, sensor_range=8.0).bandwidths(samples, labels,
+                                                                       origin)
     for i in np.flatnonzero(bw.scale < 1)[:60]:
         same, other = neighbours(samples, labels, i, origin, res)
         d = samples[same] - samples[i]
@@ -260,9 +275,10 @@ def test_published_alpha_beta_equal_a_slow_reference():
     points = np.column_stack([np.full(y.size, 1.2), y.ravel(), z.ravel()])
     points += rng.normal(0, 0.01, points.shape)
     origin = np.array([0.0, 0.05, 0.0])
-    m = AKIMap(0.1, variant="published", random_state=5)
+    m = AKIMap(0.1, variant="published", random_state=5, sensor_range=8.0)
     samples, labels = m.training_data(points, origin)
-    m = AKIMap(0.1, variant="published", random_state=5).update(points, origin)
+    m = AKIMap(0.1, variant="published", random_state=5, sensor_range=8.0).update(points,
+                                                                                 origin)
     ref = slow_akimap(samples, labels, origin, 0.1)
     cells = m.cells()
     keys = np.round(cells.centers / 0.1 - 0.5).astype(int)

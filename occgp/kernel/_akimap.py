@@ -53,9 +53,17 @@ class AKIMap(KernelMapBase):
     max_search_range : float, default=None
         R, the largest neighbour search radius, in metres; None means the
         free-sample distance in use (as the reference code).
-    sensor_range : float, default=8.0
+    sensor_range : float, default=30.0
         Distance at which the search radius reaches R, in metres (it sets the
-        bandwidths' schedule only: `max_range` limits the beams).
+        bandwidths' schedule only: `max_range` limits the beams). The paper
+        grows the radius "from the voxel size at the origin to R at max
+        range": 30 m, the useful range of the LiDARs the defaults are chosen
+        for, where the reference code has its simulated sensor's 8 m (use
+        ``sensor_range=8`` for the la3dm scenes). On the ``hku_mb`` validation
+        split (see Notes) 30 m against 8 m: accuracy at 0.5 0.933 -> 0.931,
+        AUC 0.991 -> 0.991 at 0.1 m, 0.929 -> 0.931 and 0.978 -> 0.979 at
+        0.2 m, in 30 % less time (fewer neighbours in the searches near the
+        sensor).
     variant : {"occgp", "published"}, default="occgp"
         How the scale is chosen: "occgp" minimises Eq. 3.7 on a grid of 16
         log-spaced scales refined by golden-section search; "published" runs
@@ -187,7 +195,7 @@ class AKIMap(KernelMapBase):
         *,
         free_sample_distance: float | None = None,
         max_search_range: float | None = None,
-        sensor_range: float = 8.0,
+        sensor_range: float = 30.0,
         variant: str = "occgp",
         bandwidth_floor: float | None = None,
         prior: float = 0.001,
