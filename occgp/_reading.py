@@ -29,7 +29,7 @@ from typing import IO, Any
 
 from ._validation import as_path
 
-__all__ = ["open_regular", "read_regular", "read_limited", "load_yaml_mapping",
+__all__ = ["check_regular", "open_regular", "read_regular", "read_limited", "load_yaml_mapping",
            "MAX_YAML_BYTES"]
 
 #: The largest YAML description read (map_server's files hold a few hundred bytes).
@@ -50,6 +50,15 @@ def _not_regular(path: str, mode: int, what: str) -> OSError:
     code = errno.EISDIR if stat.S_ISDIR(mode) else errno.EINVAL
     exc_type = IsADirectoryError if stat.S_ISDIR(mode) else OSError
     return exc_type(code, f"{what} must be a regular file, got {_kind(mode)}", path)
+
+
+def check_regular(path: Any, what: str = "the file", name: str = "path") -> None:
+    """Raise unless `path` is a regular file (FileNotFoundError if missing, OSError
+    naming the file and its kind otherwise), without opening it."""
+    path = os.fspath(as_path(path, name))
+    st = os.stat(path)
+    if not stat.S_ISREG(st.st_mode):
+        raise _not_regular(path, st.st_mode, what)
 
 
 def open_regular(path: Any, what: str = "the file", name: str = "path") -> IO[bytes]:

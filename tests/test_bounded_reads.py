@@ -72,6 +72,8 @@ def _readers():
         "OccupancyGrid2D.load_ros_map": (".yaml", OccupancyGrid2D.load_ros_map),
         "read_lidar_frame": (".bin", lambda p: iln.read_lidar_frame(p, "hdl64e")),
         "GridMap.load": (".npz", occgp.GridMap.load),
+        "read_rosbag": (".bag", datasets.read_rosbag),
+        "iln.train_from_yaml": (".yaml", iln.train_from_yaml),
     }
 
 

@@ -11,6 +11,7 @@ import warnings
 
 import numpy as np
 
+from .._reading import check_regular
 from .._validation import as_path, check_real
 from ._scan import Scan
 
@@ -275,6 +276,8 @@ def _check_bag_path(path):
     if not path.is_dir() and path.suffix.lower() not in (".bag", ".db3", ".mcap"):
         raise ValueError(f"{path}: not a ROS bag; expected a ROS 1 .bag file, a ROS 2 bag "
                          "directory (metadata.yaml) or a ROS 2 .db3 / .mcap file")
+    if not path.is_dir():   # a named pipe or a device would block or never end
+        check_regular(path, "a ROS bag file")
     return path
 
 

@@ -69,6 +69,7 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DistributedSampler
 
 from .._atomic import atomic_open
+from .._reading import MAX_YAML_BYTES, read_regular
 from .._validation import check_int
 from ._range import angles_to_pixels, pixel_angles
 from .models import RangeModel, make
@@ -717,7 +718,7 @@ def train_from_yaml(path) -> dict:
 
     path = Path(os.path.expanduser(str(path)))
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_regular(path, limit=MAX_YAML_BYTES, what="a configuration").decode("utf-8")
     except OSError as exc:
         raise type(exc)(f"cannot read the configuration {str(path)!r}: {exc.strerror or exc}") from None
     except UnicodeDecodeError:
