@@ -525,7 +525,8 @@ def read_rosbag(path, topic=None, *, fixed_frame=None, sensor_frame=None,
     ImportError
         If the ``rosbags`` package is not installed.
     OSError
-        If the bag does not exist or cannot be read.
+        If the bag does not exist or cannot be read, or a bag file is not a
+        regular file (a named pipe, a device).
     ValueError
         If the file is not a readable bag (corrupt or truncated), the topic
         is missing or not PointCloud2 (the message lists the PointCloud2

@@ -708,9 +708,11 @@ def train_from_yaml(path) -> dict:
     Raises
     ------
     OSError
-        If `path` cannot be read, or as :func:`train`.
+        If `path` cannot be read or is not a regular file (a named pipe, a
+        device), or as :func:`train`.
     ValueError
-        If the file is not valid YAML of a mapping, or as :func:`train`.
+        If the file is larger than 1 MiB or not valid YAML of a mapping, or as
+        :func:`train`.
     TypeError
         As :func:`train`.
     """
