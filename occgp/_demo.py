@@ -32,10 +32,11 @@ def mapping_methods(resolution: float) -> dict:
 
     The octree and the grid in scan and ray mode, :class:`~occgp.BGKMap`
     ("BGK"), :class:`~occgp.AKIMap` in its two variants ("AKIMap",
-    "AKIMap (published)") and :class:`~occgp.KNNMap` ("k-NN", its default
-    parameters, with ``sensor_range`` 8 m, the demo scanner's range: it cuts
-    no ray, as the octree's unlimited range); the kernel maps use every core
-    and AKIMap draws its free samples with ``random_state=0``.
+    "AKIMap (published)", with ``sensor_range`` 8 m, the demo scanner's range,
+    where its search radius is widest) and :class:`~occgp.KNNMap` ("k-NN", its
+    default parameters, with ``sensor_range`` 8 m: it cuts no ray, as the
+    octree's unlimited range); the kernel maps use every core and AKIMap
+    draws its free samples with ``random_state=0``.
 
     Parameters
     ----------
@@ -56,9 +57,10 @@ def mapping_methods(resolution: float) -> dict:
         "grid (scan)": {"map": "grid", **res},
         "grid (ray)": {"map": "grid", **res, "insert": {"mode": "ray"}},
         "BGK": {"map": "bgk", **res, "n_jobs": -1},
-        "AKIMap": {"map": "akimap", **res, "random_state": 0, "n_jobs": -1},
+        "AKIMap": {"map": "akimap", **res, "sensor_range": _DEMO_RANGE, "random_state": 0,
+                   "n_jobs": -1},
         "AKIMap (published)": {"map": "akimap", **res, "variant": "published",
-                               "random_state": 0, "n_jobs": -1},
+                               "sensor_range": _DEMO_RANGE, "random_state": 0, "n_jobs": -1},
         "k-NN": {"map": "knn", **res, "sensor_range": _DEMO_RANGE},
     }
 
