@@ -10,6 +10,8 @@ import resource
 import select
 import signal
 import stat
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -238,8 +240,20 @@ def test_non_bmp_file_names_round_trip(tmp_path, trees):
     assert sorted(os.listdir(tmp_path)) == ["map😀.bt", "map😀.pgm", "map😀.yaml"]
 
 
+_CLI_CHILD = """
+import resource, signal, sys
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)      # EFBIG instead of death
+limit = int(sys.argv[1])
+if limit >= 0:
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+from occgp.cli import main
+sys.exit(main(["map", sys.argv[2], "-o", sys.argv[3], "--no-progress"]))
+"""
+
+
 def test_cli_map_output_keeps_the_old_file_when_the_write_fails(tmp_path):
-    from occgp.cli import main
+    # a fresh interpreter, not a fork: the command line's threads must not meet a
+    # fork of this test process's
 
     small, large = tmp_path / "small.pcd", tmp_path / "large.pcd"
     write_pcd(small, _scan(3, 10, 0)[0])
@@ -247,15 +261,17 @@ def test_cli_map_output_keeps_the_old_file_when_the_write_fails(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
 
-    def run(scans, output):
-        raise SystemExit(main(["map", str(scans), "-o", str(output), "--no-progress"]))
-    assert _in_child(lambda: run(small, out / "m.bt")) == "exit 0"
-    assert _in_child(lambda: run(large, tmp_path / "m.bt")) == "exit 0"
+    def run(scans, output, limit=-1):
+        return subprocess.run([sys.executable, "-c", _CLI_CHILD, str(limit), str(scans),
+                               str(output)], capture_output=True, text=True, timeout=120)
+    assert run(small, out / "m.bt").returncode == 0
+    assert run(large, tmp_path / "m.bt").returncode == 0
     old = (out / "m.bt").read_bytes()
     limit = (tmp_path / "m.bt").stat().st_size - 1
     assert limit >= len(old)
-    got = _in_child(lambda: run(large, out / "m.bt"), limit=limit)
-    assert got == "exit 1", got                         # the CLI failed ...
+    got = run(large, out / "m.bt", limit)
+    assert got.returncode == 1, got.stderr              # the CLI failed ...
+    assert "File too large" in got.stderr, got.stderr
     assert (out / "m.bt").read_bytes() == old           # ... and kept the old map
     assert os.listdir(out) == ["m.bt"]
     assert OccupancyOctree.load(out / "m.bt").num_nodes > 0
