@@ -11,13 +11,16 @@ bit-identical values, whatever window of cells they ran on.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._logodds_map import LogOddsMap
+from ._map_types import check_log_odds_map
 from ._validation import as_numeric, check_bool, check_choice, check_int, check_real
+
+if TYPE_CHECKING:  # annotations only: the maps import this module
+    from ._logodds_map import LogOddsMap
 
 __all__ = ["DistanceField", "distance_field", "MAX_DISTANCE_CELLS", "UNKNOWN_CHOICES",
            "check_distance_map", "nearest_features", "squared_offsets", "cells_of", "grid_of_box",
@@ -65,10 +68,7 @@ class DistanceField(NamedTuple):
 # --------------------------------------------------------------------------- #
 def check_distance_map(tree: object, name: str = "tree") -> LogOddsMap:
     """`tree` if it is a log-odds map (an OccupancyOctree or a GridMap), else TypeError."""
-    if not isinstance(tree, LogOddsMap):
-        raise TypeError(f"{name} must be an OccupancyOctree or a GridMap, got "
-                        f"{type(tree).__name__}")
-    return tree
+    return check_log_odds_map(tree, name)
 
 
 def cells_of(points: np.ndarray, resolution: float) -> NDArray[np.int64]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from itertools import product
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -12,9 +13,11 @@ from ._distance import (
     DistanceField, MAX_DISTANCE_CELLS, UNKNOWN_CHOICES, cells_of, check_distance_map,
     closest_and_gradient, finish, grid_of_box, signed_transform,
 )
-from ._logodds_map import LogOddsMap
 from ._validation import (as_points, check_bool, check_choice, check_int, check_real,
                           show_number)
+
+if TYPE_CHECKING:  # annotations only: the maps sit above the navigation helpers
+    from ._logodds_map import LogOddsMap
 
 __all__ = ["DistanceMap"]
 

@@ -8,14 +8,19 @@ library); PCD files through :func:`occgp.datasets.write_pcd`.
 
 from __future__ import annotations
 
-import importlib
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._atomic import atomic_open
 from ._distance import DistanceField  # noqa: F401  (its public name's import path)
-from ._logodds_map import LogOddsMap
+from ._map_types import check_log_odds_map
 from ._validation import as_path, check_bool, check_choice, check_int
+from .io import write_pcd
+
+if TYPE_CHECKING:  # annotations only: the maps import this module
+    from ._logodds_map import LogOddsMap
 
 __all__ = ["save_ply", "save_pcd", "to_open3d", "MAX_VOXELS", "pack_rgb", "unpack_rgb"]
 
@@ -43,10 +48,7 @@ _KINDS = ("voxels", "points")
 # helpers
 # --------------------------------------------------------------------------- #
 def _check_map(tree: object) -> LogOddsMap:
-    if not isinstance(tree, LogOddsMap):
-        raise TypeError(f"tree must be an OccupancyOctree or a GridMap, got "
-                        f"{type(tree).__name__}")
-    return tree
+    return check_log_odds_map(tree)
 
 
 def _selected_leaves(tree: LogOddsMap, occupied: bool, with_colors: bool = False):
@@ -234,8 +236,6 @@ def save_ply(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
 # --------------------------------------------------------------------------- #
 def save_pcd(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = True) -> None:
     """Write `tree`'s occupied (or free) leaf centres to a PCD file: :meth:`occgp.OccupancyOctree.save_pcd`."""
-    # imported at run time: occgp.datasets is not part of the maps' import graph
-    write_pcd = importlib.import_module("occgp.datasets._pcd").write_pcd
     _check_map(tree)
     binary = check_bool(binary, "binary")
     centres, _, prob, colors = _selected_leaves(tree, occupied, with_colors=True)

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import _distance, _export
 from ._docfill import fill_doc
 from ._octree import TREE_MAX_VAL
 from ._planning import PlanningMixin
@@ -408,7 +409,6 @@ class LogOddsMap(PlanningMixin):
         >>> print(open(path).read().splitlines()[-1])
         1.04999995 0.0500000007 0.0500000007 0.100000001 0.699999988 33 145 140
         """
-        from . import _export
         _export.save_ply(self, path, occupied=occupied, binary=binary, cubes=cubes,
                          color=color)
         return self
@@ -467,7 +467,6 @@ class LogOddsMap(PlanningMixin):
         >>> scan.points.round(2).tolist(), fields["intensity"].round(2).tolist()
         ([[1.05, 0.05, 0.05]], [0.7])
         """
-        from . import _export
         _export.save_pcd(self, path, occupied=occupied, binary=binary)
         return self
 
@@ -507,7 +506,6 @@ class LogOddsMap(PlanningMixin):
         ValueError
             If `kind` is unknown, or the voxels would be more than `max_voxels`.
         """
-        from . import _export
         return _export.to_open3d(self, kind=kind, occupied=occupied,
                                  max_voxels=_export.MAX_VOXELS if max_voxels is None
                                  else max_voxels)
@@ -607,7 +605,6 @@ class LogOddsMap(PlanningMixin):
         >>> closest[:, 0, 0, 0].tolist(), gradient[:, 0, 0, 0].tolist()
         ([2.5, 2.5, 1.5], [1.0, 1.0, 1.0])
         """
-        from . import _distance
         return _distance.distance_field(
             self, bbox, resolution, unknown=unknown,
             max_cells=_distance.MAX_DISTANCE_CELLS if max_cells is None else max_cells,

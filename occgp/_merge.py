@@ -10,6 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._export import leaf_cells
 from ._logodds_map import OctreeFace
+from ._octree import _OcTree
 from ._validation import as_numeric, check_choice, check_int
 
 __all__ = ["OctreeMerging", "MERGE_RULES", "MAX_MERGE_CELLS", "check_rigid_transform"]
@@ -142,15 +143,16 @@ class OctreeMerging(OctreeFace):
 
 
 def _as_octree(other: Any) -> Any:
-    from .octree import OccupancyOctree
-    if isinstance(other, OccupancyOctree):
+    # _OcTree: the compiled tree under OccupancyOctree, and under no other class, so
+    # that this base of OccupancyOctree need not import it
+    if isinstance(other, _OcTree):
         return other
     to_octree = getattr(other, "to_octree", None)
     if to_octree is None:
         raise TypeError(f"other must be an OccupancyOctree or a map with to_octree(), "
                         f"got {type(other).__name__}")
     out = to_octree()
-    if not isinstance(out, OccupancyOctree):
+    if not isinstance(out, _OcTree):
         raise TypeError(f"other.to_octree() must give an OccupancyOctree, got "
                         f"{type(out).__name__}")
     return out

@@ -1,8 +1,8 @@
 """The import graph of occgp's own modules, and its circles.
 
 Every ``import`` and ``from ... import`` in a module counts as an edge, wherever it
-stands: at the top, inside a function or under ``if TYPE_CHECKING:`` (a circle of
-files is one whichever line closes it). ``importlib.import_module("occgp....")`` with a
+stands: at the top or inside a function (a circle of files is one whichever line
+closes it); only imports under ``if TYPE_CHECKING:``, which never run, are left out. ``importlib.import_module("occgp....")`` with a
 literal name counts too, so that an import hidden behind it still shows. Nodes are
 files: ``occgp/x.py`` is ``occgp.x``, ``occgp/pkg/__init__.py`` is ``occgp.pkg``;
 ``from .pkg import name`` goes to the module ``pkg.name`` when that is a file, to
@@ -59,6 +59,23 @@ def _base(module: str, level: int, is_package: bool) -> str:
     return ".".join(parts[:keep])
 
 
+def _is_type_checking(test: ast.expr) -> bool:
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or \
+        (isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
+def _runtime_nodes(tree: ast.AST):
+    """Every node of `tree` but those under ``if TYPE_CHECKING:`` (never run)."""
+    todo = [tree]
+    while todo:
+        node = todo.pop()
+        yield node
+        if isinstance(node, ast.If) and _is_type_checking(node.test):
+            todo.extend(node.orelse)
+            continue
+        todo.extend(ast.iter_child_nodes(node))
+
+
 def imports_of(module: str, path: Path, modules: set[str]) -> dict[str, int]:
     """The occgp modules ``module`` imports, each with the line of its first import."""
     is_package = path.name == "__init__.py"
@@ -70,7 +87,7 @@ def imports_of(module: str, path: Path, modules: set[str]) -> dict[str, int]:
         if name and name != module:
             found.setdefault(name, line)
 
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+    for node in _runtime_nodes(ast.parse(path.read_text(encoding="utf-8"), str(path))):
         if isinstance(node, ast.Import):
             for alias in node.names:
                 add(_target(alias.name, modules), node.lineno)

@@ -60,7 +60,7 @@ from ._family2d import (
 from ._floorplan import FloorPlan2D, floor_plan_2d
 from ._outdoor import OutdoorScene, outdoor_scene
 from ._carmen import FLASER_NO_RETURN, LaserLog, read_carmen
-from ._pcd import lzf_decompress, read_pcd, write_pcd
+from ..io import lzf_decompress, read_pcd, write_pcd
 from ._readers import (
     load_scan_folder,
     read_kitti_bin,
@@ -72,7 +72,7 @@ from ._readers import (
 )
 from ._render import TEXTURES, StereoPair, StereoRig, render_stereo, scene_materials
 from ._rosbag import RosbagScans, read_rosbag
-from ._scan import Scan
+from ..io import Scan
 from ._sequence import POSE_FORMATS, ScanSequence, read_poses
 from ._sgbm import (
     disparity_to_points,

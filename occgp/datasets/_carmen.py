@@ -29,8 +29,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_numeric, check_choice, check_real
-from ._fileio import as_path, read_text
-from ._scan import Scan
+from ..io._fileio import as_path, read_text
+from ..io._scan import Scan
 from ._scene2d import LaserScan2D
 
 __all__ = ["FLASER_NO_RETURN", "LaserLog", "read_carmen"]

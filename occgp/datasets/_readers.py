@@ -20,9 +20,9 @@ from numpy.typing import ArrayLike
 
 from .._atomic import write_bytes
 from .._docfill import fill_doc
-from ._fileio import READER_SECTIONS, as_path, read_bytes, read_text
-from ._pcd import read_pcd
-from ._scan import Scan, drop_non_finite, make_scan, check_origin
+from ..io._fileio import READER_SECTIONS, as_path, read_bytes, read_text
+from ..io._pcd import read_pcd
+from ..io._scan import Scan, drop_non_finite, make_scan, check_origin
 
 __all__ = [
     "BIN_LAYOUTS", "read_kitti_bin", "read_scan_graph", "write_scan_graph", "read_xyz", "read_scan_log",

@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 from .._docfill import fill_doc
 from .._validation import as_numeric, as_point, as_points, check_int
 from ._geometry import Box, Ellipsoid, Frustum, rotation_matrix
-from ._scan import Scan
+from ..io._scan import Scan
 
 __all__ = ["Scene", "structured_room", "unstructured_room", "make_scene"]
 

@@ -14,9 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._validation import as_path, check_bool
-from ._fileio import read_text
+from ..io._fileio import read_text
 from ._readers import natural_key, read_scans, scan_kind
-from ._scan import Scan
+from ..io._scan import Scan
 from ._trajectory import apply_poses, check_poses, read_kitti_poses, read_tum_trajectory
 
 __all__ = ["POSE_FORMATS", "ScanSequence", "read_poses"]

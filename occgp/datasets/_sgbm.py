@@ -26,7 +26,7 @@ from threadpoolctl import threadpool_limits
 from .._validation import (as_point, as_points, check_bool, check_int,
                            check_n_jobs, check_real)
 from ._render import StereoPair, StereoRig, render_stereo
-from ._scan import Scan
+from ..io._scan import Scan
 from ._stereo import ENVIRONMENTS, TETROMINOES, TetrominoScene, check_scene, orbit_positions
 from ._stereo import tetromino_scene, voxel_filter
 

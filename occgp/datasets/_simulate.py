@@ -17,7 +17,7 @@ from tqdm.auto import tqdm
 
 from .._validation import as_points, check_int, check_real
 from ..octree import OccupancyOctree
-from ._scan import Scan
+from ..io._scan import Scan
 from ._scenes import Scene
 
 __all__ = ["LidarSensor", "simulate_scans", "free_path"]

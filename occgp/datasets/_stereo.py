@@ -35,7 +35,7 @@ from tqdm.auto import tqdm
 from .._validation import (as_point, as_points, check_bool, check_choice, check_int, check_real,
                            check_seed)
 from ._geometry import Box, rotation_matrix
-from ._scan import Scan
+from ..io._scan import Scan
 from ._scenes import Scene
 
 __all__ = ["TetrominoScene", "tetromino_scene", "StereoCamera", "simulate_stereo",
