@@ -24,7 +24,7 @@ from ._status import Status
 from ._validation import (
     check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
 )
-from .knn import CDFS, MAX_HISTORY, MAX_K, MAX_RANGE, STATS, KNNMap, check_knn_params
+from ._knn_map import CDFS, MAX_HISTORY, MAX_K, MAX_RANGE, STATS, KNNMap, check_knn_params
 from .octree import unpack_keys
 
 __all__ = ["ScanReplay", "check_octomap_params"]

@@ -27,6 +27,7 @@ from .._validation import (as_point, as_points, check_bool, check_int,
                            check_n_jobs, check_real)
 from ._render import StereoPair, StereoRig, render_stereo
 from ..io._scan import Scan
+from ._labels import cell_labels
 from ._stereo import ENVIRONMENTS, TETROMINOES, TetrominoScene, check_scene, orbit_positions
 from ._stereo import tetromino_scene, voxel_filter
 
@@ -458,7 +459,6 @@ def naive_fdr(scans: Sequence[Scan], scene, resolution: float = 0.1) -> float:
     TypeError, ValueError
         For a bad scan, scene or resolution.
     """
-    from ..evaluation import cell_labels   # the evaluation package imports this one
     check_scene(scene)
     resolution = check_real(resolution, "resolution", low=1e-6, high=1000.0)
     keys = [np.floor(as_points(s[0], f"scans[{i}].points") / resolution).astype(np.int64)

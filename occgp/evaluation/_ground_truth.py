@@ -15,20 +15,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
 from .._validation import as_point, as_points, check_int, check_real, check_seed
+from ..datasets._labels import CELL_SECTIONS as _CELL_SECTIONS, cell_labels
 from ._protocols import TestSet, grid_test_set
 
 
 # cells whose corner points are tested at once in _visible (27 points of 3 floats each)
 _BAND_CHUNK = 100_000
 #: The last parameters and the Returns section of the cell labellers.
-_CELL_SECTIONS = """resolution : float
-    Cell edge, metres, > 0.
-samples : int, default=5
-    Sample points per axis, in [1, 16]; 1 tests the centre alone.
-
-Returns
--------
-labels : ndarray of bool, shape (n_cells,)"""
 
 
 class _Lifted:
@@ -380,72 +373,6 @@ class _Indexed:
             if idx.size:
                 out[idx] |= solid.contains(points[idx])
         return out
-
-
-@fill_doc(cell_sections=_CELL_SECTIONS)
-def cell_labels(scene: Any, centres: ArrayLike, resolution: float, *,
-                samples: int = 5) -> NDArray[np.bool_]:
-    """Ground truth of octree cells: whether a solid of `scene` reaches into each cell.
-
-    A cell (edge `resolution`, centred at a row of `centres`) is occupied when
-    ``scene.occupancy`` holds at one of ``samples**3`` points of the closed
-    cell: a grid over it that includes its faces, widened by a millionth of
-    the cell. A cell that a surface crosses counts as occupied whichever
-    side of the surface its centre lies on, and a surface lying on a cell
-    border (a ground plane at z = 0) makes both cells beside it occupied: a
-    measured point on it may fall in either. Cells whose centre is farther
-    than half a cell diagonal from every surface (``scene.signed_distance``,
-    when the scene has it) take the centre's label without sampling.
-
-    Parameters
-    ----------
-    scene : object
-        With ``occupancy(points) -> bool array`` (closed solids); optionally
-        ``signed_distance(points)``.
-    centres : array-like of shape (n_cells, 3)
-        Cell centres, metres.
-    {cell_sections}
-
-    Raises
-    ------
-    ValueError
-        If `centres` is not of shape (n_cells, 3) or not finite, `resolution`
-        is not positive, `samples` is out of range, or ``scene.occupancy``
-        answers with the wrong shape.
-    TypeError
-        If `samples` is not an integer.
-
-    Examples
-    --------
-    >>> class Ground:
-    ...     def occupancy(self, points):
-    ...         return points[:, 2] <= 0.0
-    >>> cell_labels(Ground(), [[0.05, 0.05, -0.05], [0.05, 0.05, 0.05],
-    ...                        [0.05, 0.05, 0.15]], 0.1).tolist()
-    [True, True, False]
-    """
-    centres = as_points(centres, "centres")
-    resolution = check_real(resolution, "resolution", low=0.0)
-    samples = check_int(samples, "samples", low=1, high=16)
-    labels = np.asarray(scene.occupancy(centres), dtype=bool)
-    if labels.shape != (len(centres),):
-        raise ValueError(f"scene.occupancy(points) must return shape ({len(centres)},), "
-                         f"got {labels.shape}")
-    if samples == 1:
-        return labels
-    near = np.arange(len(centres))
-    widen = 1.0 + 1e-6
-    if hasattr(scene, "signed_distance"):
-        sd = np.asarray(scene.signed_distance(centres), dtype=np.float64)
-        near = np.flatnonzero(np.abs(sd) <= 0.5 * math.sqrt(3) * resolution * widen)
-    offsets = np.linspace(-0.5, 0.5, samples) * widen
-    grid = np.stack(np.meshgrid(offsets, offsets, offsets, indexing="ij"), -1).reshape(-1, 3)
-    for start in range(0, len(near), 20_000):
-        rows = near[start:start + 20_000]
-        pts = (centres[rows, None, :] + resolution * grid[None]).reshape(-1, 3)
-        hit = np.asarray(scene.occupancy(pts), dtype=bool).reshape(len(rows), -1)
-        labels[rows] |= hit.any(axis=1)
-    return labels
 
 
 @fill_doc(cell_sections=_CELL_SECTIONS)

@@ -63,7 +63,8 @@ def torch_models(name):
 def pretrained_model():
     """``occgp.iln.pretrained()``, or OSError when this installation has no shipped weights."""
     try:
-        from . import pretrained
+        import torch  # noqa: F401  (the shipped models need it)
+        from ._weights import pretrained
     except ImportError:
         pretrained = None
     if not callable(pretrained):
