@@ -42,7 +42,12 @@ demo: $(STAMP)
 # BLAS output fails here and not only on someone else's machine.
 BLAS_GUARD ?= tests/test_gp_grid.py tests/test_gp_mixture.py tests/test_gpomik.py \
               tests/test_gp_committee.py tests/test_grid.py
+# the layer contract (.importlinter, docs/architecture.rst) first: an upward import or an
+# import circle fails here before the tests run; import-linter comes with the test extra,
+# and is installed here too where an older .venv lacks it
 test: $(STAMP)
+	@$(PY) -m pip show -q import-linter >/dev/null 2>&1 || $(PY) -m pip install -q "import-linter>=2.1"
+	$(VENV)/bin/lint-imports
 	$(PY) -m pytest -q
 	@for core in Prescott Haswell; do \
 	  echo "OPENBLAS_CORETYPE=$$core: $(BLAS_GUARD)"; \
