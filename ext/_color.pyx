@@ -109,8 +109,9 @@ cdef class _ColorOcTree(_TreeCore):
         :func:`_insert_key_sets`), then the colour of each point whose ray is not
         truncated at `max_range` fused into its end cell. FUSE_AVERAGE: ``averageNodeColor`` point by point, in
         order. FUSE_MEAN: per end cell, the rounded mean of its points' colours, fused
-        by one ``averageNodeColor`` per cell, in key order (x fastest). Returns the
-        number of points whose colour was fused."""
+        by one ``averageNodeColor`` per cell, in key order (x fastest). `colors` None:
+        occupancy only, no colour changes (`fusion` ignored). Returns the number of
+        points whose colour was fused."""
         cdef ColorOcTree* tree = self._get()
         cdef Pointcloud cloud
         cdef Py_ssize_t i, n = points.shape[0]
@@ -124,6 +125,7 @@ cdef class _ColorOcTree(_TreeCore):
         cdef size_t j
         cdef Py_ssize_t fused = 0
         cdef bint sets = free_points is not None
+        cdef bint paint = colors is not None
         with self._lock:
             with nogil:
                 self._inner_dirty = True
@@ -134,7 +136,7 @@ cdef class _ColorOcTree(_TreeCore):
                     for i in range(n):
                         cloud.push_back(points[i, 0], points[i, 1], points[i, 2])
                     tree.insertPointCloud(cloud, o, max_range, False, False)
-                for i in range(n):
+                for i in range(n if paint else 0):
                     p = point3d(points[i, 0], points[i, 1], points[i, 2])
                     if effective_end(o, p, max_range, &end):
                         continue
@@ -149,7 +151,7 @@ cdef class _ColorOcTree(_TreeCore):
                         s.g += colors[i, 1]
                         s.b += colors[i, 2]
                         s.n += 1
-                if fusion == _FUSE_MEAN:
+                if paint and fusion == _FUSE_MEAN:
                     order.reserve(sums.size())
                     it = sums.begin()
                     while it != sums.end():

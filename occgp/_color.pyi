@@ -27,7 +27,7 @@ class _TreeCore:
 @disjoint_base
 class _ColorOcTree(_TreeCore):
     def _insert_colored(self, points: NDArray[np.float32], origin: NDArray[np.float32],
-                        max_range: float, colors: NDArray[np.uint8], fusion: int,
+                        max_range: float, colors: NDArray[np.uint8] | None, fusion: int,
                         free_points: NDArray[np.float32] | None = None) -> int: ...
     def _fuse_colors(self, points: NDArray[np.float32], colors: NDArray[np.uint8],
                      replace: bool) -> NDArray[np.bool_]: ...

@@ -88,8 +88,9 @@ _BAG_SUFFIXES = (".bag", ".db3", ".mcap")
 
 def map_methods() -> list[str]:
     """The map types ``occgp map --method`` builds: every registered 3D map whose
-    ``insert_scan`` takes a plain scan (points and origin; :class:`~occgp.ColorOctree`
-    also needs colours, which scan files do not carry).
+    ``insert_scan`` takes a plain scan (points and origin), plugins' included
+    (:class:`~occgp.ColorOctree` then updates occupancy only: scan files carry no
+    colours).
 
     Returns
     -------

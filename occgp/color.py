@@ -102,7 +102,7 @@ class ColorOctree(OctreeFace, _ColorOcTree):
         self,
         points: ArrayLike,
         origin: ArrayLike,
-        colors: ArrayLike,
+        colors: ArrayLike | None = None,
         *,
         max_range: float | None = None,
         fusion: str = "average",
@@ -117,6 +117,13 @@ class ColorOctree(OctreeFace, _ColorOcTree):
         each cell updated once. Then the colour of every point whose ray is not
         truncated at `max_range` is fused into its end cell.
 
+        Without `colors` (a plain scan, as every map of :mod:`occgp.maps`
+        takes) only the occupancy is updated and no colour is fused: coloured
+        cells keep their colour (unless eight siblings are pruned into their
+        parent, which then takes their average, see the class notes) and
+        cells without one stay unset (:meth:`colors` reports them white and
+        not set).
+
         Parameters
         ----------
         points : array-like of shape (n_points, 3)
@@ -125,11 +132,13 @@ class ColorOctree(OctreeFace, _ColorOcTree):
             changes nothing.
         origin : array-like of shape (3,)
             Sensor position in the world frame, in metres.
-        colors : array-like of shape (n_points, 3)
+        colors : array-like of shape (n_points, 3), default=None
             The points' colours (red, green, blue): integers in [0, 255] (any
             integer dtype, e.g. uint8), or floats in [0, 1] (as Open3D holds
             them; scaled by 255 and rounded to the nearest integer). Pure white
-            is liboctomap's "no colour" (see the class notes).
+            is liboctomap's "no colour" (see the class notes). None: occupancy
+            only, the cells' colours are left as they are (`fusion` then has
+            no effect).
         max_range : float, default=None
             Rays longer than this are truncated: the cells up to `max_range`
             are marked free, the end cell is neither marked occupied nor
@@ -195,6 +204,8 @@ class ColorOctree(OctreeFace, _ColorOcTree):
         >>> m2 = ColorOctree(0.1).insert_scan(pts, [0.05, 0.05, 0.05], rgb, fusion="mean")
         >>> m2.colors(pts[:1])[0].tolist()
         [[40, 40, 40]]
+        >>> m2.insert_scan(pts, [0.05, 0.05, 0.05]).colors(pts[:1])[0].tolist()  # no colours
+        [[40, 40, 40]]
         """
         fusion = check_choice(fusion, "fusion", FUSIONS)
         points, free64, keep = prefilter(points, origin, min_range, max_range, free_points)
@@ -202,8 +213,8 @@ class ColorOctree(OctreeFace, _ColorOcTree):
         free = None if free64 is None else self._validated_scan(
             free64, origin, max_range, "scan", name="free_points")
         n_given = len(keep) if keep is not None else (0 if scan is None else len(scan[0]))
-        rgb = _as_colors(colors, n_given)
-        if keep is not None:
+        rgb = None if colors is None else _as_colors(colors, n_given)
+        if keep is not None and rgb is not None:
             rgb = np.ascontiguousarray(rgb[keep])
         if scan is None:
             if free is None:

@@ -249,7 +249,7 @@ def test_map_scans_checks_knn_params_before_reading(tmp_path, kwargs, exc, messa
     assert not (tmp_path / "m.bt").exists()
 
 
-@pytest.mark.parametrize("method", ["color-octree", "gp", "BGK"])
+@pytest.mark.parametrize("method", ["gpom", "gp", "BGK"])
 def test_map_command_rejects_unknown_method(tmp_path, capsys, monkeypatch, method):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit) as exc:

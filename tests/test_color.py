@@ -244,6 +244,26 @@ def test_mean_fusion_is_the_rounded_mean_per_cell_then_averaged():
     assert_array_equal(m.colors(pts[:1])[0][0], mean[cells.index(keys[0])].astype(int) // 2)
 
 
+@pytest.mark.parametrize("fusion", ["average", "mean"])
+def test_a_scan_without_colours_updates_occupancy_only(fusion):
+    pts, org, col = wall_scan()
+    m = ColorOctree(0.1).insert_scan(pts[:20], org, col[:20])
+    before = m.colors(pts)
+    # a plain scan (the one face's insert_scan(points, origin)): occupancy as the plain
+    # octree's, colours as they were, new cells without colour
+    m.insert_scan(pts, org, fusion=fusion)
+    m.insert_scan([[0.05, 2.05, 0.05]], org, None, max_range=5.0, min_range=0.1)
+    plain = OccupancyOctree(0.1).insert_scan(pts[:20], org).insert_scan(pts, org)
+    plain.insert_scan([[0.05, 2.05, 0.05]], org, max_range=5.0, min_range=0.1)
+    assert_array_equal(m.leaves().log_odds, plain.leaves().log_odds)
+    assert_array_equal(m.colors(pts)[0], before[0])
+    assert_array_equal(m.colors(pts)[1], before[1])
+    assert not before[1].all() and before[1].any()      # some cells only the plain scan hit
+    rgb, has = m.colors([[0.05, 2.05, 0.05]])
+    assert_array_equal(rgb, [[255, 255, 255]]) and not has[0]
+    assert m.is_occupied([[0.05, 2.05, 0.05]])[0]
+
+
 def test_truncated_rays_and_unknown_points_take_no_colour():
     m = ColorOctree(0.1)
     m.insert_scan([[0.55, 0.05, 0.05], [3.05, 0.05, 0.05]], [0.05, 0.05, 0.05],

@@ -210,7 +210,9 @@ def test_registry_lists_builds_and_rejects():
         register("x", formats=("npz",))
     with pytest.raises(ValueError, match="map type 'octree' is taken by occgp.octree"):
         register("octree")(type("Other", (), {}))
-    assert "octree" in map_methods() and "color-octree" not in map_methods()
+    # every registered 3D map, the colour tree too (a plain scan: occupancy only)
+    assert "octree" in map_methods() and "color-octree" in map_methods()
+    assert set(map_methods()) == set(available_maps(dims=3))
 
 
 def test_a_new_map_type_is_one_module_and_one_line(toy, tmp_path, capsys):
