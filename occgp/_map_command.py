@@ -295,7 +295,9 @@ def _new_map(method, resolution, max_range, params, n_jobs, input_map, knn=None)
         given["max_range"] = max_range
     if input_map is None:
         if "resolution" in names:
-            given["resolution"] = 0.1 if resolution is None else resolution
+            # None: the type's registered default (a plugin's may differ), else 0.1
+            given["resolution"] = (entry.defaults.get("resolution", 0.1)
+                                   if resolution is None else resolution)
         try:
             mapper = make_map(method, **given)
             if params:
@@ -389,8 +391,9 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         as log-odds (a ``.bt`` file keeps only whether it is above 0.5);
         cells no kernel reached stay unknown.
     resolution : float, default=None
-        Cell size in metres; None means 0.1, or the resolution of
-        `input_map` (which a value given must equal).
+        Cell size in metres; None means the resolution the map type
+        registered (:func:`occgp.maps.register`'s defaults), else 0.1, or the
+        resolution of `input_map` (which a value given must equal).
     method : str, default="octree"
         A map type of :func:`map_methods` (the registered 3D maps, see
         :func:`occgp.maps.available_maps`), built with

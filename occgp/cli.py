@@ -21,12 +21,14 @@ occupied cells as ``.ply`` or ``.pcd`` through the map's ``to_octree()``.
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
+import textwrap
 
 from . import __version__
 from .filters import GROUND_MODES
 from .knn import CDFS
-from .maps import map_type
+from .maps import available_maps, map_type
 from ._map_command import (
     KNN_DEFAULTS, KNN_OPTIONS, OPTION_OF, POSE_FORMATS, OptionError, OptionTypeError,
     check_knn_options,
@@ -38,6 +40,40 @@ from ._demo import (  # noqa: F401  (re-exported: occgp.cli is the demo's public
 
 __all__ = ["main", "demo", "map_scans", "map_methods", "mapping_methods",
            "noisy_mapping_methods", "gp_mapping_methods"]
+
+
+def _map_types_help(width: int | None = None) -> str:
+    """The ``map types`` list of ``occgp map -h``: every registered map (built-in and
+    plugins', :func:`occgp.maps.available_maps`) with its one-line description.
+
+    Parameters
+    ----------
+    width : int, default=None
+        Line width; None: the terminal's (as argparse's help), at most 100.
+
+    Returns
+    -------
+    text : str
+    """
+    if width is None:
+        width = min(max(shutil.get_terminal_size().columns - 2, 40), 100)
+    methods = set(map_methods())
+    names = available_maps()
+    pad = max(map(len, names), default=0) + 4
+    lines = ["map types (occgp.maps, plugins included; --method takes those marked *):"]
+    for name in names:
+        entry = map_type(name)
+        text = entry.description.rstrip(".")
+        if name not in methods:
+            text += ("; not for occgp map's 3D scans" if 3 not in entry.dims
+                     else "; not for occgp map: its insert_scan needs more than points "
+                     "and origin")
+        if entry.plugin:
+            text += f" [plugin {entry.plugin}]"
+        mark = "*" if name in methods else " "
+        lines.append(textwrap.fill(text, width, initial_indent=f"  {mark} {name:<{pad - 4}}  ",
+                                   subsequent_indent=" " * (pad + 2)))
+    return "\n".join(lines)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -67,7 +103,8 @@ def _parser() -> argparse.ArgumentParser:
                        ".graph, x y z text, a folder of them) and ROS bags, and write it as "
                        "an OctoMap file, PLY / PCD cells or the map's own .npz",
                        description="Build a map from scan files and ROS bags (PointCloud2 "
-                       "posed by TF) and write it.")
+                       "posed by TF) and write it.", epilog=_map_types_help(),
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.set_defaults(map_parser=p)
     p.add_argument("scans", nargs="+", help="scan files or folders (.pcd, .bin, .pcd.bin, "
                    ".graph, .xyz/.txt, ...), CARMEN 2D laser logs (FLASER / ROBOTLASER1 "
@@ -78,12 +115,14 @@ def _parser() -> argparse.ArgumentParser:
                    "occupied cells), .npz (bgk, akimap, grid: the map with its evidence, for "
                    "--input-map); required, no default")
     p.add_argument("--resolution", type=float, default=None,
-                   help="cell size in metres (default: 0.1, or the --input-map's)")
+                   help="cell size in metres (default: 0.1, or the resolution the map type "
+                   "registered, or the --input-map's)")
     methods = map_methods()
-    p.add_argument("--method", choices=methods, default="octree",
-                   help="; ".join(f"{n}: {map_type(n).description}" for n in methods) +
-                   "; a map is written to .bt/.ot/.ply/.pcd through its to_octree() unless "
-                   "the suffix is one of its own formats (default: %(default)s)")
+    p.add_argument("--method", choices=methods, default="octree", metavar="NAME",
+                   help="the map type: a registered 3D map (built-in or a plugin's; see "
+                   "'map types' below: " + ", ".join(methods) + "); a map is written to "
+                   ".bt/.ot/.ply/.pcd through its to_octree() unless the suffix is one of "
+                   "its own formats (default: %(default)s)")
     p.add_argument("--mode", choices=["scan", "ray"], default=None,
                    help="the update mode (default: scan; octree and grid only)")
     p.add_argument("--max-range", type=float, default=None,
@@ -96,7 +135,7 @@ def _parser() -> argparse.ArgumentParser:
                    "(default: %(default)s)")
     p.add_argument("--input-map", default=None, metavar="PATH",
                    help="continue a saved map in one of the method's own formats: .bt/.ot "
-                   "for octree and knn, .npz (written by -o X.npz) for bgk, akimap and "
+                   "for octree and knn, .ot for color-octree, .npz (written by -o X.npz) for bgk, akimap and "
                    "grid; the scans are inserted into it (default: a new map)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    type=parse_param, help="a constructor parameter of the map, repeatable (e.g. "

@@ -6,6 +6,11 @@ the evaluation harness handle any map through it. The registry
 (:func:`register`, :func:`available_maps`, :func:`make_map`) is the one list of
 map types they read: a new map type is one module and one decorator.
 
+Other packages add map types as plugins: a distribution that declares an entry
+point in the ``occgp.maps`` group (:data:`ENTRY_POINT_GROUP`) has its maps
+registered the first time the registry is read, beside the built-in ones
+(see :func:`register` and the user guide's "Writing a map").
+
 Examples
 --------
 >>> from occgp.maps import OccupancyMap, available_maps, make_map
@@ -21,12 +26,16 @@ True
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
 import inspect
 import numbers
 import os
-from collections.abc import Callable, Mapping
+import threading
+import warnings
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from types import MappingProxyType
+from types import MappingProxyType, ModuleType
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
@@ -35,7 +44,18 @@ from numpy.typing import ArrayLike, NDArray
 from ._validation import check_resolution
 
 __all__ = ["OccupancyMap", "MapType", "CAPABILITIES", "capabilities", "register",
-           "available_maps", "map_type", "make_map", "OCTREE_FORMATS"]
+           "available_maps", "map_type", "make_map", "OCTREE_FORMATS", "ENTRY_POINT_GROUP",
+           "MapPluginWarning"]
+
+#: The entry-point group of map plugins: each entry point names a module whose import
+#: registers maps with :func:`register`, or a function (called without arguments) that
+#: does.
+ENTRY_POINT_GROUP = "occgp.maps"
+
+
+class MapPluginWarning(UserWarning):
+    """A map plugin (an entry point of :data:`ENTRY_POINT_GROUP`) failed to load: its
+    maps are not registered; occgp and the other maps work as before."""
 
 
 @runtime_checkable
@@ -251,6 +271,9 @@ class MapType:
     description: str
     #: Parameters :func:`make_map` passes before the caller's (which override them).
     defaults: Mapping[str, Any] = field(default_factory=dict)
+    #: The plugin that registered the map: ``"NAME = VALUE (DISTRIBUTION)"`` of its
+    #: entry point; None for occgp's maps and those registered by code run in-process.
+    plugin: str | None = None
 
     @property
     def outputs(self) -> tuple[str, ...]:
@@ -303,6 +326,11 @@ _REGISTRY: dict[str, MapType] = {}
 # subpackage that `import occgp` does not load)
 _BUILTIN_MODULES = ("occgp", "occgp.gp")
 _loaded = False
+# the plugins (entry points of ENTRY_POINT_GROUP): loaded once, after the built-in maps
+_plugins_loaded = False
+_plugin_lock = threading.RLock()
+# the plugin being loaded (its label), which register() records and names in errors
+_loading_plugin: str | None = None
 
 C = TypeVar("C", bound=Callable[..., Any])
 
@@ -312,12 +340,16 @@ def register(name: str, *, dims: tuple[int, ...] | int = 3,
              **defaults: Any) -> Callable[[C], C]:
     """Register a map class under `name`: a class decorator.
 
+    A plugin (a separate distribution) calls it from the module its
+    ``occgp.maps`` entry point names (see :data:`ENTRY_POINT_GROUP`).
+
     Parameters
     ----------
     name : str
         The map type's name: lower case letters, digits, ``-`` and ``_``,
         starting with a letter. Registering another class under a name that is
-        taken raises; registering the same class again replaces its entry.
+        taken raises (a plugin cannot replace a built-in map or another
+        plugin's); registering the same class again replaces its entry.
     dims : int or tuple of int, default=3
         The dimensions of the points the map takes.
     formats : tuple of str, default=(".npz",)
@@ -373,12 +405,19 @@ def register(name: str, *, dims: tuple[int, ...] | int = 3,
     def decorator(cls: C) -> C:
         old = _REGISTRY.get(name)
         if old is not None and _qualname(old.cls) != _qualname(cls):
-            raise ValueError(f"map type {name!r} is taken by {_qualname(old.cls)}")
+            owner = f"the plugin {old.plugin}" if old.plugin else (
+                "occgp's built-in map" if _qualname(old.cls).startswith("occgp.") else
+                "a map registered in-process")
+            by = f" by the plugin {_loading_plugin}" if _loading_plugin else ""
+            raise ValueError(f"map type {name!r} is taken by {_qualname(old.cls)} ({owner}); "
+                             f"{_qualname(cls)} cannot be registered under it{by}: choose "
+                             f"another name")
         doc = (inspect.getdoc(cls) or "").strip().splitlines()
         _REGISTRY[name] = MapType(name, cls, dims, formats,
                                   description if description is not None else
                                   (doc[0] if doc else name),
-                                  MappingProxyType(dict(defaults)))
+                                  MappingProxyType(dict(defaults)),
+                                  old.plugin if old is not None else _loading_plugin)
         return cls
     return decorator
 
@@ -406,15 +445,79 @@ def _qualname(cls: Any) -> str:
 
 
 def _load_builtins() -> None:
+    """Register the built-in map types, then the plugins' (once each)."""
     global _loaded
     if not _loaded:
         for module in _BUILTIN_MODULES:
             importlib.import_module(module)
         _loaded = True
+    if not _plugins_loaded:
+        _load_plugins()
+
+
+def _plugin_label(ep: importlib.metadata.EntryPoint) -> str:
+    """``name = value (distribution)`` of an entry point, as messages name a plugin."""
+    dist = getattr(ep, "dist", None)
+    dist_name = getattr(dist, "name", None) if dist is not None else None
+    return f"{ep.name} = {ep.value}" + (f" (distribution {dist_name})" if dist_name else "")
+
+
+@contextmanager
+def _registering(label: str) -> Iterator[None]:
+    global _loading_plugin
+    outer, _loading_plugin = _loading_plugin, label
+    try:
+        yield
+    finally:
+        _loading_plugin = outer
+
+
+def _load_plugins() -> None:
+    """Load every entry point of ENTRY_POINT_GROUP, once, in the entry points' order.
+
+    A plugin that fails (its import raises, its function raises, or it registers a name
+    that is taken) is reported with a MapPluginWarning naming it; the maps it registered
+    before failing are removed, and the other plugins load as usual."""
+    global _plugins_loaded
+    with _plugin_lock:
+        if _plugins_loaded:
+            return
+        _plugins_loaded = True          # set first: a plugin may read the registry
+        try:
+            eps = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
+        except Exception as exc:        # a broken metadata folder on sys.path
+            warnings.warn(f"occgp.maps: the {ENTRY_POINT_GROUP!r} entry points could not "
+                          f"be read ({type(exc).__name__}: {exc}); no map plugin is loaded",
+                          MapPluginWarning, stacklevel=3)
+            return
+        seen = set()
+        for ep in eps:
+            key = (ep.name, ep.value)
+            if key in seen:             # one distribution seen twice on sys.path
+                continue
+            seen.add(key)
+            label = _plugin_label(ep)
+            before = set(_REGISTRY)
+            try:
+                with _registering(label):
+                    obj = ep.load()
+                    if callable(obj) and not isinstance(obj, (type, ModuleType)):
+                        obj()
+            except Exception as exc:
+                for name in set(_REGISTRY) - before:
+                    del _REGISTRY[name]
+                warnings.warn(f"occgp.maps: the map plugin {label} failed to load and is "
+                              f"skipped: {type(exc).__name__}: {exc}", MapPluginWarning,
+                              stacklevel=3)
 
 
 def available_maps(*, dims: int | None = None) -> list[str]:
     """The names of the registered map types, in registration order.
+
+    The built-in maps come first, then those of the plugins (the entry points
+    of :data:`ENTRY_POINT_GROUP`, loaded on the first call of this function,
+    :func:`map_type` or :func:`make_map`; a plugin that fails to load is
+    skipped with a :class:`MapPluginWarning`).
 
     Parameters
     ----------
