@@ -187,6 +187,7 @@ def test_covariance_and_scale_against_a_direct_computation(variant):
     assert checked > 100 and lowered > 5
 
 
+@pytest.mark.slow
 def test_occgp_minimiser_is_never_worse_than_a_fine_grid_by_much():
     samples, labels, origin = scene_samples()
     res = 0.05

@@ -78,6 +78,7 @@ def test_no_module_imports_another_modules_private_names():
                                 for m, line, src, name in found)
 
 
+@pytest.mark.slow
 def test_the_private_import_check_can_fail(tmp_path, monkeypatch):
     # a module that does reach into a sibling's private name is found
     fake = PACKAGE / "_architecture_probe.py"

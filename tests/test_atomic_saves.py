@@ -251,6 +251,7 @@ sys.exit(main(["map", sys.argv[2], "-o", sys.argv[3], "--no-progress"]))
 """
 
 
+@pytest.mark.slow
 def test_cli_map_output_keeps_the_old_file_when_the_write_fails(tmp_path):
     # a fresh interpreter, not a fork: the command line's threads must not meet a
     # fork of this test process's

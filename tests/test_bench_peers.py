@@ -32,6 +32,7 @@ def occgp_run(bench, tiny_room, tmp_path):
     return result, tmp_path
 
 
+@pytest.mark.slow
 def test_occgp_worker_writes_timings_maps_and_answers(occgp_run):
     result, out = occgp_run
     assert result["package"] == "occgp"
@@ -52,6 +53,7 @@ def test_occgp_worker_writes_timings_maps_and_answers(occgp_run):
         assert (labels == 1).any() and (labels == 0).any() and (labels == -1).any()
 
 
+@pytest.mark.slow
 def test_comparison_accepts_equal_results_and_flags_different_ones(bench, occgp_run):
     result, out = occgp_run
     assert bench.check_identical({"occgp": result}, out, [2]) == []

@@ -199,6 +199,7 @@ def test_read_lidar_frame_refuses_stray_trailing_bytes(tmp_path, stray):
             iln.read_lidar_frame(path, sensor)
 
 
+@pytest.mark.slow
 def test_ros_yaml_over_its_size_limit_or_too_deep_is_refused(tmp_path):
     from occgp._reading import MAX_YAML_BYTES
 

@@ -131,6 +131,7 @@ def _near_borders(rng, points, res):
     return np.where(rng.uniform(size=points.shape) < 0.2, moved + inside, moved)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
 def test_rays_culled_whole_give_plain_maps_near_cell_borders(cls, seed):
@@ -217,6 +218,7 @@ def geb079_trajectory():
     return simulate_scans(env, poses, LidarSensor(), seed=0, progress=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 @pytest.mark.parametrize("resolution", [0.1, 0.2, 0.4])
 def test_every_method_equals_plain_on_a_geb079_trajectory(geb079_trajectory, mode, resolution):
@@ -225,6 +227,7 @@ def test_every_method_equals_plain_on_a_geb079_trajectory(geb079_trajectory, mod
         assert_same_leaves(build(geb079_trajectory, resolution, mode=mode, method=method), plain)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 def test_every_method_equals_plain_on_scan_dat_from_nearby_poses(mode):
     from occgp.datasets import read_xyz
@@ -238,6 +241,7 @@ def test_every_method_equals_plain_on_scan_dat_from_nearby_poses(mode):
         assert_same_leaves(got, plain)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("expand", [False, True])
 def test_updates_of_a_loaded_tree_equal_liboctomaps(expand):
     """Pruned, saturated nodes of a real map are expanded, updated and pruned again as

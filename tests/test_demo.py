@@ -33,6 +33,7 @@ def quick_demo(tmp_path_factory):
     return rows, out.getvalue(), outdir
 
 
+@pytest.mark.slow
 def test_demo_prints_three_tables_on_exact_ground_truth(quick_demo):
     rows, text, _ = quick_demo
     assert [r.method for r in rows] == ["octree (scan)", "grid (scan)", "AKIMap",
@@ -56,6 +57,7 @@ def test_demo_prints_three_tables_on_exact_ground_truth(quick_demo):
     assert all(0.5 < r.auc < 1 and r.seconds > 0 for r in rows)
 
 
+@pytest.mark.slow
 def test_demo_writes_map_and_figures(quick_demo):
     rows, text, outdir = quick_demo
     for name in ("map.bt", "slice.png", "roc.png", "gp_2d.png"):
@@ -69,6 +71,7 @@ def test_demo_writes_map_and_figures(quick_demo):
         rows[0].map.to_bytes("bt")).num_leaves
 
 
+@pytest.mark.slow
 def test_demo_test_sets_are_balanced(quick_demo):
     rows, text, _ = quick_demo
     octree, gpom = rows[0], rows[4]

@@ -241,7 +241,7 @@ def assert_same_field(a, b):
 
 
 @pytest.mark.parametrize("cfg", CONFIGS)
-@pytest.mark.parametrize("with_box", [False, True])
+@pytest.mark.parametrize("with_box", [pytest.param(False, marks=pytest.mark.slow), True])
 def test_update_equals_a_new_fit_after_random_changes(cfg, with_box):
     m, rng = random_map(4, n=100, extent=1.5)
     kw = dict(cfg, bbox=BOX if with_box else None)

@@ -46,6 +46,7 @@ def test_file_header_resolution_outside_the_sound_range_is_rejected(resolution):
         OccupancyOctree.from_bytes(data)
 
 
+@pytest.mark.slow
 def test_former_segfault_and_hangs_now_raise():
     """liboctomap's traversal overflowed its key buffer (segfault) or never ended."""
     out = run_isolated("""
@@ -64,7 +65,7 @@ def test_former_segfault_and_hangs_now_raise():
     assert out.count("rejected: resolution must lie in") == 4
 
 
-@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
+@pytest.mark.parametrize("cls", [pytest.param(OccupancyOctree, marks=pytest.mark.slow), GridMap])
 @pytest.mark.parametrize("resolution", RESOLUTION_RANGE)
 def test_rays_across_the_whole_key_range_at_the_resolution_bounds(cls, resolution):
     """At both ends of the range every ray in the key range is walked, by every method."""
@@ -82,6 +83,7 @@ def test_rays_across_the_whole_key_range_at_the_resolution_bounds(cls, resolutio
             assert_array_equal(other.cells().log_odds, maps[0].cells().log_odds)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 def test_ray_longer_than_liboctomaps_key_buffer(mode):
     """insertPointCloud's KeyRay holds 100000 keys and is not checked (a segfault): such a
@@ -117,6 +119,7 @@ def test_max_range_cuts_rays_to_far_points(cls, far):
         assert_array_equal(got.log_odds, want.log_odds)
 
 
+@pytest.mark.slow
 def test_float32_overflowing_point_used_to_hang_with_max_range():
     out = run_isolated("""
         from occgp import GridMap, OccupancyOctree

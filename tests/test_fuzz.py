@@ -84,6 +84,7 @@ def test_outcomes_are_classified(fuzz, tmp_path):
     assert rejected["outcome"] == "rejected"
 
 
+@pytest.mark.slow
 def test_seeds_are_read_and_used(fuzz, tmp_path):
     for name in fuzz._NAMES:
         reader = fuzz.readers()[name]
@@ -93,6 +94,7 @@ def test_seeds_are_read_and_used(fuzz, tmp_path):
                 (name, index)
 
 
+@pytest.mark.slow
 def test_bounded_fuzz_run(fuzz, tmp_path):
     rows, findings = fuzz.run_campaign(fuzz._NAMES, CASES, seed=0, jobs=2, timeout=10.0,
                                        save_dir=tmp_path)

@@ -81,6 +81,7 @@ def test_quadrature_orders():
     assert_array_equal(x, clenshaw_curtis(9)[0])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cls", KERNEL_CLASSES)
 @pytest.mark.parametrize("rule", [ClenshawCurtis, Simpson])
 def test_order_grows_with_the_length(rule, cls):

@@ -72,6 +72,7 @@ def test_fit_assigns_every_observation_to_an_expert(fitted, data):
     assert fitted.n_clusters_ >= fitted.n_experts_ - 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rule", ["bcm", "tresp", "gpoe"])
 @pytest.mark.parametrize("hyperparameters", ["own", "shared"])
 def test_one_expert_is_gpomik(data, queries, rule, hyperparameters):
@@ -113,6 +114,7 @@ def test_skipping_experts_changes_predictions_by_less_than_the_tolerance(data, q
     assert pairs[0] < pairs[1]
 
 
+@pytest.mark.slow
 def test_n_jobs_and_backends_give_the_same_map(data, queries):
     models = [GPMixture(combine="tresp", random_state=0, n_jobs=n).fit(*data) for n in (1, 2)]
     with joblib.parallel_config(backend="loky"):
@@ -133,6 +135,7 @@ def test_blas_threads_are_restored_after_parallel_experts(data):
     assert [(i["internal_api"], i["num_threads"]) for i in threadpool_info()] == before
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_gives_the_same_map(data, queries):
     distributed = pytest.importorskip("distributed", reason="the dask extra is not installed")
     ref = GPMixture(combine="tresp", random_state=0).fit(*data)
@@ -299,6 +302,7 @@ def test_predict_checks_queries(fitted):
         fitted.predict([[0.0, 0.0]], return_var="yes")
 
 
+@pytest.mark.slow
 def test_plane_clusters_in_3d():
     from occgp.datasets import LidarSensor, simulate_scans, structured_room
     scene = structured_room(0)
@@ -477,6 +481,7 @@ def test_committee_calibration_is_fitted_on_a_balanced_leave_one_out_sample(data
     assert np.isfinite(model.plsc_).all()
 
 
+@pytest.mark.slow
 def test_subset_calibration_is_the_global_gpomiks_classifier(data):
     from occgp.gp._experts import global_template
     model = GPMixture(GPOMIK(n_restarts=0), calibration="subset-loo", random_state=0)

@@ -74,7 +74,7 @@ def test_loo_fit_raises_its_objective():
     assert_allclose(again, value, rtol=1e-10)
 
 
-@pytest.mark.parametrize("cls", ["GPOMIK", "GPOM", "GPMixture"])
+@pytest.mark.parametrize("cls", ["GPOMIK", pytest.param("GPOM", marks=pytest.mark.slow), "GPMixture"])
 def test_estimators_take_the_objective(cls):
     from occgp.datasets import room_2d
     from occgp.gp import GPOM, GPOMIK, GPMixture, observations_from_scans
@@ -103,6 +103,7 @@ def test_min_size_merges_small_clusters():
         merge_small_clusters(labels, points, is_hit, min_size=0)
 
 
+@pytest.mark.slow
 def test_global_hyperparameters_are_a_gpomik_fit():
     """hyperparameters='global': the kernel and noise of GPOMIK on the same data, and its
     PLSC with calibration='subset-loo'."""

@@ -110,6 +110,7 @@ def test_insert_scan_is_fit_then_update(name, scans, mapped, queries):
                     rtol=BLAS_TOL, atol=BLAS_TOL)
 
 
+@pytest.mark.slow
 def test_gpom_insert_scan_is_one_fit_on_all_observations(scans, mapped, queries):
     ref = FACTORIES["gpom"]().fit(*observations_from_scans(scans))
     m = mapped["gpom"]

@@ -192,6 +192,7 @@ def _same_clusters(a, b):
     assert_array_equal(a.clustering_.labels_, b.clustering_.labels_)
 
 
+@pytest.mark.slow
 def test_gp_mixture_in_both_conventions(full, short, grid):
     full_model = GPMixture(random_state=0).fit(*full[:3])
     geometric = GPMixture(random_state=0).fit(*short[:3])
@@ -210,6 +211,7 @@ def test_gp_mixture_in_both_conventions(full, short, grid):
     assert_array_equal(same.predict_proba(grid), p_full)
 
 
+@pytest.mark.slow
 def test_gpomik_and_gpom_in_both_conventions(full, short, grid):
     # Measured, |dp| max / mean and the share of the grid on the other side of 0.5:
     # GPOMIK 0.043 / 0.0035 / 0.5%, from the shorter free segments near the hits;
@@ -227,6 +229,7 @@ def test_gpomik_and_gpom_in_both_conventions(full, short, grid):
         assert np.mean((a > 0.5) != (b > 0.5)) < flip_bound, type(model).__name__
 
 
+@pytest.mark.slow
 def test_gp_mixture_update_with_short_beams():
     scans = room_2d().scan(n_poses=9, noise=0.02, seed=3)
     first, rest = scans[:6], scans[6:]
@@ -245,6 +248,7 @@ def test_gp_mixture_update_with_short_beams():
     assert_array_equal(geometric._beam_hits, given._beam_hits)
 
 
+@pytest.mark.slow
 def test_gpomik_update_with_short_beams(full, short, grid):
     scans = room_2d().scan(n_poses=9, noise=0.02, seed=3)
     a = GPOMIK(random_state=0, optimizer=False).fit(*full[:3])
@@ -269,6 +273,7 @@ def _bad_beam_hits(n_beams, n_hits):
             (ok.astype(str), TypeError, "beam_hits")]
 
 
+@pytest.mark.slow
 def test_bad_beam_hits_are_rejected_and_change_nothing(full, short, grid):
     hits, starts, ends = short[:3]
     labels = np.zeros(len(hits), dtype=int)
@@ -323,6 +328,7 @@ def test_saved_mixture_keeps_given_beam_hits(scans, grid, tmp_path):
     assert_array_equal(loaded.predict_proba(grid), model.predict_proba(grid))
 
 
+@pytest.mark.slow
 def test_file_without_beam_hits_matches_again(full, grid, tmp_path):
     """A file written before beam_hits were saved: its beams are matched on loading."""
     model = GPMixture(random_state=0).fit(*full[:3])

@@ -72,6 +72,7 @@ def test_bad_arguments(kwargs, error, match):
         thin_observations(hits, starts, ends, **kwargs)
 
 
+@pytest.mark.slow
 def test_gpomik_fits_the_observations_thinning_keeps():
     hits, starts, ends = scans()
     n = len(hits) + len(ends)
@@ -91,6 +92,7 @@ def test_gpomik_fits_the_observations_thinning_keeps():
     assert full.n_rejected_ == 0
 
 
+@pytest.mark.slow
 def test_mixture_clusters_the_observations_thinning_keeps():
     hits, starts, ends = scans()
     n = len(hits) + len(ends)

@@ -51,6 +51,7 @@ def test_short_and_zero_length_segments_give_one_free_point():
 
 
 # ------------------------------------------------------------------ predictions
+@pytest.mark.slow
 def test_wall_is_occupied_and_beams_are_free(wall):
     m = GPOM(random_state=0).fit(*wall)
     hits = wall[0]
@@ -59,6 +60,7 @@ def test_wall_is_occupied_and_beams_are_free(wall):
     assert (m.predict_proba(near) < 0.5).all()
 
 
+@pytest.mark.slow
 def test_variance_grows_away_from_the_data(wall):
     m = GPOM(random_state=0).fit(*wall)
     _, var_near = m.predict(wall[0], return_var=True)
@@ -132,6 +134,7 @@ def test_random_state_makes_fits_reproducible(wall):
     assert_array_equal(a.predict_proba(X), b.predict_proba(X))
 
 
+@pytest.mark.slow
 def test_optimizer_false_keeps_hyperparameters_and_the_user_kernel(wall):
     kernel = SquaredExponential(2.0, 0.8)
     m = GPOM(kernel, noise=0.05, optimizer=False).fit(*wall)
@@ -140,6 +143,7 @@ def test_optimizer_false_keeps_hyperparameters_and_the_user_kernel(wall):
     assert kernel == SquaredExponential(2.0, 0.8)            # never mutated by fit
 
 
+@pytest.mark.slow
 def test_optimizer_raises_the_log_marginal_likelihood(wall):
     fixed = GPOM(optimizer=False).fit(*wall)
     fitted = GPOM(random_state=0).fit(*wall)
@@ -151,6 +155,7 @@ def test_optimizer_raises_the_log_marginal_likelihood(wall):
     assert_allclose(fitted.log_marginal_likelihood_value_, lml, rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_subsample_keeps_both_classes(wall):
     m = GPOM(max_optimize=2, random_state=0).fit(*wall)
     assert np.isfinite(m.plsc_).all()
@@ -260,6 +265,7 @@ def test_local_loo_leaves_the_point_out(wall):
         assert_allclose([mu[0], var[0]], [mu2[0], var2[0]], rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_local_loo_calibration_labels_the_walls_of_a_laser_log():
     """On held-out scans of the 2D room, PLSC fitted on the local GPs' leave-one-out
     predictions (class-balanced) calls the walls occupied where the subset's classifier

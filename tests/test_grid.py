@@ -89,6 +89,7 @@ def test_ray_mode_equals_pure_python_reference(max_range):
     assert_same_cells(grid_values(grid), ray_mode_reference(scans, 0.1, max_range=max_range))
 
 
+@pytest.mark.slow
 def test_real_scan_equals_octree():
     from occgp.datasets import read_xyz
 
@@ -329,7 +330,7 @@ def test_uninitialised_core_raises():
 
 
 # ---------------------------------------------------------------------- methods
-@pytest.mark.parametrize("resolution", [0.1, 0.4])
+@pytest.mark.parametrize("resolution", [pytest.param(0.1, marks=pytest.mark.slow), 0.4])
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 def test_every_method_gives_the_plain_grid(mode, resolution):
     """Super rays and the culling region on the grid: the same cells, bit for bit, as

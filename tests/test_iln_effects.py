@@ -319,6 +319,7 @@ def test_make_dataset_bad_effects(tmp_path, kwargs, exc, match):
         make_dataset(tmp_path, 1, 0, sizes=["16x1024"], progress=False, **kwargs)
 
 
+@pytest.mark.slow
 def test_cli_realistic_dataset(tmp_path, capsys):
     from occgp.iln.cli import main
 

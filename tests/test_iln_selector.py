@@ -204,6 +204,7 @@ def _street_config(folder, out, steps=150):
             "output": {"dir": None if out is None else str(out)}}
 
 
+@pytest.mark.slow
 def test_selector_training_learns_the_edges(street, tmp_path):
     from occgp.iln.data import load_shards
     from occgp.iln.evaluate import evaluate
@@ -241,6 +242,7 @@ def test_selector_training_learns_the_edges(street, tmp_path):
         tune_checkpoint(tmp_path / "bil.pt", street, tmp_path / "v.pt", out_sizes=["64x1024"])
 
 
+@pytest.mark.slow
 def test_tune_threshold_picks_from_the_grid(street):
     from occgp.iln.data import load_shards
 

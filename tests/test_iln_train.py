@@ -173,6 +173,7 @@ def _ddp_worker(rank, world, port, cfg, out):
     torch.save({"losses": result["losses"], "sd": result["model"].state_dict()}, f"{out}-{rank}.pt")
 
 
+@pytest.mark.slow
 def test_ddp_two_processes_two_steps(shards, tmp_path):
     import torch.multiprocessing as mp
 

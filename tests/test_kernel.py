@@ -111,6 +111,7 @@ def slow_bgk(samples, labels, resolution, ell, sf2=1.0):
     return cells
 
 
+@pytest.mark.slow
 def test_bgk_alpha_beta_equal_a_slow_reference():
     rng = np.random.default_rng(0)
     points = rng.uniform(-1, 1, (60, 3)) + [2.0, 0.0, 0.5]

@@ -46,6 +46,7 @@ def copy(tree):
     return OccupancyOctree.from_bytes(tree.to_bytes(), **tree._sensor_params())
 
 
+@pytest.mark.slow
 def test_add_equals_update_cells_by_hand():
     a, b = two_maps()
     centres, values = finest(b)
@@ -54,6 +55,7 @@ def test_add_equals_update_cells_by_hand():
     assert same_leaves(copy(a).merge(b), expected)
 
 
+@pytest.mark.slow
 def test_max_equals_set_cells_by_hand():
     a, b = two_maps()
     centres, values = finest(b)
@@ -65,6 +67,7 @@ def test_max_equals_set_cells_by_hand():
     assert np.all(merged.log_odds(centres) >= np.fmin(values, merged.clamping_max))
 
 
+@pytest.mark.slow
 def test_identity_and_whole_cell_transforms_are_exact():
     a, b = two_maps()
     assert same_leaves(copy(a).merge(b, np.eye(4)), copy(a).merge(b))
@@ -106,6 +109,7 @@ def test_merging_empty_maps(rule, transform):
         assert np.array_equal(values.astype(np.float64), a.log_odds(pre))
 
 
+@pytest.mark.slow
 def test_any_rotation_resamples_every_cell_once():
     a, b = two_maps()
     angle = 0.3

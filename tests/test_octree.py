@@ -170,6 +170,7 @@ def test_scan_mode_equals_liboctomap_insert_point_cloud(octomap_insert_exe, tmp_
     assert_same_leaves(m, ref)
 
 
+@pytest.mark.slow
 def test_scan_mode_equals_liboctomap_on_real_scan(octomap_insert_exe, tmp_path):
     from occgp.datasets import read_xyz
 

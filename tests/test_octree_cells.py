@@ -176,6 +176,7 @@ def record(changes, before, after, occ_log):
                 del changes[key]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["plain", "culling", "superray+culling"])
 def test_change_detection_follows_liboctomaps_rule(method):
     from test_culling import room_sequence

@@ -131,6 +131,7 @@ def green():
     return outdoor_scene(seed=1, vegetation=True)
 
 
+@pytest.mark.slow
 def test_vegetation_adds_clutter_and_keeps_the_rest(scene, green):
     kinds = list(green.labels)
     for kind, least in (("hedge", 4), ("bush", 20), ("grass", 30)):
@@ -155,6 +156,7 @@ def test_vegetation_adds_clutter_and_keeps_the_rest(scene, green):
             assert hi[2] < 2.5 and lo[2] > -1.0
 
 
+@pytest.mark.slow
 def test_vegetation_is_exact_and_seeded(green):
     again = outdoor_scene(seed=1, vegetation=True)
     assert again.labels == green.labels
@@ -170,6 +172,7 @@ def test_vegetation_is_exact_and_seeded(green):
         assert d[0] <= solid.intersect(top[None], down)[0] < 10.0
 
 
+@pytest.mark.slow
 def test_vegetation_scene_poses_stay_clear(green):
     poses = green.random_poses(40, seed=3)
     origins = poses[:, :3, 3]

@@ -21,6 +21,7 @@ def same_tree(a, b):
     assert a.memory_usage() == b.memory_usage()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 @pytest.mark.parametrize("method", ["plain", "culling", "superray+culling"])
 @pytest.mark.parametrize("resolution", [0.05, 0.2])
@@ -35,6 +36,7 @@ def test_threaded_tree_update_gives_the_single_thread_tree(mode, method, resolut
             same_tree(trees[n], trees[1])
 
 
+@pytest.mark.slow
 def test_pruned_clamped_and_reopened_trees_update_alike():
     """The same scan again and again clamps its cells (their updates abort) and prunes
     the free space into large leaves; a block set free and a block set occupied, then
@@ -74,6 +76,7 @@ def test_threaded_update_into_a_loaded_tree_and_with_a_box():
     same_tree(two, one)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 @pytest.mark.parametrize("method", ["plain", "superray+culling"])
 def test_grid_updates_on_threads_give_the_single_thread_grid(mode, method):
@@ -99,6 +102,7 @@ def test_grid_updates_on_threads_give_the_single_thread_grid(mode, method):
     assert np.sum(np.abs(ref.log_odds - floor) < 1e-5) > 100   # clamped cells were updated
 
 
+@pytest.mark.slow
 def test_knn_map_updates_its_tree_on_threads_as_on_one():
     """KNNMap's cell updates go through the threaded tree update with its n_jobs: the
     tree is the single thread's, node for node, on scans of 4096+ cells."""
@@ -115,6 +119,7 @@ def test_knn_map_updates_its_tree_on_threads_as_on_one():
     assert min(sizes) >= 4096
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 def test_super_rays_grouped_on_threads_give_the_single_thread_map(mode):
     """A dense wall (1600 end cells of about 25 points): the end cells' groups are

@@ -340,6 +340,7 @@ def registered_bag(path, edge_moves=True, stamps=(S, 2 * S, 3 * S)):
     return write_bag(path, msgs)
 
 
+@pytest.mark.slow
 def test_akimap_sample_bag_warns_that_the_sensor_never_moves():
     bag = data_path("akimap_sample", "sample.bag")
     scans, messages = _user_warnings(lambda: list(read_rosbag(bag)))

@@ -198,6 +198,7 @@ def test_min_range_must_be_less_than_the_knn_sensor_range():
 
 
 # ---------------------------------------------------------------------- free_points
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("method", METHODS)
 def test_free_points_give_liboctomaps_key_sets(mode, method):

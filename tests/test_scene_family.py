@@ -46,6 +46,7 @@ def test_split_is_disjoint_and_balanced():
         assert {k: kinds.count(k) for k in FAMILY_KINDS} == {k: 3 for k in FAMILY_KINDS}
 
 
+@pytest.mark.slow
 def test_every_kind_and_laser_in_each_split(cases):
     for seeds in (TUNING_SEEDS, TEST_SEEDS):
         assert [cases[s].kind for s in seeds[:4]] == list(FAMILY_KINDS)
@@ -93,6 +94,7 @@ def test_kind_override():
 
 
 # ------------------------------------------------------------------------ the path
+@pytest.mark.slow
 def test_paths_keep_clearance_and_revisit(cases):
     for seed, case in cases.items():
         path = case.scene.path
@@ -142,6 +144,7 @@ def test_full_turn_has_no_repeated_beam(cases):
     assert len(np.unique(np.round(np.mod(angles, 2 * np.pi), 9))) == 361
 
 
+@pytest.mark.slow
 def test_zero_noise_gives_exact_ranges(cases):
     case = cases[7]                            # range and pose noise in its setting
     assert case.sensor.range_noise > 0 and case.sensor.position_noise > 0
@@ -380,6 +383,7 @@ def test_fpr_at_tpr_matches_the_curve():
     assert fpr_at_tpr(truth, prob, 1.0) == fpr[np.argmax(tpr >= 1.0)]
 
 
+@pytest.mark.slow
 def test_peak_rss_sees_an_allocation():
     with PeakRSS() as memory:
         block = np.ones(30_000_000)              # 229 MB

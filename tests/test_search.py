@@ -96,6 +96,7 @@ def test_the_papers_grids_have_the_papers_counts(replay):
     assert knn.best_params == {k: best[k] for k in KNN_GRID}
 
 
+@pytest.mark.slow
 def test_parallel_and_dask_give_the_same_table(replay):
     _, rep = replay
     labels = cell_labels(Wall(), rep.centers, 0.2)

@@ -172,6 +172,7 @@ def test_naive_fdr_counts_free_cells(scene):
     assert np.isnan(naive_fdr([Scan(np.empty((0, 3)), np.zeros(3))], scene))
 
 
+@pytest.mark.slow
 def test_rank_orders_by_naive_fdr(scene, pairs):
     sets = sgbm_parameter_sets(6, seed=5)
     order, fdr = rank_sgbm_sets(pairs[:2], SMALL, scene, sets)

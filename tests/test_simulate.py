@@ -252,6 +252,7 @@ def test_free_path_rejects_bad_environment():
 
 
 # --------------------------------------------------------------------------- geb079 (real map)
+@pytest.mark.slow
 def test_geb079_free_path_is_collision_free(geb079, geb079_path):
     poses = geb079_path
     assert poses.shape == (12, 3)
@@ -273,6 +274,7 @@ def test_geb079_free_path_is_collision_free(geb079, geb079_path):
     assert_array_equal(poses, free_path(geb079, 12, seed=0))
 
 
+@pytest.mark.slow
 def test_geb079_dense_scan(geb079, geb079_path):
     """The slowest test here (about 0.5 s): one default 108k-ray scan of the real map."""
     scan = simulate_scans(geb079, geb079_path[:1])[0]

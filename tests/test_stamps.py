@@ -55,6 +55,7 @@ def moving_box_maps(decay: bool):
     return tree
 
 
+@pytest.mark.slow
 def test_moving_box_clears_by_rays_and_by_decay_and_nothing_else_changes():
     kept, decayed = moving_box_maps(False), moving_box_maps(True)
     cells = dense_cells(kept)
@@ -89,6 +90,7 @@ def _leaves(tree):
     return lv.centers[order], lv.sizes[order], lv.log_odds[order]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["plain", "culling", "superray", "superray+culling", "auto"])
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 def test_stamped_insert_gives_the_same_map_and_stamps_every_updated_cell(method, mode):

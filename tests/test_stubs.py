@@ -9,6 +9,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# a mypy run per compiled module, 6-10 s each: the whole module is in the slow set
+pytestmark = pytest.mark.slow
+
 
 @pytest.mark.parametrize("module", ["occgp._octree", "occgp._grid", "occgp._kernel", "occgp._integral",
                                     "occgp._linetrack", "occgp._color"])

@@ -91,6 +91,7 @@ def test_max_range_with_superrays():
     check_all_methods(scans, 0.2, max_range=2.0)
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
 @given(

@@ -37,6 +37,9 @@ def scenes():
 
 
 SCENES = scenes()
+# the room (4 scans of 400 points) is the slow case of every method and mode
+SCENE_PARAMS = [pytest.param(*s, id=s[0], marks=[pytest.mark.slow] if s[0] == "room" else [])
+                for s in SCENES]
 
 
 def build(cls, scans, resolution, **kwargs):
@@ -65,7 +68,7 @@ def assert_same_grid(a, b):
     assert_array_equal(ca.log_odds, cb.log_odds)
 
 
-@pytest.mark.parametrize("name,scans,resolution", SCENES, ids=[s[0] for s in SCENES])
+@pytest.mark.parametrize("name,scans,resolution", SCENE_PARAMS)
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 @pytest.mark.parametrize("method", METHODS)
 def test_octree_is_identical_for_every_n_jobs(name, scans, resolution, mode, method):
@@ -78,7 +81,7 @@ def test_octree_is_identical_for_every_n_jobs(name, scans, resolution, mode, met
         assert counts == ref_counts or method == "superray+culling", n_jobs
 
 
-@pytest.mark.parametrize("name,scans,resolution", SCENES, ids=[s[0] for s in SCENES])
+@pytest.mark.parametrize("name,scans,resolution", SCENE_PARAMS)
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 @pytest.mark.parametrize("method", METHODS)
 def test_grid_is_identical_for_every_n_jobs(name, scans, resolution, mode, method):
@@ -141,6 +144,7 @@ def test_more_threads_than_cores_give_the_same_map(cls, kw):
         assert stats == ref_stats
 
 
+@pytest.mark.slow
 def test_bbox_max_range_and_key_tables_give_the_same_map():
     """bbox= and max_range on occgp's traversal; a key box of 10.6M cells (dense counts
     for one thread only: 2 x 10.6M > 2^24 cells, so the core keeps one thread), and one
