@@ -1,6 +1,8 @@
 # occgp: `make demo` and `make test` each do the whole set-up on a fresh Debian
 # machine (system packages, .venv, the package with its extras), then run.
 # Both are idempotent: the set-up is redone only when the build inputs change.
+# `make test-fast` runs the tests not marked slow (pytest -m "not slow", about a
+# minute on 2 cores) for a quick check while editing; `make test` runs every test.
 
 PYTHON ?= python3
 VENV   ?= .venv
@@ -12,7 +14,7 @@ EXTRAS ?= test,dask,ros,iln,stereo
 TORCH  ?= torch==2.13.0
 BUILD_INPUTS := setup.py pyproject.toml $(wildcard ext/*.pyx ext/*.pxd ext/*.pxi ext/*.h)
 
-.PHONY: all demo test bench docs asan soak fuzz system venv install clean distclean
+.PHONY: all demo test test-fast bench docs asan soak fuzz system venv install clean distclean
 
 all: test
 
@@ -53,6 +55,11 @@ test: $(STAMP)
 	  echo "OPENBLAS_CORETYPE=$$core: $(BLAS_GUARD)"; \
 	  OPENBLAS_CORETYPE=$$core $(PY) -m pytest -q -p no:cacheprovider $(BLAS_GUARD) || exit 1; \
 	done
+
+# the quick subset while editing: every test module but the tests marked slow
+# (pyproject.toml's `slow` marker); `make test` above runs them all
+test-fast: $(STAMP)
+	$(PY) -m pytest -q -m "not slow"
 
 bench: $(STAMP)
 	$(PY) bench/bench_octree.py
