@@ -302,8 +302,7 @@ default="clenshaw-curtis"
                              f"{int((obs.labels < 0).sum())} beams")
         self._check_observations(obs, kernel)
         n_given = len(obs.y)
-        obs = thin_to_budget(obs, self.max_observations, None if beam_hits is None
-                             else np.asarray(beam_hits), rng, self.max_cell_size,
+        obs = thin_to_budget(obs, self.max_observations, beam_hits, rng, self.max_cell_size,
                              "max_cell_size")[0]
         n_opt = min(len(obs.y), self.max_optimize)
         fix = "lower max_optimize"
