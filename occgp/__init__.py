@@ -10,15 +10,11 @@ scenes and scan readers (:mod:`occgp.datasets`), and one evaluation harness
 
 import logging
 
-from .octree import Changes, Leaves, Nodes, OccupancyOctree, Stamps
-from .color import ColorLeaves, ColorOctree
+from .octree import Changes, ColorLeaves, ColorOctree, Leaves, Nodes, OccupancyOctree, Stamps
 from .grid import GridMap
 from .kernel import AKIMap, BGKMap
 from .knn import KNNMap
-from ._distance import DistanceField
-from ._distance_map import DistanceMap
-from ._frontiers import Frontiers
-from ._map2d import OccupancyGrid2D
+from .nav import DistanceField, DistanceMap, Frontiers, OccupancyGrid2D
 from .maps import OccupancyMap, available_maps, make_map, register
 from . import filters  # noqa: F401  (occgp.filters: the scan filters)
 

@@ -9,16 +9,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._docfill import fill_doc
-from . import _npz_io
+from .io import _npz as _npz_io
 from ._grid import _Grid
-from ._logodds_map import SENSOR_MODEL, Leaves, LogOddsMap
+from .octree._logodds import SENSOR_MODEL, Leaves, LogOddsMap
 from .maps import register
 from ._scan_input import join_free, prefilter
-from ._superray_policy import adaptive_threshold
+from .octree._superray_policy import adaptive_threshold
 from ._validation import check_bool, check_n_jobs, n_threads
 
 if TYPE_CHECKING:
-    from .octree import OccupancyOctree
+    from .octree._tree import OccupancyOctree
 
 __all__ = ["GridMap"]
 
@@ -242,7 +242,7 @@ default="auto"
         """Write the map with every cell to an ``.npz`` file.
 
         The file is a NumPy archive of plain arrays (see
-        :mod:`occgp._npz_io`): ``format`` ``"occgp.grid_map"``, ``version``
+        :mod:`occgp.io._npz`): ``format`` ``"occgp.grid_map"``, ``version``
         1, ``class``, ``params`` (the constructor's parameters as JSON),
         ``keys`` (uint16, shape (n_cells, 3), the cells' keys in key order)
         and ``log_odds`` (float32, shape (n_cells,)).
@@ -329,7 +329,7 @@ default="auto"
         -------
         tree : OccupancyOctree
         """
-        from .octree import OccupancyOctree
+        from .octree._tree import OccupancyOctree
 
         tree = OccupancyOctree(**self.get_params())
         keys, _, values = self._cells_sorted(False)

@@ -282,7 +282,7 @@ def test_failed_figure_save_keeps_the_old_file(tmp_path):
     pytest.importorskip("matplotlib", reason="the demo's figures need matplotlib")
     from matplotlib.figure import Figure
 
-    from occgp._demo import _save_figure
+    from occgp.cli._demo import _save_figure
 
     def figure(n):
         fig = Figure(figsize=(2, 2))

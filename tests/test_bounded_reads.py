@@ -152,8 +152,7 @@ def test_open_regular_names_missing_files_and_folders(tmp_path):
 def test_pgm_pixels_are_not_read_before_the_size_checks(tmp_path):
     """A header announcing 10^10 pixels, or more than the file holds, is refused from
     the header alone (the pixel data would be huge or absent)."""
-    from occgp import _ros_map
-
+    from occgp.nav import _ros_map as _ros_map
     (tmp_path / "m.yaml").write_bytes(b"image: m.pgm\n" + _HDR)
     (tmp_path / "m.pgm").write_bytes(b"P5 100000 100000 255\n" + bytes(4))
     with pytest.raises(ValueError, match=r"m\.pgm: the PGM image has 100000 x 100000 = "

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from occgp import AKIMap, BGKMap, KNNMap, OccupancyOctree
-from occgp._demo import STEREO_HISTORY, STEREO_KNN, STEREO_OCTREE, STEREO_RANGE
+from occgp.cli._demo import STEREO_HISTORY, STEREO_KNN, STEREO_OCTREE, STEREO_RANGE
 from occgp.maps import make_map
-from occgp.cli import main, map_scans, mapping_methods, noisy_mapping_methods
+from occgp.cli import main
+from occgp.cli._main import map_scans, mapping_methods, noisy_mapping_methods
 from occgp.datasets import read_scans, structured_room, write_pcd
 
 KERNEL_METHODS = {"BGK", "AKIMap", "AKIMap (published)"}
@@ -500,7 +501,7 @@ def test_map_command_progress_bar_counts_every_step(tmp_path, capsys):
 
 
 def test_map_help_shows_every_default():
-    from occgp.cli import _parser
+    from occgp.cli._main import _parser
 
     parser = _parser()
     sub = next(a for a in parser._actions if a.dest == "command")

@@ -1,4 +1,4 @@
-"""The colour octree (occgp.color.ColorOctree over liboctomap's ColorOcTree).
+"""The colour octree (occgp.octree.ColorOctree over liboctomap's ColorOcTree).
 
 Occupancy is checked leaf for leaf against OccupancyOctree, colours against a
 direct computation and against liboctomap's own call sequence (a small C++
@@ -16,8 +16,8 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from occgp import OccupancyOctree
-from occgp._export import pack_rgb, unpack_rgb
-from occgp.color import ColorLeaves, ColorOctree
+from occgp.io._export import pack_rgb, unpack_rgb
+from occgp.octree import ColorLeaves, ColorOctree
 from occgp.datasets import read_pcd
 
 from test_export import read_ply

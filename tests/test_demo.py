@@ -4,8 +4,8 @@ import io
 
 import pytest
 
-import occgp._demo as demo_module
-import occgp.cli as cli
+import occgp.cli._demo as demo_module
+import occgp.cli._main as cli
 from occgp import OccupancyOctree
 from occgp.gp import GPOM, GPOMIK, GPMixture, OccupancyGrid
 

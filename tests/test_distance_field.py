@@ -34,10 +34,10 @@ def brute_force(m, field, unknown, signed):
 # --------------------------------------------------------------------------- #
 # the dense field
 # --------------------------------------------------------------------------- #
-def test_distance_field_moved_but_importable_where_it_was():
-    from occgp._export import DistanceField as Old
-    assert Old is DistanceField is occgp.DistanceField
-    assert not hasattr(occgp._export, "distance_field")
+def test_distance_field_has_one_public_path():
+    from occgp.nav import DistanceField as nav_field
+    assert nav_field is DistanceField is occgp.DistanceField
+    assert DistanceField.__module__ == "occgp.nav"
 
 
 @pytest.mark.parametrize("unknown", ["occupied", "free"])

@@ -1,4 +1,4 @@
-"""Maps out: PLY / PCD / Open3D exports and the distance field (occgp._export)."""
+"""Maps out: PLY / PCD / Open3D exports and the distance field (occgp.io._export)."""
 
 import struct
 import sys
@@ -8,9 +8,9 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from occgp import GridMap, OccupancyOctree
-from occgp import _octomap_format as fmt
-from occgp._distance import distance_field
-from occgp._export import _CUBE_TRIANGLES, _finest_cells, save_pcd, save_ply, to_open3d
+from occgp.io import _octomap_format as fmt
+from occgp.nav._distance import distance_field
+from occgp.io._export import _CUBE_TRIANGLES, _finest_cells, save_pcd, save_ply, to_open3d
 from occgp.datasets import read_pcd
 
 

@@ -51,7 +51,7 @@ def test_ros_map_and_stamps_mutations_reach_their_targets(fuzz):
     assert sum(y not in yaml_seeds for y, _ in cases) > 50      # YAML files mutated
     assert sum(p not in pgm_seeds for _, p in cases) > 50       # PGM images mutated
     assert any(b"*a" in y for y, _ in cases)                    # aliases tried
-    from occgp._octree_stamps import STAMPS_MAGIC
+    from occgp.octree._stamps import STAMPS_MAGIC
 
     stamps = fuzz.readers()["stamps_ot"]
     assert all(STAMPS_MAGIC in seed for seed in stamps.seeds()[:3])

@@ -20,7 +20,7 @@ import pytest
 import occgp
 import occgp.datasets
 from occgp import maps
-from occgp.cli import _map_types_help
+from occgp.cli._main import _map_types_help
 from occgp.maps import MapPluginWarning, available_maps, make_map, map_type
 
 PLUGIN_MODULE = '''

@@ -16,7 +16,8 @@ import occgp.datasets
 import occgp.evaluation
 import occgp.knn
 from occgp import maps
-from occgp.cli import main, map_methods
+from occgp.cli import main
+from occgp.cli._main import map_methods
 from occgp.maps import OccupancyMap, available_maps, capabilities, make_map, map_type, register
 
 TOY = Path(__file__).resolve().parent.parent / "docs" / "toy_map.py"

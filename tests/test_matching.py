@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from occgp.evaluation import MatchedCounts, matched_counts
-from occgp.octree import pack_keys
+from occgp.octree._queries import pack_keys
 
 
 def slow_counts(pred, ref, scored):

@@ -180,7 +180,7 @@ def test_corrupt_files_raise_clear_errors(m):
 
 def test_deep_binary_tree_is_refused():
     """Child code 11 (inner) on every level: deeper than 16 levels, refused before reading."""
-    from occgp._octomap_format import write_header
+    from occgp.io._octomap_format import write_header
 
     body = b"\x03\x00" * 40
     with pytest.raises(ValueError, match="deeper than the 16 levels"):

@@ -466,7 +466,7 @@ def mutate_ros_map(rng, data):
 def mutate_stamps(rng, data):
     """1 to 4 mutations, most inside the stamps block after the OctoMap data: its
     count, its decay time, its keys and stamps, truncations and extra bytes."""
-    from occgp._octree_stamps import STAMPS_MAGIC
+    from occgp.octree._stamps import STAMPS_MAGIC
 
     start = data.find(STAMPS_MAGIC)
     if start < 0:

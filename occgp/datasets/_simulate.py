@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
 from .._validation import as_points, check_int, check_real
-from ..octree import OccupancyOctree
+from ..octree._tree import OccupancyOctree
 from ..io._scan import Scan
 from ._scenes import Scene
 

@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..octree import pack_keys, unpack_keys
+from ..octree._tree import pack_keys, unpack_keys
 
 __all__ = ["MatchedCounts", "matched_counts", "OFFSETS", "neighbour_table",
            "greedy_matches"]

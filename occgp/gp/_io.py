@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 
-from .. import _npz_io
+from ..io import _npz as _npz_io
 from .._validation import check_real
 from ._cells import Cell
 from ._checks import check_at_least

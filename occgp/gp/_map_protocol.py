@@ -308,7 +308,7 @@ class MapProtocol:
         TypeError
             If `resolution` is not a real number.
         """
-        from ..octree import OccupancyOctree
+        from ..octree._tree import OccupancyOctree
 
         res = check_resolution(self._octree_resolution(resolution))
         tree = OccupancyOctree(res, clamping_min=0.001, clamping_max=0.999,

@@ -42,7 +42,7 @@ import zlib
 import numpy as np
 
 from .._atomic import atomic_open
-from .._npz_io import read_npy_header
+from ..io._npz import read_npy_header
 from .._validation import as_path, check_bool, check_int, check_n_jobs
 from . import _effects
 from ._range import LidarModel

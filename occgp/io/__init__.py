@@ -2,7 +2,7 @@
 
 Today: the PCD reader and writer (:func:`read_pcd`, :func:`write_pcd`, with PCL's LZF
 codec) and the scan record (:class:`Scan`) every reader returns. The maps' exports
-(``occgp/_export.py``) write PCD through here; :mod:`occgp.datasets` re-exports these
+(``occgp/io/_export.py``) write PCD through here; :mod:`occgp.datasets` re-exports these
 names where they were. docs/architecture.rst lists what moves here later (the OctoMap
 formats, ``.npz`` files, the PLY and Open3D exports, the real-data readers).
 """

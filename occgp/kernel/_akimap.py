@@ -7,7 +7,7 @@ from numbers import Integral
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .. import _npz_io
+from ..io import _npz as _npz_io
 from .._docfill import fill_doc
 from .._kernel import _akimap_bandwidths
 from .._validation import as_point, as_points, check_real, n_threads

@@ -2,7 +2,7 @@
 
 Files are NumPy ``.npz`` archives of plain arrays in the ``occgp.kernel_map``
 format (described in :meth:`KernelMapFiles.save`), written and checked by
-:mod:`occgp._npz_io`; files written before ``occupancy_threshold`` existed lack
+:mod:`occgp.io._npz`; files written before ``occupancy_threshold`` existed lack
 that parameter and read with its default. Pickles rebuild a map from its
 parameters and cells through :func:`restore_kernel_map`.
 """
@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import _npz_io
+from ..io import _npz as _npz_io
 from .._docfill import fill_doc
 from .._validation import as_path
 

@@ -22,7 +22,7 @@ from .._docfill import fill_doc
 from .._kernel import _KernelCells
 from .._validation import (as_point, as_points, check_bool, check_n_jobs, check_probability,
                            check_real, n_threads)
-from ..octree import OccupancyOctree
+from ..octree._tree import OccupancyOctree
 from .._scan_input import prefilter
 from ._kernel_io import KernelMapFiles
 from ._kernel_samples import (MAX_VAL, MAX_WEIGHT, check_max_cells, check_max_range,

@@ -18,14 +18,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._knn_scores import history_knn_distances, logodds32, mean_knn_distances, point_log_odds
-from ._octree import _welford
-from ._status import Status
-from ._validation import (
+from ._scores import history_knn_distances, logodds32, mean_knn_distances, point_log_odds
+from .._octree import _welford
+from .._status import Status
+from .._validation import (
     check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
 )
-from ._knn_map import CDFS, MAX_HISTORY, MAX_K, MAX_RANGE, STATS, KNNMap, check_knn_params
-from .octree import unpack_keys
+from ._map import CDFS, MAX_HISTORY, MAX_K, MAX_RANGE, STATS, KNNMap, check_knn_params
+from ..octree._tree import unpack_keys
 
 __all__ = ["ScanReplay", "check_octomap_params"]
 
@@ -34,7 +34,7 @@ def check_octomap_params(params: dict[str, Any]) -> dict[str, float]:
     """OctoMap's ``prob_hit``, ``prob_miss``, ``clamping_min``, ``clamping_max`` checked
     as :class:`~occgp.OccupancyOctree` checks them, except that ``prob_hit = 0.5`` (a hit
     that carries no evidence, the first value of Miao et al.'s grid) is allowed."""
-    from ._logodds_map import check_params
+    from ..octree._logodds import check_params
     hit = check_real(params["prob_hit"], "prob_hit", low=0.5, high=1.0, low_open=False)
     q = check_params({"resolution": 1.0, "occupancy_threshold": 0.5, **params,
                       "prob_hit": 0.7})

@@ -26,18 +26,18 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._knn_scores import (
+from ._scores import (
     fixed_log_odds, history_knn_distances, logodds32, mean_knn_distances, point_log_odds,
 )
-from ._octree import _welford
-from ._status import Status
-from ._superray_policy import adaptive_threshold
-from ._validation import (
+from .._octree import _welford
+from .._status import Status
+from ..octree._superray_policy import adaptive_threshold
+from .._validation import (
     check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
 )
-from .maps import register
-from .octree import OccupancyOctree
-from ._scan_input import prefilter
+from ..maps import register
+from ..octree._tree import OccupancyOctree
+from .._scan_input import prefilter
 
 __all__ = ["KNNMap", "check_knn_params", "check_score_stats", "mean_knn_distances",
            "history_knn_distances", "point_log_odds", "fixed_log_odds"]

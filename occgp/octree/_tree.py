@@ -8,17 +8,17 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._docfill import fill_doc
-from ._logodds_map import MODES, OCTREE_ATTRIBUTES, SENSOR_MODEL, Leaves
-from ._octree import KEYRAY_CELLS, _OcTree
-from ._octree_files import OctreeFiles
-from ._octree_queries import Nodes, OctreeQueries, pack_keys, unpack_keys
+from .._docfill import fill_doc
+from ._logodds import MODES, OCTREE_ATTRIBUTES, SENSOR_MODEL, Leaves
+from .._octree import KEYRAY_CELLS, _OcTree
+from ._files import OctreeFiles
+from ._queries import Nodes, OctreeQueries, pack_keys, unpack_keys
 from ._merge import OctreeMerging
-from ._octree_stamps import OctreeStamps, Stamps
-from .maps import register
-from ._scan_input import join_free, prefilter
+from ._stamps import OctreeStamps, Stamps
+from ..maps import register
+from .._scan_input import join_free, prefilter
 from ._superray_policy import adaptive_threshold
-from ._validation import as_numeric, check_bool, check_choice, check_n_jobs, n_threads
+from .._validation import as_numeric, check_bool, check_choice, check_n_jobs, n_threads
 
 __all__ = ["OccupancyOctree", "Leaves", "Changes", "Nodes", "Stamps"]
 

@@ -2,7 +2,7 @@
 
 :class:`OccupancyGrid2D` is what ``project_2d`` of the log-odds maps returns;
 it writes and reads the PGM + YAML pair of ROS's map_server / Nav2
-(:mod:`occgp._ros_map`) and finds its frontiers (:mod:`occgp._frontiers`).
+(:mod:`occgp.nav._ros_map`) and finds its frontiers (:mod:`occgp.nav._frontiers`).
 """
 
 from __future__ import annotations
@@ -12,8 +12,9 @@ import os
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import _frontiers, _ros_map
-from ._validation import as_numeric, as_path, as_point, as_points, check_int, check_real
+from . import _frontiers
+from . import _ros_map
+from .._validation import as_numeric, as_path, as_point, as_points, check_int, check_real
 
 __all__ = ["OccupancyGrid2D"]
 

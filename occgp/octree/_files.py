@@ -8,12 +8,12 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
-from . import _octomap_format as fmt
-from ._atomic import write_bytes
-from ._logodds_map import OctreeFace
-from ._octree import _check_binary_data, _check_full_data
-from ._reading import read_regular
-from ._validation import as_path, check_choice, check_resolution
+from ..io import _octomap_format as fmt
+from .._atomic import write_bytes
+from ._logodds import OctreeFace
+from .._octree import _check_binary_data, _check_full_data
+from .._reading import read_regular
+from .._validation import as_path, check_choice, check_resolution
 
 __all__ = ["OctreeFiles", "check_format"]
 

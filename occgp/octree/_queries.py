@@ -10,10 +10,10 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._docfill import fill_doc
-from ._logodds_map import Leaves, OctreeFace
-from ._octree import TREE_DEPTH, TREE_MAX_VAL
-from ._validation import as_numeric, as_points, check_bool, check_int, check_real
+from .._docfill import fill_doc
+from ._logodds import Leaves, OctreeFace
+from .._octree import TREE_DEPTH, TREE_MAX_VAL
+from .._validation import as_numeric, as_points, check_bool, check_int, check_real
 
 __all__ = ["Nodes", "OctreeQueries", "as_float32_directions", "pack_keys", "unpack_keys"]
 

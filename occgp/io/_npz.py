@@ -34,8 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from ._atomic import atomic_open
-from ._validation import as_path
+from .._atomic import atomic_open
+from .._validation import as_path
 
 #: A member may declare at most this many bytes per compressed byte (deflate
 #: reaches about 1032), plus _SLACK: more is a zip bomb or corrupt.

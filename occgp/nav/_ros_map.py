@@ -20,9 +20,9 @@ import re
 import numpy as np
 from numpy.typing import NDArray
 
-from ._atomic import atomic_group
-from ._reading import load_yaml_mapping, open_regular, read_limited
-from ._validation import as_float, show_number
+from .._atomic import atomic_group
+from .._reading import load_yaml_mapping, open_regular, read_limited
+from .._validation import as_float, show_number
 
 __all__ = ["write_ros_map", "read_ros_map", "read_pgm", "OCCUPIED", "FREE", "UNKNOWN",
            "OCCUPIED_THRESH", "FREE_THRESH", "MAX_PGM_PIXELS", "MAX_PGM_HEADER",

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
-from ._atomic import atomic_open
+from .. import __version__
+from .._atomic import atomic_open
 
 __all__ = ["demo", "mapping_methods", "noisy_mapping_methods", "gp_mapping_methods",
            "stereo_scans_of_scene"]
@@ -126,7 +126,7 @@ def stereo_scans_of_scene(seed: int = 0, *, n_jobs: int | None = -1):
     """The demo's stereo scene and its clouds: :data:`STEREO_SCENE` orbited twice with
     :data:`STEREO_FRAMES` rendered keyframes per orbit, matched by StereoSGBM with
     :data:`STEREO_SGBM` (renderer noise seeded by `seed`)."""
-    from .datasets import StereoRig, render_orbit, stereo_scans, tetromino_scene
+    from ..datasets import StereoRig, render_orbit, stereo_scans, tetromino_scene
     params = dict(STEREO_SCENE)
     scene = tetromino_scene(params.pop("layout"), **params)
     rig = StereoRig()
@@ -162,7 +162,7 @@ def gp_mapping_methods(resolution: float) -> dict:
         (:class:`occgp.maps.OccupancyMap`: ``occupancy`` is NaN where it has no
         evidence).
     """
-    from .gp import GPOM, GPOMIK, GPMixture, OccupancyGrid, SquaredExponential
+    from ..gp import GPOM, GPOMIK, GPMixture, OccupancyGrid, SquaredExponential
 
     return {
         "GPOMIK": lambda: GPOMIK(SquaredExponential(1.7, 0.6), noise=1e-4, optimizer=False,
@@ -176,8 +176,8 @@ def gp_mapping_methods(resolution: float) -> dict:
 
 def _run_gp(name, factory, observations, n_scans, test):
     """Fit one 2D model on all observations at once (timed) and score it (a MapResult)."""
-    from .evaluation import MapResult
-    from .metrics import score_all
+    from ..evaluation import MapResult
+    from ..metrics import score_all
 
     hits, starts, ends = observations
     model = factory()
@@ -257,9 +257,9 @@ def demo(outdir: str | Path = "demo_out", *, resolution: float = 0.1, seed: int 
         of :func:`gp_mapping_methods` (their ``map`` answers ``occupancy``
         with the model's ``predict_proba``).
     """
-    from .datasets import room_2d, structured_room
-    from .evaluation import compare_methods, exact_test_set, format_table
-    from .gp import observations_from_scans
+    from ..datasets import room_2d, structured_room
+    from ..evaluation import compare_methods, exact_test_set, format_table
+    from ..gp import observations_from_scans
 
     out = sys.stdout if out is None else out
     outdir = Path(outdir)
@@ -333,7 +333,7 @@ def _lattice(lo, hi, res):
 
 def _truth_panel(scene, centres, res, scans):
     """The cells' exact labels (closed-cell rule), NaN where no scan could see them."""
-    from .evaluation import cells_in_view, exact_labels
+    from ..evaluation import cells_in_view, exact_labels
 
     truth = exact_labels(scene, centres, res).astype(float)
     truth[~cells_in_view(scene, centres, res, scans, max_range=_DEMO_RANGE)] = np.nan
@@ -392,7 +392,7 @@ def _cmap():
 
 
 def _roc_axes(ax, rows, test, title):
-    from .metrics import roc_curve
+    from ..metrics import roc_curve
 
     for r in rows:
         proba = r.map.occupancy(test.points)

@@ -8,10 +8,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._export import leaf_cells
-from ._logodds_map import OctreeFace
-from ._octree import _OcTree
-from ._validation import as_numeric, check_choice, check_int
+from ..io._export import leaf_cells
+from ._logodds import OctreeFace
+from .._octree import _OcTree
+from .._validation import as_numeric, check_choice, check_int
 
 __all__ = ["OctreeMerging", "MERGE_RULES", "MAX_MERGE_CELLS", "check_rigid_transform"]
 

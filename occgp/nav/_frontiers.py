@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from ._validation import check_int
+from .._validation import check_int
 
 __all__ = ["Frontiers", "find_frontiers"]
 

@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 
 from ._frontiers import Frontiers, empty_frontiers, find_frontiers
 from ._map2d import OccupancyGrid2D
-from ._validation import as_numeric, check_int, check_real
+from .._validation import as_numeric, check_int, check_real
 
 __all__ = ["PlanningMixin", "MAX_GRID_CELLS", "MAX_FRONTIER_CELLS", "box_counts",
            "grid_span", "as_box"]

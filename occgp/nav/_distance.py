@@ -16,11 +16,11 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._map_types import check_log_odds_map
-from ._validation import as_numeric, check_bool, check_choice, check_int, check_real
+from .._map_types import check_log_odds_map
+from .._validation import as_numeric, check_bool, check_choice, check_int, check_real
 
 if TYPE_CHECKING:  # annotations only: the maps import this module
-    from ._logodds_map import LogOddsMap
+    from ..octree._logodds import LogOddsMap
 
 __all__ = ["DistanceField", "distance_field", "MAX_DISTANCE_CELLS", "UNKNOWN_CHOICES",
            "check_distance_map", "nearest_features", "squared_offsets", "cells_of", "grid_of_box",

@@ -1,6 +1,6 @@
 """The ``occgp`` command line: ``occgp demo`` (the main job) and ``occgp map``.
 
-``occgp demo`` (:func:`demo`, in ``occgp/_demo.py``) maps the synthetic
+``occgp demo`` (:func:`demo`, in ``occgp/cli/_demo.py``) maps the synthetic
 structured room with every mapping method (:func:`mapping_methods`: the octree
 and the grid in scan and ray mode, BGK, AKIMap in both variants and the k-NN
 map), clouds of a small stereo scene rendered and matched by OpenCV's StereoSGBM
@@ -25,10 +25,10 @@ import shutil
 import sys
 import textwrap
 
-from . import __version__
-from .filters import GROUND_MODES
-from .knn import CDFS
-from .maps import available_maps, map_type
+from .. import __version__
+from ..filters import GROUND_MODES
+from ..knn import CDFS
+from ..maps import available_maps, map_type
 from ._map_command import (
     KNN_DEFAULTS, KNN_OPTIONS, OPTION_OF, POSE_FORMATS, OptionError, OptionTypeError,
     check_knn_options,
@@ -96,7 +96,7 @@ def _parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("iln", help="the Implicit LiDAR Network: simulated range-image data "
                        "sets and model training (occgp iln -h)")
-    from .iln.cli import build_parser as _iln_parser  # numpy only; torch when training
+    from ..iln.cli import build_parser as _iln_parser  # numpy only; torch when training
     _iln_parser(p)
 
     p = sub.add_parser("map", help="build a map from scan files (.pcd, .bin, .pcd.bin, "
@@ -258,7 +258,7 @@ def _knn_args(args) -> dict | None:
 
 def _scan_filter(args):
     """The ScanFilter of the filter options, None when none is given."""
-    from .filters import ScanFilter
+    from ..filters import ScanFilter
     given = (args.min_range, args.z_min, args.z_max, args.self_box)
     if all(v is None for v in given) and args.ground == "keep":
         return None
@@ -273,7 +273,7 @@ def _scan_filter(args):
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.command == "iln":
-        from .iln.cli import run as _iln_run
+        from ..iln.cli import run as _iln_run
         return _iln_run(args)
     progress = False if args.no_progress else None
     knn_params = _knn_args(args) if args.command == "map" else None

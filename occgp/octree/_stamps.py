@@ -20,9 +20,9 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._logodds_map import OctreeFace
-from ._octree_queries import pack_keys, unpack_keys
-from ._validation import check_real
+from ._logodds import OctreeFace
+from ._queries import pack_keys, unpack_keys
+from .._validation import check_real
 
 __all__ = ["Stamps", "OctreeStamps", "STAMPS_MAGIC", "stamps_block", "read_stamps_block"]
 

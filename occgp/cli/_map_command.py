@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import check_n_jobs, check_real, check_resolution, show_number
-from .knn import CDFS, KNN_PARAMS, KNNMap, check_knn_params
-from .maps import OCTREE_FORMATS, available_maps, make_map, map_type
-from .octree import OccupancyOctree
+from .._validation import check_n_jobs, check_real, check_resolution, show_number
+from ..knn import CDFS, KNN_PARAMS, KNNMap, check_knn_params
+from ..maps import OCTREE_FORMATS, available_maps, make_map, map_type
+from ..octree._tree import OccupancyOctree
 
 __all__ = ["map_scans", "map_methods", "OptionError", "OPTION_OF", "POSE_FORMATS",
            "KNN_OPTIONS", "KNN_DEFAULTS", "check_knn_options", "knn_error", "option_name",
@@ -136,8 +136,8 @@ def _is_bag(path) -> bool:
 def _is_carmen(path) -> bool:
     """Whether `path` is a CARMEN laser log (a text file, maybe compressed, with FLASER or
     ROBOTLASER1 lines)."""
-    from .datasets._carmen import is_carmen_log
-    from .datasets._readers import scan_kind
+    from ..datasets._carmen import is_carmen_log
+    from ..datasets._readers import scan_kind
 
     path = Path(path)
     return path.is_file() and scan_kind(path) == "text" and is_carmen_log(path)
@@ -150,7 +150,7 @@ def _suffix(path: Path) -> str:
 def _read_poses(path, poses_format):
     """The (n, 4, 4) poses of a KITTI or TUM file (:func:`occgp.datasets.read_poses`);
     a file whose format cannot be told is an error of the `poses` option."""
-    from .datasets import read_poses
+    from ..datasets import read_poses
 
     try:
         return read_poses(path, poses_format)
@@ -515,7 +515,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     """
     from tqdm.auto import tqdm
 
-    from .datasets import Scan, ScanSequence, apply_poses, read_carmen, read_rosbag
+    from ..datasets import Scan, ScanSequence, apply_poses, read_carmen, read_rosbag
 
     t_start = time.perf_counter()
     out = sys.stdout if out is None else out
@@ -685,7 +685,7 @@ def _check_scan_filter(scan_filter, method: str) -> None:
     """map_scans' `scan_filter`, checked (on an empty scan) before any file is read."""
     if scan_filter is None:
         return
-    from .filters import ScanFilter
+    from ..filters import ScanFilter
     if not isinstance(scan_filter, ScanFilter):
         raise TypeError(f"scan_filter must be an occgp.filters.ScanFilter, got "
                         f"{type(scan_filter).__name__}")

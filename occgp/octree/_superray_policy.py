@@ -3,7 +3,7 @@ the threshold the compiled core takes for a scan, and the back-off after a scan 
 grouping did not pay (the state lives on the map: ``_superray_skip``, the scans left
 to insert without super rays, and ``_superray_pause``, the next pause)."""
 
-from ._octree import RAY_VISITS  # a ray's start, in cell visits (ext/_superrays.h)
+from .._octree import RAY_VISITS  # a ray's start, in cell visits (ext/_superrays.h)
 
 
 def adaptive_threshold(m, method: str, threshold: int) -> int:

@@ -13,11 +13,11 @@ from ._distance import (
     DistanceField, MAX_DISTANCE_CELLS, UNKNOWN_CHOICES, cells_of, check_distance_map,
     closest_and_gradient, finish, grid_of_box, signed_transform,
 )
-from ._validation import (as_points, check_bool, check_choice, check_int, check_real,
+from .._validation import (as_points, check_bool, check_choice, check_int, check_real,
                           show_number)
 
 if TYPE_CHECKING:  # annotations only: the maps sit above the navigation helpers
-    from ._logodds_map import LogOddsMap
+    from ..octree._logodds import LogOddsMap
 
 __all__ = ["DistanceMap"]
 

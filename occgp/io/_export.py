@@ -13,14 +13,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._atomic import atomic_open
-from ._distance import DistanceField  # noqa: F401  (its public name's import path)
-from ._map_types import check_log_odds_map
-from ._validation import as_path, check_bool, check_choice, check_int
-from .io import write_pcd
+from .._atomic import atomic_open
+from .._map_types import check_log_odds_map
+from .._validation import as_path, check_bool, check_choice, check_int
+from ._pcd import write_pcd
 
 if TYPE_CHECKING:  # annotations only: the maps import this module
-    from ._logodds_map import LogOddsMap
+    from ..octree._logodds import LogOddsMap
 
 __all__ = ["save_ply", "save_pcd", "to_open3d", "MAX_VOXELS", "pack_rgb", "unpack_rgb"]
 

@@ -12,13 +12,14 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import _distance, _export
-from ._docfill import fill_doc
-from ._octree import TREE_MAX_VAL
-from ._planning import PlanningMixin
-from ._status import Status, check_status
+from ..nav import _distance
+from ..io import _export
+from .._docfill import fill_doc
+from .._octree import TREE_MAX_VAL
+from ..nav._planning import PlanningMixin
+from .._status import Status, check_status
 from ._superray_policy import learn_superrays
-from ._validation import (
+from .._validation import (
     as_point, as_points, check_bool, check_choice, check_int, check_probability, check_real,
     check_resolution,
 )
@@ -486,7 +487,7 @@ class LogOddsMap(PlanningMixin):
             True: the leaves at or above the occupancy threshold; False: the
             known leaves below it.
         max_voxels : int, default=None
-            The most voxels (None: ``occgp._export.MAX_VOXELS``, 4194304) ``kind="voxels"`` builds (about 56 bytes each); past
+            The most voxels (None: ``occgp.io._export.MAX_VOXELS``, 4194304) ``kind="voxels"`` builds (about 56 bytes each); past
             it a ValueError is raised before any allocation (free space, which
             prunes into large leaves, reaches it first).
 
@@ -543,7 +544,7 @@ class LogOddsMap(PlanningMixin):
             choice for planning) or as free space. Points outside the map's key
             range are unknown.
         max_cells : int, default=None
-            The most cells (None: ``occgp._distance.MAX_DISTANCE_CELLS``, 8388608)
+            The most cells (None: ``occgp.nav._distance.MAX_DISTANCE_CELLS``, 8388608)
             the grid may have (about 30 bytes each at peak, up to 90 with
             `signed` and both extras); past it a ValueError is raised before any
             allocation.
