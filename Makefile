@@ -14,7 +14,7 @@ EXTRAS ?= test,dask,ros,iln,stereo
 TORCH  ?= torch==2.13.0
 BUILD_INPUTS := setup.py pyproject.toml $(wildcard ext/*.pyx ext/*.pxd ext/*.pxi ext/*.h)
 
-.PHONY: all demo test test-fast bench docs asan soak fuzz system venv install clean distclean
+.PHONY: all demo test test-fast bench docs asan soak fuzz system venv install clean distclean dist
 
 all: test
 
@@ -76,11 +76,27 @@ docs: $(STAMP)
 	$(PY) -m pip install -q -e ".[docs]" --no-build-isolation
 	$(PY) -m sphinx -W --keep-going -b html docs docs/_build/html
 
+# The release artefacts (issue 43, RELEASING.md): dist/occgp-<version>.tar.gz and a
+# self-contained manylinux wheel (liboctomap, liboctomath and libgomp inside), built from a
+# clean copy of the tree by PyPA's build, repaired by auditwheel, then installed and run by
+# tests/test_wheel.py in fresh venvs (tools/dist.sh). The tools live in their own venv,
+# .venv-dist; .venv's editable install is not touched. Not part of CI (`make test`).
+DIST_VENV  ?= .venv-dist
+DIST_STAMP := $(DIST_VENV)/.occgp-dist-tools
+$(DIST_STAMP): tools/dist-requirements.txt
+	@PYTHON=$(PYTHON) bash tools/install-system-deps.sh
+	$(PYTHON) -m venv $(DIST_VENV)
+	$(DIST_VENV)/bin/python -m pip install -q -r tools/dist-requirements.txt
+	@touch $@
+
+dist: $(DIST_STAMP)
+	DIST_PY=$(DIST_VENV)/bin/python bash tools/dist.sh
+
 clean:
 	rm -rf build docs/_build docs/auto_examples docs/gen_modules ext/*.cpp occgp/*.so demo_out
 
 distclean: clean
-	rm -rf $(VENV) *.egg-info
+	rm -rf $(VENV) $(DIST_VENV) dist wheelhouse *.egg-info
 
 # Long fuzz campaign of the readers and loaders (tools/fuzz.py): FUZZ_CASES seeded
 # mutation cases per reader, then as many coverage-guided atheris runs where atheris

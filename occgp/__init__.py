@@ -18,7 +18,7 @@ from .nav import DistanceField, DistanceMap, Frontiers, OccupancyGrid2D
 from .maps import OccupancyMap, available_maps, make_map, register
 from . import filters  # noqa: F401  (occgp.filters: the scan filters)
 
-__version__ = "0.1.0.dev0"
+from ._version import __version__
 __all__ = ["OccupancyOctree", "ColorOctree", "GridMap", "Leaves", "Nodes", "ColorLeaves",
            "Changes", "Stamps", "AKIMap", "BGKMap", "KNNMap", "DistanceField", "DistanceMap",
            "OccupancyGrid2D", "Frontiers", "OccupancyMap", "available_maps", "make_map",
