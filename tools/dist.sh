@@ -3,7 +3,8 @@
 #
 #  1. a clean tree: the files git tracks or would track (git ls-files -co --exclude-standard),
 #     copied into build/dist/src, so that no build output of the working tree (build/,
-#     ext/*.cpp, the editable install's occgp/*.so, *.egg-info) reaches the artefacts;
+#     ext/*.cpp, the editable install's occgp/*.so, *.egg-info) reaches the artefacts; with
+#     DIST_REF set (make dist DIST_REF=v0.1.0), that commit's tree (git archive) instead;
 #  2. PyPA's build: the sdist from that tree, then the wheel from the unpacked sdist, each in
 #     an isolated environment with pyproject.toml's pinned build requirements;
 #  3. auditwheel repair: liboctomap, liboctomath and libgomp copied into the wheel's
@@ -23,17 +24,23 @@ if ! git rev-parse --is-inside-work-tree >/dev/null 2>&1; then
   echo "make dist: needs a git checkout (it builds from the files git tracks)" >&2
   exit 1
 fi
-if [ -n "$(git status --porcelain --untracked-files=no)" ]; then
+DIST_REF=${DIST_REF:-}
+if [ -z "$DIST_REF" ] && [ -n "$(git status --porcelain --untracked-files=no)" ]; then
   echo "make dist: note: the working tree has uncommitted changes; they go into the artefacts" \
-       "(a release is built from a clean checkout of its tag: RELEASING.md)"
+       "(a release is built from its tag: make dist DIST_REF=vX.Y.Z, RELEASING.md)"
 fi
 
 rm -rf build/dist dist
 mkdir -p build/dist/src build/dist/raw dist
-# (a tracked file deleted in the working tree is left out)
-git ls-files -co --exclude-standard -z \
-  | xargs -0 -r sh -c 'for f; do [ -f "$f" ] && printf "%s\0" "$f"; done' sh \
-  | xargs -0 -r cp --parents -t build/dist/src
+if [ -n "$DIST_REF" ]; then
+  echo "== the tree of $DIST_REF ($(git rev-parse --short "$DIST_REF^{commit}"))"
+  git archive --format=tar "$DIST_REF" | tar -x -C build/dist/src
+else
+  # the working tree's files (a tracked file deleted in the working tree is left out)
+  git ls-files -co --exclude-standard -z \
+    | xargs -0 -r sh -c 'for f; do [ -f "$f" ] && printf "%s\0" "$f"; done' sh \
+    | xargs -0 -r cp --parents -t build/dist/src
+fi
 
 echo "== build: sdist, then the wheel from the sdist"
 "$DIST_PY" -m build --outdir build/dist/raw build/dist/src
