@@ -132,7 +132,8 @@ def make_scans(path: Path, n_geb: int, n_dat: int) -> None:
     """Simulate / read the scans once, with this checkout's occgp."""
     sys.path.insert(0, str(ROOT))
     from occgp import OccupancyOctree
-    from occgp.datasets import free_path, read_xyz, simulate_scans
+    from occgp.datasets import free_path, simulate_scans
+    from occgp.io import read_xyz
 
     out = {}
     if n_geb:

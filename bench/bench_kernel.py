@@ -43,7 +43,8 @@ from pathlib import Path
 import numpy as np
 
 from occgp import AKIMap, BGKMap, OccupancyOctree
-from occgp.datasets import read_scans, structured_room, unstructured_room
+from occgp.datasets import structured_room, unstructured_room
+from occgp.io import read_scans
 from occgp.evaluation import (compare_methods, equal_time_comparison, format_table,
                               grid_test_set, held_out_split)
 

@@ -72,7 +72,7 @@ def hku_scans_and_test(scans_slice):
     """The hku_mb training scans (world frame; `scans_slice` of them) and the test set
     of its held-out scans (i % 10 == 5)."""
     import numpy as np
-    from occgp.datasets import apply_poses, read_kitti_poses, read_pcd
+    from occgp.io import apply_poses, read_kitti_poses, read_pcd
     from occgp.evaluation import TestSet
     poses = read_kitti_poses(HKU / "optimized_poses.txt")
     scans = apply_poses([read_pcd(HKU / "Scans" / f"{i:06d}.pcd")
@@ -92,7 +92,8 @@ def hku_scans_and_test(scans_slice):
 
 
 def scans_and_test(name, scans_slice):
-    from occgp.datasets import read_scans, unstructured_room
+    from occgp.datasets import unstructured_room
+    from occgp.io import read_scans
     from occgp.evaluation import grid_test_set, held_out_split
     if name == "la3dm":
         return held_out_split(read_scans(LA3DM), fraction=0.2, seed=0)

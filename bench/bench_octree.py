@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from octomap_reference import build_octomap_insert, time_octomap_insert, write_scan_bin  # noqa: E402
 
 from occgp import OccupancyOctree  # noqa: E402
-from occgp.datasets import read_xyz  # noqa: E402
+from occgp.io import read_xyz  # noqa: E402
 
 SCAN = ROOT / ".." / "shared" / "data" / "octomap" / "scan.dat.bz2"
 

@@ -59,7 +59,7 @@ COLUMNS = ("method", "auc", "accuracy", "brier", "nll", "acc_occupied", "acc_fre
 
 def load(name):
     """The log as the benchmark takes it."""
-    from occgp.datasets import ScanSequence, read_carmen
+    from occgp.io import ScanSequence, read_carmen
 
     if name == "hku_mb":
         return ScanSequence(LOGS[name] / "Scans", LOGS[name] / "optimized_poses.txt",

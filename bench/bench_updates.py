@@ -67,7 +67,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 from octomap_reference import build_octomap_insert, time_octomap_sequence, write_scan_bin  # noqa: E402
 
 from occgp import GridMap, OccupancyOctree  # noqa: E402
-from occgp.datasets import free_path, read_xyz, simulate_scans  # noqa: E402
+from occgp.datasets import free_path, simulate_scans  # noqa: E402
+from occgp.io import read_xyz  # noqa: E402
 
 DATA = ROOT / ".." / "shared" / "data" / "octomap"
 METHODS = [(mode, method) for mode in ("scan", "ray")
@@ -90,7 +91,7 @@ def scan_dat_poses(n_poses, seed=0):
 def sample_bag():
     """The akimap sample bag's 73 real LiDAR clouds (1.2k-2k points each), posed by its
     TF, from the camera's position (needs the ``rosbags`` package)."""
-    from occgp.datasets import read_rosbag
+    from occgp.io import read_rosbag
     bag = DATA.parent / "akimap_sample" / "sample.bag"
     return [(np.asarray(p, np.float32), np.asarray(o, np.float32))
             for p, o in read_rosbag(bag, fixed_frame="map", sensor_frame="camera")]

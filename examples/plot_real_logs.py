@@ -10,9 +10,9 @@ and scores it on the held-out hits and on samples along the held-out beams,
 half of them within a metre of the surface.
 
 Two logs from ``../shared/data``: the Intel Research Lab's CARMEN 2D laser log
-(:func:`occgp.datasets.read_carmen`; 910 scans of 180 beams, SLAM-corrected
+(:func:`occgp.io.read_carmen`; 910 scans of 180 beams, SLAM-corrected
 poses) and the ``hku_mb`` Livox LiDAR sequence
-(:class:`occgp.datasets.ScanSequence`: 457 keyframes of about 5,100 points with
+(:class:`occgp.io.ScanSequence`: 457 keyframes of about 5,100 points with
 FAST-LIO2 poses). The logs are not part of occgp: without them this example
 says so and stops. ``bench/bench_real.py`` runs every map on every log; the
 user guide's "Which map when" section has its tables.
@@ -29,7 +29,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from occgp.datasets import ScanSequence, read_carmen
+from occgp.io import ScanSequence, read_carmen
 from occgp.evaluation import RealLogBenchmark
 
 roots = [Path(p) for p in ("../shared/data", "../../shared/data", "../../../shared/data")]

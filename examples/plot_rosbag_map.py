@@ -5,7 +5,7 @@ Mapping a real ROS bag, poses from TF
 
 A real log, read as a user reads their own: the akimap sample bag (a mobile
 robot's LiDAR, 73 ``sensor_msgs/PointCloud2`` clouds over 15 s, LOAM odometry
-on ``/tf``) from ``../shared/data``. :func:`occgp.datasets.read_rosbag`
+on ``/tf``) from ``../shared/data``. :func:`occgp.io.read_rosbag`
 decodes the clouds and composes the TF chain from the ``map`` frame to each
 cloud's stamp; the sensor origin is the ``camera`` frame. The scans go into an
 :class:`~occgp.OccupancyOctree`, whose occupied cells are written as a PLY
@@ -28,7 +28,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from occgp import OccupancyOctree
-from occgp.datasets import read_rosbag
+from occgp.io import read_rosbag
 
 candidates = [Path(p) / "akimap_sample" / "sample.bag"
               for p in ("../shared/data", "../../shared/data", "../../../shared/data")]

@@ -19,7 +19,7 @@ import pytest
 import occgp
 from occgp import OccupancyGrid2D, OccupancyOctree
 from occgp._atomic import atomic_group, atomic_open, atomic_path, write_bytes
-from occgp.datasets import read_pcd, read_scan_graph, write_pcd, write_scan_graph
+from occgp.io import read_pcd, read_scan_graph, write_pcd, write_scan_graph
 from occgp.maps import available_maps, make_map, map_type
 
 # map parameters that keep the fits of the GP maps tiny and fast

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import occgp
-from occgp import ColorOctree, OccupancyGrid2D, OccupancyOctree, datasets, iln
+from occgp import ColorOctree, OccupancyGrid2D, OccupancyOctree, iln, io
 from occgp._reading import load_yaml_mapping, open_regular, read_regular
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "fork") or not hasattr(os, "mkfifo"),
@@ -58,21 +58,21 @@ def _in_child(fn, seconds=10, memory=2 << 30):
 def _readers():
     """name -> (suffix, reader of a path)."""
     return {
-        "read_pcd": (".pcd", datasets.read_pcd),
-        "read_kitti_bin": (".bin", datasets.read_kitti_bin),
-        "read_xyz": (".xyz", datasets.read_xyz),
-        "read_xyz_gz": (".xyz.gz", datasets.read_xyz),
-        "read_scan_log": (".log", datasets.read_scan_log),
-        "read_scan_graph": (".graph", datasets.read_scan_graph),
-        "read_carmen": (".clf", datasets.read_carmen),
-        "read_kitti_poses": (".txt", datasets.read_kitti_poses),
-        "read_poses": (".txt", datasets.read_poses),
+        "read_pcd": (".pcd", io.read_pcd),
+        "read_kitti_bin": (".bin", io.read_kitti_bin),
+        "read_xyz": (".xyz", io.read_xyz),
+        "read_xyz_gz": (".xyz.gz", io.read_xyz),
+        "read_scan_log": (".log", io.read_scan_log),
+        "read_scan_graph": (".graph", io.read_scan_graph),
+        "read_carmen": (".clf", io.read_carmen),
+        "read_kitti_poses": (".txt", io.read_kitti_poses),
+        "read_poses": (".txt", io.read_poses),
         "OccupancyOctree.load": (".bt", OccupancyOctree.load),
         "ColorOctree.load": (".ot", ColorOctree.load),
         "OccupancyGrid2D.load_ros_map": (".yaml", OccupancyGrid2D.load_ros_map),
         "read_lidar_frame": (".bin", lambda p: iln.read_lidar_frame(p, "hdl64e")),
         "GridMap.load": (".npz", occgp.GridMap.load),
-        "read_rosbag": (".bag", datasets.read_rosbag),
+        "read_rosbag": (".bag", io.read_rosbag),
         "iln.train_from_yaml": (".yaml", iln.train_from_yaml),
     }
 

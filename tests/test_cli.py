@@ -12,7 +12,8 @@ from occgp.cli._demo import STEREO_HISTORY, STEREO_KNN, STEREO_OCTREE, STEREO_RA
 from occgp.maps import make_map
 from occgp.cli import main
 from occgp.cli._main import map_scans, mapping_methods, noisy_mapping_methods
-from occgp.datasets import read_scans, structured_room, write_pcd
+from occgp.datasets import structured_room
+from occgp.io import read_scans, write_pcd
 
 KERNEL_METHODS = {"BGK", "AKIMap", "AKIMap (published)"}
 STEREO_METHODS = {"octree, stereo", "k-NN, stereo", f"k-NN {STEREO_HISTORY} scans, stereo"}
@@ -410,7 +411,7 @@ def test_map_command_applies_kitti_and_tum_poses(tmp_path, capsys):
 
 @pytest.mark.parametrize("method", ["octree", "bgk"])
 def test_map_command_writes_ply_and_pcd(tmp_path, capsys, method):
-    from occgp.datasets import read_pcd
+    from occgp.io import read_pcd
 
     paths, scans = _write_scans(tmp_path)
     main(["map", *map(str, paths), "-o", str(tmp_path / "m.ot"), "--method", method,

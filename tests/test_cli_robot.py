@@ -6,7 +6,8 @@ import pytest
 
 from occgp import GridMap, OccupancyGrid2D, OccupancyOctree
 from occgp.cli import main
-from occgp.datasets import read_scans, structured_room, write_pcd
+from occgp.datasets import structured_room
+from occgp.io import read_scans, write_pcd
 
 
 def _write_scans(tmp_path, n_points=800):

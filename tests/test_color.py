@@ -18,7 +18,7 @@ from numpy.testing import assert_array_equal
 from occgp import OccupancyOctree
 from occgp.io._export import pack_rgb, unpack_rgb
 from occgp.octree import ColorLeaves, ColorOctree
-from occgp.datasets import read_pcd
+from occgp.io import read_pcd
 
 from test_export import read_ply
 

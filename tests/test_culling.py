@@ -230,7 +230,7 @@ def test_every_method_equals_plain_on_a_geb079_trajectory(geb079_trajectory, mod
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 def test_every_method_equals_plain_on_scan_dat_from_nearby_poses(mode):
-    from occgp.datasets import read_xyz
+    from occgp.io import read_xyz
     scan = read_xyz(data_path("octomap", "scan.dat.bz2"))
     rng = np.random.default_rng(0)
     shifts = np.vstack([np.zeros(3), rng.uniform(-0.5, 0.5, (3, 3)) * [1, 1, 0.2]])

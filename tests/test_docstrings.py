@@ -31,7 +31,7 @@ import pytest
 
 numpydoc_docscrape = pytest.importorskip("numpydoc.docscrape")
 
-MODULES = ["occgp", "occgp.gp", "occgp.datasets", "occgp.evaluation", "occgp.metrics", "occgp.iln"]
+MODULES = ["occgp", "occgp.gp", "occgp.datasets", "occgp.io", "occgp.evaluation", "occgp.metrics", "occgp.iln"]
 
 #: Modules that need an optional dependency to import all of their API.
 NEEDS = {"occgp.iln": "torch"}

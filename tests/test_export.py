@@ -11,7 +11,7 @@ from occgp import GridMap, OccupancyOctree
 from occgp.io import _octomap_format as fmt
 from occgp.nav._distance import distance_field
 from occgp.io._export import _CUBE_TRIANGLES, _finest_cells, save_pcd, save_ply, to_open3d
-from occgp.datasets import read_pcd
+from occgp.io import read_pcd
 
 
 # --------------------------------------------------------------------------- #

@@ -270,7 +270,8 @@ def test_local_loo_calibration_labels_the_walls_of_a_laser_log():
     """On held-out scans of the 2D room, PLSC fitted on the local GPs' leave-one-out
     predictions (class-balanced) calls the walls occupied where the subset's classifier
     does not; the ranking (AUC) stays."""
-    from occgp.datasets import LaserLog, room_2d
+    from occgp.datasets import room_2d
+    from occgp.io import LaserLog
     from occgp.evaluation import RealLogBenchmark
 
     log = LaserLog(room_2d().scan(n_poses=26, n_beams=60), np.arange(26.0))

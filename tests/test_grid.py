@@ -91,7 +91,7 @@ def test_ray_mode_equals_pure_python_reference(max_range):
 
 @pytest.mark.slow
 def test_real_scan_equals_octree():
-    from occgp.datasets import read_xyz
+    from occgp.io import read_xyz
 
     scan = read_xyz(data_path("octomap", "scan.dat.bz2"))
     points = scan.points[::32]

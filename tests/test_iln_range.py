@@ -230,10 +230,10 @@ def test_bad_input(call, exc, match):
 
 
 # --------------------------------------------------------------------------- #
-# nuScenes ring index (occgp.datasets.read_kitti_bin(..., return_fields=True))
+# nuScenes ring index (occgp.io.read_kitti_bin(..., return_fields=True))
 # --------------------------------------------------------------------------- #
 def test_read_nuscenes_ring_into_range_image(tmp_path):
-    from occgp.datasets import read_kitti_bin
+    from occgp.io import read_kitti_bin
 
     m = LidarModel.hdl32e(rows=32, cols=64)
     rng = np.random.default_rng(1)
@@ -264,7 +264,7 @@ def test_read_nuscenes_ring_into_range_image(tmp_path):
 
 
 def test_read_nuscenes_bad_ring(tmp_path):
-    from occgp.datasets import read_kitti_bin
+    from occgp.io import read_kitti_bin
 
     path = tmp_path / "bad.pcd.bin"
     np.array([[1, 2, 3, 4, 2.5]], dtype=np.float32).tofile(path)

@@ -9,8 +9,14 @@ import pytest
 from scipy.spatial import cKDTree
 
 from occgp.cli import main
-from occgp.datasets import (
-    FLASER_NO_RETURN, LaserLog, ScanSequence, apply_poses, read_carmen, read_pcd, read_poses,
+from occgp.io import (
+    FLASER_NO_RETURN,
+    LaserLog,
+    ScanSequence,
+    apply_poses,
+    read_carmen,
+    read_pcd,
+    read_poses,
     write_pcd,
 )
 

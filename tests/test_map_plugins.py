@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import occgp
-import occgp.datasets
+import occgp.io
 from occgp import maps
 from occgp.cli._main import _map_types_help
 from occgp.maps import MapPluginWarning, available_maps, make_map, map_type
@@ -121,7 +121,7 @@ def test_occgp_map_builds_a_plugins_map(tmp_path):
     site = write_dist(tmp_path / "site", "occgp-twice", "0.1", {"twice": "occgp_test_twice"},
                       {"occgp_test_twice": PLUGIN_MODULE})
     points, origin = _wall()
-    occgp.datasets.write_pcd(tmp_path / "scan.pcd", points)
+    occgp.io.write_pcd(tmp_path / "scan.pcd", points)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [str(site)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
     cmd = [sys.executable, "-c", "import sys; from occgp.cli import main; "

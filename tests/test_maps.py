@@ -12,7 +12,7 @@ import pytest
 from sklearn.base import clone
 
 import occgp
-import occgp.datasets
+import occgp.io
 import occgp.evaluation
 import occgp.knn
 from occgp import maps
@@ -222,7 +222,7 @@ def test_a_new_map_type_is_one_module_and_one_line(toy, tmp_path, capsys):
     assert isinstance(m, toy) and isinstance(m, OccupancyMap)
     # occgp map builds it from scan files, in its own format and as an octree
     points, origin = _wall_scan()
-    occgp.datasets.write_pcd(tmp_path / "scan.pcd", points)
+    occgp.io.write_pcd(tmp_path / "scan.pcd", points)
     for out in ("toy.npz", "toy.bt"):
         assert main(["map", str(tmp_path / "scan.pcd"), "-o", str(tmp_path / out),
                      "--method", "toy", "--resolution", "0.2", "--no-progress"]) == 0

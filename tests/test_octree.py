@@ -172,7 +172,7 @@ def test_scan_mode_equals_liboctomap_insert_point_cloud(octomap_insert_exe, tmp_
 
 @pytest.mark.slow
 def test_scan_mode_equals_liboctomap_on_real_scan(octomap_insert_exe, tmp_path):
-    from occgp.datasets import read_xyz
+    from occgp.io import read_xyz
 
     scan = read_xyz(data_path("octomap", "scan.dat.bz2"))
     points = scan.points[::4]
@@ -264,7 +264,7 @@ def test_graph2tree_reads_what_occgp_writes_and_agrees(tmp_path):
     import shutil
     import subprocess
 
-    from occgp.datasets import write_scan_graph
+    from occgp.io import write_scan_graph
 
     if shutil.which("graph2tree") is None:
         pytest.skip("OctoMap's graph2tree tool (Debian: octomap-tools) is not installed")

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from occgp.datasets import (
-    Scan,
+from occgp.datasets import Scan
+from occgp.io import (
     load_scan_folder,
     lzf_decompress,
     read_kitti_bin,
@@ -752,3 +752,41 @@ def test_pcd_absurd_count_of_an_empty_cloud(tmp_path, data, count):
     (tmp_path / "c.pcd").write_bytes(header + body)
     with pytest.raises(ValueError, match=rf"c.pcd: field 'i' has COUNT {count}, expected 1 to"):
         read_pcd(tmp_path / "c.pcd")
+
+
+MOVED_TO_IO = ["read_pcd", "write_pcd", "lzf_decompress", "read_kitti_bin", "read_scan_graph",
+               "write_scan_graph", "read_xyz", "read_scan_log", "load_scan_folder", "read_scans",
+               "read_carmen", "LaserLog", "FLASER_NO_RETURN", "ScanSequence", "read_poses",
+               "POSE_FORMATS", "read_kitti_poses", "read_tum_trajectory", "apply_poses",
+               "read_rosbag", "RosbagScans"]
+
+
+@pytest.mark.parametrize("name", MOVED_TO_IO)
+def test_old_datasets_paths_warn_and_give_the_io_objects(name):
+    import occgp.datasets
+    import occgp.io
+
+    with pytest.warns(DeprecationWarning,
+                      match=rf"occgp\.datasets\.{name} is deprecated; import it from occgp\.io"):
+        obj = getattr(occgp.datasets, name)
+    assert obj is getattr(occgp.io, name)
+    assert name not in occgp.datasets.__all__ and name in occgp.io.__all__
+
+
+def test_from_import_of_an_old_path_warns():
+    with pytest.warns(DeprecationWarning, match=r"occgp\.datasets\.read_pcd is deprecated"):
+        from occgp.datasets import read_pcd as old
+    assert old is read_pcd
+
+
+def test_the_records_the_simulators_return_stay_in_datasets(recwarn):
+    import warnings
+
+    import occgp.datasets
+    import occgp.io
+
+    warnings.simplefilter("error", DeprecationWarning)
+    assert occgp.datasets.Scan is occgp.io.Scan
+    assert occgp.datasets.LaserScan2D is occgp.io.LaserScan2D
+    with pytest.raises(AttributeError, match="has no attribute 'read_nothing'"):
+        occgp.datasets.read_nothing

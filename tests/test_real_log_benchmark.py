@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from occgp.datasets import LaserLog, room_2d, structured_room
+from occgp.datasets import room_2d, structured_room
+from occgp.io import LaserLog
 from occgp.evaluation import (
     NLL_EPS, LogTestSet, RealLogBenchmark, log_split, log_test_set, score_log,
 )

@@ -1,4 +1,4 @@
-"""Tests of occgp.datasets' ROS bag reader (PointCloud2 scans posed by TF)."""
+"""Tests of occgp.io's ROS bag reader (PointCloud2 scans posed by TF)."""
 
 import sys
 import warnings
@@ -15,8 +15,8 @@ from rosbags.rosbag1 import Writer as Writer1  # noqa: E402
 from rosbags.rosbag2 import StoragePlugin, Writer as Writer2  # noqa: E402
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
 
-from occgp.datasets import Scan  # noqa: E402
-from occgp.datasets._rosbag import read_rosbag  # noqa: E402
+from occgp.io import Scan  # noqa: E402
+from occgp.io import read_rosbag  # noqa: E402
 
 TS1 = get_typestore(Stores.ROS1_NOETIC)
 TS1.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms",

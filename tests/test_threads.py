@@ -7,7 +7,8 @@ from numpy.testing import assert_array_equal
 from occgp import GridMap, KNNMap, OccupancyOctree
 from occgp._status import Status
 from occgp.cli import main
-from occgp.datasets import structured_room, write_pcd
+from occgp.datasets import structured_room
+from occgp.io import write_pcd
 from occgp.knn import ScanReplay
 from test_culling import room_sequence
 from test_octree import random_scans

@@ -8,7 +8,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy.spatial.transform import Rotation
 
 from occgp.datasets import Scan
-from occgp.datasets._trajectory import apply_poses, read_kitti_poses, read_tum_trajectory
+from occgp.io import apply_poses, read_kitti_poses, read_tum_trajectory
 
 
 def _poses(n=3, seed=0):

@@ -86,7 +86,7 @@ def _cloud(rng, n):
 
 
 def _pcd_seeds(data):
-    from occgp.datasets import write_pcd
+    from occgp.io import write_pcd
 
     rng = np.random.default_rng(_SEED_RNG)
     out = []
@@ -130,7 +130,7 @@ def _bin_seeds(width):
 
 
 def _graph_seeds():
-    from occgp.datasets import Scan, write_scan_graph
+    from occgp.io import Scan, write_scan_graph
 
     rng = np.random.default_rng(_SEED_RNG)
     out = []
@@ -526,7 +526,7 @@ def _clean_insert_error(exc):
 def use_scans(scans, workdir, reader):
     """Check scans, round-trip them through a writer, insert them, query the map."""
     from occgp import OccupancyOctree
-    from occgp.datasets import Scan, read_pcd, read_scan_graph, write_pcd, write_scan_graph
+    from occgp.io import Scan, read_pcd, read_scan_graph, write_pcd, write_scan_graph
 
     _check(isinstance(scans, list), f"expected a list of scans, got {type(scans).__name__}")
     for k, scan in enumerate(scans[:4]):
@@ -580,7 +580,7 @@ def use_scans(scans, workdir, reader):
 
 def use_laser_log(log, workdir):
     """Check a LaserLog's scans and observations, fit the 2D log-odds grid on them."""
-    from occgp.datasets import LaserLog
+    from occgp.io import LaserLog
     from occgp.gp import OccupancyGrid
 
     _check(isinstance(log, LaserLog), f"got a {type(log).__name__}")
@@ -744,7 +744,7 @@ class StampsReader(Reader):
 
 
 def _read_pcd(paths):
-    from occgp.datasets import read_pcd
+    from occgp.io import read_pcd
 
     scan, fields = read_pcd(paths[0], return_fields=True)
     n = len(scan.points)
@@ -761,8 +761,14 @@ def _one(fn):
 
 def _build_readers():
     from occgp import OccupancyGrid2D, OccupancyOctree
-    from occgp.datasets import (load_scan_folder, read_carmen, read_kitti_bin,
-                                read_scan_graph, read_scan_log, read_xyz)
+    from occgp.io import (
+        load_scan_folder,
+        read_carmen,
+        read_kitti_bin,
+        read_scan_graph,
+        read_scan_log,
+        read_xyz,
+    )
 
     def use_s(name):
         return lambda result, workdir: use_scans(result, workdir, name)

@@ -136,8 +136,8 @@ def _is_bag(path) -> bool:
 def _is_carmen(path) -> bool:
     """Whether `path` is a CARMEN laser log (a text file, maybe compressed, with FLASER or
     ROBOTLASER1 lines)."""
-    from ..datasets._carmen import is_carmen_log
-    from ..datasets._readers import scan_kind
+    from ..io._carmen import is_carmen_log
+    from ..io._readers import scan_kind
 
     path = Path(path)
     return path.is_file() and scan_kind(path) == "text" and is_carmen_log(path)
@@ -148,9 +148,9 @@ def _suffix(path: Path) -> str:
 
 
 def _read_poses(path, poses_format):
-    """The (n, 4, 4) poses of a KITTI or TUM file (:func:`occgp.datasets.read_poses`);
+    """The (n, 4, 4) poses of a KITTI or TUM file (:func:`occgp.io.read_poses`);
     a file whose format cannot be told is an error of the `poses` option."""
-    from ..datasets import read_poses
+    from ..io import read_poses
 
     try:
         return read_poses(path, poses_format)
@@ -371,14 +371,14 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     ----------
     paths : sequence of str or path-like
         Scan files or folders, read lazily, scan by scan, as one
-        :class:`occgp.datasets.ScanSequence` (posed by `poses`; the suffixes
-        of :func:`occgp.datasets.read_scans`); CARMEN 2D laser logs (text
+        :class:`occgp.io.ScanSequence` (posed by `poses`; the suffixes
+        of :func:`occgp.io.read_scans`); CARMEN 2D laser logs (text
         files, maybe compressed, with ``FLASER`` or ``ROBOTLASER1`` lines),
-        read with :func:`occgp.datasets.read_carmen` and inserted as planar
+        read with :func:`occgp.io.read_carmen` and inserted as planar
         scans at z = 0 placed by their own poses (no-return readings
         dropped); and ROS bags (a ``.bag``, ``.db3`` or ``.mcap`` file, or a
         ROS 2 bag folder holding ``metadata.yaml``), read with
-        :func:`occgp.datasets.read_rosbag`. Scans go in in this order.
+        :func:`occgp.io.read_rosbag`. Scans go in in this order.
     output : str or path-like
         The map file; its suffix gives the format: one of the map type's own
         formats (:attr:`occgp.maps.MapType.formats`: ``.bt`` / ``.ot`` for
@@ -427,18 +427,18 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         A trajectory file: KITTI odometry poses (12 numbers a line, a 3 x 4
         row-major sensor-to-world pose) or TUM (``t x y z qx qy qz qw``).
         Pose ``i`` moves scan ``i`` (in input order, over all `paths`) with
-        :func:`occgp.datasets.apply_poses`; the file must hold one pose per
+        :func:`occgp.io.apply_poses`; the file must hold one pose per
         scan. TUM timestamps are not matched to scans, only the order counts.
     poses_format : {"kitti", "tum"}, default=None
         The format of `poses`; None guesses it from the first line's columns
         (12: kitti, 8: tum).
     topic, fixed_frame, sensor_frame, tf_tolerance
-        For ROS bags only, passed to :func:`occgp.datasets.read_rosbag`
+        For ROS bags only, passed to :func:`occgp.io.read_rosbag`
         (defaults: the only PointCloud2 topic, the root of the TF tree, the
         cloud's frame, 0 s).
     fields : int, str or numpy.dtype, default=None
         Record layout of ``.bin`` scan files, passed to
-        :func:`occgp.datasets.read_scans` (None: by file name).
+        :func:`occgp.io.read_scans` (None: by file name).
     input_map : str or path-like, default=None
         A saved map to continue, in one of the map type's own formats
         (``.bt`` / ``.ot`` for ``method="octree"`` and ``"knn"``, ``.npz``
@@ -515,7 +515,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     """
     from tqdm.auto import tqdm
 
-    from ..datasets import Scan, ScanSequence, apply_poses, read_carmen, read_rosbag
+    from ..io import Scan, ScanSequence, apply_poses, read_carmen, read_rosbag
 
     t_start = time.perf_counter()
     out = sys.stdout if out is None else out

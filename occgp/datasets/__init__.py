@@ -1,4 +1,4 @@
-"""Synthetic scenes with exact ground truth, sensor simulators and scan readers.
+"""Synthetic scenes with exact ground truth and sensor simulators.
 
 Scenes
 ------
@@ -8,7 +8,7 @@ occupancy, signed distance and ray casting, and an la3dm-like sensor
 (:meth:`Scene.scan`: 4 poses x 3 scans x 3500 returns). :func:`room_2d`
 builds the 22 x 18 m 2D room of the GP papers (:class:`Scene2D`), scanned by
 a 180-degree, 17-beam, 8 m laser along a 26-pose path
-(:class:`LaserScan2D`). :func:`floor_plan_2d` builds a seeded 2D building of
+(:class:`~occgp.io.LaserScan2D`). :func:`floor_plan_2d` builds a seeded 2D building of
 rooms, corridors and furniture (60 x 40 m by default, :class:`FloorPlan2D`)
 with a path through every room, for scaling studies: the same laser gives
 about 32 observations per pose, 20,000 at 619 poses.
@@ -29,17 +29,11 @@ sensor blur, noise and gain mismatch), for a real stereo matcher
 
 Readers
 -------
-:func:`read_pcd` / :func:`write_pcd` (PCD ascii, binary,
-binary_compressed), :func:`read_kitti_bin`, :func:`read_scan_graph` /
-:func:`write_scan_graph` (OctoMap ``.graph``), :func:`read_xyz` (text,
-optionally compressed), :func:`read_scan_log` (OctoMap text logs),
-:func:`load_scan_folder` and :func:`read_scans` (dispatch by suffix).
-Every scan is a :class:`Scan` ``(points, origin)``; a sequence of scans is a
-``list[Scan]``. Real logs: :class:`ScanSequence` reads a folder of scans in
-the sensor frame with a KITTI or TUM pose file (:func:`read_poses`) lazily,
-scan by scan, as ``occgp map FOLDER --poses FILE`` does; :func:`read_carmen`
-reads a CARMEN 2D laser log (``FLASER`` / ``ROBOTLASER1`` lines) into a
-:class:`LaserLog` of :class:`LaserScan2D`.
+The scan files and real logs are read by :mod:`occgp.io` (``read_pcd``,
+``read_scans``, ``read_carmen``, ``ScanSequence``, ``read_rosbag`` ...). Their old
+paths here (``occgp.datasets.read_pcd`` ...) still work for one release with a
+:class:`DeprecationWarning`. The records the simulators return,
+:class:`~occgp.io.Scan` and :class:`~occgp.io.LaserScan2D`, stay importable from here.
 
 Examples
 --------
@@ -49,6 +43,10 @@ Examples
 (50, 3)
 """
 
+import warnings
+
+from .. import io as _io
+from ..io import LaserScan2D, Scan
 from ._family2d import (
     FAMILY_KINDS,
     TEST_SEEDS,
@@ -59,21 +57,7 @@ from ._family2d import (
 )
 from ._floorplan import FloorPlan2D, floor_plan_2d
 from ._outdoor import OutdoorScene, outdoor_scene
-from ._carmen import FLASER_NO_RETURN, LaserLog, read_carmen
-from ..io import lzf_decompress, read_pcd, write_pcd
-from ._readers import (
-    load_scan_folder,
-    read_kitti_bin,
-    read_scan_graph,
-    read_scan_log,
-    read_scans,
-    read_xyz,
-    write_scan_graph,
-)
 from ._render import TEXTURES, StereoPair, StereoRig, render_stereo, scene_materials
-from ._rosbag import RosbagScans, read_rosbag
-from ..io import Scan
-from ._sequence import POSE_FORMATS, ScanSequence, read_poses
 from ._sgbm import (
     disparity_to_points,
     match_stereo,
@@ -89,7 +73,7 @@ from ._sgbm import (
     sgbm_parameter_sets,
     stereo_scans,
 )
-from ._scene2d import LaserScan2D, Scene2D, room_2d
+from ._scene2d import Scene2D, room_2d
 from ._scenes import Scene, make_scene, structured_room, unstructured_room
 from ._simulate import LidarSensor, free_path, simulate_scans
 from ._stereo import (
@@ -101,7 +85,6 @@ from ._stereo import (
     tetromino_scene,
     voxel_filter,
 )
-from ._trajectory import apply_poses, read_kitti_poses, read_tum_trajectory
 
 __all__ = [
     "Scan",
@@ -122,22 +105,6 @@ __all__ = [
     "FAMILY_KINDS",
     "TUNING_SEEDS",
     "TEST_SEEDS",
-    "read_pcd",
-    "write_pcd",
-    "read_carmen",
-    "LaserLog",
-    "FLASER_NO_RETURN",
-    "ScanSequence",
-    "read_poses",
-    "POSE_FORMATS",
-    "lzf_decompress",
-    "read_kitti_bin",
-    "read_scan_graph",
-    "write_scan_graph",
-    "read_xyz",
-    "read_scan_log",
-    "load_scan_folder",
-    "read_scans",
     "LidarSensor",
     "simulate_scans",
     "free_path",
@@ -153,11 +120,6 @@ __all__ = [
     "render_stereo",
     "scene_materials",
     "TEXTURES",
-    "read_rosbag",
-    "RosbagScans",
-    "read_kitti_poses",
-    "read_tum_trajectory",
-    "apply_poses",
     "SGBM_GRID",
     "SGBM_DEFAULT",
     "sgbm_parameter_sets",
@@ -172,3 +134,21 @@ __all__ = [
     "RenderedStereoDataset",
     "rendered_stereo_datasets",
 ]
+
+#: The readers that moved to :mod:`occgp.io`; their old paths here warn for one release.
+_MOVED_TO_IO = frozenset({
+    "read_pcd", "write_pcd", "lzf_decompress", "read_kitti_bin", "read_scan_graph",
+    "write_scan_graph", "read_xyz", "read_scan_log", "load_scan_folder", "read_scans",
+    "read_carmen", "LaserLog", "FLASER_NO_RETURN", "ScanSequence", "read_poses",
+    "POSE_FORMATS", "read_kitti_poses", "read_tum_trajectory", "apply_poses",
+    "read_rosbag", "RosbagScans",
+})
+
+
+def __getattr__(name):
+    if name in _MOVED_TO_IO:
+        warnings.warn(f"occgp.datasets.{name} is deprecated; import it from occgp.io "
+                      "(the old path goes in the next release)", DeprecationWarning,
+                      stacklevel=2)
+        return getattr(_io, name)
+    raise AttributeError(f"module 'occgp.datasets' has no attribute {name!r}")

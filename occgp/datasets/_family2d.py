@@ -19,7 +19,8 @@ from numpy.typing import NDArray
 from .._validation import check_choice, check_int, check_real
 from ._family_layouts import furnish_densely, hall_layout, warehouse_layout
 from ._floorplan import floor_plan_2d
-from ._scene2d import LaserScan2D, Scene2D, along_path
+from ..io import LaserScan2D
+from ._scene2d import Scene2D, along_path
 
 __all__ = ["FAMILY_KINDS", "TUNING_SEEDS", "TEST_SEEDS", "SensorSetting2D", "FamilyScene2D",
            "scene_family_2d"]

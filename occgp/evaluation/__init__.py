@@ -8,8 +8,8 @@ synthetic scene (:func:`grid_test_set` over a box; :func:`exact_test_set` over
 the cells the scans could see, see :func:`cells_in_view`) or, for real scans,
 from the held-out protocol (:func:`held_out_split`), which scores only where
 the sensor looked and so rates every method near perfect on a synthetic scene.
-Real logs with poses (a :class:`~occgp.datasets.LaserLog` or a
-:class:`~occgp.datasets.ScanSequence`) are scored by
+Real logs with poses (a :class:`~occgp.io.LaserLog` or a
+:class:`~occgp.io.ScanSequence`) are scored by
 :class:`RealLogBenchmark`: whole scans held out (:func:`log_split`), their
 hits and samples along their beams as test points (:func:`log_test_set`),
 scores with calibration (:func:`score_log`: AUC, accuracy at the map's own

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
 from .._validation import as_point, as_points, check_real, check_seed
-from ..datasets import LaserLog, LaserScan2D
+from ..io import LaserLog, LaserScan2D
 from ._protocols import disable_bar, map_factory
 from ._scene_sets import PeakRSS
 from .metrics import roc_auc
@@ -341,10 +341,10 @@ class RealLogBenchmark:
 
     The test set (:func:`log_test_set` of the held-out scans) is made once,
     when first needed, and every map is scored on the same points. A 2D log
-    (a :class:`~occgp.datasets.LaserLog`) builds a map with one ``fit(hits,
+    (a :class:`~occgp.io.LaserLog`) builds a map with one ``fit(hits,
     segment_starts, segment_ends)`` on every training beam (every 2D map of
     the registry has it); a 3D log (a list of scans or a
-    :class:`~occgp.datasets.ScanSequence`) inserts the training scans one by
+    :class:`~occgp.io.ScanSequence`) inserts the training scans one by
     one, with the ``insert`` options of the method.
 
     Parameters
@@ -366,7 +366,7 @@ class RealLogBenchmark:
     Examples
     --------
     >>> from occgp.datasets import room_2d
-    >>> from occgp.datasets import LaserLog
+    >>> from occgp.io import LaserLog
     >>> scans = room_2d().scan(n_poses=20)
     >>> bench = RealLogBenchmark(LaserLog(scans, np.arange(20.0)), every=5, offset=2,
     ...                          max_range=8.0)

@@ -29,9 +29,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_numeric, check_choice, check_real
-from ..io._fileio import as_path, read_text
-from ..io._scan import Scan
-from ._scene2d import LaserScan2D
+from ._fileio import as_path, read_text
+from ._scan import Scan
+from ._scan2d import LaserScan2D
 
 __all__ = ["FLASER_NO_RETURN", "LaserLog", "read_carmen"]
 
@@ -378,7 +378,7 @@ def read_carmen(path, *, message: str | None = None, no_return_range: float | No
 
 def is_carmen_log(path) -> bool:
     """Whether a text file's first 200 non-comment lines hold a FLASER or ROBOTLASER1
-    line (a quick look for :func:`occgp.datasets.read_scans`' dispatch)."""
+    line (a quick look for :func:`occgp.io.read_scans`' dispatch)."""
     try:
         text = read_text(Path(path))
     except (OSError, ValueError):

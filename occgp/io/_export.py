@@ -3,7 +3,7 @@
 The functions take the map (an :class:`occgp.OccupancyOctree` or an
 :class:`occgp.GridMap`) as their first argument; the maps' methods of the same
 names call them. PLY files are written by occgp itself (no third-party PLY
-library); PCD files through :func:`occgp.datasets.write_pcd`.
+library); PCD files through :func:`occgp.io.write_pcd`.
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ import numpy as np
 
 from .._reading import check_regular
 from .._validation import as_path, check_real
-from ..io._scan import Scan
+from ._scan import Scan
 
 __all__ = ["read_rosbag", "RosbagScans"]
 

@@ -14,9 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._validation import as_path, check_bool
-from ..io._fileio import read_text
+from ._fileio import read_text
 from ._readers import natural_key, read_scans, scan_kind
-from ..io._scan import Scan
+from ._scan import Scan
 from ._trajectory import apply_poses, check_poses, read_kitti_poses, read_tum_trajectory
 
 __all__ = ["POSE_FORMATS", "ScanSequence", "read_poses"]
@@ -146,7 +146,7 @@ class ScanSequence:
     --------
     >>> import os, tempfile
     >>> import numpy as np
-    >>> from occgp.datasets import write_pcd
+    >>> from occgp.io import write_pcd
     >>> folder = tempfile.mkdtemp()
     >>> for i in range(3):
     ...     write_pcd(os.path.join(folder, f"{i}.pcd"), [[1.0, 0.0, 0.0]])

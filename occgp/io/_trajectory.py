@@ -11,8 +11,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
 from .._validation import check_real
-from ..io._fileio import READER_SECTIONS, read_text
-from ..io._scan import Scan, make_scan
+from ._fileio import READER_SECTIONS, read_text
+from ._scan import Scan, make_scan
 
 __all__ = ["read_kitti_poses", "read_tum_trajectory", "apply_poses"]
 
