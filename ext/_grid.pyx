@@ -2,8 +2,8 @@
 # distutils: language = c++
 """Compiled core of :class:`occgp.GridMap`: a hashed uniform grid on liboctomap's keys.
 
-The cells live in an ``unordered_map`` from the packed 16-bit keys of
-liboctomap to float32 log-odds. A private liboctomap ``OcTree`` of the same
+The cells live in a block grid (``ext/_block_grid.h``): a hashed root of dense
+8 x 8 x 8 blocks of float32 log-odds, on liboctomap's 16-bit keys. A private liboctomap ``OcTree`` of the same
 resolution holds the sensor model and computes the keys and the ray traversals
 (``computeRayKeys``, ``coordToKeyChecked``, ``keyToCoord``), so the grid finds
 exactly the cells the octree finds; a scan's cells are collected by the
@@ -16,13 +16,11 @@ per-map lock serialises the operations on one map.
 """
 
 cimport cython
-from cython.operator cimport dereference as deref, preincrement as inc
 from libc.math cimport exp
 from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
 from libcpp cimport bool
 from libcpp.algorithm cimport sort
 from libcpp.memory cimport unique_ptr
-from libcpp.unordered_map cimport unordered_map
 from libcpp.utility cimport pair
 from libcpp.vector cimport vector
 
@@ -34,8 +32,21 @@ from _scan cimport ScanCell, ScanStats, scan_updates_free_only
 from _status cimport Status
 
 
+cdef extern from "_block_grid.h" namespace "occgp" nogil:
+    cdef cppclass BlockGrid:
+        float* find(uint64_t packed)
+        void set(uint64_t packed, float value) except +
+        size_t size()
+        size_t num_blocks()
+        void clear()
+        void reserve_blocks(size_t n) except +
+        size_t memory_usage()
+        void collect(vector[pair[uint64_t, float]]& out, bool occupied_only,
+                     float threshold) except +
+        void key_bounds(uint16_t* lo, uint16_t* hi)
+
 cdef extern from "_grid_apply.h" namespace "occgp" nogil:
-    void apply_grid_updates(unordered_map[uint64_t, float]& cells, const vector[ScanCell]& found,
+    void apply_grid_updates(BlockGrid& cells, const vector[ScanCell]& found,
                             float lo, float hi, int n_threads) except +
 
 include "_scan_result.pxi"
@@ -44,20 +55,19 @@ import threading
 
 import numpy as np
 
-ctypedef unordered_map[uint64_t, float] CellMap         # packed key -> log-odds
-ctypedef pair[uint64_t, float] Cell
+ctypedef pair[uint64_t, float] Cell                     # packed key, log-odds
 
 
 cdef struct GridView:
-    CellMap* cells
+    BlockGrid* cells
     float floor      # lower clamping bound (log-odds)
 
 
 cdef bool _fully_free(void* view, const OcTreeKey& key) noexcept nogil:
     """FreeTest of a grid: the cell is known and at the lower clamping bound."""
     cdef GridView* v = <GridView*>view
-    cdef CellMap.iterator found = v.cells.find(pack_key(key))
-    return found != v.cells.end() and deref(found).second <= v.floor
+    cdef float* found = v.cells.find(pack_key(key))
+    return found != NULL and found[0] <= v.floor
 
 
 @cython.auto_pickle(False)
@@ -65,7 +75,7 @@ cdef class _Grid:
     """A hashed uniform grid owned by Python. Use :class:`occgp.GridMap`."""
 
     cdef unique_ptr[OcTree] _key_tree   # key calculator and sensor model; holds no cells
-    cdef CellMap _cells
+    cdef BlockGrid _cells
     cdef object _lock
     cdef vector[uint32_t] _counts       # scratch of scan_updates, zero between scans
     cdef bool _counts_dirty
@@ -164,7 +174,7 @@ cdef class _Grid:
         cdef OcTree* tree = self._get()
         cdef Py_ssize_t i, n = points.shape[0]
         cdef OcTreeKey key
-        cdef CellMap.iterator found
+        cdef float* found
         cdef float value, threshold = tree.getOccupancyThresLog()
         out = np.full(n, np.nan) if what != 2 else np.full(n, -1, dtype=np.int8)
         cdef double[::1] values
@@ -180,9 +190,9 @@ cdef class _Grid:
                             point3d(points[i, 0], points[i, 1], points[i, 2]), key):
                         continue
                     found = self._cells.find(pack_key(key))
-                    if found == self._cells.end():
+                    if found == NULL:
                         continue
-                    value = deref(found).second
+                    value = found[0]
                     if what == 0:      # liboctomap's probability(log-odds)
                         values[i] = 1. - (1. / (1. + exp(<double>value)))
                     elif what == 1:
@@ -196,18 +206,12 @@ cdef class _Grid:
         cdef OcTree* tree = self._get()
         cdef float threshold = tree.getOccupancyThresLog()
         cdef vector[Cell] cells
-        cdef CellMap.iterator it
         cdef OcTreeKey key
         cdef Py_ssize_t i, n
         cdef int axis
         with self._lock:
             with nogil:
-                cells.reserve(self._cells.size())
-                it = self._cells.begin()
-                while it != self._cells.end():
-                    if not occupied_only or deref(it).second >= threshold:
-                        cells.push_back(deref(it))
-                    inc(it)
+                self._cells.collect(cells, occupied_only, threshold)
         n = cells.size()
         keys = np.empty((n, 3), dtype=np.uint16)
         centers = np.empty((n, 3))
@@ -232,10 +236,9 @@ cdef class _Grid:
         with self._lock:
             with nogil:
                 self._cells.clear()
-                self._cells.reserve(n)
                 for i in range(n):
-                    self._cells[pack_key(OcTreeKey(keys[i, 0], keys[i, 1], keys[i, 2]))] = \
-                        values[i]
+                    self._cells.set(pack_key(OcTreeKey(keys[i, 0], keys[i, 1], keys[i, 2])),
+                                    values[i])
 
     # ------------------------------------------------------------------ structure
     def _num_cells(self):
@@ -243,10 +246,13 @@ cdef class _Grid:
             return self._cells.size()
 
     def _memory_usage(self):
-        """Bytes of the hash map: a node (entry, next pointer) per cell, a pointer per bucket."""
+        """Bytes of the block grid: the blocks, their root entries and the bucket array."""
         with self._lock:
-            return (self._cells.size() * (sizeof(Cell) + sizeof(void*))
-                    + self._cells.bucket_count() * sizeof(void*))
+            return self._cells.memory_usage()
+
+    def _num_blocks(self):
+        with self._lock:
+            return self._cells.num_blocks()
 
     def _bounds(self):
         """(min corner, max corner) of the known cells, as liboctomap's getMetricMin/Max."""
@@ -254,26 +260,17 @@ cdef class _Grid:
         cdef double half = tree.getResolution() / 2.0
         cdef uint16_t lo[3]
         cdef uint16_t hi[3]
-        cdef OcTreeKey key
-        cdef CellMap.iterator it
         cdef int axis
         for axis in range(3):
             lo[axis] = 0xFFFF
             hi[axis] = 0
         with self._lock:
             with nogil:
-                it = self._cells.begin()
-                while it != self._cells.end():
-                    key = unpack_key(deref(it).first)
-                    for axis in range(3):
-                        lo[axis] = min(lo[axis], key[axis])
-                        hi[axis] = max(hi[axis], key[axis])
-                    inc(it)
+                self._cells.key_bounds(lo, hi)
         return (np.array([tree.keyToCoord(lo[axis], KEY_DEPTH) - half for axis in range(3)]),
                 np.array([tree.keyToCoord(hi[axis], KEY_DEPTH) + half for axis in range(3)]))
 
     def _clear(self):
-        cdef CellMap empty
         with self._lock:
             with nogil:
-                self._cells.swap(empty)        # frees the buckets too
+                self._cells.clear()            # frees the blocks and the buckets

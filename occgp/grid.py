@@ -36,8 +36,8 @@ class GridMap(LogOddsMap, _Grid):
     """Probabilistic 3D occupancy map on a uniform grid (hashed cells).
 
     Every cell has the edge length `resolution` and holds the log-odds of being
-    occupied; only observed cells are stored, in a hash map keyed by the cell's
-    integer coordinates. Keys, ray traversal (3D-DDA), sensor model, clamping
+    occupied; only observed cells are stored, in dense blocks of 8 x 8 x 8 cells
+    under a hashed root (``ext/_block_grid.h``). Keys, ray traversal (3D-DDA), sensor model, clamping
     and both update modes are exactly those of :class:`OccupancyOctree`: after
     the same scans, the grid holds the same cells with the same float32
     log-odds as the octree expanded to its finest level. Without the tree,

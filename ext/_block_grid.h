@@ -1,0 +1,195 @@
+// The cells of occgp.GridMap (ext/_grid.pyx): a hashed root of dense 8 x 8 x 8 blocks.
+//
+// A cell is liboctomap's 16-bit key (packed by pack_key, ext/_keys.h) and a float32
+// log-odds. The root maps a block's key (the cell keys shifted right by 3 on each
+// axis) to a block that holds the 512 log-odds of its cells and a bit mask of the
+// known ones. A lookup hashes once per block, not once per cell; an Accessor keeps the
+// last block it found, so the cells of one ray or one scan, which are mostly in the
+// same block as the cell before them, are found without hashing at all.
+//
+// Memory: a block is 2,112 bytes (512 floats, 8 words of mask) plus its root entry;
+// memory_usage() counts both, and the bucket array.
+#ifndef OCCGP_BLOCK_GRID_H
+#define OCCGP_BLOCK_GRID_H
+
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <memory>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+namespace occgp {
+
+constexpr int kBlockBits = 3;                           // 8 cells a side
+constexpr uint64_t kBlockMask = (1u << kBlockBits) - 1;
+constexpr int kBlockCells = 1 << (3 * kBlockBits);      // 512
+
+struct GridBlock {
+  uint64_t known[kBlockCells / 64];
+  float value[kBlockCells];
+};
+
+// The block holding a packed key (its three keys shifted right by kBlockBits).
+inline uint64_t block_of(uint64_t packed) {
+  constexpr uint64_t field = 0xFFFFull >> kBlockBits;
+  return ((packed >> kBlockBits) & field) | ((packed >> (16 + kBlockBits)) & field) << 16 |
+         ((packed >> (32 + kBlockBits)) & field) << 32;
+}
+
+// The cell's index inside its block (x fastest).
+inline int cell_of(uint64_t packed) {
+  return static_cast<int>((packed & kBlockMask) | ((packed >> 16) & kBlockMask) << kBlockBits |
+                          ((packed >> 32) & kBlockMask) << (2 * kBlockBits));
+}
+
+// The packed key of cell `index` of block `block`.
+inline uint64_t key_of(uint64_t block, int index) {
+  const uint64_t i = static_cast<uint64_t>(index);
+  return ((block & 0xFFFF) << kBlockBits | (i & kBlockMask)) |
+         (((block >> 16) & 0xFFFF) << kBlockBits | ((i >> kBlockBits) & kBlockMask)) << 16 |
+         (((block >> 32) & 0xFFFF) << kBlockBits | ((i >> (2 * kBlockBits)) & kBlockMask)) << 32;
+}
+
+class BlockGrid {
+ public:
+  typedef std::unordered_map<uint64_t, std::unique_ptr<GridBlock>> Root;
+
+  // The block of `block_key`, or nullptr.
+  GridBlock* find_block(uint64_t block_key) const {
+    const Root::const_iterator it = root_.find(block_key);
+    return it == root_.end() ? nullptr : it->second.get();
+  }
+
+  // The block of `block_key`, created (no cell known) if missing.
+  GridBlock* get_block(uint64_t block_key) {
+    std::unique_ptr<GridBlock>& slot = root_[block_key];
+    if (!slot) {
+      slot.reset(new GridBlock);
+      std::memset(slot->known, 0, sizeof(slot->known));
+    }
+    return slot.get();
+  }
+
+  // The log-odds of a known cell, or nullptr.
+  float* find(uint64_t packed) const {
+    GridBlock* block = find_block(block_of(packed));
+    return block ? find_in(block, packed) : nullptr;
+  }
+
+  static float* find_in(GridBlock* block, uint64_t packed) {
+    const int i = cell_of(packed);
+    return (block->known[i >> 6] >> (i & 63)) & 1 ? &block->value[i] : nullptr;
+  }
+
+  // The log-odds of a cell, made known at 0 if it was not; second: whether it was new.
+  std::pair<float*, bool> emplace_in(GridBlock* block, uint64_t packed) {
+    const int i = cell_of(packed);
+    uint64_t& word = block->known[i >> 6];
+    const uint64_t bit = 1ull << (i & 63);
+    if (word & bit) return std::make_pair(&block->value[i], false);
+    word |= bit;
+    block->value[i] = 0.0f;
+    ++n_cells_;
+    return std::make_pair(&block->value[i], true);
+  }
+
+  std::pair<float*, bool> emplace(uint64_t packed) {
+    return emplace_in(get_block(block_of(packed)), packed);
+  }
+
+  size_t size() const { return n_cells_; }
+  size_t num_blocks() const { return root_.size(); }
+
+  void clear() {
+    Root empty;
+    root_.swap(empty);  // frees the buckets too
+    n_cells_ = 0;
+  }
+
+  void reserve_blocks(size_t n) { root_.reserve(n); }
+
+  // Bytes of the blocks, their root entries (a node with the key, the pointer and the
+  // next pointer) and the bucket array.
+  size_t memory_usage() const {
+    return root_.size() * (sizeof(GridBlock) + sizeof(Root::value_type) + sizeof(void*)) +
+           root_.bucket_count() * sizeof(void*);
+  }
+
+  // Calls f(packed key, log-odds) for every known cell, block by block.
+  template <class F>
+  void for_each(F f) const {
+    for (Root::const_iterator it = root_.begin(); it != root_.end(); ++it) {
+      const GridBlock* block = it->second.get();
+      for (int w = 0; w < kBlockCells / 64; ++w) {
+        uint64_t bits = block->known[w];
+        while (bits) {
+          const int i = w * 64 + __builtin_ctzll(bits);
+          bits &= bits - 1;
+          f(key_of(it->first, i), block->value[i]);
+        }
+      }
+    }
+  }
+
+  // Every known cell as (packed key, log-odds), those below `threshold` left out when
+  // `occupied_only`.
+  void collect(std::vector<std::pair<uint64_t, float>>& out, bool occupied_only,
+               float threshold) const {
+    out.reserve(out.size() + n_cells_);
+    for_each([&](uint64_t key, float value) {
+      if (!occupied_only || value >= threshold) out.push_back(std::make_pair(key, value));
+    });
+  }
+
+  // The smallest and largest key of the known cells on each axis (unchanged if none).
+  void key_bounds(uint16_t lo[3], uint16_t hi[3]) const {
+    for_each([&](uint64_t key, float) {
+      for (int axis = 0; axis < 3; ++axis) {
+        const uint16_t k = static_cast<uint16_t>((key >> (16 * axis)) & 0xFFFF);
+        if (k < lo[axis]) lo[axis] = k;
+        if (k > hi[axis]) hi[axis] = k;
+      }
+    });
+  }
+
+  void set(uint64_t packed, float value) { *emplace(packed).first = value; }
+
+ private:
+  Root root_;
+  size_t n_cells_ = 0;
+};
+
+// Finds cells of one BlockGrid, remembering the last block it looked in: the cells of
+// a scan come in runs that share a block, so most lookups never hash.
+class BlockAccessor {
+ public:
+  explicit BlockAccessor(BlockGrid* grid) : grid_(grid) {}
+
+  float* find(uint64_t packed) {
+    GridBlock* block = block_for(block_of(packed), false);
+    return block ? BlockGrid::find_in(block, packed) : nullptr;
+  }
+
+  std::pair<float*, bool> emplace(uint64_t packed) {
+    return grid_->emplace_in(block_for(block_of(packed), true), packed);
+  }
+
+ private:
+  GridBlock* block_for(uint64_t block_key, bool create) {
+    if (block_key != last_key_ || (create && last_ == nullptr)) {
+      last_ = create ? grid_->get_block(block_key) : grid_->find_block(block_key);
+      last_key_ = block_key;
+    }
+    return last_;
+  }
+
+  BlockGrid* grid_;
+  uint64_t last_key_ = ~0ull;
+  GridBlock* last_ = nullptr;
+};
+
+}  // namespace occgp
+
+#endif  // OCCGP_BLOCK_GRID_H
