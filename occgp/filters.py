@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._params import ParamsMixin
 from ._scan_input import check_min_range, far_enough
 from ._validation import (as_numeric, as_point, as_points, check_bool, check_choice, check_int,
                           check_real, check_seed)
@@ -327,7 +328,7 @@ def segment_ground(points: ArrayLike, *, distance: float = 0.04, angle: float = 
 
 
 @dataclass(init=False, repr=True, eq=False)
-class ScanFilter:
+class ScanFilter(ParamsMixin):
     """The scan filters of octomap_server, in one object.
 
     :meth:`apply` takes a scan in the world frame and returns the points to
@@ -418,22 +419,13 @@ class ScanFilter:
         self.max_iterations = max_iterations
         self.random_state = random_state
 
-    def get_params(self, deep: bool = True) -> dict:
-        """The constructor's parameters (scikit-learn's ``get_params``).
-
-        Parameters
-        ----------
-        deep : bool, default=True
-            Accepted for scikit-learn's API.
-
-        Returns
-        -------
-        params : dict
-        """
-        return {name: getattr(self, name) for name in self.__dataclass_fields__}
+    def _check_params_together(self, params):
+        type(self)(**params).masks(np.empty((0, 3)), np.zeros(3))   # checks every value
+        return params
 
     def set_params(self, **params) -> "ScanFilter":
-        """Set parameters by name (scikit-learn's ``set_params``); checked by :meth:`apply`.
+        """Set parameters by name (scikit-learn's ``set_params``), checked as
+        :meth:`apply` checks them before any changes.
 
         Parameters
         ----------
@@ -446,15 +438,11 @@ class ScanFilter:
 
         Raises
         ------
-        ValueError
-            If a name is not a parameter.
+        TypeError, ValueError
+            If a name is not a parameter or a value is rejected (as by
+            :meth:`apply`); nothing has changed then.
         """
-        for name in params:
-            if name not in self.__dataclass_fields__:
-                raise ValueError(f"{name!r} is not a parameter of ScanFilter")
-        for name, value in params.items():
-            setattr(self, name, value)
-        return self
+        return super().set_params(**params)
 
     def masks(self, points: ArrayLike, origin: ArrayLike) -> tuple[NDArray[np.bool_],
                                                                   NDArray[np.bool_]]:

@@ -180,7 +180,7 @@ def leaf_values(tree) -> dict[tuple, np.float32]:
 
 
 def knn_reference(scans, resolution, *, k, p_u, p_l, p_m, p_m_out, p_min, p_max,
-                  sensor_range, score_stats=None):
+                  max_range, score_stats=None):
     """Cell key → float32 log-odds after inserting `scans` with the k-NN inverse sensor
     model: brute-force neighbours, Welford one point at a time (or the fixed
     `score_stats` (mean, std)), the normal CDF from ``math.erfc``, the ray port above,
@@ -195,7 +195,7 @@ def knn_reference(scans, resolution, *, k, p_u, p_l, p_m, p_m_out, p_min, p_max,
         near, cut = [], []
         for p in np.asarray(points, np.float32):
             p = [f32(c) for c in p]
-            end, truncated = _ray_end(o, p, sensor_range)
+            end, truncated = _ray_end(o, p, max_range)
             (cut if truncated else near).append(end)
         pts = np.array(near, dtype=np.float64).reshape(-1, 3)
         scores = []

@@ -15,11 +15,11 @@ def wall_scan(ny=21, nz=11, x=2.0):
     return np.column_stack([np.full(y.size, x), y.ravel(), z.ravel()]), np.zeros(3)
 
 
-def neighbours(samples, labels, i, origin, res, big_r=0.5, sensor_range=8.0):
+def neighbours(samples, labels, i, origin, res, big_r=0.5, schedule_range=8.0):
     """Indices of the samples within sample i's search radius (brute force; the
     reference code's 8 m schedule, which the tests give the maps)."""
     d = np.linalg.norm(samples[i] - origin)
-    radius = min((big_r - res) / sensor_range * d + res, big_r)
+    radius = min((big_r - res) / schedule_range * d + res, big_r)
     near = np.flatnonzero(np.sum((samples - samples[i]) ** 2, axis=1) <= radius ** 2)
     return near[labels[near] == labels[i]], near[labels[near] != labels[i]]
 
@@ -102,7 +102,7 @@ def test_plane_covariance_has_the_normal_as_smallest_eigenvector(variant):
     ab = rng.uniform(-0.4, 0.4, (300, 2))
     samples = ab[:, :1] * u + ab[:, 1:] * v + [5.0, 0.0, 0.0]
     labels = np.ones(len(samples))
-    m = AKIMap(0.05, variant=variant, sensor_range=8.0)
+    m = AKIMap(0.05, variant=variant, schedule_range=8.0)
     bw = m.bandwidths(samples, labels, [0.0, 0.0, 0.0])
     central = np.flatnonzero(np.all(np.abs(ab) < 0.15, axis=1))
     assert len(central) > 20 and np.all(bw.n_same[central] > 10)
@@ -138,14 +138,14 @@ def scene_samples():
 
 
 def test_search_radius_reaches_r_at_30_m_by_default():
-    """sensor_range defaults to 30 m (a 30 m LiDAR; the reference code's 8 m for its
+    """schedule_range defaults to 30 m (a 30 m LiDAR; the reference code's 8 m for its
     simulated sensor): the neighbour counts are those of that schedule."""
     samples, labels, origin = scene_samples()
-    assert AKIMap().sensor_range == 30.0
+    assert AKIMap().schedule_range == 30.0
     bw = AKIMap(0.05).bandwidths(samples, labels, origin)
-    eight = AKIMap(0.05, sensor_range=8.0).bandwidths(samples, labels, origin)
+    eight = AKIMap(0.05, schedule_range=8.0).bandwidths(samples, labels, origin)
     for i in np.random.default_rng(3).choice(len(samples), 100, replace=False):
-        same, _ = neighbours(samples, labels, i, origin, 0.05, sensor_range=30.0)
+        same, _ = neighbours(samples, labels, i, origin, 0.05, schedule_range=30.0)
         assert bw.n_same[i] == len(same)
     assert np.mean(bw.n_same) < np.mean(eight.n_same)
 
@@ -158,7 +158,7 @@ def test_covariance_and_scale_against_a_direct_computation(variant):
     samples, labels, origin = scene_samples()
     res = 0.05
     bw = AKIMap(res, variant=variant, bandwidth_floor=0.0,
-                sensor_range=8.0).bandwidths(samples, labels, origin)
+                schedule_range=8.0).bandwidths(samples, labels, origin)
     rng = np.random.default_rng(1)
     checked = lowered = 0
     for i in rng.choice(len(samples), 300, replace=False):
@@ -191,7 +191,7 @@ def test_covariance_and_scale_against_a_direct_computation(variant):
 def test_occgp_minimiser_is_never_worse_than_a_fine_grid_by_much():
     samples, labels, origin = scene_samples()
     res = 0.05
-    bw = AKIMap(res, bandwidth_floor=0.0, sensor_range=8.0).bandwidths(samples, labels,
+    bw = AKIMap(res, bandwidth_floor=0.0, schedule_range=8.0).bandwidths(samples, labels,
                                                                        origin)
     for i in np.flatnonzero(bw.scale < 1)[:60]:
         same, other = neighbours(samples, labels, i, origin, res)
@@ -209,13 +209,13 @@ def test_occgp_minimiser_is_never_worse_than_a_fine_grid_by_much():
 
 
 # ---------------------------------------------------------------------- evidence
-def slow_akimap(samples, labels, origin, res, big_r=0.5, sensor_range=8.0):
+def slow_akimap(samples, labels, origin, res, big_r=0.5, schedule_range=8.0):
     """The published AKIMap update in plain Python: neighbours, covariance, the reference
     code's gradient descent, and alpha / beta over every cell in each support box."""
     n = len(samples)
     precisions, weights = [], []
     for i in range(n):
-        same, other = neighbours(samples, labels, i, origin, res, big_r, sensor_range)
+        same, other = neighbours(samples, labels, i, origin, res, big_r, schedule_range)
         if len(same) <= 2:
             precisions.append(np.eye(3) / res ** 2)
             weights.append(res ** -3.0)
@@ -276,9 +276,9 @@ def test_published_alpha_beta_equal_a_slow_reference():
     points = np.column_stack([np.full(y.size, 1.2), y.ravel(), z.ravel()])
     points += rng.normal(0, 0.01, points.shape)
     origin = np.array([0.0, 0.05, 0.0])
-    m = AKIMap(0.1, variant="published", random_state=5, sensor_range=8.0)
+    m = AKIMap(0.1, variant="published", random_state=5, schedule_range=8.0)
     samples, labels = m.training_data(points, origin)
-    m = AKIMap(0.1, variant="published", random_state=5, sensor_range=8.0).update(points,
+    m = AKIMap(0.1, variant="published", random_state=5, schedule_range=8.0).update(points,
                                                                                  origin)
     ref = slow_akimap(samples, labels, origin, 0.1)
     cells = m.cells()
@@ -375,7 +375,7 @@ def test_to_octree_of_akimap(tmp_path):
     (dict(resolution=-0.1), ValueError, "resolution must lie in"),
     (dict(free_sample_distance=0.0), ValueError, "free_sample_distance must lie in"),
     (dict(max_search_range=np.inf), ValueError, "max_search_range must lie in"),
-    (dict(sensor_range="8"), TypeError, "sensor_range must be a real number"),
+    (dict(schedule_range="8"), TypeError, "schedule_range must be a real number"),
     (dict(variant="paper"), ValueError, r"variant must be one of \('occgp', 'published'\)"),
     (dict(bandwidth_floor=-0.1), ValueError, "bandwidth_floor must lie in"),
     (dict(random_state=-1), ValueError, "random_state must be None, a non-negative int"),
@@ -461,7 +461,7 @@ def test_extreme_search_parameters_give_the_right_bandwidths():
     bw = AKIMap(0.1, max_search_range=1e-300).bandwidths(samples, labels, origin)
     assert np.all(bw.n_same == 1)
     # a sensor range of 1e-320 m: the radius is R = 0.5 m everywhere (no 0 * inf)
-    bw = AKIMap(0.1, sensor_range=1e-320).bandwidths(samples, labels, origin)
+    bw = AKIMap(0.1, schedule_range=1e-320).bandwidths(samples, labels, origin)
     want = [len(neighbours(samples, labels, i, origin, 0.1, 0.5, 1e-300)[0])
             for i in range(len(samples))]
     assert_array_equal(bw.n_same, want)
@@ -487,7 +487,7 @@ def test_free_samples_in_chunks_equal_all_at_once(monkeypatch):
     ("variant", 3, ValueError, "variant must be one of"),
     ("bandwidth_floor", "0.1", TypeError, "bandwidth_floor must be a real number"),
     ("free_sample_distance", -0.5, ValueError, "free_sample_distance must lie in"),
-    ("sensor_range", np.nan, ValueError, "sensor_range must lie in"),
+    ("schedule_range", np.nan, ValueError, "schedule_range must lie in"),
     ("max_cells_per_update", 2.0**40, TypeError, "max_cells_per_update must be a positive"),
 ])
 def test_parameters_changed_after_construction_are_checked_on_update(name, value, exc, match):

@@ -38,7 +38,7 @@ def test_mapping_methods_include_the_kernel_maps():
     assert _build(methods["AKIMap"])[0].variant == "occgp"
     assert _build(methods["AKIMap (published)"])[0].variant == "published"
     knn = _build(methods["k-NN"])[0]
-    assert isinstance(knn, KNNMap) and knn.sensor_range == 8.0
+    assert isinstance(knn, KNNMap) and knn.max_range == 8.0
 
 
 def test_stereo_methods_cut_rays_alike_with_the_chosen_parameters():
@@ -49,7 +49,7 @@ def test_stereo_methods_cut_rays_alike_with_the_chosen_parameters():
     (octree, options), (knn, _) = _build(methods["octree, stereo"]), \
         _build(methods["k-NN, stereo"])
     multi = _build(methods[f"k-NN {STEREO_HISTORY} scans, stereo"])[0]
-    assert isinstance(knn, KNNMap) and knn.sensor_range == STEREO_RANGE == 4.0
+    assert isinstance(knn, KNNMap) and knn.max_range == STEREO_RANGE == 4.0
     assert knn.resolution == 0.2 and knn.history == 0 and multi.history == STEREO_HISTORY
     assert {k: knn.get_params()[k] for k in STEREO_KNN} == STEREO_KNN
     assert type(octree) is not KNNMap and octree.resolution == 0.2
@@ -161,7 +161,7 @@ def test_map_command_builds_knn_map(tmp_path, capsys):
                  "--sensor-range", "6", "--p-u", "0.9", "--p-m", "0.3", "--p-t", "0.6",
                  "--cdf", "truncated", "--no-progress"]) == 0
     assert "2 scans, 1,000 points" in capsys.readouterr().out
-    params = dict(k=3, sensor_range=6.0, p_u=0.9, p_m=0.3, p_t=0.6, cdf="truncated")
+    params = dict(k=3, max_range=6.0, p_u=0.9, p_m=0.3, occupancy_threshold=0.6, cdf="truncated")
     expected, default = KNNMap(0.1, **params), KNNMap(0.1)
     for s in scans:
         expected.insert_scan(s.points, s.origin)
@@ -188,9 +188,9 @@ def test_map_command_builds_knn_map(tmp_path, capsys):
     ("--k", "0", r"argument --k: k must lie in \[1, 1000\], got 0"),
     ("--k", "1.5", r"argument --k: invalid int value"),
     ("--k", "5000", r"argument --k: k must lie in \[1, 1000\], got 5000"),
-    ("--sensor-range", "0", r"argument --sensor-range: sensor_range must lie in \(0.0, "),
-    ("--sensor-range", "nan", r"argument --sensor-range: sensor_range must lie in"),
-    ("--sensor-range", "1e30", r"argument --sensor-range: sensor_range must lie in"),
+    ("--sensor-range", "0", r"argument --sensor-range: max_range must lie in \(0.0, "),
+    ("--sensor-range", "nan", r"argument --sensor-range: max_range must lie in"),
+    ("--sensor-range", "1e30", r"argument --sensor-range: max_range must lie in"),
     ("--p-u", "1.5", r"argument --p-u: p_u must lie in \(0.0, 1.0\), got 1.5"),
     ("--p-u", "0.3", r"argument --p-u/--p-l: .*must satisfy p_u >= p_l"),
     ("--p-l", "0.9", r"argument --p-u/--p-l: .*must satisfy p_u >= p_l"),
@@ -198,9 +198,9 @@ def test_map_command_builds_knn_map(tmp_path, capsys):
     ("--p-m-out", "0.5", r"argument --p-m-out: p_m_out must be below 0.5"),
     ("--p-min", "0", r"argument --p-min: p_min must lie in \(0.0, 1.0\), got 0.0"),
     ("--p-min", "0.3", r"argument --p-m/--p-min: .*must satisfy p_m >= p_min"),
-    ("--p-max", "0.4", r"argument --p-max/--p-t: .*must satisfy p_max >= p_t"),
+    ("--p-max", "0.4", r"argument --p-max/--p-t: .*must satisfy p_max >= occupancy_threshold"),
     ("--p-max", "1", r"argument --p-max: p_max must lie in \(0.0, 1.0\), got 1.0"),
-    ("--p-t", "inf", r"argument --p-t: p_t must lie in \(0.0, 1.0\), got inf"),
+    ("--p-t", "inf", r"argument --p-t: occupancy_threshold must lie in \(0.0, 1.0\), got inf"),
     ("--cdf", "cauchy", r"argument --cdf: invalid choice: 'cauchy'"),
     ("--max-range", "3", r"argument --max-range: not with --method knn, whose range limit "
      r"is --sensor-range"),
@@ -231,9 +231,8 @@ def test_map_command_rejects_knn_options_with_other_methods(tmp_path, capsys, mo
 @pytest.mark.parametrize("kwargs, exc, message", [
     (dict(method="octree", knn_params={"k": 3}), ValueError,
      r"knn_params applies to method='knn' only, got method='octree'"),
-    (dict(method="knn", max_range=3.0), ValueError,
-     r"max_range does not apply to method='knn': its range limit is "
-     r"its sensor_range \(default 4.0 m\)"),
+    (dict(method="knn", max_range=3.0, knn_params={"max_range": 5.0}), ValueError,
+     r"max_range is given twice: as max_range= and in knn_params"),
     (dict(method="knn", knn_params={"kk": 3}), ValueError,
      r"knn_params holds \['kk'\], which KNNMap does not take"),
     (dict(method="knn", knn_params=[("k", 3)]), TypeError,

@@ -31,7 +31,7 @@ def noisy_scans(rng, n_scans=3, n_wall=40, n_speckle=8, n_far=8):
 
 
 def build(scans, resolution=0.2, method="plain", **params):
-    m = KNNMap(resolution, sensor_range=3.0, **{**PARAMS, **params})
+    m = KNNMap(resolution, max_range=3.0, **{**PARAMS, **params})
     for points, origin in scans:
         m.insert_scan(points, origin, method=method)
     return m
@@ -88,7 +88,7 @@ def test_mean_knn_distances_brute_force():
 def test_map_matches_the_slow_reference_cell_for_cell(seed):
     scans = noisy_scans(np.random.default_rng(seed))
     m = build(scans)
-    ref = knn_reference(scans, 0.2, sensor_range=3.0, **PARAMS)
+    ref = knn_reference(scans, 0.2, max_range=3.0, **PARAMS)
     got = leaf_values(m)
     assert set(got) == set(ref)
     keys = sorted(ref)
@@ -108,7 +108,7 @@ def test_speckle_lowers_occupancy():
 def test_l_in_wins_over_l_out_and_points_over_both():
     # one ray to a near point and one cut ray along the same line
     origin = np.array([0.05, 0.05, 0.05])
-    m = KNNMap(0.1, k=1, p_m=0.2, p_m_out=0.4, sensor_range=4.0)
+    m = KNNMap(0.1, k=1, p_m=0.2, p_m_out=0.4, max_range=4.0)
     m.insert_scan([[1.05, 0.05, 0.05], [10.05, 0.05, 0.05]], origin, method="plain")
     x = lambda v: [[v, 0.05, 0.05]]  # noqa: E731
     assert m.log_odds(x(0.55))[0] == logodds32(0.2)         # both rays: l_in
@@ -122,8 +122,8 @@ def test_l_in_wins_over_l_out_and_points_over_both():
 def test_every_method_gives_the_plain_map(method):
     scans = room_sequence(np.random.default_rng(4), n_scans=8, n_points=500)
     params = dict(p_m=0.12, p_m_out=0.2, p_min=0.12)
-    plain = KNNMap(0.1, sensor_range=2.0, **params)
-    other = KNNMap(0.1, sensor_range=2.0, **params)
+    plain = KNNMap(0.1, max_range=2.0, **params)
+    other = KNNMap(0.1, max_range=2.0, **params)
     regions = []
     for points, origin in scans:
         plain.insert_scan(points, origin, method="plain")
@@ -158,7 +158,7 @@ def test_rejected_scan_changes_nothing():
     with pytest.raises(ValueError, match="points"):
         m.insert_scan(bad, scans[0][1])
     # cut at the sensor range, the ray still leaves the key range
-    small = KNNMap(1e-4, sensor_range=4.0)
+    small = KNNMap(1e-4, max_range=4.0)
     for point in ([10.0, 0, 0], [3.5, 0, 0]):       # cut at 4 m, or within range
         with pytest.raises(ValueError, match="key range"):
             small.insert_scan([[1.0, 0, 0], point], [0, 0, 0])
@@ -179,10 +179,10 @@ def test_empty_scan_and_attributes():
 @pytest.mark.parametrize("bad, match", [
     (dict(k=0), "k"), (dict(k=1.5), "k"), (dict(p_u=0.3, p_l=0.5), "p_u >= p_l"),
     (dict(p_m=0.01), "p_m >= p_min"), (dict(p_m=0.3, p_m_out=0.2), "p_m_out >= p_m"),
-    (dict(p_m_out=0.5), "p_m_out"), (dict(p_t=0.01), "p_t >= p_min"),
-    (dict(p_t=0.99), "p_max >= p_t"), (dict(p_max=1.0), "p_max"), (dict(p_u=1.0), "p_u"),
-    (dict(p_min=0.0), "p_min"), (dict(sensor_range=0.0), "sensor_range"),
-    (dict(sensor_range=1e30), "sensor_range"), (dict(cdf="gev"), "cdf"),
+    (dict(p_m_out=0.5), "p_m_out"), (dict(occupancy_threshold=0.01), "occupancy_threshold >= p_min"),
+    (dict(occupancy_threshold=0.99), "p_max >= occupancy_threshold"), (dict(p_max=1.0), "p_max"), (dict(p_u=1.0), "p_u"),
+    (dict(p_min=0.0), "p_min"), (dict(max_range=0.0), "max_range"),
+    (dict(max_range=1e30), "max_range"), (dict(cdf="gev"), "cdf"),
     (dict(n_jobs=0), "n_jobs"),
 ])
 def test_bad_parameters(bad, match):
@@ -194,13 +194,13 @@ def test_parameter_type_errors():
     with pytest.raises(TypeError, match="p_u"):
         KNNMap(0.1, p_u="high")
     with pytest.raises(TypeError, match="k"):
-        check_knn_params(dict(PARAMS, k="3", p_t=0.5, sensor_range=4.0))
+        check_knn_params(dict(PARAMS, k="3", occupancy_threshold=0.5, max_range=4.0))
 
 
 # ---------------------------------------------------------------------- replay
 def test_replay_equals_building_the_maps():
     scans = noisy_scans(np.random.default_rng(11), n_scans=4, n_wall=80)
-    rep = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(1, 3))
+    rep = ScanReplay(scans, 0.2, max_range=3.0, ks=(1, 3))
     combos = [dict(PARAMS), dict(PARAMS, k=1, p_u=0.62, p_l=0.62, p_m=0.05, p_m_out=0.05),
               dict(PARAMS, k=1, p_min=0.3, p_max=0.6, p_m=0.3, p_m_out=0.45)]
     values = rep.knn_log_odds(combos)
@@ -214,7 +214,7 @@ def test_replay_equals_building_the_maps():
 
 def test_octomap_replay_equals_liboctomap():
     scans = noisy_scans(np.random.default_rng(12), n_scans=4, n_wall=80)
-    rep = ScanReplay(scans, 0.2, sensor_range=3.0)
+    rep = ScanReplay(scans, 0.2, max_range=3.0)
     combos = [dict(prob_hit=0.7, prob_miss=0.4, clamping_min=0.12, clamping_max=0.97),
               dict(prob_hit=0.86, prob_miss=0.26, clamping_min=0.3, clamping_max=0.6)]
     values = rep.octomap_log_odds(combos)
@@ -251,7 +251,7 @@ def test_fixed_statistics_match_the_slow_reference(seed):
     scans = noisy_scans(np.random.default_rng(seed))
     fixed = (0.11, 0.04)
     m = build(scans, score_stats=fixed)
-    ref = knn_reference(scans, 0.2, sensor_range=3.0, score_stats=fixed, **PARAMS)
+    ref = knn_reference(scans, 0.2, max_range=3.0, score_stats=fixed, **PARAMS)
     got = leaf_values(m)
     assert set(got) == set(ref)
     keys = sorted(ref)
@@ -273,7 +273,7 @@ def test_fixed_statistics_pickle_and_zero_std():
     for mm in (m, again):
         mm.insert_scan(*scans[2], method="plain")
     assert leaf_values(m) == leaf_values(again)
-    ref = knn_reference(scans, 0.2, sensor_range=3.0, score_stats=(0.1, 0.0), **PARAMS)
+    ref = knn_reference(scans, 0.2, max_range=3.0, score_stats=(0.1, 0.0), **PARAMS)
     got = leaf_values(m)
     np.testing.assert_allclose([got[k] for k in sorted(ref)], [ref[k] for k in sorted(ref)],
                                rtol=0, atol=2e-6)
@@ -281,8 +281,8 @@ def test_fixed_statistics_pickle_and_zero_std():
 
 def test_dataset_replay_equals_maps_with_the_dataset_statistics():
     scans = noisy_scans(np.random.default_rng(13), n_scans=4, n_wall=80)
-    rep = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(1, 3), stats="dataset")
-    online = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(1, 3))
+    rep = ScanReplay(scans, 0.2, max_range=3.0, ks=(1, 3), stats="dataset")
+    online = ScanReplay(scans, 0.2, max_range=3.0, ks=(1, 3))
     combos = [dict(PARAMS), dict(PARAMS, k=1, p_u=0.74, p_l=0.38)]
     keys = [tuple(int((key >> np.uint64(16 * a)) & np.uint64(0xFFFF)) for a in range(3))
             for key in rep.keys]

@@ -224,7 +224,7 @@ def test_replay_equals_the_maps_with_history(history, cdf, stats):
     scans = noisy_scans(np.random.default_rng(11 + history), n_scans=5, n_wall=80)
     # a scan with no near point: an empty cloud in the history, then the own-scan score
     scans.insert(2, (np.array([[6.0, 0.0, 0.0], [6.0, 1.0, 0.5]]), np.zeros(3)))
-    rep = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(1, 3), cdf=cdf, stats=stats,
+    rep = ScanReplay(scans, 0.2, max_range=3.0, ks=(1, 3), cdf=cdf, stats=stats,
                      history=history)
     assert rep.history == history
     combos = [dict(PARAMS), dict(PARAMS, k=1, p_u=0.62, p_l=0.62, p_m=0.05, p_m_out=0.05),
@@ -243,7 +243,7 @@ def test_replay_equals_the_maps_with_history(history, cdf, stats):
         got = leaf_values(m)
         assert set(got) == set(keys)
         assert [got[k] for k in keys] == row.tolist()
-    paper = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(1, 3), cdf=cdf, stats=stats)
+    paper = ScanReplay(scans, 0.2, max_range=3.0, ks=(1, 3), cdf=cdf, stats=stats)
     assert not np.array_equal(paper.knn_log_odds(combos), rep.knn_log_odds(combos))
 
 
@@ -258,14 +258,14 @@ class Wall:
 
 def test_grid_search_with_history():
     scans = noisy_scans(np.random.default_rng(21), n_scans=4, n_wall=120)
-    rep = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(3,), history=2)
+    rep = ScanReplay(scans, 0.2, max_range=3.0, ks=(3,), history=2)
     labels = cell_labels(Wall(), rep.centers, 0.2)
-    res = grid_search(scans, labels, GRID2, resolution=0.2, sensor_range=3.0, history=2)
+    res = grid_search(scans, labels, GRID2, resolution=0.2, max_range=3.0, history=2)
     assert res.results == grid_search(rep, labels, GRID2).results
     assert res.results == grid_search(rep, labels, GRID2, history=2).results
-    paper = grid_search(scans, labels, GRID2, resolution=0.2, sensor_range=3.0)
+    paper = grid_search(scans, labels, GRID2, resolution=0.2, max_range=3.0)
     assert paper.results == grid_search(scans, labels, GRID2, resolution=0.2,
-                                        sensor_range=3.0, history=0).results
+                                        max_range=3.0, history=0).results
     assert [r["auc"] for r in paper.results] != [r["auc"] for r in res.results]
     with pytest.raises(ValueError, match="history=0 differs from the ScanReplay's"):
         grid_search(rep, labels, GRID2, history=0)

@@ -595,11 +595,11 @@ def test_grid_and_colour_maps_set_params_as_if_built_with_them():
 def test_knnmap_keeps_its_rules():
     m = KNNMap(RES)
     before = m.get_params()
-    with pytest.raises(ValueError, match=r"'prob_hit' is not a parameter of KNNMap "
-                                         r"\(parameters: resolution, k, "):
+    with pytest.raises(ValueError, match=r"'prob_hit' is not a parameter of KNNMap; "
+                                         r"its parameters are resolution, k, "):
         m.set_params(prob_hit=0.8)
-    with pytest.raises(ValueError, match=r"p_max >= p_t"):
-        m.set_params(k=3, p_t=0.99)     # checked together: k is not set either
+    with pytest.raises(ValueError, match=r"p_max >= occupancy_threshold"):
+        m.set_params(k=3, occupancy_threshold=0.99)     # checked together: k is not set either
     with pytest.raises(AttributeError, match="no prob_hit"):
         m.prob_hit
     assert m.get_params() == before

@@ -108,7 +108,7 @@ def test_knn_map_updates_its_tree_on_threads_as_on_one():
     tree is the single thread's, node for node, on scans of 4096+ cells."""
     from occgp import KNNMap
     scans = room_scans(n_points=3000, seed=5)[:4]
-    maps = {n: KNNMap(0.05, k=3, sensor_range=6.0, n_jobs=n) for n in (1, 2, 3)}
+    maps = {n: KNNMap(0.05, k=3, max_range=6.0, n_jobs=n) for n in (1, 2, 3)}
     sizes = []
     for points, origin in scans:
         for m in maps.values():

@@ -192,8 +192,8 @@ def test_min_range_must_be_less_than_max_range(cls):
         cls(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], *extra, min_range="1")
 
 
-def test_min_range_must_be_less_than_the_knn_sensor_range():
-    with pytest.raises(ValueError, match=r"min_range must be less than sensor_range \(4.0\)"):
+def test_min_range_must_be_less_than_the_knn_max_range():
+    with pytest.raises(ValueError, match=r"min_range must be less than max_range \(4.0\)"):
         KNNMap(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], min_range=5.0)
 
 

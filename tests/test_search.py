@@ -25,7 +25,7 @@ class Wall:
 @pytest.fixture(scope="module")
 def replay():
     scans = noisy_scans(np.random.default_rng(21), n_scans=4, n_wall=120)
-    return scans, ScanReplay(scans, 0.2, sensor_range=3.0, ks=(1, 3))
+    return scans, ScanReplay(scans, 0.2, max_range=3.0, ks=(1, 3))
 
 
 def curve_of(m, centres, labels, thresholds):
@@ -33,8 +33,7 @@ def curve_of(m, centres, labels, thresholds):
     tpr, fdr = [], []
     for t in thresholds:
         occ = type(m).from_bytes(m.to_bytes(), **{**m._sensor_params(),
-                                                   **({"p_t": t} if isinstance(m, KNNMap)
-                                                      else {"occupancy_threshold": t})}
+                                                   "occupancy_threshold": t}
                                  ).is_occupied(centres)
         if occ.any():
             tpr.append((occ & labels).sum() / labels.sum())
@@ -50,7 +49,7 @@ def test_scores_are_those_of_the_built_maps(replay):
     res = grid_search(rep, labels, grid)
     assert len(res.results) == 2 and res.n_rejected == 0
     for row in res.results:
-        m = KNNMap(0.2, sensor_range=3.0, **{k: row[k] for k in grid})
+        m = KNNMap(0.2, max_range=3.0, **{k: row[k] for k in grid})
         for points, origin in scans:
             m.insert_scan(points, origin)
         ts = [t for t in sorted(THRESHOLDS, reverse=True) if 0.05 <= t <= 0.95]
@@ -116,7 +115,7 @@ def test_scans_are_replayed_on_the_fly(replay):
     scans, rep = replay
     labels = cell_labels(Wall(), rep.centers, 0.2)
     grid = {"k": [1, 3], "p_u": [0.9]}
-    a = grid_search(scans, Wall(), grid, resolution=0.2, sensor_range=3.0)
+    a = grid_search(scans, Wall(), grid, resolution=0.2, max_range=3.0)
     b = grid_search(rep, labels, grid)
     assert [r["auc"] for r in a.results] == [r["auc"] for r in b.results]
 
@@ -125,7 +124,7 @@ def test_the_search_uses_no_deprecated_name(replay):
     scans, rep = replay
     with warnings.catch_warnings():
         warnings.simplefilter("error", DeprecationWarning)
-        grid_search(scans, Wall(), {"p_u": [0.9]}, resolution=0.2, sensor_range=3.0)
+        grid_search(scans, Wall(), {"p_u": [0.9]}, resolution=0.2, max_range=3.0)
         grid_search(rep, Wall(), {"p_u": [0.9]})
         with pytest.raises(ValueError, match="truth must have shape"):
             grid_search(rep, [True], {"p_u": [0.9]})
@@ -242,7 +241,7 @@ def test_authors_scoring_is_matched_counts_and_the_unanchored_area(replay):
 def test_authors_scoring_on_a_hand_built_replay():
     # one scan, three points in a row along y at x = 2: three end cells, rays before them
     pts = np.array([[2.05, 0.05, 0.05], [2.05, 0.35, 0.05], [2.05, 0.65, 0.05]])
-    rep = ScanReplay([(pts, [0.05, 0.05, 0.05])], 0.1, sensor_range=3.0)
+    rep = ScanReplay([(pts, [0.05, 0.05, 0.05])], 0.1, max_range=3.0)
     ends = np.isclose(rep.centers[:, 0], 2.05)
     assert ends.sum() == 3
     # the truth: the ray cell just before each end cell (x = 1.95), one cell off
@@ -252,7 +251,7 @@ def test_authors_scoring_on_a_hand_built_replay():
     grid = {"k": [1], "p_u": [0.9], "p_l": [0.9], "p_m": [0.2], "p_m_out": [0.2]}
     strict = grid_search(rep, behind, grid, thresholds=[0.5])
     authors = grid_search(rep, behind, grid, thresholds=[0.5], scoring="authors")
-    # at p_t = 0.5 the three end cells are occupied, everything else free: strictly
+    # at occupancy_threshold = 0.5 the three end cells are occupied, everything else free: strictly
     # 3 FP, 3 FN; by the authors' rule each end cell matches the occupied cell next to
     # it (3 TP, no FP), while the three occupied cells predicted free stay FN
     assert strict.results[0]["tpr"] == (0.0,) and strict.results[0]["fdr"] == (1.0,)
@@ -266,17 +265,17 @@ def test_truncated_cdf_and_dataset_statistics(replay):
     labels = cell_labels(Wall(), rep.centers, 0.2)
     for cdf, stats in (("truncated", "online"), ("normal", "dataset"),
                        ("truncated", "dataset")):
-        res = grid_search(scans, labels, GRID2, resolution=0.2, sensor_range=3.0, cdf=cdf,
+        res = grid_search(scans, labels, GRID2, resolution=0.2, max_range=3.0, cdf=cdf,
                           stats=stats)
-        other = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(3,), cdf=cdf, stats=stats)
+        other = ScanReplay(scans, 0.2, max_range=3.0, ks=(3,), cdf=cdf, stats=stats)
         assert res.results == grid_search(other, labels, GRID2, cdf=cdf, stats=stats).results
         values = other.knn_log_odds([{k: r[k] for k in GRID2} for r in res.results])
         assert not np.array_equal(values, rep.knn_log_odds(
             [{k: r[k] for k in GRID2} for r in res.results]))
     # the maps: those KNNMap builds with the same cdf and fixed statistics
-    other = ScanReplay(scans, 0.2, sensor_range=3.0, ks=(3,), cdf="truncated", stats="dataset")
+    other = ScanReplay(scans, 0.2, max_range=3.0, ks=(3,), cdf="truncated", stats="dataset")
     params = {k: v[0] for k, v in GRID2.items()}
-    m = KNNMap(0.2, sensor_range=3.0, cdf="truncated", score_stats=other.score_stats(3),
+    m = KNNMap(0.2, max_range=3.0, cdf="truncated", score_stats=other.score_stats(3),
                **params)
     for points, origin in scans:
         m.insert_scan(points, origin)

@@ -23,7 +23,7 @@ __all__ = ["demo", "mapping_methods", "noisy_mapping_methods", "gp_mapping_metho
            "stereo_scans_of_scene"]
 
 # the demo's scanner range (Scene.scan's max_range): every return lies within it, so
-# the k-NN map's sensor_range of that length cuts no clean ray
+# the k-NN map's max_range of that length cuts no clean ray
 _DEMO_RANGE = 8.0
 
 
@@ -32,9 +32,9 @@ def mapping_methods(resolution: float) -> dict:
 
     The octree and the grid in scan and ray mode, :class:`~occgp.BGKMap`
     ("BGK"), :class:`~occgp.AKIMap` in its two variants ("AKIMap",
-    "AKIMap (published)", with ``sensor_range`` 8 m, the demo scanner's range,
+    "AKIMap (published)", with ``schedule_range`` 8 m, the demo scanner's range,
     where its search radius is widest) and :class:`~occgp.KNNMap` ("k-NN", its
-    default parameters, with ``sensor_range`` 8 m: it cuts no ray, as the
+    default parameters, with ``max_range`` 8 m: it cuts no ray, as the
     octree's unlimited range); the kernel maps use every core and AKIMap
     draws its free samples with ``random_state=0``.
 
@@ -57,11 +57,11 @@ def mapping_methods(resolution: float) -> dict:
         "grid (scan)": {"map": "grid", **res},
         "grid (ray)": {"map": "grid", **res, "insert": {"mode": "ray"}},
         "BGK": {"map": "bgk", **res, "n_jobs": -1},
-        "AKIMap": {"map": "akimap", **res, "sensor_range": _DEMO_RANGE, "random_state": 0,
+        "AKIMap": {"map": "akimap", **res, "schedule_range": _DEMO_RANGE, "random_state": 0,
                    "n_jobs": -1},
         "AKIMap (published)": {"map": "akimap", **res, "variant": "published",
-                               "sensor_range": _DEMO_RANGE, "random_state": 0, "n_jobs": -1},
-        "k-NN": {"map": "knn", **res, "sensor_range": _DEMO_RANGE},
+                               "schedule_range": _DEMO_RANGE, "random_state": 0, "n_jobs": -1},
+        "k-NN": {"map": "knn", **res, "max_range": _DEMO_RANGE},
     }
 
 
@@ -96,7 +96,7 @@ def noisy_mapping_methods(resolution: float) -> dict:
 
     "octree, stereo": :class:`~occgp.OccupancyOctree` with ``max_range``
     :data:`STEREO_RANGE` and :data:`STEREO_OCTREE`; "k-NN, stereo":
-    :class:`~occgp.KNNMap` with ``sensor_range`` :data:`STEREO_RANGE` and
+    :class:`~occgp.KNNMap` with ``max_range`` :data:`STEREO_RANGE` and
     :data:`STEREO_KNN`; "k-NN 4 scans, stereo": ``history``
     :data:`STEREO_HISTORY` (each point scored against the previous keyframes'
     clouds) with :data:`STEREO_KNN_HISTORY`. The parameters were chosen on other
@@ -112,7 +112,7 @@ def noisy_mapping_methods(resolution: float) -> dict:
     methods : dict of str to dict
         Each method as :func:`mapping_methods` gives them.
     """
-    knn = {"map": "knn", "resolution": resolution, "sensor_range": STEREO_RANGE, **STEREO_KNN}
+    knn = {"map": "knn", "resolution": resolution, "max_range": STEREO_RANGE, **STEREO_KNN}
     return {
         "octree, stereo": {"map": "octree", "resolution": resolution, **STEREO_OCTREE,
                            "insert": {"max_range": STEREO_RANGE}},

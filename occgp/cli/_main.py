@@ -207,10 +207,10 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--k", type=int, default=None,
                    help=f"nearest neighbours scoring each point, in [1, 1000] "
                    f"(default: {d['k']})")
-    g.add_argument("--sensor-range", type=float, default=None,
+    g.add_argument("--sensor-range", type=float, default=None, dest="max_range_knn",
                    help=f"range s_c in metres: farther points are not inserted and their "
                    f"rays are cut here, as --max-range cuts the octree's "
-                   f"(default: {d['sensor_range']})")
+                   f"(default: {d['max_range']}); the map's max_range")
     g.add_argument("--p-u", type=float, default=None,
                    help=f"probability of the best-supported points (default: {d['p_u']})")
     g.add_argument("--p-l", type=float, default=None,
@@ -226,20 +226,26 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"lower clamping bound (default: {d['p_min']})")
     g.add_argument("--p-max", type=float, default=None,
                    help=f"upper clamping bound, < 1 (default: {d['p_max']})")
-    g.add_argument("--p-t", type=float, default=None,
-                   help=f"occupancy threshold, in [--p-min, --p-max] (default: {d['p_t']})")
+    g.add_argument("--p-t", type=float, default=None, dest="occupancy_threshold",
+                   help=f"occupancy threshold, in [--p-min, --p-max] "
+                   f"(default: {d['occupancy_threshold']}); the map's occupancy_threshold")
     g.add_argument("--cdf", choices=CDFS, default=None,
                    help=f"the CDF of the scores: normal (the paper's) or truncated at 0 "
                    f"(default: {d['cdf']})")
     return parser
 
 
+#: The k-NN options whose argparse names differ from KNNMap's parameters (``--sensor-range``
+#: sets max_range, which --max-range names for the other maps; ``--p-t`` the threshold).
+_KNN_DEST = {"max_range": "max_range_knn"}
+
+
 def _knn_args(args) -> dict | None:
     """The k-NN options given on the command line (None: none), checked; exits with
     parser.error (code 2) on a bad one or one given with another method."""
     parser = args.map_parser
-    given = {name: getattr(args, name) for name in KNN_OPTIONS
-             if getattr(args, name) is not None}
+    given = {name: getattr(args, _KNN_DEST.get(name, name)) for name in KNN_OPTIONS
+             if getattr(args, _KNN_DEST.get(name, name)) is not None}
     if args.method != "knn":
         if given:
             parser.error(f"argument {'/'.join(map(option_name, given))}: applies to --method "
@@ -247,7 +253,7 @@ def _knn_args(args) -> dict | None:
         return None
     if args.max_range is not None:
         parser.error(f"argument --max-range: not with --method knn, whose range limit is "
-                     f"--sensor-range (default: {KNN_DEFAULTS['sensor_range']}); it cuts "
+                     f"--sensor-range (default: {KNN_DEFAULTS['max_range']}); it cuts "
                      f"rays as --max-range does for the octree")
     try:
         check_knn_options(given)

@@ -18,6 +18,7 @@ import numpy as np
 
 from .._validation import check_n_jobs, check_real, check_resolution, show_number
 from ..knn import CDFS, KNN_PARAMS, KNNMap, check_knn_params
+from .._params import check_renamed
 from ..maps import OCTREE_FORMATS, available_maps, make_map, map_type
 from ..octree._tree import OccupancyOctree
 
@@ -35,11 +36,13 @@ def check_knn_options(knn_params) -> dict:
     if not isinstance(knn_params, Mapping):
         raise TypeError(f"knn_params must be a mapping of KNNMap parameters, "
                         f"got {type(knn_params).__name__}")
-    unknown = sorted(set(knn_params) - set(KNN_OPTIONS), key=str)
+    unknown = sorted(set(knn_params) - set(KNN_OPTIONS) - set(KNNMap._deprecated_params),
+                     key=str)
     if unknown:
         raise ValueError(f"knn_params holds {unknown}, which KNNMap does not take; it takes "
                          f"{list(KNN_OPTIONS)}")
-    params = {**KNN_DEFAULTS, **knn_params}
+    params = {**KNN_DEFAULTS, **check_renamed(KNNMap._deprecated_params, dict(knn_params),
+                                              owner="knn_params", stacklevel=4)}
     cdf = params.pop("cdf")
     if not isinstance(cdf, str) or cdf not in CDFS:
         raise ValueError(f"cdf must be one of {CDFS}, got {cdf!r}")
@@ -216,6 +219,10 @@ def _check_map_args(paths, output, method, mode, resolution, max_range, knn_para
         raise OptionError("mode", f"mode must be 'scan' or 'ray', got {mode!r}")
     if knn_params is not None and method != "knn":
         raise ValueError(f"knn_params applies to method='knn' only, got method={method!r}")
+    if max_range is not None and isinstance(knn_params, Mapping) and \
+            {"max_range", "sensor_range"} & set(knn_params):
+        raise OptionError("max_range", "max_range is given twice: as max_range= and in "
+                          "knn_params; give it once")
     own = getattr(entry.cls, "RANGE_PARAM", "max_range")
     if max_range is not None and own != "max_range":
         raise OptionError("max_range", f"max_range does not apply to method={method!r}: "
@@ -411,16 +418,17 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         ``insert_scan`` takes ``max_range`` (the octree, the grid) inserts
         longer beams up to it as free space only; one with a ``max_range``
         parameter (BGK) gets it and drops them whole; any other map (AKIMap)
-        gets only the end points within `max_range` of the sensor. Not for a
-        map with a ``sensor_range`` parameter (``method="knn"``), its own
-        range limit (in `knn_params`). The points beyond
+        gets only the end points within `max_range` of the sensor; the k-NN
+        map (``method="knn"``) gets it as its own ``max_range`` parameter (it
+        cuts the rays; also settable in `knn_params`, not in both). The points beyond
         the limit are counted and reported (raw points: BGK applies its
         limit to the centroids of its down-sampling cubes).
     knn_params : mapping, default=None
         For ``method="knn"`` only: :class:`~occgp.KNNMap`'s ``k``, ``p_u``,
-        ``p_l``, ``p_m``, ``p_m_out``, ``p_min``, ``p_max``, ``p_t``,
-        ``sensor_range`` and ``cdf``; those left out take KNNMap's defaults
-        (``sensor_range`` 4 m: points farther from the sensor are not
+        ``p_l``, ``p_m``, ``p_m_out``, ``p_min``, ``p_max``,
+        ``occupancy_threshold``, ``max_range`` and ``cdf`` (``p_t`` and
+        ``sensor_range``, the old names, are deprecated); those left out take
+        KNNMap's defaults (``max_range`` 4 m: points farther from the sensor are not
         inserted, their rays are cut there). Checked as KNNMap checks them
         (Miao et al.'s Eq. 12) before any scan is read.
     poses : str or path-like, default=None
@@ -650,7 +658,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
 
 def _inserter(mapper, mode, max_range, n_jobs):
     """(insert(points, origin), the range limit whose points are counted or None, how the
-    map meets it): "sensor_range" (the map's own range parameter cuts rays), "param" (its
+    map meets it): "cut" (the map's own range parameter cuts rays), "param" (its
     ``max_range`` parameter), "option" (insert_scan's ``max_range`` cuts rays) or "drop"
     (the points beyond are not passed)."""
     options = _insert_options(type(mapper))
@@ -662,9 +670,8 @@ def _inserter(mapper, mode, max_range, n_jobs):
         kwargs["mode"] = "scan"
     if "n_jobs" in options and "n_jobs" not in params:
         kwargs["n_jobs"] = n_jobs
-    own = getattr(type(mapper), "RANGE_PARAM", "max_range")
-    if own != "max_range":
-        limit, how = params[own], "sensor_range"
+    if getattr(type(mapper), "RANGE_PARAM", None) in params:    # KNNMap: it cuts rays
+        limit, how = params[type(mapper).RANGE_PARAM], "cut"
     elif "max_range" in params:
         limit, how = params["max_range"], "param"
     elif max_range is not None and "max_range" in options:
@@ -706,7 +713,7 @@ def _beyond_message(mapper, how, n, total, limit, beams) -> str:
     where = f"{n:,} of {total:,} points lie beyond"
     if how == "option":
         return f"{where} max_range {limit:g} m: their rays were cut there (free space only)"
-    if how == "sensor_range":
+    if how == "cut":
         return (f"{where} {type(mapper).RANGE_PARAM} {limit:g} m: not inserted, their rays "
                 f"were cut there")
     name = type(mapper).__name__
@@ -733,8 +740,12 @@ def _save(mapper, tree, output: Path, formats) -> None:
 
 
 def option_name(name: str) -> str:
-    """The command-line option of a KNNMap parameter: ``p_m_out`` → ``--p-m-out``."""
-    return "--" + name.replace("_", "-")
+    """The command-line option of a KNNMap parameter: ``p_m_out`` → ``--p-m-out``
+    (``max_range`` → ``--sensor-range``, ``occupancy_threshold`` → ``--p-t``)."""
+    return _KNN_OPTION_NAMES.get(name) or "--" + name.replace("_", "-")
+
+
+_KNN_OPTION_NAMES = {"max_range": "--sensor-range", "occupancy_threshold": "--p-t"}
 
 
 def knn_error(parser: argparse.ArgumentParser, exc: Exception) -> None:

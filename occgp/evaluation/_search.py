@@ -3,7 +3,7 @@
 :func:`grid_search` scores each parameter combination of the k-NN model
 (:class:`occgp.KNNMap`) or of OctoMap by the area under its TPR–FDR curve
 against ground truth, as Miao, Hunter and Georgilas do: the map's cells are
-classified at each occupancy threshold ``p_t`` of a grid, giving one
+classified at each occupancy threshold of a grid, giving one
 operating point (FDR, TPR) per threshold. The maps are not built one by one:
 a :class:`occgp.knn.ScanReplay` holds what they share and replays each
 combination exactly (see there).
@@ -20,6 +20,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from joblib import Parallel, delayed
 
+from .._params import DEFAULT_RESOLUTION, check_renamed
 from .._validation import check_choice, check_int, check_n_jobs, check_real, n_threads
 from ..knn import (
     CDFS, MAX_HISTORY, STATS, KNNMap, ScanReplay, check_knn_params, check_octomap_params,
@@ -44,7 +45,7 @@ def _steps(low: float, high: float, step: float) -> tuple[float, ...]:
     return tuple(round(low + i * step, 9) for i in range(n))
 
 
-#: The occupancy thresholds p_t of Miao et al.'s Table 1: 0.02 to 0.98 by 0.12.
+#: The occupancy thresholds (the paper's p_t) of Miao et al.'s Table 1: 0.02 to 0.98 by 0.12.
 THRESHOLDS = _steps(0.02, 0.98, 0.12)
 #: Miao et al.'s Table 1, optimisation (k and the clamping fixed): with the
 #: constraints of Eq. 12 and the 9 thresholds, 4,050 combinations.
@@ -111,14 +112,15 @@ class GridSearchResult(NamedTuple):
         Returns
         -------
         rows : list of dict
-            The combination's parameters, ``p_t``, ``tpr`` and ``fdr``: e.g. the
+            The combination's parameters, ``occupancy_threshold``, ``tpr`` and
+            ``fdr``: e.g. the
             samples of :func:`occgp.evaluation.nca_feature_weights`.
         """
         rows = []
         for row in self.results:
             params = {k: v for k, v in row.items() if k not in _SCORE_KEYS}
             for t, tpr, fdr in zip(row["thresholds"], row["tpr"], row["fdr"]):
-                rows.append({**params, "p_t": t, "tpr": tpr, "fdr": fdr})
+                rows.append({**params, "occupancy_threshold": t, "tpr": tpr, "fdr": fdr})
         return rows
 
 
@@ -257,18 +259,19 @@ def _make_scorer(replay, labels, mask, scoring, thresholds):
 
 def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
                 param_grid: Mapping[str, Sequence[Any]] | Sequence[Mapping[str, Sequence[Any]]],
-                *, method: str = "knn", resolution: float = 0.1, sensor_range: float = 4.0,
+                *, method: str = "knn", resolution: float = DEFAULT_RESOLUTION,
+                max_range: float = 4.0,
                 thresholds: Sequence[float] | None = THRESHOLDS, mask: Any = None,
                 scoring: str = "exact", cdf: str | None = None, stats: str | None = None,
                 history: int | None = None, batch_size: int = 32,
-                n_jobs: int | None = None) -> GridSearchResult:
+                n_jobs: int | None = None, **deprecated: Any) -> GridSearchResult:
     """Score every combination of a parameter grid by its map's TPR–FDR AUC.
 
     Miao et al.'s search: each combination's map (:class:`occgp.KNNMap` for
-    ``method="knn"``, OctoMap's ``insertPointCloud`` with ``max_range =
-    sensor_range`` for ``"octomap"``) is built from the scans, every cell it
-    holds is classified at each threshold ``p_t`` of `thresholds` within the
-    clamping bounds (``p_min <= p_t <= p_max``), and the operating points
+    ``method="knn"``, OctoMap's ``insertPointCloud`` with the same
+    ``max_range`` for ``"octomap"``) is built from the scans, every cell it
+    holds is classified at each occupancy threshold of `thresholds` within the
+    clamping bounds (``p_min <= threshold <= p_max``), and the operating points
     (FDR, TPR) give the curve's area. The maps are replayed from a
     :class:`~occgp.knn.ScanReplay` (exactly the maps the classes build), so
     the scans are traversed and scored by k-NN once for the whole grid.
@@ -277,7 +280,7 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
     ----------
     scans : ScanReplay or iterable of (points, origin)
         The data set; scans are made into a ``ScanReplay(scans, resolution,
-        sensor_range=sensor_range, ks=<the grid's k values>)``. Pass a
+        max_range=max_range, ks=<the grid's k values>)``. Pass a
         ScanReplay to share it between searches (its resolution and range
         then apply, and its ks must hold the grid's).
     truth : array-like of bool of shape (n_cells,), or a scene
@@ -295,10 +298,12 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
         ranges) are dropped and counted. :data:`KNN_GRID` and
         :data:`OCTOMAP_GRID` are the paper's.
     method : {"knn", "octomap"}, default="knn"
-    resolution : float, default=0.1
-    sensor_range : float, default=4.0
+    resolution : float, default=DEFAULT_RESOLUTION (0.1)
+    max_range : float, default=4.0
+        The sensor range, metres: longer rays are cut there (``KNNMap``'s and
+        OctoMap's ``max_range``; the name ``sensor_range`` is deprecated).
     thresholds : sequence of float or None, default=THRESHOLDS
-        The thresholds ``p_t`` (probabilities) of each curve; None: every
+        The occupancy thresholds (probabilities) of each curve; None: every
         distinct value of the map (:func:`occgp.metrics.tpr_fdr_auc`; not with
         ``scoring="authors"``).
     mask : array-like of bool of shape (n_cells,) or None, default=None
@@ -364,6 +369,13 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
     (4, 0, ['k', 'p_l', 'p_m'])
     """
     t0 = time.perf_counter()
+    for name in deprecated:
+        if name != "sensor_range":
+            raise TypeError(f"grid_search() got an unexpected keyword argument {name!r}")
+    if deprecated:
+        max_range = check_renamed({"sensor_range": "max_range"},
+                                  {"max_range": max_range, **deprecated}, {"max_range": 4.0},
+                                  "grid_search")["max_range"]
     method = check_choice(method, "method", ("knn", "octomap"))
     scoring = check_choice(scoring, "scoring", SCORINGS)
     if cdf is not None:
@@ -393,7 +405,8 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
     for c in combos:
         try:
             if method == "knn":
-                q = check_knn_params({**c, "p_t": c["p_min"], "sensor_range": sensor_range})
+                q = check_knn_params({**c, "occupancy_threshold": c["p_min"],
+                                      "max_range": max_range})
                 kept.append({key: q[key] for key in _KNN_KEYS})
             else:
                 kept.append(check_octomap_params(c))
@@ -411,7 +424,7 @@ def grid_search(scans: ScanReplay | Iterable[Sequence[Any]], truth: Any,
                                  f"({getattr(replay, name)!r}): make the replay with it")
     else:
         ks = sorted({c["k"] for c in kept}) if method == "knn" else [1]
-        replay = ScanReplay(scans, resolution, sensor_range=sensor_range, ks=ks,
+        replay = ScanReplay(scans, resolution, max_range=max_range, ks=ks,
                             cdf=cdf or "normal", stats=stats or "online",
                             history=history or 0, n_jobs=n_jobs)
     if hasattr(truth, "occupancy"):

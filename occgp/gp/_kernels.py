@@ -13,11 +13,13 @@ space; gradients of a kernel matrix are with respect to ``theta``.
 from __future__ import annotations
 
 import numbers
+from numbers import Real
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
+from .._params import Check, Interval, ParamsMixin
 from .._validation import as_numeric, check_bool, check_int
 from ._limits import MAX_DENSE_BYTES
 
@@ -60,12 +62,34 @@ def check_bounds(bounds, name):
     return lo, hi
 
 
-class Stationary:
+def _check_length_scale(value, name: str = "length_scale"):
+    ls = np.asarray(value)
+    if ls.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must hold real numbers, got dtype {ls.dtype}")
+    ls = np.atleast_1d(ls.astype(np.float64))
+    if ls.ndim != 1 or not (np.isfinite(ls).all() and (ls > 0).all()):
+        raise ValueError(
+            f"{name} must be a positive number or a 1-D array of them, got {value!r}")
+    return ls
+
+
+class Stationary(ParamsMixin):
     """Base of the stationary kernels: ``variance * f(s)``.
 
     Subclasses set ``kind`` (the compiled core's id), ``name`` and implement
-    ``_profile(s)`` and ``_gradient_factor(s) = -2 f'(s)``.
+    ``_profile(s)`` and ``_gradient_factor(s) = -2 f'(s)``. ``get_params`` /
+    ``set_params`` (scikit-learn's estimator protocol) check the new values
+    against ``_parameter_constraints`` before any changes.
     """
+
+    _parameter_constraints = {
+        "variance": [Interval(Real, 0, None, closed="neither")],
+        "length_scale": [Check(_check_length_scale,
+                               "a positive number or a 1-D array of them")],
+        "variance_bounds": [Check(lambda v, name: check_bounds(v, name), "(low, high) bounds")],
+        "length_scale_bounds": [Check(lambda v, name: check_bounds(v, name),
+                                      "(low, high) bounds")],
+    }
 
     kind = -1
     name = ""
@@ -87,13 +111,7 @@ class Stationary:
         variance = float(self.variance)
         if not (0 < variance < np.inf):
             raise ValueError(f"variance must be positive and finite, got {self.variance!r}")
-        ls = np.asarray(self.length_scale)
-        if ls.dtype.kind not in "iuf":
-            raise TypeError(f"length_scale must hold real numbers, got dtype {ls.dtype}")
-        ls = np.atleast_1d(ls.astype(np.float64))
-        if ls.ndim != 1 or not (np.isfinite(ls).all() and (ls > 0).all()):
-            raise ValueError(
-                f"length_scale must be a positive number or a 1-D array of them, got {self.length_scale!r}")
+        ls = _check_length_scale(self.length_scale)
         check_bounds(self.variance_bounds, "variance_bounds")
         check_bounds(self.length_scale_bounds, "length_scale_bounds")
         return variance, ls
@@ -157,51 +175,6 @@ class Stationary:
         return type(self)(float(np.exp(theta[0])), ls if self.anisotropic else float(ls[0]),
                           variance_bounds=self.variance_bounds,
                           length_scale_bounds=self.length_scale_bounds)
-
-    def get_params(self, deep: bool = True) -> dict:
-        """The constructor arguments (scikit-learn's estimator protocol).
-
-        Parameters
-        ----------
-        deep : bool, default=True
-            Ignored (a kernel holds no sub-estimators); kept for scikit-learn.
-
-        Returns
-        -------
-        params : dict
-            ``variance``, ``length_scale``, ``variance_bounds`` and
-            ``length_scale_bounds``, as set (not validated).
-        """
-        return {"variance": self.variance, "length_scale": self.length_scale,
-                "variance_bounds": self.variance_bounds,
-                "length_scale_bounds": self.length_scale_bounds}
-
-    def set_params(self, **params):
-        """Set constructor arguments (scikit-learn's estimator protocol).
-
-        Values are checked when the kernel is next used, not here.
-
-        Parameters
-        ----------
-        **params
-            New values of the names :meth:`get_params` returns.
-
-        Returns
-        -------
-        self
-            The kernel, to allow chaining.
-
-        Raises
-        ------
-        ValueError
-            If a name is not one of :meth:`get_params`'s.
-        """
-        valid = self.get_params()
-        for key, value in params.items():
-            if key not in valid:
-                raise ValueError(f"invalid parameter {key!r} for {type(self).__name__}")
-            setattr(self, key, value)
-        return self
 
     def __repr__(self):
         ls = np.asarray(self.length_scale)

@@ -10,11 +10,14 @@ where the model has no evidence. Each model provides the hooks ``_fitted``,
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import logit
 
 from .._docfill import fill_doc
+from .._params import ParamsMixin
 from .._validation import (as_numeric, as_point, as_points, check_bool, check_probability,
                            check_resolution)
 
@@ -68,11 +71,14 @@ def scan_observations(points: ArrayLike, origin: ArrayLike, hit: ArrayLike | Non
 
 
 @fill_doc()
-class MapProtocol:
+class MapProtocol(ParamsMixin):
     """Mix-in: the map protocol (:class:`occgp.maps.OccupancyMap`) of a 2D estimator.
 
     The class must define ``occupancy_threshold`` (a constructor parameter),
     ``_check_params()``, ``fit`` and ``predict_proba``, and the hooks below.
+    Its ``get_params`` / ``set_params`` are :class:`occgp._params.ParamsMixin`'s
+    (before scikit-learn's ``BaseEstimator``), which checks new values with
+    ``_check_params`` before any changes.
     """
 
     #: The dimensions of the points :meth:`insert_scan` takes.
@@ -264,19 +270,16 @@ class MapProtocol:
         TypeError
             If a value has the wrong type; nothing is changed then.
         """
-        old = self.get_params(deep=False)
-        inner = {k: v.get_params(deep=False) for k, v in old.items()
-                 if hasattr(v, "get_params") and not isinstance(v, type)}
-        try:
-            super().set_params(**params)
-            self._check_params()
-        except (TypeError, ValueError):
-            super().set_params(**old)
-            for k, values in inner.items():
-                if hasattr(old[k], "set_params"):
-                    old[k].set_params(**values)
-            raise
-        return self
+        return super().set_params(**params)
+
+    def _check_params_together(self, params):
+        """Every parameter checked by the class's ``_check_params``, on a shallow copy
+        that holds the new values (the map itself changes only once they pass)."""
+        trial = copy.copy(self)
+        for name, value in params.items():
+            setattr(trial, name, value)
+        trial._check_params()
+        return params
 
     def to_octree(self, resolution: float | None = None):
         """The map as an :class:`~occgp.OccupancyOctree`: its posterior as log-odds.

@@ -17,6 +17,7 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from .._docfill import fill_doc
+from .._params import DEFAULT_RESOLUTION
 from .._validation import as_points, check_probability, check_real
 from ._io import gp_fitted, read_gp, write_gp
 from ..maps import register
@@ -330,7 +331,7 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
     array([0.4, 0.7, 0.5])
     """
 
-    def __init__(self, resolution: float = 0.1, prob_hit: float = 0.7,
+    def __init__(self, resolution: float = DEFAULT_RESOLUTION, prob_hit: float = 0.7,
                  prob_miss: float = 0.4, clamping_min: float = 0.1192,
                  clamping_max: float = 0.971, occupancy_threshold: float = 0.5):
         self.resolution = resolution

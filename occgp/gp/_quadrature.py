@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from scipy import integrate
 
 from .._docfill import fill_doc
+from .._params import ParamsMixin
 
 __all__ = ["ClenshawCurtis", "Simpson", "clenshaw_curtis", "simpson"]
 
@@ -141,7 +142,7 @@ def _check_kernel_class(kernel):
     return kernel
 
 
-class Rule:
+class Rule(ParamsMixin):
     """Orders 3, 5, 9, ... up to `max_order`, each with its calibrated reach."""
 
     _family = None
@@ -150,6 +151,10 @@ class Rule:
     def __init__(self, tol: float = 1e-10, max_order: int = 257):
         self.tol = tol
         self.max_order = max_order
+
+    def _check_params_together(self, params):
+        type(self)(**params)._checked()
+        return params
 
     def _checked(self):
         if isinstance(self.tol, bool) or not isinstance(self.tol, numbers.Real) \
@@ -276,21 +281,6 @@ class Rule:
         k = int(np.searchsorted(reach, length)) if reach[-1] >= length else len(orders) - 1
         panels = 1 if reach[k] >= length else int(np.ceil(length / reach[k]))
         return orders[k], panels
-
-    def get_params(self, deep: bool = True) -> dict:
-        """The constructor arguments (scikit-learn's estimator protocol).
-
-        Parameters
-        ----------
-        deep : bool, default=True
-            Ignored (a rule holds no sub-estimators); kept for scikit-learn.
-
-        Returns
-        -------
-        params : dict
-            ``tol`` and ``max_order``, as set (not validated).
-        """
-        return {"tol": self.tol, "max_order": self.max_order}
 
     def __repr__(self):
         return f"{type(self).__name__}(tol={self.tol!r}, max_order={self.max_order!r})"

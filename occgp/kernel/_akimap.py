@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from numbers import Integral
+from numbers import Integral, Real
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -10,6 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..io import _npz as _npz_io
 from .._docfill import fill_doc
 from .._kernel import _akimap_bandwidths
+from .._params import DEFAULT_RESOLUTION, Check, Interval, Options, deprecated_alias
 from .._validation import as_point, as_points, check_real, n_threads
 from ..maps import register
 from ._kernel_map import KernelMapBase
@@ -53,13 +55,15 @@ class AKIMap(KernelMapBase):
     max_search_range : float, default=None
         R, the largest neighbour search radius, in metres; None means the
         free-sample distance in use (as the reference code).
-    sensor_range : float, default=30.0
-        Distance at which the search radius reaches R, in metres (it sets the
-        bandwidths' schedule only: `max_range` limits the beams). The paper
+    schedule_range : float, default=30.0
+        The paper's sensor range in the bandwidth schedule ``r(d)``: the
+        distance at which the search radius reaches R, in metres (it sets the
+        bandwidths' schedule only: `max_range` limits the beams; called
+        ``sensor_range`` before, a name deprecated for one release). The paper
         grows the radius "from the voxel size at the origin to R at max
         range": 30 m, the useful range of the LiDARs the defaults are chosen
         for, where the reference code has its simulated sensor's 8 m (use
-        ``sensor_range=8`` for the la3dm scenes). On the ``hku_mb`` validation
+        ``schedule_range=8`` for the la3dm scenes). On the ``hku_mb`` validation
         split (see Notes) 30 m against 8 m: accuracy at 0.5 0.933 -> 0.931,
         AUC 0.991 -> 0.991 at 0.1 m, 0.929 -> 0.931 and 0.978 -> 0.979 at
         0.2 m, in 30 % less time (fewer neighbours in the searches near the
@@ -119,7 +123,7 @@ class AKIMap(KernelMapBase):
     start half a distance from the origin, cells already holding a sample
     are skipped). Each sample gets its own bandwidth matrix H:
 
-    * the same-label samples within ``r(d) = min((R - resolution) / sensor_range
+    * the same-label samples within ``r(d) = min((R - resolution) / schedule_range
       * d + resolution, R)`` of it (d its distance to the origin,
       ``R = max_search_range``) give the scatter about it, ``Sigma = S / (n - 2)
       + 0.001 I`` (n counts the sample itself); with ``n <= 2`` the kernel is
@@ -188,14 +192,26 @@ class AKIMap(KernelMapBase):
     """
 
     VARIANTS = ("occgp", "published")
+    _parameter_constraints = {
+        **KernelMapBase._parameter_constraints,
+        "free_sample_distance": [None, Interval(Real, 0, None, closed="neither")],
+        "max_search_range": [None, Interval(Real, 0, None, closed="neither")],
+        "schedule_range": [Interval(Real, 0, None, closed="neither")],
+        "variant": [Options(VARIANTS)],
+        "bandwidth_floor": [None, Interval(Real, 0, None, closed="left")],
+        "random_state": [Check(lambda value, name: _check_random_state(value),
+                               "None, a non-negative int or a numpy.random.Generator")],
+    }
+    _deprecated_params = {"sensor_range": "schedule_range"}
+    sensor_range = deprecated_alias("schedule_range", "sensor_range")
 
     def __init__(
         self,
-        resolution: float = 0.1,
+        resolution: float = DEFAULT_RESOLUTION,
         *,
         free_sample_distance: float | None = None,
         max_search_range: float | None = None,
-        sensor_range: float = 30.0,
+        schedule_range: float = 30.0,
         variant: str = "occgp",
         bandwidth_floor: float | None = None,
         prior: float = 0.001,
@@ -204,11 +220,15 @@ class AKIMap(KernelMapBase):
         n_jobs: int | None = None,
         max_cells_per_update: int = MAX_CELLS_PER_UPDATE,
         occupancy_threshold: float = 0.5,
+        **deprecated: Any,
     ) -> None:
+        if deprecated:
+            schedule_range = self._renamed(deprecated, schedule_range=schedule_range)[
+                "schedule_range"]
         self._resolution = resolution
         self.free_sample_distance = free_sample_distance
         self.max_search_range = max_search_range
-        self.sensor_range = sensor_range
+        self.schedule_range = schedule_range
         self.variant = variant
         self.bandwidth_floor = bandwidth_floor
         self.prior = prior
@@ -231,7 +251,8 @@ class AKIMap(KernelMapBase):
         r = params["max_search_range"]
         out["max_search_range"] = None if r is None else check_real(r, "max_search_range",
                                                                     low=0.0)
-        out["sensor_range"] = check_real(params["sensor_range"], "sensor_range", low=0.0)
+        out["schedule_range"] = check_real(params["schedule_range"], "schedule_range",
+                                           low=0.0)
         variant = params["variant"]
         if not isinstance(variant, str) or variant not in self.VARIANTS:
             raise ValueError(f"variant must be one of {self.VARIANTS}, got {variant!r}")
@@ -429,7 +450,7 @@ class AKIMap(KernelMapBase):
         cell = search_cell(xs, radius)
         pairs, out = _akimap_bandwidths(np.ascontiguousarray(xs, dtype=np.float64),
                                         np.ascontiguousarray(lab, dtype=np.uint8), org,
-                                        p.resolution, radius, p.sensor_range,
+                                        p.resolution, radius, p.schedule_range,
                                         p.variant == "published", p.floor,
                                         n_threads(p.n_jobs), cell,
                                         float(p.max_cells_per_update))

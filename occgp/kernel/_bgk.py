@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from numbers import Real
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
+from .._params import DEFAULT_RESOLUTION, Interval
 from .._validation import check_real
 from ..maps import register
 from ._kernel_map import KernelMapBase
@@ -137,7 +140,7 @@ class BGKMap(KernelMapBase):
 
     def __init__(
         self,
-        resolution: float = 0.1,
+        resolution: float = DEFAULT_RESOLUTION,
         *,
         ell: float | None = None,
         sf2: float = 1.0,
@@ -164,6 +167,13 @@ class BGKMap(KernelMapBase):
         self._beams = (0, 0)
 
     _SUPPORT_HINT = "a smaller ell"
+    _parameter_constraints = {
+        **KernelMapBase._parameter_constraints,
+        "ell": [None, Interval(Real, 0, None, closed="neither")],
+        "sf2": [Interval(Real, 0, None, closed="neither")],
+        "free_resolution": [None, Interval(Real, 0, None, closed="neither")],
+        "ds_resolution": [None, Interval(Real, 0, None, closed="neither")],
+    }
 
     def _accepted(self) -> None:
         self.last_beams_ = self._beams

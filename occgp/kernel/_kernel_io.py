@@ -3,13 +3,14 @@
 Files are NumPy ``.npz`` archives of plain arrays in the ``occgp.kernel_map``
 format (described in :meth:`KernelMapFiles.save`), written and checked by
 :mod:`occgp.io._npz`; files written before ``occupancy_threshold`` existed lack
-that parameter and read with its default. Pickles rebuild a map from its
+that parameter and read with its default; parameters renamed since a file was
+written (AKIMap's ``sensor_range``, now ``schedule_range``) read under their new
+names. Pickles rebuild a map from its
 parameters and cells through :func:`restore_kernel_map`.
 """
 
 from __future__ import annotations
 
-import inspect
 import os
 from typing import TYPE_CHECKING, Any
 
@@ -38,6 +39,8 @@ class KernelMapFiles:
 
     if TYPE_CHECKING:  # provided by the class this is mixed into
         def get_params(self, deep: bool = True) -> dict: ...
+        @classmethod
+        def _get_param_names(cls) -> list[str]: ...
         def _validated_params(self, params: dict | None = None) -> Any: ...
         def _cells_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
         def _set_cells(self, keys: np.ndarray, alpha: np.ndarray,
@@ -140,7 +143,8 @@ class KernelMapFiles:
         """
         name = cls.__name__
         source, _, params, arrays = read_kernel_file(cls, path)
-        expected = [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
+        params = renamed_params(cls, params)
+        expected = cls._get_param_names()
         missing = set(expected) - set(params)
         if set(params) - set(expected) or missing - set(cls._PARAMS_ADDED):
             raise ValueError(f"{source}: the parameters of a {name} must be "
@@ -189,12 +193,20 @@ def restore_kernel_map(cls, params, keys, alpha, beta, extra=None):
                          f"{beta.shape}")
     if not (np.isfinite(alpha).all() and np.isfinite(beta).all()):
         raise ValueError(f"corrupt pickle of a {cls.__name__}: alpha and beta must be finite")
-    m = cls(**params)
+    m = cls(**renamed_params(cls, params))
     m._set_cells(np.ascontiguousarray(keys), np.ascontiguousarray(alpha, dtype=np.float64),
                  np.ascontiguousarray(beta, dtype=np.float64))
     for name, value in (extra or {}).items():
         setattr(m, name, value)
     return m
+
+
+def renamed_params(cls, params: dict) -> dict:
+    """`params` of a file or pickle of `cls` with the parameters renamed since it was
+    written (``_deprecated_params``) under their new names, without a warning: the
+    files and pickles of earlier versions stay readable."""
+    renames = getattr(cls, "_deprecated_params", {})
+    return {renames.get(name, name): value for name, value in params.items()}
 
 
 def read_kernel_file(cls, path):

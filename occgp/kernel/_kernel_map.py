@@ -10,8 +10,8 @@ on bad input, the compiled accumulation, the queries and the protocol of
 
 from __future__ import annotations
 
-import inspect
 import warnings
+from numbers import Integral, Real
 from types import SimpleNamespace
 from typing import Any
 
@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
 from .._kernel import _KernelCells
+from .._params import Check, Interval, ParamsMixin
 from .._validation import (as_point, as_points, check_bool, check_n_jobs, check_probability,
                            check_real, n_threads)
 from ..octree._tree import OccupancyOctree
@@ -38,7 +39,7 @@ points : array-like of shape (n_points, 3)
 
 
 @fill_doc(query_points=_QUERY_POINTS)
-class KernelMapBase(KernelMapFiles, _KernelCells):
+class KernelMapBase(ParamsMixin, KernelMapFiles, _KernelCells):
     """What the kernel maps share: cells, Beta posteriors, parameters and queries.
 
     A subclass's ``__init__`` stores its arguments as attributes of the same
@@ -54,11 +55,17 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
     prior: float
     occupancy_threshold: float
 
-    # ------------------------------------------------------------ parameters
-    @classmethod
-    def _param_names(cls) -> tuple[str, ...]:
-        return tuple(p for p in inspect.signature(cls.__init__).parameters if p != "self")
+    #: What each parameter may be (see :mod:`occgp._params`); a subclass extends it.
+    _parameter_constraints: dict = {
+        "resolution": [Interval(Real, 0, None, closed="neither")],
+        "prior": [Interval(Real, 0, None, closed="neither")],
+        "n_jobs": [Check(check_n_jobs, "None or a non-zero int")],
+        "max_cells_per_update": [Interval(Integral, 1, None)],
+        "occupancy_threshold": [Interval(Real, 0, 1, closed="neither")],
+        "max_range": [None, Interval(Real, 0, None, closed="neither")],
+    }
 
+    # ------------------------------------------------------------ parameters
     def _build(self) -> None:
         """Check the stored parameters and set up the (empty) cells."""
         p = self._validated_params()
@@ -84,25 +91,18 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
 
     def _validated_params(self, params: dict | None = None) -> SimpleNamespace:
         """The checked parameters (the map's own by default) as attributes."""
-        return SimpleNamespace(**self._check_values(self.get_params() if params is None
-                                                    else params))
+        return SimpleNamespace(**self._check_values(self.get_params(deep=False)
+                                                    if params is None else params))
 
-    def get_params(self, deep: bool = True) -> dict:
-        """The constructor's parameters (scikit-learn's convention).
-
-        Parameters
-        ----------
-        deep : bool, default=True
-            Accepted for scikit-learn; a kernel map holds no nested estimator.
-
-        Returns
-        -------
-        params : dict
-            Parameter name to value, as stored (``type(m)(**m.get_params())``
-            builds an empty map of the same kind, as :func:`sklearn.base.clone`
-            does).
-        """
-        return {name: getattr(self, name) for name in self._param_names()}
+    def _check_params_together(self, params: dict) -> dict:
+        """Every parameter checked (:meth:`_check_values`); `resolution` changes only
+        while the map holds no cell."""
+        checked = self._check_values(params)
+        if checked["resolution"] != self._cell_edge and self.num_cells:
+            raise ValueError(f"resolution cannot change while the map holds cells (it is "
+                             f"{self.resolution!r}, got {params['resolution']!r}); the map "
+                             f"is unchanged")
+        return checked
 
     def set_params(self, **params: Any):
         """Change parameters (scikit-learn's convention).
@@ -135,27 +135,16 @@ class KernelMapBase(KernelMapFiles, _KernelCells):
         >>> m.get_params()["ell"], m.occupancy_threshold
         (0.3, 0.7)
         """
-        names = self._param_names()
-        for name in params:
-            if name not in names:
-                raise ValueError(f"{name!r} is not a parameter of {type(self).__name__}; "
-                                 f"its parameters are {', '.join(names)}")
-        p = self._validated_params({**self.get_params(), **params})
-        if "resolution" in params and p.resolution != self._cell_edge and self.num_cells:
-            raise ValueError(f"resolution cannot change while the map holds cells (it is "
-                             f"{self.resolution!r}, got {params['resolution']!r}); the map "
-                             f"is unchanged")
-        self._set_checked_params(params, p)
-        return self
+        return super().set_params(**params)
 
-    def _set_checked_params(self, params: dict, p: SimpleNamespace) -> None:
-        """Store `params`, checked (all of them, as `p`)."""
+    def _set_checked_params(self, params: dict, checked: dict) -> None:
+        """Store `params`, as given (all of them checked, as `checked`)."""
         for name, value in params.items():
             if name == "resolution":
                 self._resolution = value
-                if p.resolution != self._cell_edge:
-                    self._setup(p.resolution)
-                    self._cell_edge = p.resolution
+                if checked["resolution"] != self._cell_edge:
+                    self._setup(checked["resolution"])
+                    self._cell_edge = checked["resolution"]
             else:
                 setattr(self, name, value)
 

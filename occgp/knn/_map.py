@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
@@ -30,6 +31,8 @@ from ._scores import (
     fixed_log_odds, history_knn_distances, logodds32, mean_knn_distances, point_log_odds,
 )
 from .._octree import _welford
+from .._params import (DEFAULT_RESOLUTION, Check, Interval, Options, ParamsMixin,
+                       check_renamed, deprecated_alias)
 from .._status import Status
 from ..octree._superray_policy import adaptive_threshold
 from .._validation import (
@@ -44,7 +47,10 @@ __all__ = ["KNNMap", "check_knn_params", "check_score_stats", "mean_knn_distance
 
 #: The parameters of the k-NN model, as :class:`KNNMap` takes them (``cdf`` and
 #: ``n_jobs`` aside).
-KNN_PARAMS = ("k", "p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "p_t", "sensor_range")
+KNN_PARAMS = ("k", "p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "occupancy_threshold",
+              "max_range")
+#: The names the k-NN model's parameters had before (deprecated), with their new names.
+RENAMED = {"p_t": "occupancy_threshold", "sensor_range": "max_range"}
 CDFS = ("normal", "truncated")
 #: Where the mean and standard deviation of the scores come from: Welford's running
 #: statistics, or the whole data set's (fixed for the run).
@@ -69,21 +75,26 @@ def check_knn_params(params: dict[str, Any]) -> dict[str, Any]:
     * ``0 < p_min <= p_m <= p_m_out < 0.5``: a ray whose end point lies beyond
       the sensor range is less trustworthy, so its miss probability ``p_m_out``
       is nearer 0.5 than ``p_m``; both lie above the lower clamp;
-    * ``p_min <= p_t <= p_max < 1``;
-    * ``sensor_range``: finite, in (0, 1e15] metres.
+    * ``p_min <= occupancy_threshold <= p_max < 1``;
+    * ``max_range``: finite, in (0, 1e15] metres.
+
+    The names ``p_t`` and ``sensor_range`` (before ``occupancy_threshold`` and
+    ``max_range``) are deprecated: they still work for one release, with a
+    DeprecationWarning.
     """
+    params = check_renamed(RENAMED, params, owner="check_knn_params")
     out = dict(params)
     out["k"] = check_int(params["k"], "k", low=1, high=MAX_K)
-    for name in ("p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "p_t"):
+    for name in ("p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "occupancy_threshold"):
         out[name] = check_real(params[name], name, low=0.0, high=1.0)
-    out["sensor_range"] = check_real(params["sensor_range"], "sensor_range", low=0.0,
-                                     high=MAX_RANGE, high_open=False)
+    out["max_range"] = check_real(params["max_range"], "max_range", low=0.0,
+                                  high=MAX_RANGE, high_open=False)
     rules = [
         ("p_u", "p_l", "p_u >= p_l"),
         ("p_m", "p_min", "p_m >= p_min"),
         ("p_m_out", "p_m", "p_m_out >= p_m"),
-        ("p_t", "p_min", "p_t >= p_min"),
-        ("p_max", "p_t", "p_max >= p_t"),
+        ("occupancy_threshold", "p_min", "occupancy_threshold >= p_min"),
+        ("p_max", "occupancy_threshold", "p_max >= occupancy_threshold"),
     ]
     for big, small, rule in rules:
         if out[big] < out[small]:
@@ -141,10 +152,10 @@ def _check_all(params: dict[str, Any]) -> dict[str, Any]:
 
 @register("knn", formats=(".bt", ".ot"),
           description="The k-NN inverse sensor model on an octree (Miao et al.)")
-class KNNMap(OccupancyOctree):
+class KNNMap(ParamsMixin, OccupancyOctree):
     """Occupancy octree updated by the k-NN inverse sensor model (Miao et al.).
 
-    Per scan (:meth:`insert_scan`), the points within `sensor_range` of the
+    Per scan (:meth:`insert_scan`), the points within `max_range` of the
     origin (the *near* points, by liboctomap's own range test) are scored by
     ``s``, the mean distance to their `k` nearest neighbours among the scan's
     near points (:class:`scipy.spatial.cKDTree`). The mean and standard
@@ -162,11 +173,11 @@ class KNNMap(OccupancyOctree):
     * a cell holding near points: :math:`\\sum_j \\operatorname{logit} p(s_j)`
       over its points (may be negative: noise lowers occupancy);
     * else a cell crossed by a ray to a near point: ``l_in = logit(p_m)``;
-    * else a cell crossed only by rays to points beyond `sensor_range`, which
+    * else a cell crossed only by rays to points beyond `max_range`, which
       are cut there (their end cells are not updated): ``l_out =
       logit(p_m_out)``.
 
-    Cells are occupied at ``p >= p_t``. Rays are traversed as liboctomap's
+    Cells are occupied at ``p >= occupancy_threshold``. Rays are traversed as liboctomap's
     ``computeRayKeys`` traverses them, by occgp's compiled scan pipeline: the
     culling region and super rays apply (free updates are <= 0, so the
     culling region's fully free cells are left as they are) and give the same
@@ -174,7 +185,7 @@ class KNNMap(OccupancyOctree):
 
     Parameters
     ----------
-    resolution : float, default=0.1
+    resolution : float, default=DEFAULT_RESOLUTION (0.1)
         Edge length of the smallest cells, metres (as for
         :class:`~occgp.OccupancyOctree`).
     k : int, default=1
@@ -188,12 +199,18 @@ class KNNMap(OccupancyOctree):
         Miss probability of cells crossed only by rays cut at the sensor range
         (``l_out``); ``0 < p_min <= p_m <= p_m_out < 0.5``.
     p_min, p_max : float, default=0.02, 0.98
-        Clamping bounds (probabilities); ``p_min <= p_t <= p_max < 1``.
-    p_t : float, default=0.5
-        Occupancy threshold.
-    sensor_range : float, default=4.0
-        The range s_c, metres: points farther from the origin are not inserted,
-        their rays are cut here. In (0, 1e15].
+        Clamping bounds (probabilities); ``p_min <= occupancy_threshold <=
+        p_max < 1``.
+    occupancy_threshold : float, default=0.5
+        Cells are occupied at a probability of at least this (the paper's
+        ``p_t``; the name ``p_t`` is deprecated).
+    max_range : float, default=4.0
+        The sensor range s_c, metres: rays longer than this are cut here,
+        their end cells are not marked occupied and the points are nobody's
+        neighbour (the meaning of :meth:`occgp.OccupancyOctree.insert_scan`'s
+        `max_range`, whose crossed cells here get ``p_m_out``). Finite, in
+        (0, 1e15] (None, no limit, is not allowed: the model needs s_c). The
+        name ``sensor_range`` is deprecated.
     cdf : {"normal", "truncated"}, default="normal"
         F: the normal CDF of the paper, or the normal truncated at s = 0 (the
         scores are distances), as the authors' code does.
@@ -272,21 +289,41 @@ class KNNMap(OccupancyOctree):
     _kind = "octree"
     #: The parameter that limits the range of the scans: farther points are not
     #: inserted and their rays are cut there (``occgp map`` reports them).
-    RANGE_PARAM = "sensor_range"
+    RANGE_PARAM = "max_range"
+    _parameter_constraints = {
+        "resolution": [Check(check_resolution, "a resolution in metres")],
+        "k": [Interval(Integral, 1, MAX_K)],
+        **{name: [Interval(Real, 0, 1, closed="neither")]
+           for name in ("p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max",
+                        "occupancy_threshold")},
+        "max_range": [Interval(Real, 0, MAX_RANGE, closed="right")],
+        "cdf": [Options(CDFS)],
+        "score_stats": [Check(check_score_stats, "None or a (mean, std) pair")],
+        "history": [Interval(Integral, 0, MAX_HISTORY)],
+        "n_jobs": [Check(check_n_jobs, "None or a non-zero int")],
+    }
+    _deprecated_params = RENAMED
+    p_t = deprecated_alias("occupancy_threshold", "p_t")
+    sensor_range = deprecated_alias("max_range", "sensor_range")
 
-    def __init__(self, resolution: float = 0.1, *, k: int = 1, p_u: float = 0.86,
-                 p_l: float = 0.38, p_m: float = 0.26, p_m_out: float = 0.38,
-                 p_min: float = 0.02, p_max: float = 0.98, p_t: float = 0.5,
-                 sensor_range: float = 4.0, cdf: str = "normal",
-                 score_stats: tuple[float, float] | None = None, history: int = 0,
-                 n_jobs: int | None = None) -> None:
+    def __init__(self, resolution: float = DEFAULT_RESOLUTION, *, k: int = 1,
+                 p_u: float = 0.86, p_l: float = 0.38, p_m: float = 0.26,
+                 p_m_out: float = 0.38, p_min: float = 0.02, p_max: float = 0.98,
+                 occupancy_threshold: float = 0.5, max_range: float = 4.0,
+                 cdf: str = "normal", score_stats: tuple[float, float] | None = None,
+                 history: int = 0, n_jobs: int | None = None, **deprecated: Any) -> None:
+        if deprecated:
+            new = self._renamed(deprecated, occupancy_threshold=occupancy_threshold,
+                                max_range=max_range)
+            occupancy_threshold, max_range = new["occupancy_threshold"], new["max_range"]
         params = _check_all({"resolution": resolution, "k": k, "p_u": p_u, "p_l": p_l,
                               "p_m": p_m, "p_m_out": p_m_out, "p_min": p_min, "p_max": p_max,
-                              "p_t": p_t, "sensor_range": sensor_range, "cdf": cdf,
+                              "occupancy_threshold": occupancy_threshold,
+                              "max_range": max_range, "cdf": cdf,
                               "score_stats": score_stats, "history": history,
                               "n_jobs": n_jobs})
         self._build(params, _CLASS_HIT, _CLASS_MISS, params["p_min"], params["p_max"],
-                    params["p_t"])
+                    params["occupancy_threshold"])
         self._scores = (0, 0.0, 0.0)       # Welford: count, mean, sum of squared deviations
         self._history: list[NDArray[np.float64]] = []   # the last `history` near clouds
 
@@ -301,7 +338,7 @@ class KNNMap(OccupancyOctree):
         Any constructor parameter but ``resolution`` (accepted only with the
         map's own value) may change; the values are checked together as the
         constructor checks them. The cells keep their log-odds: new values apply
-        to later scans, and ``p_min``, ``p_max`` and ``p_t`` also to later
+        to later scans, and ``p_min``, ``p_max`` and ``occupancy_threshold`` also to later
         clamps and to the queries that compare with the threshold. The score
         statistics (Welford's) are kept, and so are the previous scans' clouds
         up to the new `history` (the latest ones; none with 0); a larger
@@ -328,23 +365,27 @@ class KNNMap(OccupancyOctree):
         Examples
         --------
         >>> from occgp import KNNMap
-        >>> m = KNNMap(0.1).set_params(k=3, p_t=0.6)
+        >>> m = KNNMap(0.1).set_params(k=3, occupancy_threshold=0.6)
         >>> m.k, m.occupancy_threshold
         (3, 0.6)
         """
-        unknown = [name for name in params if name not in self._params]
-        if unknown:
-            raise ValueError(f"{unknown[0]!r} is not a parameter of KNNMap (parameters: "
-                             f"{', '.join(self._params)})")
-        if "resolution" in params and params["resolution"] != self.resolution:
+        return super().set_params(**params)
+
+    def _get_param(self, name: str) -> Any:
+        return self._params[name]
+
+    def _check_params_together(self, params: dict[str, Any]) -> dict[str, Any]:
+        if params["resolution"] != self.resolution:
             raise ValueError(f"resolution is fixed at construction ({self.resolution!r}), "
                              f"got {params['resolution']!r}; build a new map instead")
-        new = _check_all({**self._params, **params})
-        self._set_sensor_model(_CLASS_HIT, _CLASS_MISS, new["p_min"], new["p_max"], new["p_t"])
-        self._params = new
-        if len(self._history) > new["history"]:
-            self._history = self._history[len(self._history) - new["history"]:]
-        return self
+        return _check_all(params)
+
+    def _set_checked_params(self, params: dict[str, Any], checked: dict[str, Any]) -> None:
+        self._set_sensor_model(_CLASS_HIT, _CLASS_MISS, checked["p_min"], checked["p_max"],
+                               checked["occupancy_threshold"])
+        self._params = checked
+        if len(self._history) > checked["history"]:
+            self._history = self._history[len(self._history) - checked["history"]:]
 
     @property
     def k(self) -> int:
@@ -372,9 +413,9 @@ class KNNMap(OccupancyOctree):
         return self._params["p_m_out"]
 
     @property
-    def sensor_range(self) -> float:
-        """The range s_c, metres."""
-        return self._params["sensor_range"]
+    def max_range(self) -> float:
+        """The sensor range s_c, metres: longer rays are cut here."""
+        return self._params["max_range"]
 
     @property
     def cdf(self) -> str:
@@ -410,7 +451,8 @@ class KNNMap(OccupancyOctree):
 
     @property
     def occupancy_threshold(self) -> float:
-        return self._params["p_t"]
+        """Cells are occupied at a probability of at least this."""
+        return self._params["occupancy_threshold"]
 
     @property
     def n_scores_(self) -> int:
@@ -436,7 +478,7 @@ class KNNMap(OccupancyOctree):
         ----------
         points : array-like of shape (n_points, 3)
             The cloud in the world frame, metres; finite. Points beyond
-            `sensor_range` only cut rays. An empty scan changes nothing.
+            `max_range` only cut rays. An empty scan changes nothing.
         origin : array-like of shape (3,)
             Sensor position, metres.
         method : {"auto", "plain", "culling", "superray", "superray+culling"}, \
@@ -452,7 +494,7 @@ default="auto"
             ray and are nobody's neighbour): the map, its score statistics and
             its history are those of the pre-filtered scan. Distances in double
             precision, as for :meth:`occgp.OccupancyOctree.insert_scan`; None: no
-            filter. Must be finite, >= 0 and less than `sensor_range`.
+            filter. Must be finite, >= 0 and less than `max_range`.
         stamp : float, default=None
             Stamp every cell the scan updates with this time, for
             :meth:`~occgp.OccupancyOctree.stamps` and
@@ -472,17 +514,17 @@ default="auto"
         ValueError
             If `points` is not of shape (n_points, 3), `origin` not of shape
             (3,), either holds NaN or inf, a ray end (after the cut at
-            `sensor_range`) lies outside the key range, the scan reaches more
+            `max_range`) lies outside the key range, the scan reaches more
             than :attr:`MAX_SCAN_CELLS` cells, `method` is invalid, or
             `min_range` is negative, not finite or not less than
-            `sensor_range`, or `stamp` is not finite. The map and its
+            `max_range`, or `stamp` is not finite. The map and its
             statistics are then unchanged.
         """
-        points, _, _ = prefilter(points, origin, min_range, self.sensor_range,
-                                 range_name="sensor_range")
+        points, _, _ = prefilter(points, origin, min_range, self.max_range,
+                                 range_name="max_range")
         method, threshold = self._check_method(method, superray_threshold)
         stamping = self._stamped(stamp)
-        scan = self._validated_scan(points, origin, self.sensor_range, "scan",
+        scan = self._validated_scan(points, origin, self.max_range, "scan",
                                     check_ends=False)
         if scan is None:
             return self
@@ -540,6 +582,8 @@ def _cell_updates(kinds: NDArray[np.uint8], point_cell: NDArray[np.int64],
 
 def _rebuild_knn(cls, params: dict, data: bytes, scores: tuple,
                  history: tuple = ()) -> KNNMap:
+    # a pickle of an earlier version names p_t and sensor_range: read them without a warning
+    params = {RENAMED.get(k, k): v for k, v in params.items()}
     tree = cls.from_bytes(data, **{k: v for k, v in params.items() if k != "resolution"})
     tree._scores = tuple(scores)
     tree._history = [np.array(c, dtype=np.float64).reshape(-1, 3) for c in history]

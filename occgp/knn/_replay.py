@@ -24,7 +24,9 @@ from .._status import Status
 from .._validation import (
     check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
 )
-from ._map import CDFS, MAX_HISTORY, MAX_K, MAX_RANGE, STATS, KNNMap, check_knn_params
+from ._map import (CDFS, MAX_HISTORY, MAX_K, MAX_RANGE, RENAMED, STATS, KNNMap,
+                   check_knn_params)
+from .._params import DEFAULT_RESOLUTION, check_renamed, deprecated_alias
 from ..octree._tree import unpack_keys
 
 __all__ = ["ScanReplay", "check_octomap_params"]
@@ -55,16 +57,18 @@ class ScanReplay:
     vectorised, clamped float32 update per cell, in scan order, for a batch of
     parameter combinations. The result equals, cell for cell and bit for bit,
     the map that :class:`~occgp.KNNMap` (or :class:`~occgp.OccupancyOctree` with
-    ``max_range=sensor_range``, liboctomap's ``insertPointCloud``) builds from
+    the same ``max_range``, liboctomap's ``insertPointCloud``) builds from
     the same scans.
 
     Parameters
     ----------
     scans : iterable of (points, origin)
         The data set, in insertion order.
-    resolution : float, default=0.1
-    sensor_range : float, default=4.0
-        The range s_c (OctoMap's ``max_range``), metres.
+    resolution : float, default=DEFAULT_RESOLUTION (0.1)
+    max_range : float, default=4.0
+        The sensor range s_c, metres: rays longer than this are cut there, as
+        ``KNNMap(max_range=)`` and OctoMap's ``max_range`` cut them (the name
+        ``sensor_range`` is deprecated).
     ks : sequence of int, default=(1,)
         The values of k to score points for.
     cdf : {"normal", "truncated"}, default="normal"
@@ -87,28 +91,36 @@ class ScanReplay:
     keys : ndarray of uint64, shape (n_cells,)
         Every cell the scans update (packed keys, x in the low 16 bits), sorted.
     centers : ndarray of shape (n_cells, 3)
-        Their centres, metres.
+        Their centers, metres.
     n_scans : int
     n_points : int
         Points in the scans; ``n_near`` of them within range.
     """
 
-    def __init__(self, scans: Iterable[Sequence[Any]], resolution: float = 0.1, *,
-                 sensor_range: float = 4.0, ks: Sequence[int] = (1,), cdf: str = "normal",
-                 stats: str = "online", history: int = 0,
-                 n_jobs: int | None = None) -> None:
+    def __init__(self, scans: Iterable[Sequence[Any]],
+                 resolution: float = DEFAULT_RESOLUTION, *, max_range: float = 4.0,
+                 ks: Sequence[int] = (1,), cdf: str = "normal", stats: str = "online",
+                 history: int = 0, n_jobs: int | None = None, **deprecated: Any) -> None:
+        for name in deprecated:
+            if name != "sensor_range":
+                raise TypeError(f"ScanReplay.__init__() got an unexpected keyword argument "
+                                f"{name!r}")
+        if deprecated:
+            max_range = check_renamed({"sensor_range": "max_range"},
+                                      {"max_range": max_range, **deprecated},
+                                      {"max_range": 4.0}, "ScanReplay")["max_range"]
         k_values = (ks,) if isinstance(ks, (int, np.integer)) else ks
         self.ks = tuple(check_int(k, "ks", low=1, high=MAX_K) for k in k_values)
         if not self.ks:
             raise ValueError("ks must hold at least one k")
         self.resolution = check_resolution(resolution)
-        self.sensor_range = check_real(sensor_range, "sensor_range", low=0.0,
-                                       high=MAX_RANGE, high_open=False)
+        self.max_range = check_real(max_range, "max_range", low=0.0,
+                                    high=MAX_RANGE, high_open=False)
         self.cdf = check_choice(cdf, "cdf", CDFS)
         self.stats = check_choice(stats, "stats", STATS)
         self.history = check_int(history, "history", low=0, high=MAX_HISTORY)
         workers = n_threads(check_n_jobs(n_jobs))
-        probe = KNNMap(self.resolution, sensor_range=self.sensor_range)
+        probe = KNNMap(self.resolution, max_range=self.max_range)
         local = []
         self.n_points = self.n_near = 0
         running = [(0, 0.0, 0.0)] * len(self.ks)
@@ -118,7 +130,7 @@ class ScanReplay:
                 points, origin = scan
             except (TypeError, ValueError):
                 raise TypeError(f"scans[{i}] must be a (points, origin) pair") from None
-            got = probe._validated_scan(points, origin, self.sensor_range, "scan",
+            got = probe._validated_scan(points, origin, self.max_range, "scan",
                                         check_ends=False)
             if got is None:
                 continue
@@ -186,6 +198,8 @@ class ScanReplay:
         count, mean, m2 = self._final_stats[self.ks.index(k)]
         return (mean, math.sqrt(m2 / count) if count > 0 else 0.0)
 
+    sensor_range = deprecated_alias("max_range", "sensor_range")
+
     @property
     def centres(self) -> NDArray[np.float64]:
         """Deprecated name of :attr:`centers`."""
@@ -208,8 +222,9 @@ class ScanReplay:
         params : sequence of dict
             One dict per combination, holding ``k`` (one of :attr:`ks`),
             ``p_u``, ``p_l``, ``p_m``, ``p_m_out``, ``p_min`` and ``p_max``
-            (checked as :func:`check_knn_params` checks them, with ``p_t`` and
-            ``sensor_range`` left out: the threshold does not change log-odds).
+            (checked as :func:`check_knn_params` checks them, with
+            ``occupancy_threshold`` and ``max_range`` left out: the threshold
+            does not change log-odds, the range is the replay's).
 
         Returns
         -------
@@ -249,7 +264,7 @@ class ScanReplay:
     def octomap_log_odds(self, params: Sequence[dict[str, Any]]) -> NDArray[np.float32]:
         """Like :meth:`knn_log_odds`, for OctoMap.
 
-        liboctomap's ``insertPointCloud`` with ``max_range=sensor_range``: one
+        liboctomap's ``insertPointCloud`` with the replay's ``max_range``: one
         update per cell and scan (a hit wins), clamped per scan.
 
         Parameters
@@ -291,8 +306,9 @@ class ScanReplay:
 
     def _check_knn(self, p: dict[str, Any], i: int) -> dict[str, Any]:
         try:
-            q = check_knn_params({"p_t": p.get("p_min", 0.5), "sensor_range": self.sensor_range,
-                                  **p})
+            p = check_renamed(RENAMED, p, owner="ScanReplay", stacklevel=4)
+            q = check_knn_params({"occupancy_threshold": p.get("p_min", 0.5),
+                                  "max_range": self.max_range, **p})
         except KeyError as exc:
             raise ValueError(f"params[{i}] lacks the k-NN parameter {exc}") from None
         except (TypeError, ValueError) as exc:
