@@ -58,6 +58,7 @@ from ._family2d import (
 from ._floorplan import FloorPlan2D, floor_plan_2d
 from ._outdoor import OutdoorScene, outdoor_scene
 from ._render import TEXTURES, StereoPair, StereoRig, render_stereo, scene_materials
+from ._rendered_sets import RenderedStereoDataset, rendered_stereo_datasets
 from ._sgbm import (
     disparity_to_points,
     match_stereo,
@@ -66,8 +67,6 @@ from ._sgbm import (
     PointErrors,
     rank_sgbm_sets,
     render_orbit,
-    rendered_stereo_datasets,
-    RenderedStereoDataset,
     SGBM_DEFAULT,
     SGBM_GRID,
     sgbm_parameter_sets,
@@ -78,13 +77,12 @@ from ._scenes import Scene, make_scene, structured_room, unstructured_room
 from ._simulate import LidarSensor, free_path, simulate_scans
 from ._stereo import (
     StereoCamera,
-    StereoDataset,
     TetrominoScene,
     simulate_stereo,
-    stereo_datasets,
     tetromino_scene,
     voxel_filter,
 )
+from ._stereo_sets import StereoDataset, stereo_datasets
 
 __all__ = [
     "Scan",
