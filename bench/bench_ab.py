@@ -71,12 +71,15 @@ def worker(root: str, scans_path: str) -> None:
         case = json.loads(line)
         cls = OccupancyOctree if case["kind"] == "octree" else GridMap
         options = {"mode": case["mode"], "method": case["method"]}
-        if "n_jobs" in inspect.signature(cls.insert_scan).parameters:
-            options["n_jobs"] = case["threads"]
+        params = {}
+        if "n_jobs" in inspect.signature(cls).parameters:
+            params["n_jobs"] = case["threads"]          # the map's (this release on)
+        elif "n_jobs" in inspect.signature(cls.insert_scan).parameters:
+            options["n_jobs"] = case["threads"]         # insert_scan's (older builds)
         elif case["threads"] != 1:      # an older build without threads
             print(json.dumps({"skipped": True}), flush=True)
             continue
-        m = cls(case["resolution"])
+        m = cls(case["resolution"], **params)
         t0 = time.perf_counter()
         for points, origin in sets[case["dataset"]]:
             m.insert_scan(points, origin, **options)

@@ -32,12 +32,12 @@ from occgp import AKIMap, BGKMap, GridMap, KNNMap, OccupancyOctree  # noqa: E402
 
 # (label, build(resolution, threads) -> map, insert options, whether it takes threads)
 METHODS = [
-    ("octree, scan (default)", lambda r, j: OccupancyOctree(r), {"mode": "scan"}, True),
-    ("octree, scan, plain (liboctomap)", lambda r, j: OccupancyOctree(r),
+    ("octree, scan (default)", lambda r, j: OccupancyOctree(r, n_jobs=j), {"mode": "scan"}, True),
+    ("octree, scan, plain (liboctomap)", lambda r, j: OccupancyOctree(r, n_jobs=j),
      {"mode": "scan", "method": "plain"}, False),
-    ("octree, ray", lambda r, j: OccupancyOctree(r), {"mode": "ray"}, True),
-    ("grid, scan", lambda r, j: GridMap(r), {"mode": "scan"}, True),
-    ("k-NN map", lambda r, j: KNNMap(r, sensor_range=20.0), {}, True),
+    ("octree, ray", lambda r, j: OccupancyOctree(r, n_jobs=j), {"mode": "ray"}, True),
+    ("grid, scan", lambda r, j: GridMap(r, n_jobs=j), {"mode": "scan"}, True),
+    ("k-NN map", lambda r, j: KNNMap(r, max_range=20.0), {}, True),
     ("BGK", lambda r, j: BGKMap(r, n_jobs=j), {}, True),
     ("AKIMap", lambda r, j: AKIMap(r, n_jobs=j, random_state=0), {}, True),
 ]
@@ -46,17 +46,10 @@ METHODS = [
 def run(scans, label, build, options, resolution, threads):
     m = build(resolution, threads)
     kwargs = dict(options)
-    if "n_jobs" in _insert_params(type(m)) and "n_jobs" not in m.get_params():
-        kwargs["n_jobs"] = threads
     t0 = time.perf_counter()
     for points, origin in scans:
         m.insert_scan(points, origin, **kwargs)
     return time.perf_counter() - t0
-
-
-def _insert_params(cls):
-    import inspect
-    return inspect.signature(cls.insert_scan).parameters
 
 
 def main(argv=None):

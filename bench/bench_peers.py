@@ -77,15 +77,18 @@ def _best(repeats, setup, fn):
 def _occgp_ops():
     from occgp import OccupancyOctree, __version__
 
-    def insert(tree, points, origin, n_jobs=None):
-        tree.insert_scan(points, origin, n_jobs=n_jobs)
+    def new(resolution, n_jobs=None):
+        return OccupancyOctree(resolution, n_jobs=n_jobs)
+
+    def insert(tree, points, origin):
+        tree.insert_scan(points, origin)
 
     def labels(tree, q):
         occupied, unknown = tree.is_occupied(q, return_unknown=True)
         return np.where(unknown, -1, occupied.astype(np.int32)).astype(np.int32)
 
     return dict(
-        version=__version__, new=OccupancyOctree, insert=insert,
+        version=__version__, new=new, insert=insert,
         occupancy=lambda tree, q: tree.occupancy(q), labels=labels,
         write_ot=lambda tree, path: tree.save(path), write_bt=lambda tree, path: tree.save(path),
         calls=dict(insert="insert_scan(points, origin)",
@@ -150,8 +153,8 @@ def run_worker(job):
             run["insert_s"] = t
             if package == "occgp":
                 for n in job["n_jobs"]:
-                    t, tree = _best(job["repeats"], lambda: ops["new"](res),
-                                    lambda tree: (ops["insert"](tree, points, origin, n), tree)[1])
+                    t, tree = _best(job["repeats"], lambda: ops["new"](res, n),
+                                    lambda tree: (ops["insert"](tree, points, origin), tree)[1])
                     run[f"insert_n_jobs_{n}_s"] = t
                     tree.save(f"{stem}_n_jobs_{n}.ot")
             tree = ops["new"](res)

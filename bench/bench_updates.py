@@ -28,7 +28,7 @@ cell). Times are wall clock, single thread; ratios, not absolute times, are
 what carries over between machines.
 
 Thread columns: each row's map is built twice side by side in the same process,
-scan by scan in turn, with ``insert_scan(n_jobs=1)`` and with ``n_jobs=2``
+scan by scan in turn, with ``n_jobs=1`` and with ``n_jobs=2`` (the maps' constructor)
 (``--threads``): ms per scan of each and their ratio (the speed-up of the
 threads); the threaded map is checked to equal the single-threaded one. The
 liboctomap ``insertPointCloud`` method (octree, ``mode="scan"``, ``"plain"``) runs
@@ -114,12 +114,12 @@ def run_occgp(scans, resolution, kind, mode, method, diagnose=False, threads=2):
     after the first, with ``n_jobs=threads``: its per-scan seconds and whether its
     map equals the first's; last, the first map's culling region cells per scan."""
     cls = OccupancyOctree if kind == "octree" else GridMap
-    m = cls(resolution)
-    mt = cls(resolution)
+    m = cls(resolution, n_jobs=1)
+    mt = cls(resolution, n_jobs=threads)
     total, proc, cells, rays, total_t, regions = [], [], [], [], [], []
     for points, origin in scans:
         t0 = time.perf_counter()
-        m.insert_scan(points, origin, mode=mode, method=method, n_jobs=1)
+        m.insert_scan(points, origin, mode=mode, method=method)
         total.append(time.perf_counter() - t0)
         stats = m.last_insert_
         proc.append(stats.get("preprocessing_seconds", 0.0))
@@ -127,7 +127,7 @@ def run_occgp(scans, resolution, kind, mode, method, diagnose=False, threads=2):
         rays.append(stats["rays"])
         regions.append(stats.get("region_cells", -1))  # "plain" scan mode: liboctomap
         t0 = time.perf_counter()
-        mt.insert_scan(points, origin, mode=mode, method=method, n_jobs=threads)
+        mt.insert_scan(points, origin, mode=mode, method=method)
         total_t.append(time.perf_counter() - t0)
     unnecessary = []
     if diagnose:

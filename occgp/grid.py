@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -11,11 +11,12 @@ from numpy.typing import ArrayLike
 from ._docfill import fill_doc
 from .io import _npz as _npz_io
 from ._grid import _Grid
-from .octree._logodds import SENSOR_MODEL, Leaves, LogOddsMap
+from .octree._logodds import N_JOBS, SENSOR_MODEL, Leaves, LogOddsMap
+from .octree._options import InsertOptions, resolve_options
 from .maps import register
 from ._scan_input import join_free, prefilter
 from .octree._superray_policy import adaptive_threshold
-from ._validation import check_bool, check_n_jobs, n_threads
+from ._validation import check_bool, n_threads
 
 if TYPE_CHECKING:
     from .octree._tree import OccupancyOctree
@@ -31,7 +32,7 @@ _FORMAT, _VERSIONS = "occgp.grid_map", (1,)
 
 @register("grid", formats=(".npz",),
           description="A uniform 3D log-odds grid (OctoMap's update, 3D-DDA)", resolution=0.1)
-@fill_doc(sensor_model=SENSOR_MODEL)
+@fill_doc(sensor_model=SENSOR_MODEL, n_jobs=N_JOBS)
 class GridMap(LogOddsMap, _Grid):
     """Probabilistic 3D occupancy map on a uniform grid (hashed cells).
 
@@ -55,6 +56,7 @@ class GridMap(LogOddsMap, _Grid):
         the range where liboctomap's single-precision ray traversal is sound
         (see the user guide's notes on single precision).
     {sensor_model}
+    {n_jobs}
 
     Attributes
     ----------
@@ -94,6 +96,22 @@ class GridMap(LogOddsMap, _Grid):
 
     _kind = "grid"
 
+    def __init__(
+        self,
+        resolution: float,
+        *,
+        prob_hit: float = 0.7,
+        prob_miss: float = 0.4,
+        clamping_min: float = 0.1192,
+        clamping_max: float = 0.971,
+        occupancy_threshold: float = 0.5,
+        n_jobs: int | None = None,
+    ) -> None:
+        self._build_checked(dict(
+            resolution=resolution, prob_hit=prob_hit, prob_miss=prob_miss,
+            clamping_min=clamping_min, clamping_max=clamping_max,
+            occupancy_threshold=occupancy_threshold, n_jobs=n_jobs))
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}(resolution={self.resolution!r}, num_cells={self.num_cells})"
 
@@ -105,11 +123,9 @@ class GridMap(LogOddsMap, _Grid):
         *,
         max_range: float | None = None,
         mode: str = "scan",
-        method: str = "auto",
-        superray_threshold: int = 20,
-        n_jobs: int | None = None,
-        min_range: float | None = None,
         free_points: ArrayLike | None = None,
+        options: InsertOptions | None = None,
+        **kwargs: Any,
     ) -> "GridMap":
         """Integrate one range scan into the map.
 
@@ -135,35 +151,25 @@ class GridMap(LogOddsMap, _Grid):
             as occupied, and every cell gets at most one update. ``"ray"`` counts
             rays: each cell gets ``n_free * l_miss + n_hit * l_hit`` (``n`` = how
             many rays pass through / end in it) and is clamped once.
-        method : {"auto", "plain", "culling", "superray", "superray+culling"}, \
-default="auto"
-            How the rays are traversed; every method gives the same map, cell
-            for cell: ``"auto"`` is ``"superray+culling"``, which backs off
-            from super rays while they do not pay; ``"plain"`` walks every
-            ray, ``"superray"`` groups rays into super rays, ``"culling"``
-            skips the scan's culling region of fully free cells (grown over
-            this grid's cells), after Kwon's dissertation, ch. 2. See
-            :meth:`OccupancyOctree.insert_scan` for the details.
-        superray_threshold : int, default=20
-            With the super-ray methods, the fewest end points a cell must hold
-            for its rays to be grouped; at least 1.
-        n_jobs : int or None, default=None
-            Threads that walk the scan's rays, every method (None: 1, -1: every
-            core; at most the cores, and about one per 64 rays). The threads'
-            counts are merged (integer sums) before the cells are updated, so
-            the grid and :attr:`last_insert_`'s counts are the same for every
-            `n_jobs`. As for :meth:`OccupancyOctree.insert_scan`, the threads'
-            dense counts share a limit of 2^24 cells of the scan's key box
-            (fewer threads where their boxes exceed it).
-        min_range : float, default=None
-            Points (and free points) nearer to `origin` than this cast no ray,
-            as for :meth:`OccupancyOctree.insert_scan` (double-precision
-            distances; None: no filter). Must be finite, >= 0 and less than
-            `max_range`.
         free_points : array-like of shape (n_free, 3), default=None
             End points of rays that only clear (their end cell gets nothing
             from them), joined to the same update as `points`, as for
             :meth:`OccupancyOctree.insert_scan`.
+        options : InsertOptions, default=None
+            Of :class:`~occgp.octree.InsertOptions`, the grid takes `method`
+            (every method gives the same map, cell for cell: ``"auto"`` is
+            ``"superray+culling"``, which backs off from super rays while they
+            do not pay; ``"plain"`` walks every ray, ``"superray"`` groups rays
+            into super rays, ``"culling"`` skips the scan's culling region of
+            fully free cells, grown over this grid's cells, after Kwon's
+            dissertation, ch. 2), `superray_threshold` and `min_range` (points
+            nearer to `origin` cast no ray), as for
+            :meth:`OccupancyOctree.insert_scan`; `discretize` and `bbox` must
+            keep their defaults.
+        **kwargs
+            Those fields by name, as in earlier releases. ``n_jobs=`` is
+            deprecated (a :class:`DeprecationWarning`; removed in the next
+            release): give `n_jobs` to the constructor or :meth:`set_params`.
 
         Returns
         -------
@@ -181,9 +187,9 @@ default="auto"
             crosses a cell border (too short for the single-precision
             traversal), the scan reaches more than :attr:`MAX_SCAN_CELLS`
             distinct cells (the same scans for every `n_jobs`), or
-            `max_range`, `mode`, `method`, `superray_threshold` or `n_jobs` is
-            invalid (`n_jobs` 0 or not an int); `min_range` is negative, not
-            finite or not less than `max_range`; `free_points` is not of shape
+            `max_range`, `mode` or an option is invalid (see
+            :class:`~occgp.octree.InsertOptions`); `min_range` is not less
+            than `max_range`; `free_points` is not of shape
             (n_free, 3), holds NaN or inf or has an end outside the key range.
             The map is then unchanged.
 
@@ -195,9 +201,11 @@ default="auto"
         >>> m.num_cells        # the cells the ray crosses, and its end cell
         10
         """
-        points, free64, _ = prefilter(points, origin, min_range, max_range, free_points)
-        threads = n_threads(check_n_jobs(n_jobs))
-        method, threshold = self._check_method(method, superray_threshold)
+        opts, n_jobs = resolve_options(options, kwargs, f"{type(self).__name__}.insert_scan",
+                                       ("method", "superray_threshold", "min_range"))
+        threads = self._threads() if n_jobs is None else n_threads(n_jobs)
+        points, free64, _ = prefilter(points, origin, opts.min_range, max_range, free_points)
+        method, threshold = self._check_method(opts.method, opts.superray_threshold)
         scan = join_free(
             self._validated_scan(points, origin, max_range, mode,
                                  check_ends=free64 is not None),
@@ -245,7 +253,9 @@ default="auto"
         :mod:`occgp.io._npz`): ``format`` ``"occgp.grid_map"``, ``version``
         1, ``class``, ``params`` (the constructor's parameters as JSON),
         ``keys`` (uint16, shape (n_cells, 3), the cells' keys in key order)
-        and ``log_odds`` (float32, shape (n_cells,)).
+        and ``log_odds`` (float32, shape (n_cells,)). `n_jobs`, a run-time
+        setting, is not written (:meth:`load` gives the map the default;
+        :meth:`set_params` changes it).
 
         The file is written atomically: a temporary file beside `path` replaces
         it once complete, so the previous file stays intact if the write fails.
@@ -276,7 +286,7 @@ default="auto"
         """
         keys, _, values = self._cells_sorted(False)
         _npz_io.write_npz(path, _FORMAT, _VERSIONS[-1], type(self).__name__,
-                          _npz_io.encode_value(self.get_params()),
+                          _npz_io.encode_value(_saved_params(self.get_params())),
                           {"keys": keys.astype(np.uint16), "log_odds": values.astype(np.float32)})
         return self
 
@@ -357,6 +367,12 @@ default="auto"
         self._set_cells(np.ascontiguousarray(keys, np.uint16),
                         np.ascontiguousarray(values, np.float32))
         return self
+
+def _saved_params(params: dict) -> dict:
+    """The parameters a grid's file stores: all but the run-time ``n_jobs`` (so that
+    files stay readable by the releases whose grid has no ``n_jobs``)."""
+    return {k: v for k, v in params.items() if k != "n_jobs"}
+
 
 def _rebuild(cls, params: dict, payload: bytes) -> GridMap:
     """Unpickle a :class:`GridMap`."""

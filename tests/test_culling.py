@@ -281,8 +281,8 @@ def test_unnecessary_traversals_are_the_visits_of_no_op_cells(method):
     expected = 0
     for p in points:
         for key in ray_keys(origin, p, 0.2):
-            centre = (np.array(key) - 32768 + 0.5) * 0.2
-            value = m.log_odds([centre])[0]
+            center = (np.array(key) - 32768 + 0.5) * 0.2
+            value = m.log_odds([center])[0]
             if key not in ends and value <= floor:
                 expected += 1
     stats = m._insert_batch(points, origin, -1.0, True, method == "culling", diagnose=True)
@@ -335,13 +335,13 @@ def test_region_spared_cells_and_traversed_cells_add_up_to_the_walk_without_regi
     if not on_borders:
         shift = np.array([0.0123, 0.0371, 0.0217])
         scans = [(points + shift, origin + shift) for points, origin in scans]
-    plain, culled = cls(0.1), cls(0.1)
+    plain, culled = cls(0.1, n_jobs=n_jobs), cls(0.1, n_jobs=n_jobs)
     without = (dict(method="plain") if mode == "ray"
                else dict(method="superray", superray_threshold=2**31 - 1))
     spared = hidden = 0
     for points, origin in scans:
-        plain.insert_scan(points, origin, mode=mode, n_jobs=n_jobs, **without)
-        culled.insert_scan(points, origin, mode=mode, method="culling", n_jobs=n_jobs)
+        plain.insert_scan(points, origin, mode=mode, **without)
+        culled.insert_scan(points, origin, mode=mode, method="culling")
         a, b = plain.last_insert_, culled.last_insert_
         assert a["region_spared_cells"] == 0 and a["rays"] == b["rays"]
         extra = b["traversed_cells"] + b["region_spared_cells"] - a["traversed_cells"]

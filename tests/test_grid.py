@@ -16,7 +16,7 @@ PARAMS = dict(prob_hit=0.75, prob_miss=0.35, clamping_min=0.12, clamping_max=0.9
 
 
 def random_scans(rng, n_scans=4, n_points=150, spread=2.0):
-    """Scans of random rays from origins scattered around the map's centre."""
+    """Scans of random rays from origins scattered around the map's center."""
     scans = []
     for _ in range(n_scans):
         origin = rng.uniform(-0.7, 0.7, 3)
@@ -34,7 +34,7 @@ def with_revisits(scans):
 
 
 def grid_values(grid):
-    """Cell key → float32 log-odds, keys computed from the centres as `leaf_values` does."""
+    """Cell key → float32 log-odds, keys computed from the centers as `leaf_values` does."""
     centers, sizes, values = grid.cells()
     assert np.all(sizes == grid.resolution)
     keys = np.floor(centers / grid.resolution).astype(np.int64) + MAX_VAL
@@ -159,7 +159,8 @@ def test_parameters_repr_and_empty_scan():
     assert m.resolution == 0.05 and m.prob_hit == 0.8 and m.prob_miss == 0.3
     assert m.clamping_min == 0.2 and m.clamping_max == 0.9 and m.occupancy_threshold == 0.6
     assert m.get_params() == dict(resolution=0.05, prob_hit=0.8, prob_miss=0.3,
-                                  clamping_min=0.2, clamping_max=0.9, occupancy_threshold=0.6)
+                                  clamping_min=0.2, clamping_max=0.9, occupancy_threshold=0.6,
+                                  n_jobs=None)
     assert m.key_range == (-32768 * 0.05, 32768 * 0.05)
     assert repr(m) == "GridMap(resolution=0.05, num_cells=0)"
     assert m.insert_scan(np.empty((0, 3)), [0, 0, 0]) is m and m.num_cells == 0

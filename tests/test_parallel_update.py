@@ -1,4 +1,4 @@
-"""The octree's tree update on several threads (``insert_scan(n_jobs=)``): the tree is
+"""The octree's tree update on several threads (``OccupancyOctree(n_jobs=)``): the tree is
 the one a single thread builds, node for node (the ``.ot`` bytes hold every node's
 value and children), on scans large enough to take the threaded path (at least 4096
 cells), over fresh, pruned, clamped and re-opened trees."""
@@ -27,10 +27,10 @@ def same_tree(a, b):
 @pytest.mark.parametrize("resolution", [0.05, 0.2])
 def test_threaded_tree_update_gives_the_single_thread_tree(mode, method, resolution):
     scans = room_scans()
-    trees = {n: OccupancyOctree(resolution) for n in (1, 2, 3, 8)}
+    trees = {n: OccupancyOctree(resolution, n_jobs=n) for n in (1, 2, 3, 8)}
     for points, origin in scans:
         for n, m in trees.items():
-            m.insert_scan(points, origin, mode=mode, method=method, n_jobs=n)
+            m.insert_scan(points, origin, mode=mode, method=method)
             assert m.last_insert_.get("updated_cells", 5000) >= 4096 or resolution == 0.2
         for n in (2, 3, 8):
             same_tree(trees[n], trees[1])
@@ -42,7 +42,7 @@ def test_pruned_clamped_and_reopened_trees_update_alike():
     the free space into large leaves; a block set free and a block set occupied, then
     scans through them, expand pruned leaves below and above the split depth."""
     scans = room_scans(n_points=4000, seed=1)
-    trees = [OccupancyOctree(0.1) for _ in range(3)]
+    trees = [OccupancyOctree(0.1, n_jobs=n) for n in (1, 2, 4)]
     ar = np.arange(32) * 0.1 + 0.05
     block = np.stack(np.meshgrid(ar - 1.6, ar - 1.6, ar * 0.25, indexing="ij"),
                      -1).reshape(-1, 3)
@@ -51,13 +51,13 @@ def test_pruned_clamped_and_reopened_trees_update_alike():
         m.set_cells(block[::7] + [0, 0, 0.8], 3.5)  # occupied cells above it
     for rep in range(6):
         for points, origin in scans[:2]:
-            for m, n in zip(trees, (1, 2, 4)):
-                m.insert_scan(points, origin, mode="ray" if rep % 2 else "scan", n_jobs=n)
+            for m in trees:
+                m.insert_scan(points, origin, mode="ray" if rep % 2 else "scan")
         same_tree(trees[1], trees[0])
         same_tree(trees[2], trees[0])
     # the opposite evidence re-opens clamped, pruned leaves
-    for m, n in zip(trees, (1, 2, 4)):
-        m.insert_scan(scans[3].points, scans[3].origin, n_jobs=n)
+    for m in trees:
+        m.insert_scan(scans[3].points, scans[3].origin)
     same_tree(trees[1], trees[0])
     same_tree(trees[2], trees[0])
 
@@ -68,11 +68,11 @@ def test_threaded_update_into_a_loaded_tree_and_with_a_box():
     for points, origin in scans[:2]:
         base.insert_scan(points, origin)
     data = base.to_bytes("bt")               # clamped, pruned, as a .bt file gives it
-    one, two = OccupancyOctree.from_bytes(data), OccupancyOctree.from_bytes(data)
+    one, two = OccupancyOctree.from_bytes(data), OccupancyOctree.from_bytes(data, n_jobs=2)
     box = [[-3.0, -2.0, 0.0], [2.0, 2.5, 1.5]]
     for points, origin in scans[2:]:
-        one.insert_scan(points, origin, bbox=box, n_jobs=1)
-        two.insert_scan(points, origin, bbox=box, n_jobs=2)
+        one.insert_scan(points, origin, bbox=box)
+        two.insert_scan(points, origin, bbox=box)
     same_tree(two, one)
 
 
@@ -85,11 +85,11 @@ def test_grid_updates_on_threads_give_the_single_thread_grid(mode, method):
     single thread's, over repeated scans that clamp and re-open cells."""
     from occgp import GridMap
     scans = room_scans(n_points=4000, seed=3)
-    grids = {n: GridMap(0.05) for n in (1, 2, 3, 8)}
+    grids = {n: GridMap(0.05, n_jobs=n) for n in (1, 2, 3, 8)}
     sizes = []
     for points, origin in scans + scans[::-1]:
         for n, m in grids.items():
-            m.insert_scan(points, origin, mode=mode, method=method, n_jobs=n)
+            m.insert_scan(points, origin, mode=mode, method=method)
         sizes.append(grids[1].last_insert_["updated_cells"])
         ref = grids[1].cells()
         for n in (2, 3, 8):
@@ -131,11 +131,11 @@ def test_super_rays_grouped_on_threads_give_the_single_thread_map(mode):
         origin = np.array([0.03, 0.02, 0.01]) + 0.07 * k
         wall = np.column_stack([np.full(40000, 3.05), rng.uniform(-2, 2, (40000, 2))])
         scans.append((wall, origin))
-    trees = {n: OccupancyOctree(0.1) for n in (1, 2, 3)}
+    trees = {n: OccupancyOctree(0.1, n_jobs=n) for n in (1, 2, 3)}
     for points, origin in scans:
         stats = {}
         for n, m in trees.items():
-            m.insert_scan(points, origin, mode=mode, method="superray", n_jobs=n)
+            m.insert_scan(points, origin, mode=mode, method="superray")
             stats[n] = {k: m.last_insert_[k] for k in ("rays", "traversed_cells",
                                                          "updated_cells")}
         assert stats[1]["rays"] < len(points) - 500         # rays were grouped

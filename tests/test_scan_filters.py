@@ -20,8 +20,14 @@ from test_octree import assert_same_leaves
 f32 = np.float32
 METHODS = ["plain", "culling", "superray", "superray+culling", "auto"]
 MODES = ["scan", "ray"]
+# insert_scan's keywords; "n_jobs" goes to the constructor (see split)
 OPTIONS = [{}, {"max_range": 1.6}, {"bbox": [[-1.0, -0.9, -0.2], [1.3, 1.1, 1.5]]},
            {"n_jobs": 2}]
+
+
+def split(options):
+    """(the constructor's n_jobs, insert_scan's other keywords) of an OPTIONS entry."""
+    return options.get("n_jobs"), {k: v for k, v in options.items() if k != "n_jobs"}
 
 
 def room_scans(seed=0, n_scans=4, n_points=300, n_ground=150):
@@ -105,13 +111,14 @@ def test_min_range_equals_the_prefiltered_scan(cls, mode, method):
     for options in OPTIONS:
         if cls is GridMap and "bbox" in options:
             continue
-        a, b = cls(0.2), cls(0.2)
+        n_jobs, kwargs = split(options)
+        a, b = cls(0.2, n_jobs=n_jobs), cls(0.2, n_jobs=n_jobs)
         for points, ground, origin in scans:
             cloud = np.vstack([points, ground])
             a.insert_scan(cloud, origin, mode=mode, method=method, min_range=0.45,
-                          superray_threshold=3, **options)
+                          superray_threshold=3, **kwargs)
             b.insert_scan(prefiltered(cloud, origin, 0.45), origin, mode=mode,
-                          method=method, superray_threshold=3, **options)
+                          method=method, superray_threshold=3, **kwargs)
         if cls is GridMap:
             assert grid_values(a) == grid_values(b)
         else:
@@ -206,10 +213,11 @@ def test_free_points_give_liboctomaps_key_sets(mode, method):
     # free points also ending in the hit clusters' cells: they must not join super rays
     scans = [(p, np.vstack([g, p[300:330]]), o) for p, g, o in scans]
     for options in OPTIONS + [{"n_jobs": 2, "max_range": 1.6}]:
-        m = OccupancyOctree(0.2)
+        n_jobs, kwargs = split(options)
+        m = OccupancyOctree(0.2, n_jobs=n_jobs)
         for points, free, origin in scans:
             m.insert_scan(points, origin, free_points=free, mode=mode, method=method,
-                          superray_threshold=3, **options)
+                          superray_threshold=3, **kwargs)
         ref = free_reference(scans, 0.2, mode, options.get("max_range"),
                              options.get("bbox"))
         assert leaf_values(m) == ref, options
@@ -222,12 +230,13 @@ def test_free_points_give_liboctomaps_key_sets(mode, method):
 def test_free_points_on_the_grid_equal_the_octree(mode, method):
     scans = room_scans(8, n_scans=3)
     for options in ({}, {"max_range": 1.6, "n_jobs": 2}):
-        g, o = GridMap(0.2), OccupancyOctree(0.2)
+        n_jobs, kwargs = split(options)
+        g, o = GridMap(0.2, n_jobs=n_jobs), OccupancyOctree(0.2, n_jobs=n_jobs)
         for points, free, origin in scans:
             g.insert_scan(points, origin, free_points=free, mode=mode, method=method,
-                          superray_threshold=3, **options)
+                          superray_threshold=3, **kwargs)
             o.insert_scan(points, origin, free_points=free, mode=mode, method="plain",
-                          **options)
+                          **kwargs)
         assert grid_values(g) == leaf_values(o)
 
 

@@ -12,7 +12,7 @@ RES = 0.1
 
 def box_scan(boxes, *, n_az=160, n_el=90, origin=(0.0, 0.0, 0.0)):
     """Rays from `origin` over a sphere patch to the nearest hit on the inside of a
-    6 x 6 x 3 m room (centred on the origin) or on the outside of axis-aligned `boxes`."""
+    6 x 6 x 3 m room (centered on the origin) or on the outside of axis-aligned `boxes`."""
     origin = np.asarray(origin, dtype=float)
     az, el = np.meshgrid(np.linspace(-np.pi, np.pi, n_az, endpoint=False),
                          np.linspace(-1.2, 1.2, n_el))
@@ -34,7 +34,7 @@ def box_scan(boxes, *, n_az=160, n_el=90, origin=(0.0, 0.0, 0.0)):
 
 
 def dense_cells(tree, lo=(-3.0, -3.0, -1.5), hi=(3.0, 3.0, 1.5)):
-    """The centres of every finest cell of the room."""
+    """The centers of every finest cell of the room."""
     axes = [np.arange(a + RES / 2, b, RES) for a, b in zip(lo, hi)]
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
 
@@ -95,12 +95,12 @@ def _leaves(tree):
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 def test_stamped_insert_gives_the_same_map_and_stamps_every_updated_cell(method, mode):
     scans = [box_scan([BOX_A], n_az=60, n_el=30), box_scan([BOX_B], n_az=60, n_el=30)]
-    plain, stamped, tracked = OccupancyOctree(RES), OccupancyOctree(RES), OccupancyOctree(RES)
+    plain, tracked = OccupancyOctree(RES), OccupancyOctree(RES)
+    stamped = OccupancyOctree(RES, n_jobs=2)
     tracked.track_changes = True
     for t, scan in enumerate(scans):
         plain.insert_scan(scan, [0, 0, 0], mode=mode, method=method)
-        stamped.insert_scan(scan, [0, 0, 0], mode=mode, method=method, stamp=10.0 + t,
-                            n_jobs=2)
+        stamped.insert_scan(scan, [0, 0, 0], mode=mode, method=method, stamp=10.0 + t)
         if t == 0:   # on an empty map every updated cell is new: the changes are the cells
             tracked.insert_scan(scan, [0, 0, 0], mode=mode, method="plain")
             first = tracked.changed_cells().keys

@@ -72,7 +72,7 @@ def test_origin_on_borders(origin):
 
 def test_end_points_on_borders_axis_rays_and_repeats():
     res = 0.2
-    origin = np.array([0.1, 0.1, 0.1])                         # a cell centre
+    origin = np.array([0.1, 0.1, 0.1])                         # a cell center
     rng = np.random.default_rng(3)
     k = rng.integers(-8, 8, (300, 3))
     on_borders = k * res                                        # cell corners
@@ -96,7 +96,7 @@ def test_max_range_with_superrays():
           suppress_health_check=[HealthCheck.too_slow])
 @given(
     resolution=st.sampled_from([0.05, 0.1, 0.2, 0.25, 0.5, 1.0]),
-    origin_kind=st.sampled_from(["random", "centre", "border", "corner"]),
+    origin_kind=st.sampled_from(["random", "center", "border", "corner"]),
     snap=st.sampled_from([0.0, 0.5, 1.0]),
     threshold=st.integers(1, 8),
     seed=st.integers(0, 2**31 - 1),
@@ -105,7 +105,7 @@ def test_superrays_property(resolution, origin_kind, snap, threshold, seed):
     """Random clouds, origins and resolutions: super rays never change the map."""
     rng = np.random.default_rng(seed)
     o = rng.uniform(-2, 2, 3)
-    if origin_kind == "centre":
+    if origin_kind == "center":
         o = (np.floor(o / resolution) + 0.5) * resolution
     elif origin_kind == "border":
         o[rng.integers(3)] = np.round(o[0] / resolution) * resolution
@@ -227,11 +227,10 @@ def test_spared_cells_are_the_visits_the_grouping_spared(cls, mode, n_jobs):
     rng = np.random.default_rng(11)
     origin = np.array([0.33, -0.21, 0.57])
     scans = [clustered_scan(rng, origin, 0.2, spread=1.5) for _ in range(8)]
-    grouped, plain = cls(0.2), cls(0.2)
+    grouped, plain = cls(0.2, n_jobs=n_jobs), cls(0.2, n_jobs=n_jobs)
     for points in scans:
         for m, method in ((grouped, "superray"), (plain, "culling")):
-            m.insert_scan(points, origin, mode=mode, method=method, superray_threshold=5,
-                          n_jobs=n_jobs)
+            m.insert_scan(points, origin, mode=mode, method=method, superray_threshold=5)
         g, p = grouped.last_insert_, plain.last_insert_
         assert g["rays"] < len(points) and g["spared_cells"] > 0
         assert p["spared_cells"] == 0
@@ -240,8 +239,8 @@ def test_spared_cells_are_the_visits_the_grouping_spared(cls, mode, n_jobs):
     # a culling region around the sensor: both methods cull the same cells
     assert plain.last_insert_["region_cells"] > 0
     grouped.insert_scan(scans[0], origin, mode=mode, method="superray+culling",
-                        superray_threshold=5, n_jobs=n_jobs)
-    plain.insert_scan(scans[0], origin, mode=mode, method="culling", n_jobs=n_jobs)
+                        superray_threshold=5)
+    plain.insert_scan(scans[0], origin, mode=mode, method="culling")
     g, p = grouped.last_insert_, plain.last_insert_
     assert g["superrays"] and g["region_cells"] == p["region_cells"]
     assert g["traversed_cells"] + g["spared_cells"] == p["traversed_cells"]

@@ -43,9 +43,10 @@ SCENE_PARAMS = [pytest.param(*s, id=s[0], marks=[pytest.mark.slow] if s[0] == "r
                 for s in SCENES]
 
 
-def build(cls, scans, resolution, **kwargs):
-    """Insert `scans` in order; return the map and each scan's timing-free counts."""
-    m = cls(resolution)
+def build(cls, scans, resolution, n_jobs=None, **kwargs):
+    """Insert `scans` in order into a map with `n_jobs`; return the map and each scan's
+    timing-free counts."""
+    m = cls(resolution, n_jobs=n_jobs)
     counts = []
     for points, origin in scans:
         m.insert_scan(points, origin, **kwargs)
@@ -179,11 +180,11 @@ def test_change_tracking_is_the_same_for_every_n_jobs():
     _, scans, res = SCENES[0]
     got = []
     for n_jobs in N_JOBS:
-        m = OccupancyOctree(res)
+        m = OccupancyOctree(res, n_jobs=n_jobs)
         m.insert_scan(*scans[0], method="plain")
         m.track_changes = True
         for points, origin in scans[1:]:
-            m.insert_scan(points, origin, method="plain", n_jobs=n_jobs)   # occgp's traversal
+            m.insert_scan(points, origin, method="plain")   # occgp's traversal
         got.append(m.changed_cells())
     for changes in got[1:]:
         assert_array_equal(changes.keys, got[0].keys)
@@ -210,14 +211,13 @@ def test_max_scan_cells_gives_the_same_outcome_for_every_n_jobs(cls):
             assert _core_insert(m, points, origin, n_threads, max_cells=distinct,
                                 **kw)[1] == distinct
         for n_jobs in N_JOBS:
-            m = cls(res)
+            m = cls(res, n_jobs=n_jobs)
             m.MAX_SCAN_CELLS = distinct // 10        # threads stop early, alike
             with pytest.raises(ValueError, match=r"reach more than MAX_SCAN_CELLS"):
-                m.insert_scan(points, origin, mode="ray", method=method, n_jobs=n_jobs)
+                m.insert_scan(points, origin, mode="ray", method=method)
             assert (m.num_cells if cls is GridMap else m.num_nodes) == 0
             m.MAX_SCAN_CELLS = distinct
-            m.insert_scan(points, origin, mode="ray", method=method, superray_threshold=3,
-                          n_jobs=n_jobs)
+            m.insert_scan(points, origin, mode="ray", method=method, superray_threshold=3)
             assert m.last_insert_["updated_cells"] == distinct
 
 
@@ -255,13 +255,42 @@ def test_knn_map_is_identical_for_every_n_jobs():
 @pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
 @pytest.mark.parametrize("n_jobs", [0, 1.5, "2", True, np.float64(2.0)])
 def test_bad_n_jobs_is_rejected_before_the_map_changes(cls, n_jobs):
+    bad = r"n_jobs must be None, a positive int or a negative int \(-1: every core\), got"
+    with pytest.raises(ValueError, match=bad):
+        cls(0.1, n_jobs=n_jobs)
     m = cls(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0])
     before = m.num_cells if cls is GridMap else m.num_nodes
-    for method in ("plain", "auto"):
-        with pytest.raises(ValueError, match=r"n_jobs must be None, a positive int or a "
-                                             r"negative int \(-1: every core\), got"):
+    with pytest.raises(ValueError, match=bad):
+        m.set_params(n_jobs=n_jobs)
+    assert m.n_jobs is None and m.get_params()["n_jobs"] is None
+    for method in ("plain", "auto"):          # the deprecated per-call form
+        with pytest.raises(ValueError, match=bad):
             m.insert_scan([[0, 1.0, 0]], [0, 0, 0], method=method, n_jobs=n_jobs)
     assert (m.num_cells if cls is GridMap else m.num_nodes) == before
+
+
+@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])
+def test_n_jobs_is_a_parameter_and_the_per_call_form_is_deprecated(cls):
+    """n_jobs is the constructor's (get_params, set_params, clone, pickles); the
+    per-call ``insert_scan(n_jobs=)`` of earlier releases warns and still works."""
+    import pickle
+
+    from sklearn.base import clone
+
+    _, scans, res = SCENES[1]
+    ref, _ = build(cls, scans, res, n_jobs=1)
+    m = cls(res, n_jobs=2)
+    assert m.n_jobs == 2 and m.get_params()["n_jobs"] == 2
+    assert clone(m).n_jobs == 2 and pickle.loads(pickle.dumps(m)).n_jobs == 2
+    assert m.set_params(n_jobs=-1).n_jobs == -1
+    old = cls(res)
+    for points, origin in scans:
+        m.insert_scan(points, origin)
+        with pytest.warns(DeprecationWarning, match=r"insert_scan\(n_jobs=\) is deprecated"):
+            old.insert_scan(points, origin, n_jobs=2)
+    (assert_same_grid if cls is GridMap else assert_same_octree)(m, ref)
+    (assert_same_grid if cls is GridMap else assert_same_octree)(old, ref)
+    assert old.n_jobs is None                  # the call's threads, not the map's
 
 
 def test_liboctomap_path_takes_n_jobs_and_gives_its_map():

@@ -397,8 +397,8 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         and `params` are then set with its ``set_params``. The scans are
         inserted into it.
     n_jobs : int, default=-1
-        Threads of the map (a constructor parameter, or an option of its
-        ``insert_scan``): -1 every core, None or 1 one. The map does not
+        Threads of the map (the constructor's ``n_jobs``, of every map type
+        that has threads): -1 every core, None or 1 one. The map does not
         depend on it.
     params : mapping, default=None
         Further constructor parameters of the map type (e.g.
@@ -529,7 +529,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
             raise OptionError("poses", f"poses file {str(poses)!r} holds {len(pose_array)} "
                                f"poses for {n_scans} scans; expected one pose per scan, in "
                                f"input order")
-        insert, limit, how = _inserter(mapper, mode, max_range, n_jobs)
+        insert, limit, how = _inserter(mapper, mode, max_range)
         n_points = n_beyond = n_done = n_filtered = n_free = 0
         beams = np.zeros(2, dtype=np.int64)     # BGK's (kept, dropped) beams
         dropped = []
@@ -598,7 +598,7 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
     return mapper
 
 
-def _inserter(mapper, mode, max_range, n_jobs):
+def _inserter(mapper, mode, max_range):
     """(insert(points, origin), the range limit whose points are counted or None, how the
     map meets it): "cut" (the map's own range parameter cuts rays), "param" (its
     ``max_range`` parameter), "option" (insert_scan's ``max_range`` cuts rays) or "drop"
@@ -610,8 +610,6 @@ def _inserter(mapper, mode, max_range, n_jobs):
         kwargs["mode"] = mode
     elif "mode" in options:
         kwargs["mode"] = "scan"
-    if "n_jobs" in options and "n_jobs" not in params:
-        kwargs["n_jobs"] = n_jobs
     if getattr(type(mapper), "RANGE_PARAM", None) in params:    # KNNMap: it cuts rays
         limit, how = params[type(mapper).RANGE_PARAM], "cut"
     elif "max_range" in params:

@@ -34,6 +34,7 @@ from .._octree import _welford
 from .._params import (DEFAULT_RESOLUTION, Check, Interval, Options, ParamsMixin,
                        check_renamed, deprecated_alias)
 from .._status import Status
+from ..octree._options import InsertOptions, resolve_options
 from ..octree._superray_policy import adaptive_threshold
 from .._validation import (
     check_choice, check_int, check_n_jobs, check_real, check_resolution, n_threads,
@@ -236,7 +237,7 @@ class KNNMap(ParamsMixin, OccupancyOctree):
     n_jobs : int or None, default=None
         Threads for the k-NN queries (``cKDTree.query(workers=)``), for
         walking a scan's rays and for the tree update (as
-        ``OccupancyOctree.insert_scan(n_jobs=)``: the map is the same for every
+        ``OccupancyOctree(n_jobs=)``: the map is the same for every
         `n_jobs`); None: 1, -1: every core.
 
     Attributes
@@ -469,9 +470,8 @@ class KNNMap(ParamsMixin, OccupancyOctree):
 
     # ------------------------------------------------------------------ updates
     def insert_scan(self, points: ArrayLike, origin: ArrayLike, *,  # type: ignore[override]
-                    method: str = "auto", superray_threshold: int = 20,
-                    min_range: float | None = None,
-                    stamp: float | None = None) -> "KNNMap":
+                    stamp: float | None = None, options: InsertOptions | None = None,
+                    **kwargs: Any) -> "KNNMap":
         """Integrate one point cloud with the k-NN inverse sensor model.
 
         Parameters
@@ -481,20 +481,6 @@ class KNNMap(ParamsMixin, OccupancyOctree):
             `max_range` only cut rays. An empty scan changes nothing.
         origin : array-like of shape (3,)
             Sensor position, metres.
-        method : {"auto", "plain", "culling", "superray", "superray+culling"}, \
-default="auto"
-            How rays are traversed, as for
-            :meth:`occgp.OccupancyOctree.insert_scan`; every method gives the
-            same map.
-        superray_threshold : int, default=20
-            With the super-ray methods, the fewest end points a cell must hold
-            for its rays to be grouped; at least 1.
-        min_range : float, default=None
-            Points nearer to `origin` than this are dropped first (they cast no
-            ray and are nobody's neighbour): the map, its score statistics and
-            its history are those of the pre-filtered scan. Distances in double
-            precision, as for :meth:`occgp.OccupancyOctree.insert_scan`; None: no
-            filter. Must be finite, >= 0 and less than `max_range`.
         stamp : float, default=None
             Stamp every cell the scan updates with this time, for
             :meth:`~occgp.OccupancyOctree.stamps` and
@@ -502,6 +488,18 @@ default="auto"
             :meth:`occgp.OccupancyOctree.insert_scan`). The culling region is
             then not used (its cells are observed too, and are stamped); the
             map is the same.
+        options : InsertOptions, default=None
+            Of :class:`~occgp.octree.InsertOptions`, the k-NN map takes
+            `method` (how rays are traversed, as for
+            :meth:`occgp.OccupancyOctree.insert_scan`; every method gives the
+            same map), `superray_threshold` and `min_range` (points nearer to
+            `origin` are dropped first: they cast no ray and are nobody's
+            neighbour, so the map, its score statistics and its history are
+            those of the pre-filtered scan; less than `max_range`);
+            `discretize` and `bbox` must keep their defaults. The threads are
+            the constructor's `n_jobs`.
+        **kwargs
+            Those fields by name, as in earlier releases.
 
         Returns
         -------
@@ -520,9 +518,12 @@ default="auto"
             `max_range`, or `stamp` is not finite. The map and its
             statistics are then unchanged.
         """
-        points, _, _ = prefilter(points, origin, min_range, self.max_range,
+        opts, _ = resolve_options(options, kwargs, f"{type(self).__name__}.insert_scan",
+                                  ("method", "superray_threshold", "min_range"),
+                                  threaded=False)
+        points, _, _ = prefilter(points, origin, opts.min_range, self.max_range,
                                  range_name="max_range")
-        method, threshold = self._check_method(method, superray_threshold)
+        method, threshold = self._check_method(opts.method, opts.superray_threshold)
         stamping = self._stamped(stamp)
         scan = self._validated_scan(points, origin, self.max_range, "scan",
                                     check_ends=False)

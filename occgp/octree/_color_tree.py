@@ -1,9 +1,15 @@
-"""The colour occupancy octree: liboctomap's ``ColorOcTree`` under a numpy API."""
+"""The colour occupancy octree: liboctomap's ``ColorOcTree`` under a numpy API.
+
+:class:`ColorOctree` is :class:`~occgp.octree.LogOddsMap` in front of the compiled
+``ColorOcTree`` (``occgp._color._ColorOcTree``); the parts it shares with
+:class:`occgp.OccupancyOctree` (leaf and node counts, its repr) are functions of
+``_queries.py`` bound in its class body.
+"""
 
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -12,7 +18,9 @@ from .._atomic import write_bytes
 from .._docfill import fill_doc
 from ..io import _octomap_format as fmt
 from .._color import FUSE_AVERAGE, FUSE_MEAN, _ColorOcTree
-from ._logodds import OCTREE_ATTRIBUTES, SENSOR_MODEL, OctreeFace
+from . import _queries
+from ._logodds import OCTREE_ATTRIBUTES, SENSOR_MODEL, LogOddsMap
+from ._options import InsertOptions, resolve_options
 from ..maps import register
 from .._octree import KEYRAY_CELLS, _check_full_data
 from .._reading import read_regular
@@ -49,7 +57,7 @@ class ColorLeaves(NamedTuple):
 @register("color-octree", formats=(".ot",),
           description="OctoMap's octree with a colour per cell", resolution=0.1)
 @fill_doc(sensor_model=SENSOR_MODEL, octree_attributes=OCTREE_ATTRIBUTES)
-class ColorOctree(OctreeFace, _ColorOcTree):
+class ColorOctree(LogOddsMap, _ColorOcTree):
     """Probabilistic 3D occupancy map whose cells also hold a colour (OctoMap's ColorOcTree).
 
     Occupancy works as in :class:`occgp.OccupancyOctree` (scan mode): each
@@ -97,6 +105,13 @@ class ColorOctree(OctreeFace, _ColorOcTree):
 
     _kind = "octree"
 
+    def __repr__(self) -> str:
+        return _queries.tree_repr(self)
+
+    num_leaves = _queries.num_leaves
+    num_nodes = _queries.num_nodes
+    _num_cells = _queries._num_leaves
+
     # ------------------------------------------------------------------ updates
     def insert_scan(
         self,
@@ -106,8 +121,9 @@ class ColorOctree(OctreeFace, _ColorOcTree):
         *,
         max_range: float | None = None,
         fusion: str = "average",
-        min_range: float | None = None,
         free_points: ArrayLike | None = None,
+        options: InsertOptions | None = None,
+        **kwargs: Any,
     ) -> "ColorOctree":
         """Integrate one coloured range scan into the map.
 
@@ -156,12 +172,6 @@ class ColorOctree(OctreeFace, _ColorOcTree):
             ``averageNodeColor`` (cells in key order): within a scan every
             point weighs the same; across scans, each scan's mean is averaged
             pairwise with the cell's colour (a file stores no point counts).
-        min_range : float, default=None
-            Points (with their colours) and free points nearer to `origin`
-            than this are dropped first, as for
-            :meth:`occgp.OccupancyOctree.insert_scan` (double-precision
-            distances; None: no filter). Must be finite, >= 0 and less than
-            `max_range`.
         free_points : array-like of shape (n_free, 3), default=None
             End points of rays that only clear (octomap_server's ground
             points): their cells join the scan's free set, their end cells get
@@ -170,6 +180,16 @@ class ColorOctree(OctreeFace, _ColorOcTree):
             ``computeRayKeys``, one ``updateNode`` per cell, occupied over
             free), the map :meth:`occgp.OccupancyOctree.insert_scan` gives with
             the same `free_points`.
+        options : InsertOptions, default=None
+            Of :class:`~occgp.octree.InsertOptions`, the colour tree takes
+            `min_range`: points (with their colours) and free points nearer to
+            `origin` than this are dropped first, as for
+            :meth:`occgp.OccupancyOctree.insert_scan` (double-precision
+            distances; None: no filter); finite, >= 0 and less than
+            `max_range`. The other fields must keep their defaults (the
+            occupancy update is always liboctomap's ``insertPointCloud``).
+        **kwargs
+            `min_range` by name, as in earlier releases.
 
         Returns
         -------
@@ -207,8 +227,10 @@ class ColorOctree(OctreeFace, _ColorOcTree):
         >>> m2.insert_scan(pts, [0.05, 0.05, 0.05]).colors(pts[:1])[0].tolist()  # no colours
         [[40, 40, 40]]
         """
+        opts, _ = resolve_options(options, kwargs, f"{type(self).__name__}.insert_scan",
+                                  ("min_range",), threaded=False)
         fusion = check_choice(fusion, "fusion", FUSIONS)
-        points, free64, keep = prefilter(points, origin, min_range, max_range, free_points)
+        points, free64, keep = prefilter(points, origin, opts.min_range, max_range, free_points)
         scan = self._validated_scan(points, origin, max_range, "scan")
         free = None if free64 is None else self._validated_scan(
             free64, origin, max_range, "scan", name="free_points")

@@ -1,8 +1,12 @@
 """What occgp's log-odds maps share: parameters, scan validation and queries.
 
-:class:`occgp.OccupancyOctree` and :class:`occgp.GridMap` put this class in
-front of their compiled cores, which provide ``_setup``, ``_in_range``,
-``_check_rays`` and ``_query`` with the same meaning.
+:class:`occgp.OccupancyOctree`, :class:`occgp.ColorOctree` and
+:class:`occgp.GridMap` put :class:`LogOddsMap` in front of their compiled cores
+(``class OccupancyOctree(LogOddsMap, _OcTree)``), which provide ``_setup``,
+``_in_range``, ``_check_rays`` and ``_query`` with the same meaning. Its other
+parts are plain functions in modules of their own, bound in the class body as
+methods: the files and geometries it writes (``_outputs.py``), the planners'
+projection and frontiers (``occgp/nav/_planning.py``).
 """
 
 from __future__ import annotations
@@ -12,29 +16,31 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..nav import _distance
-from ..io import _export
 from .._docfill import fill_doc
 from .._octree import TREE_MAX_VAL
-from ..nav._planning import PlanningMixin
+from ..nav import _planning
+from . import _outputs
+from ._options import METHODS
 from .._status import Status, check_status
 from ._superray_policy import learn_superrays
 from .._validation import (
-    as_point, as_points, check_bool, check_choice, check_int, check_probability, check_real,
-    check_resolution,
+    as_point, as_points, check_bool, check_choice, check_int, check_n_jobs, check_probability,
+    check_real, check_resolution, n_threads,
 )
 
-__all__ = ["LogOddsMap", "OctreeFace", "Leaves", "MODES", "METHODS"]
+__all__ = ["LogOddsMap", "Leaves", "MODES", "METHODS", "SENSOR_MODEL", "N_JOBS",
+           "OCTREE_ATTRIBUTES", "check_params"]
 
 MODES = ("scan", "ray")
 #: Rays between two cells whose float squared length is below FLT_MIN cannot be walked.
 _SHORTEST_RAY = float(np.sqrt(np.finfo(np.float32).tiny))
 #: Longest ray whose float squared length is finite.
 _LONGEST_RAY = float(np.sqrt(np.finfo(np.float32).max))
-METHODS = ("auto", "plain", "culling", "superray", "superray+culling")
 #: The settable sensor-model parameters (:meth:`LogOddsMap.set_params`).
 _SENSOR_PARAMS = ("prob_hit", "prob_miss", "clamping_min", "clamping_max",
                   "occupancy_threshold")
+#: The other parameters set_params may change, on the maps that have them.
+_RUN_PARAMS = ("n_jobs",)
 
 
 #: The sensor model of the log-odds maps (liboctomap's), as numpydoc parameters.
@@ -49,6 +55,16 @@ clamping_max : float, default=0.971
     Upper clamping bound (probability); in (0.5, 1).
 occupancy_threshold : float, default=0.5
     Cells at or above this probability count as occupied; in (0, 1)."""
+
+#: The threads of a scan insertion, as numpydoc parameters (octree and grid).
+N_JOBS = """\
+n_jobs : int or None, default=None
+    Threads that walk each scan's rays in :meth:`insert_scan` (None: 1, -1:
+    every core; at most the cores, and about one per 64 rays). The threads'
+    counts are merged (integer sums) before the cells are updated, so the map
+    and :attr:`last_insert_`'s counts are the same for every `n_jobs`. A
+    run-time setting: :meth:`set_params` may change it; pickles keep it, map
+    files do not."""
 
 #: The attributes every octree shows.
 OCTREE_ATTRIBUTES = """\
@@ -73,8 +89,14 @@ class Leaves(NamedTuple):
     log_odds: NDArray[np.float32]
 
 
-class LogOddsMap(PlanningMixin):
-    """Base of the log-odds maps: see :class:`occgp.OccupancyOctree` for the parameters."""
+class LogOddsMap:
+    """Base of the log-odds maps: see :class:`occgp.OccupancyOctree` for the parameters.
+
+    The one Python class between a log-odds map and its compiled core: parameters,
+    queries, scan checks; :meth:`save_ply`, :meth:`save_pcd`, :meth:`to_open3d`,
+    :meth:`distance_field` (``_outputs.py``), :meth:`project_2d` and
+    :meth:`frontiers` (``occgp/nav/_planning.py``) are functions bound here.
+    """
 
     #: What the map is called in error messages.
     _kind = "map"
@@ -120,6 +142,10 @@ class LogOddsMap(PlanningMixin):
             clamping_min=clamping_min, clamping_max=clamping_max,
             occupancy_threshold=occupancy_threshold,
         )
+        self._build_checked(params)
+
+    def _build_checked(self, params: dict) -> None:
+        """:meth:`_build` with the constructor's `params`, checked (:func:`check_params`)."""
         checked = check_params(params)
         self._build(checked, *(checked[k] for k in _SENSOR_PARAMS))
 
@@ -156,6 +182,15 @@ class LogOddsMap(PlanningMixin):
     def resolution(self) -> float:
         """Edge length of the smallest cells, in metres."""
         return self._params["resolution"]
+
+    @property
+    def n_jobs(self) -> int | None:
+        """Threads of :meth:`insert_scan` (None: one; the constructor's ``n_jobs``)."""
+        return self._params.get("n_jobs")
+
+    def _threads(self) -> int:
+        """The threads of the map's ``n_jobs``, as the compiled cores take them."""
+        return n_threads(self._params.get("n_jobs"))
 
     @property
     def prob_hit(self) -> float:
@@ -280,8 +315,8 @@ class LogOddsMap(PlanningMixin):
         """Change the sensor model (liboctomap's ``setProbHit``, ``setClampingThresMin``, ...).
 
         Sets any of ``prob_hit``, ``prob_miss``, ``clamping_min``,
-        ``clamping_max`` and ``occupancy_threshold``, checked as the
-        constructor checks them (scikit-learn's ``set_params``;
+        ``clamping_max`` and ``occupancy_threshold`` (and ``n_jobs`` on the
+        maps that take it), checked as the constructor checks them (scikit-learn's ``set_params``;
         :meth:`get_params` reads them back). As with liboctomap's setters, the
         stored log-odds do not change: the new values apply to later updates
         (and clamps) and to the queries that compare with a threshold
@@ -319,7 +354,7 @@ class LogOddsMap(PlanningMixin):
         >>> m.prob_hit, m.get_params()["clamping_max"]
         (0.9, 0.99)
         """
-        settable = [k for k in _SENSOR_PARAMS if k in self._params]
+        settable = [k for k in _SENSOR_PARAMS + _RUN_PARAMS if k in self._params]
         for name, value in params.items():
             if name == "resolution" and "resolution" in self._params:
                 if value != self.resolution:
@@ -338,278 +373,12 @@ class LogOddsMap(PlanningMixin):
         return self
 
     # ------------------------------------------------------------------ maps out
-    def save_ply(self, path, *, occupied: bool = True, binary: bool = True,
-                 cubes: bool = False, color: bool = True):
-        """Write the occupied (or the free) cells of a map to a PLY file.
-
-        With ``cubes=False`` the file is a point cloud: one vertex per leaf, at
-        its centre. With ``cubes=True`` it is a triangle mesh: each leaf is a cube
-        of 8 vertices and 12 triangles (counter-clockwise seen from outside), so
-        that mesh viewers (MeshLab, CloudCompare, Open3D) show the voxels. Every
-        vertex carries the properties
-
-        * ``x y z`` (float): the centre (points) or a corner (cubes), in metres;
-        * ``size`` (float): the leaf's edge (pruned leaves are larger than the
-          resolution);
-        * ``probability`` (float): the leaf's occupancy probability;
-        * ``red green blue`` (uchar, with `color`): the leaf's own colour for
-          a colour map (:class:`occgp.ColorOctree`; ``255 255 255`` where a
-          leaf has none), otherwise a viridis colour of the leaf's height, spread
-          from the lowest to the highest cell.
-
-        A ``comment`` line records the map's resolution. Faces are
-        ``property list uchar int vertex_indices``.
-
-        The file is written atomically: a temporary file beside `path` replaces
-        it once complete, so the previous file stays intact if the write fails.
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-            Destination (overwritten).
-        occupied : bool, default=True
-            True: the leaves at or above the occupancy threshold; False: the
-            known leaves below it.
-        binary : bool, default=True
-            ``binary_little_endian`` (True) or ``ascii`` (False) encoding.
-        cubes : bool, default=False
-            Write each leaf as a cube mesh instead of a point.
-        color : bool, default=True
-            Add the colours (the cells' own for a colour map, else by height).
-
-        Returns
-        -------
-        self
-            The map.
-
-        Raises
-        ------
-        TypeError
-            If `path` is not a str or os.PathLike, or a flag
-            is not a bool.
-        ValueError
-            If ``cubes=True`` and the leaves are more than 268,435,455 (their
-            vertex indices would overflow int32).
-        OSError
-            If the file cannot be written (missing folder, no permission); the
-            message names the path.
-
-        Notes
-        -----
-        Coordinates are stored in single precision, as liboctomap stores them:
-        across the key range (``2**15`` cells each side) that resolves a cell to
-        about 1/256 of its edge.
-
-        Examples
-        --------
-        >>> import os, tempfile
-        >>> from occgp import OccupancyOctree
-        >>> m = OccupancyOctree(0.1).insert_scan([[1.0, 0.0, 0.0]], [0.0, 0.0, 0.0])
-        >>> path = os.path.join(tempfile.mkdtemp(), "map.ply")
-        >>> _ = m.save_ply(path, binary=False)
-        >>> print(open(path).read().splitlines()[-1])
-        1.04999995 0.0500000007 0.0500000007 0.100000001 0.699999988 33 145 140
-        """
-        _export.save_ply(self, path, occupied=occupied, binary=binary, cubes=cubes,
-                         color=color)
-        return self
-
-    def save_pcd(self, path, *, occupied: bool = True, binary: bool = True):
-        """Write the centres of the occupied (or the free) leaves to a PCD v0.7 file.
-
-        Fields ``x y z intensity`` (float32), ``intensity`` being the leaf's
-        occupancy probability (PCL's ``PointXYZI``); the viewpoint is the origin.
-        A colour map (:class:`occgp.ColorOctree`) adds the field ``rgb``:
-        the leaf's colour packed as ``r << 16 | g << 8 | b`` in a uint32
-        (``TYPE U``; PCL's ``PointXYZRGB`` holds the same bits), ``0xFFFFFF`` for
-        leaves without colour.
-        Pruned leaves give one point at their centre (see
-        :meth:`~occgp.OccupancyOctree.expand` for finest cells).
-
-        The file is written atomically: a temporary file beside `path` replaces
-        it once complete, so the previous file stays intact if the write fails.
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-            Destination (overwritten).
-        occupied : bool, default=True
-            True: the leaves at or above the occupancy threshold; False: the
-            known leaves below it.
-        binary : bool, default=True
-            ``DATA binary`` (True) or ``DATA ascii`` (False).
-
-        Returns
-        -------
-        self
-            The map.
-
-        Raises
-        ------
-        TypeError
-            If `path` is not a str or os.PathLike, or a flag
-            is not a bool.
-        OSError
-            If the file cannot be written; the message names the path.
-
-        See Also
-        --------
-        occgp.datasets.read_pcd : Reads the file back.
-
-        Examples
-        --------
-        >>> import os, tempfile
-        >>> from occgp import OccupancyOctree
-        >>> from occgp.datasets import read_pcd
-        >>> m = OccupancyOctree(0.1).insert_scan([[1.0, 0.0, 0.0]], [0.0, 0.0, 0.0])
-        >>> path = os.path.join(tempfile.mkdtemp(), "map.pcd")
-        >>> _ = m.save_pcd(path)
-        >>> scan, fields = read_pcd(path, return_fields=True)
-        >>> scan.points.round(2).tolist(), fields["intensity"].round(2).tolist()
-        ([[1.05, 0.05, 0.05]], [0.7])
-        """
-        _export.save_pcd(self, path, occupied=occupied, binary=binary)
-        return self
-
-    def to_open3d(self, *, kind: str = "voxels", occupied: bool = True,
-                  max_voxels: int | None = None):
-        """The occupied (or the free) cells of a map as an Open3D geometry.
-
-        Parameters
-        ----------
-        tree : OccupancyOctree or GridMap
-        kind : {"voxels", "points"}, default="voxels"
-            ``"voxels"``: an ``open3d.geometry.VoxelGrid`` of voxel size
-            ``resolution``, aligned to the map's cells; pruned leaves are expanded
-            to their finest cells. ``"points"``: an ``open3d.geometry.PointCloud``
-            of the leaf centres (one point per leaf, pruned or not).
-        occupied : bool, default=True
-            True: the leaves at or above the occupancy threshold; False: the
-            known leaves below it.
-        max_voxels : int, default=None
-            The most voxels (None: ``occgp.io._export.MAX_VOXELS``, 4194304) ``kind="voxels"`` builds (about 56 bytes each); past
-            it a ValueError is raised before any allocation (free space, which
-            prunes into large leaves, reaches it first).
-
-        Returns
-        -------
-        geometry : open3d.geometry.VoxelGrid or open3d.geometry.PointCloud
-            Coloured by height (viridis, from the lowest to the highest cell), or
-            with the cells' own colours for a colour map
-            (:class:`occgp.ColorOctree`).
-
-        Raises
-        ------
-        ImportError
-            If Open3D is not installed (the extra ``occgp[open3d]``).
-        TypeError
-            If `occupied` not a bool or `max_voxels` not an int.
-        ValueError
-            If `kind` is unknown, or the voxels would be more than `max_voxels`.
-        """
-        return _export.to_open3d(self, kind=kind, occupied=occupied,
-                                 max_voxels=_export.MAX_VOXELS if max_voxels is None
-                                 else max_voxels)
-
-    def distance_field(self, bbox: ArrayLike, resolution: float | None = None, *,
-                       unknown: str = "occupied", max_cells: int | None = None,
-                       signed: bool = False, return_closest: bool = False,
-                       return_gradient: bool = False):
-        """Euclidean distance from each cell of a regular grid to the nearest obstacle.
-
-        The grid covers the box `bbox` with cubic cells of edge `resolution`,
-        aligned to its multiples: its minimum corner is
-        ``floor(bbox[0] / resolution) * resolution`` and it reaches at least
-        ``bbox[1]`` (a corner within 1e-9 cell of a multiple of `resolution`
-        counts as on it). Each cell takes the map's state at its centre (occupied,
-        free or unknown); obstacle cells are the occupied ones, plus the unknown
-        ones when ``unknown="occupied"``. The distance, in metres, is from each
-        cell's centre to the nearest obstacle cell's centre (scipy's exact
-        feature transform, ``scipy.ndimage.distance_transform_edt``; the
-        distance is ``sqrt(i² + j² + k²) * resolution`` for the integer offset
-        ``(i, j, k)`` to that cell), so obstacle cells hold 0 and a cell next to
-        one holds `resolution`. Obstacles outside the box are not seen. For a
-        field stored in blocks, truncated, and updated from the map's changes,
-        see :class:`occgp.DistanceMap`.
-
-        Parameters
-        ----------
-        bbox : array-like of shape (2, 3)
-            ``[min_corner, max_corner]`` in metres, finite, min < max on every axis.
-        resolution : float, default=None
-            Cell edge in metres; default: the map's resolution (then the grid's
-            cells are the map's finest cells).
-        unknown : {"occupied", "free"}, default="occupied"
-            How cells the map knows nothing about count: as obstacles (the safe
-            choice for planning) or as free space. Points outside the map's key
-            range are unknown.
-        max_cells : int, default=None
-            The most cells (None: ``occgp.nav._distance.MAX_DISTANCE_CELLS``, 8388608)
-            the grid may have (about 30 bytes each at peak, up to 90 with
-            `signed` and both extras); past it a ValueError is raised before any
-            allocation.
-        signed : bool, default=False
-            Signed distances, as voxblox's and nvblox's ESDF: positive outside
-            obstacles (the distance above), and in each obstacle cell minus the
-            distance from its centre to the nearest non-obstacle cell's centre.
-            A boundary obstacle cell holds ``-resolution``, its free neighbour
-            ``+resolution``; no cell holds 0 (``-inf`` in every cell when the
-            grid holds no non-obstacle cell).
-        return_closest : bool, default=False
-            Also return, per cell, the centre of the cell its distance is
-            measured to: the nearest obstacle cell (an obstacle cell's own
-            centre in an unsigned field; with `signed`, for obstacle cells, the
-            nearest non-obstacle cell). NaN where there is none. Ties between
-            equally near cells are broken by scipy's transform.
-        return_gradient : bool, default=False
-            Also return the gradient of the distance as the unit vector
-            ``(centre - closest) / distance``: away from the nearest obstacle
-            outside obstacles, towards free space inside them (signed), so that
-            it points where the distance grows; 0 in the obstacle cells of an
-            unsigned field, NaN where `closest` is NaN.
-
-        Returns
-        -------
-        field : DistanceField
-            Named tuple ``(distances, origin, resolution)``: `distances` of shape
-            (nx, ny, nz) indexed along x, y, z (inf everywhere when the grid holds
-            no obstacle), `origin` the grid's minimum corner, `resolution` its
-            cell edge.
-        closest : ndarray of shape (nx, ny, nz, 3)
-            Only with `return_closest`: centres in metres.
-        gradient : ndarray of shape (nx, ny, nz, 3)
-            Only with `return_gradient`.
-
-        Raises
-        ------
-        TypeError
-            If `bbox` does not hold numbers, `resolution` is not a real number,
-            `max_cells` not an int, or a flag not a bool.
-        ValueError
-            If `bbox` is not of shape (2, 3), not finite or not min < max;
-            `resolution` not positive and finite; `unknown` not one of the
-            choices; or the grid would have more than `max_cells` cells.
-
-        Examples
-        --------
-        >>> from occgp import OccupancyOctree
-        >>> m = OccupancyOctree(1.0).set_cells([[0.5, 0.5, 0.5]], [2.0])
-        >>> field = m.distance_field([[0, 0, 0], [3, 1, 1]], unknown="free")
-        >>> field.distances[:, 0, 0].tolist(), field.origin.tolist()
-        ([0.0, 1.0, 2.0], [0.0, 0.0, 0.0])
-        >>> m = m.set_cells([[1.5, 0.5, 0.5], [2.5, 0.5, 0.5]], [2.0, -2.0])
-        >>> field, closest, gradient = m.distance_field(
-        ...     [[0, 0, 0], [3, 1, 1]], unknown="free", signed=True,
-        ...     return_closest=True, return_gradient=True)
-        >>> field.distances[:, 0, 0].tolist()
-        [-2.0, -1.0, 1.0]
-        >>> closest[:, 0, 0, 0].tolist(), gradient[:, 0, 0, 0].tolist()
-        ([2.5, 2.5, 1.5], [1.0, 1.0, 1.0])
-        """
-        return _distance.distance_field(
-            self, bbox, resolution, unknown=unknown,
-            max_cells=_distance.MAX_DISTANCE_CELLS if max_cells is None else max_cells,
-            signed=signed, return_closest=return_closest, return_gradient=return_gradient)
+    save_ply = _outputs.save_ply
+    save_pcd = _outputs.save_pcd
+    to_open3d = _outputs.to_open3d
+    distance_field = _outputs.distance_field
+    project_2d = _planning.project_2d
+    frontiers = _planning.frontiers
 
     # ------------------------------------------------------------------ helpers
     @staticmethod
@@ -712,33 +481,6 @@ class LogOddsMap(PlanningMixin):
                      resolution=self.resolution, first=int(np.flatnonzero(~ok)[0]))
 
 
-class OctreeFace(LogOddsMap):
-    """What the octrees (:class:`occgp.OccupancyOctree`, :class:`occgp.ColorOctree`) add to
-    the log-odds face: the tree's leaves and nodes, from their compiled cores'
-    ``_num_leaves`` and ``_num_nodes``."""
-
-    if TYPE_CHECKING:  # provided by the compiled core the subclass also derives from
-        def _num_leaves(self) -> int: ...
-        def _num_nodes(self) -> int: ...
-
-    def __repr__(self) -> str:
-        return (f"{type(self).__name__}(resolution={self.resolution!r}, "
-                f"num_leaves={self.num_leaves})")
-
-    @property
-    def num_leaves(self) -> int:
-        """Number of leaves (known cells, after pruning)."""
-        return self._num_leaves()
-
-    @property
-    def num_nodes(self) -> int:
-        """Number of nodes in the tree, inner nodes included."""
-        return self._num_nodes()
-
-    def _num_cells(self) -> int:
-        return self._num_leaves()
-
-
 def check_params(params: dict) -> dict:
     """Validate a log-odds map's parameters; return them as floats."""
     out = dict(params)
@@ -749,6 +491,8 @@ def check_params(params: dict) -> dict:
     out["clamping_max"] = check_real(params["clamping_max"], "clamping_max", low=0.5, high=1.0)
     out["occupancy_threshold"] = check_probability(params["occupancy_threshold"],
                                                    "occupancy_threshold")
+    if "n_jobs" in params:
+        out["n_jobs"] = check_n_jobs(params["n_jobs"])
     return out
 
 

@@ -1,23 +1,25 @@
-"""Merging occupancy octrees (several robots or sessions): :class:`OctreeMerging`, a base
-of :class:`occgp.OccupancyOctree`."""
+"""Merging occupancy octrees (several robots or sessions).
+
+:func:`merge` is a method of :class:`occgp.OccupancyOctree`, which binds it in its
+class body (``merge = _merge.merge``), so its first argument is the map, named
+``self``."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..io._export import leaf_cells
-from ._logodds import OctreeFace
 from .._octree import _OcTree
 from .._validation import as_numeric, check_choice, check_int
 
-__all__ = ["OctreeMerging", "MERGE_RULES", "MAX_MERGE_CELLS", "check_rigid_transform"]
+__all__ = ["merge", "MERGE_RULES", "MAX_MERGE_CELLS", "check_rigid_transform"]
 
-#: How :meth:`OctreeMerging.merge` combines two cells' log-odds.
+#: How :func:`merge` combines two cells' log-odds.
 MERGE_RULES = ("add", "max")
-#: The most finest cells :meth:`OctreeMerging.merge` expands `other` into by default
+#: The most finest cells :func:`merge` expands `other` into by default
 #: (about 40 bytes each while merging).
 MAX_MERGE_CELLS = 2**24
 _HALF = 32768
@@ -43,108 +45,98 @@ def check_rigid_transform(transform: ArrayLike, name: str = "transform") -> NDAr
     return t
 
 
-class OctreeMerging(OctreeFace):
-    """:meth:`merge`: another map's evidence added to this one."""
+def merge(self, other: Any, transform: ArrayLike | None = None, *, rule: str = "add",
+          max_cells: int | None = None):
+    """Add another map's evidence to this map, cell by cell.
 
-    if TYPE_CHECKING:  # provided by the compiled core and the class
-        def _apply_cells(self, keys: NDArray[np.uint64], updates: NDArray[np.float32],
-                         n_threads: int = ...) -> int: ...
-        def _set_values(self, keys: NDArray[np.uint16], log_odds: NDArray[np.float32]) -> None: ...
-        def leaves(self, *, occupied_only: bool = ..., bbox: ArrayLike | None = ...,
-                   max_depth: int = ...) -> Any: ...
+    Every finest cell `other` knows (pruned leaves count for each of
+    their cells) is combined with this map's cell at the same place:
 
-    def merge(self, other: Any, transform: ArrayLike | None = None, *, rule: str = "add",
-              max_cells: int | None = None):
-        """Add another map's evidence to this map, cell by cell.
+    * ``rule="add"``: its log-odds are added, as
+      :meth:`update_cells` adds them (a cell this map did not know starts
+      from 0), clamped to this map's ``[clamping_min, clamping_max]``. For
+      maps made from independent scans this is the Bayesian fusion of
+      their evidence.
+    * ``rule="max"``: the cell takes the larger of the two log-odds (the
+      other's alone where this map knew nothing), as :meth:`set_cells`
+      sets it (clamped): a conservative merge for maps that saw the same
+      scans.
 
-        Every finest cell `other` knows (pruned leaves count for each of
-        their cells) is combined with this map's cell at the same place:
+    With `transform`, `other` is first moved by that rigid transform (its
+    frame into this map's): each cell of this map within reach takes the
+    value of the cell of `other` holding the preimage of its centre
+    (nearest-cell resampling, so no cell is left out or counted twice).
+    Transforms by whole cells (and quarter turns about the axes through
+    cell corners) map cells onto cells exactly.
 
-        * ``rule="add"``: its log-odds are added, as
-          :meth:`update_cells` adds them (a cell this map did not know starts
-          from 0), clamped to this map's ``[clamping_min, clamping_max]``. For
-          maps made from independent scans this is the Bayesian fusion of
-          their evidence.
-        * ``rule="max"``: the cell takes the larger of the two log-odds (the
-          other's alone where this map knew nothing), as :meth:`set_cells`
-          sets it (clamped): a conservative merge for maps that saw the same
-          scans.
+    Empty maps are valid on either side: an empty `other` (with or
+    without `transform`) leaves this map unchanged, and merging into an
+    empty map gives it `other`'s cells (clamped to this map's limits).
 
-        With `transform`, `other` is first moved by that rigid transform (its
-        frame into this map's): each cell of this map within reach takes the
-        value of the cell of `other` holding the preimage of its centre
-        (nearest-cell resampling, so no cell is left out or counted twice).
-        Transforms by whole cells (and quarter turns about the axes through
-        cell corners) map cells onto cells exactly.
+    Parameters
+    ----------
+    other : OccupancyOctree or map with ``to_octree()``
+        The map to merge in, of the same resolution (a
+        :class:`~occgp.GridMap` goes through its ``to_octree()``).
+    transform : array-like of shape (4, 4), default=None
+        Homogeneous rigid transform from `other`'s frame to this map's.
+    rule : {"add", "max"}, default="add"
+    max_cells : int, default=None
+        The most finest cells `other` may expand into (None:
+        :data:`MAX_MERGE_CELLS`); past it a ValueError is raised before
+        anything changes.
 
-        Empty maps are valid on either side: an empty `other` (with or
-        without `transform`) leaves this map unchanged, and merging into an
-        empty map gives it `other`'s cells (clamped to this map's limits).
+    Returns
+    -------
+    self : OccupancyOctree
 
-        Parameters
-        ----------
-        other : OccupancyOctree or map with ``to_octree()``
-            The map to merge in, of the same resolution (a
-            :class:`~occgp.GridMap` goes through its ``to_octree()``).
-        transform : array-like of shape (4, 4), default=None
-            Homogeneous rigid transform from `other`'s frame to this map's.
-        rule : {"add", "max"}, default="add"
-        max_cells : int, default=None
-            The most finest cells `other` may expand into (None:
-            :data:`MAX_MERGE_CELLS`); past it a ValueError is raised before
-            anything changes.
+    Raises
+    ------
+    TypeError
+        If `other` is not a map.
+    ValueError
+        If the resolutions differ, `transform` is not a 4 x 4 rigid
+        transform, `rule` is unknown, `other` expands into more than
+        `max_cells` cells, or a cell moved by `transform` falls outside the
+        key range. The map is then unchanged.
 
-        Returns
-        -------
-        self : OccupancyOctree
-
-        Raises
-        ------
-        TypeError
-            If `other` is not a map.
-        ValueError
-            If the resolutions differ, `transform` is not a 4 x 4 rigid
-            transform, `rule` is unknown, `other` expands into more than
-            `max_cells` cells, or a cell moved by `transform` falls outside the
-            key range. The map is then unchanged.
-
-        Examples
-        --------
-        >>> from occgp import OccupancyOctree
-        >>> a = OccupancyOctree(0.1).update_cells([[0.05, 0.05, 0.05]], 1.0)
-        >>> b = OccupancyOctree(0.1).update_cells([[0.05, 0.05, 0.05], [0.15, 0.05, 0.05]],
-        ...                                       [1.5, -0.5])
-        >>> a.merge(b).log_odds([[0.05, 0.05, 0.05], [0.15, 0.05, 0.05]]).tolist()
-        [2.5, -0.5]
-        """
-        other = _as_octree(other)
-        if other.resolution != self.resolution:
-            raise ValueError(f"other must have this map's resolution {self.resolution!r}, "
-                             f"got {other.resolution!r}")
-        t = None if transform is None else check_rigid_transform(transform)
-        rule = check_choice(rule, "rule", MERGE_RULES)
-        cap = MAX_MERGE_CELLS if max_cells is None else check_int(max_cells, "max_cells", low=1)
-        keys, values = _finest_cells(other, cap)
-        if len(keys) and t is not None and not np.array_equal(t, np.eye(4)):
-            keys, values = _resampled(other, keys, t, self.resolution)
-        if len(keys) == 0:
-            return self
-        packed = (keys[:, 0].astype(np.uint64) | (keys[:, 1].astype(np.uint64) << np.uint64(16))
-                  | (keys[:, 2].astype(np.uint64) << np.uint64(32)))
-        if rule == "add":
-            self._apply_cells(np.ascontiguousarray(packed), np.ascontiguousarray(values))
-            return self
-        mine = self.log_odds((keys - _HALF + 0.5) * self.resolution)
-        take = np.isnan(mine) | (values > mine)
-        if take.any():
-            self._set_values(np.ascontiguousarray(keys[take], dtype=np.uint16),
-                             np.ascontiguousarray(values[take]))
+    Examples
+    --------
+    >>> from occgp import OccupancyOctree
+    >>> a = OccupancyOctree(0.1).update_cells([[0.05, 0.05, 0.05]], 1.0)
+    >>> b = OccupancyOctree(0.1).update_cells([[0.05, 0.05, 0.05], [0.15, 0.05, 0.05]],
+    ...                                       [1.5, -0.5])
+    >>> a.merge(b).log_odds([[0.05, 0.05, 0.05], [0.15, 0.05, 0.05]]).tolist()
+    [2.5, -0.5]
+    """
+    other = _as_octree(other)
+    if other.resolution != self.resolution:
+        raise ValueError(f"other must have this map's resolution {self.resolution!r}, "
+                         f"got {other.resolution!r}")
+    t = None if transform is None else check_rigid_transform(transform)
+    rule = check_choice(rule, "rule", MERGE_RULES)
+    cap = MAX_MERGE_CELLS if max_cells is None else check_int(max_cells, "max_cells", low=1)
+    keys, values = _finest_cells(other, cap)
+    if len(keys) and t is not None and not np.array_equal(t, np.eye(4)):
+        keys, values = _resampled(other, keys, t, self.resolution)
+    if len(keys) == 0:
         return self
+    packed = (keys[:, 0].astype(np.uint64) | (keys[:, 1].astype(np.uint64) << np.uint64(16))
+              | (keys[:, 2].astype(np.uint64) << np.uint64(32)))
+    if rule == "add":
+        self._apply_cells(np.ascontiguousarray(packed), np.ascontiguousarray(values))
+        return self
+    mine = self.log_odds((keys - _HALF + 0.5) * self.resolution)
+    take = np.isnan(mine) | (values > mine)
+    if take.any():
+        self._set_values(np.ascontiguousarray(keys[take], dtype=np.uint16),
+                         np.ascontiguousarray(values[take]))
+    return self
 
 
 def _as_octree(other: Any) -> Any:
     # _OcTree: the compiled tree under OccupancyOctree, and under no other class, so
-    # that this base of OccupancyOctree need not import it
+    # that this part of OccupancyOctree need not import it
     if isinstance(other, _OcTree):
         return other
     to_octree = getattr(other, "to_octree", None)
