@@ -85,6 +85,8 @@ DIST_VENV  ?= .venv-dist
 DIST_STAMP := $(DIST_VENV)/.occgp-dist-tools
 # empty: the working tree's files; a tag or commit (make dist DIST_REF=v0.1.0): its tree
 DIST_REF   ?=
+# 1: the wheel's libraries stripped of symbols and debug information (auditwheel --strip)
+DIST_STRIP ?= 1
 $(DIST_STAMP): tools/dist-requirements.txt
 	@PYTHON=$(PYTHON) bash tools/install-system-deps.sh
 	$(PYTHON) -m venv $(DIST_VENV)
@@ -92,7 +94,7 @@ $(DIST_STAMP): tools/dist-requirements.txt
 	@touch $@
 
 dist: $(DIST_STAMP)
-	DIST_PY=$(DIST_VENV)/bin/python DIST_REF=$(DIST_REF) bash tools/dist.sh
+	DIST_PY=$(DIST_VENV)/bin/python DIST_REF=$(DIST_REF) DIST_STRIP=$(DIST_STRIP) bash tools/dist.sh
 
 clean:
 	rm -rf build docs/_build docs/auto_examples docs/gen_modules ext/*.cpp occgp/*.so demo_out
