@@ -12,7 +12,9 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "occgp"
 # modules every method may import private names from: the shared argument checks
 ALLOWED = {"occgp._validation"}
-MAX_LINES = 800
+MAX_LINES = 700
+# the compiled core's sources (ext/): not yet split to MAX_LINES (_octree.pyx, _scan.h)
+MAX_EXT_LINES = 800
 
 
 def _module_name(path: Path) -> str:
@@ -96,7 +98,8 @@ def test_the_private_import_check_can_fail(tmp_path, monkeypatch):
                          ids=lambda p: str(p.relative_to(ROOT)))
 def test_modules_stay_small(path):
     n = len(path.read_text().splitlines())
-    assert n <= MAX_LINES, f"{path.relative_to(ROOT)} has {n} lines (at most {MAX_LINES})"
+    limit = MAX_EXT_LINES if path.parent.name == "ext" else MAX_LINES
+    assert n <= limit, f"{path.relative_to(ROOT)} has {n} lines (at most {limit})"
 
 
 def test_no_two_modules_share_a_name():
