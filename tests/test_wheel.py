@@ -163,7 +163,7 @@ def test_wheel_is_self_contained(tmp_path):
                 assert Path(target).parent.resolve() == libs.resolve(), (so.name, line)
                 octomap_lines.append(f"{so.name}: {line.strip()}")
         assert not re.search(r"/usr/lib\S*/liboctoma|^\s*\S+ => /lib\S*/liboctoma", ldd, re.M)
-        if "occgp.libs" in ldd:  # (one that links no bundled library gets no RUNPATH)
+        if "occgp.libs" in ldd:  # (one that links no bundled library gets no RPATH)
             runpath = _run(["readelf", "-d", str(so)], work, env)
             assert re.search(r"R(UN)?PATH.*\$ORIGIN/(\.\./)+occgp\.libs", runpath), runpath
     print(f"\n[wheel] {wheel.name}: {wheel.stat().st_size / 2**20:.1f} MiB; pip install of "

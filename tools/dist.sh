@@ -8,7 +8,7 @@
 #  2. PyPA's build: the sdist from that tree, then the wheel from the unpacked sdist, each in
 #     an isolated environment with pyproject.toml's pinned build requirements;
 #  3. auditwheel repair: liboctomap, liboctomath and libgomp copied into the wheel's
-#     occgp.libs/ (renamed with a hash), the extensions' NEEDED entries and RUNPATH pointed
+#     occgp.libs/ (renamed with a hash), the extensions' NEEDED entries and RPATH pointed
 #     at them, and the manylinux tag this machine's glibc and libstdc++ allow; symbols
 #     stripped (--strip: a 2.6 MiB wheel instead of 8.3 MiB of mostly debug information;
 #     DIST_STRIP=0 keeps them);
