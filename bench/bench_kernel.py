@@ -24,7 +24,7 @@ Data sets:
   points on their rays), one row per method averaged over ``--seeds`` splits;
 * ``structured`` / ``unstructured``: occgp's synthetic rooms (10 x 7 x 2 m,
   4 poses x 3 scans x 3500 points) scored against the exact occupancy of every
-  cell centre of the room at 0.05 m, averaged over ``--seeds`` scan draws.
+  cell center of the room at 0.05 m, averaged over ``--seeds`` scan draws.
 
 Also printed: bytes per reached cell of each kernel map, and the issue's
 targets against the la3dm rows.
@@ -59,8 +59,8 @@ def methods(seed, threads):
         # the search radius reaches R at the simulated sensors' 8 m (AKIMap's default
         # is a 30 m LiDAR's range)
         "AKIMap (published)": lambda: AKIMap(RES, variant="published", random_state=seed,
-                                             sensor_range=8.0, n_jobs=threads),
-        "AKIMap (occgp)": lambda: AKIMap(RES, random_state=seed, sensor_range=8.0,
+                                             schedule_range=8.0, n_jobs=threads),
+        "AKIMap (occgp)": lambda: AKIMap(RES, random_state=seed, schedule_range=8.0,
                                          n_jobs=threads),
         "BGK (la3dm defaults)": lambda: BGKMap(RES, max_range=8.0, n_jobs=threads),
         "BGK (free every 0.3 m)": lambda: BGKMap(RES, free_resolution=0.3, max_range=8.0,

@@ -132,7 +132,7 @@ def measure(d, rig, quick, n_jobs):
     order, fdr = rank_sgbm_sets(pairs[::4 if quick else RANK_EVERY], rig, scene, sets,
                                 resolution=RESOLUTION, n_jobs=n_jobs)
     times["rank"] = time.perf_counter() - t0
-    ref = ScanReplay(true_scans(pairs, rig), RESOLUTION, sensor_range=SENSOR_RANGE)
+    ref = ScanReplay(true_scans(pairs, rig), RESOLUTION, max_range=SENSOR_RANGE)
     picks = {"1st": int(order[0]), "middle": int(order[len(order) // 2]),
              "last": int(order[-1])}
     out = {"name": d.name, "half": d.half, "texture": d.texture, "ranks": {},
@@ -143,7 +143,7 @@ def measure(d, rig, quick, n_jobs):
         scans = d.scans(sets[i], rig=rig, pairs=pairs, n_jobs=n_jobs)
         t_match = time.perf_counter() - t0
         t0 = time.perf_counter()
-        replay = ScanReplay(scans, RESOLUTION, sensor_range=SENSOR_RANGE, ks=(1,))
+        replay = ScanReplay(scans, RESOLUTION, max_range=SENSOR_RANGE, ks=(1,))
         labels = cell_labels(scene, replay.centers, RESOLUTION)
         mask = np.isin(replay.keys, ref.keys)
         t_replay = time.perf_counter() - t0
@@ -154,7 +154,7 @@ def measure(d, rig, quick, n_jobs):
         t_hist = math.nan
         if rank == "last":      # the multi-scan score: its target is on the last-ranked sets
             t0 = time.perf_counter()
-            hist_replay = ScanReplay(scans, RESOLUTION, sensor_range=SENSOR_RANGE, ks=(1,),
+            hist_replay = ScanReplay(scans, RESOLUTION, max_range=SENSOR_RANGE, ks=(1,),
                                      history=HISTORY)
             assert np.array_equal(hist_replay.keys, replay.keys)
             hist = grid_search(hist_replay, labels, KNN_GRID, method="knn", **kw)

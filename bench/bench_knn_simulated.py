@@ -54,7 +54,7 @@ from bench_gp import table  # the GP bench's (same folder)
 
 RESOLUTION = 0.1
 SENSOR_RANGE = 4.0
-NCA_FEATURES = ("k", "p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "p_t")
+NCA_FEATURES = ("k", "p_u", "p_l", "p_m", "p_m_out", "p_min", "p_max", "occupancy_threshold")
 NCA_KS = (1, 3, 5, 7)
 #: The data sets of the quick run (2 per noise level) and of tables 4-6.
 QUICK_SETS = ("I_textured_buildings", "S_plain_open")
@@ -76,7 +76,7 @@ def compare(d, n_jobs):
     scans = d.scans()
     t_sim = time.perf_counter() - t0
     t0 = time.perf_counter()
-    replay = ScanReplay(scans, RESOLUTION, sensor_range=SENSOR_RANGE, ks=(1,))
+    replay = ScanReplay(scans, RESOLUTION, max_range=SENSOR_RANGE, ks=(1,))
     t_replay = time.perf_counter() - t0
     t0 = time.perf_counter()
     labels = cell_labels(d.scene(), replay.centers, RESOLUTION)
@@ -184,7 +184,7 @@ def weight_grid_points():
     for values in itertools.product(*(KNN_WEIGHT_GRID[k] for k in keys)):
         c = dict(zip(keys, values))
         try:
-            check_knn_params({**c, "p_t": c["p_min"], "sensor_range": SENSOR_RANGE})
+            check_knn_params({**c, "occupancy_threshold": c["p_min"], "max_range": SENSOR_RANGE})
         except ValueError:
             continue
         combos.append(c)
@@ -202,7 +202,7 @@ def nca_table(details, n_samples, n_jobs, seed=0):
     out, notes = [], []
     for name, (scans, labels) in details.items():
         t0 = time.perf_counter()
-        replay = ScanReplay(scans, RESOLUTION, sensor_range=SENSOR_RANGE, ks=NCA_KS)
+        replay = ScanReplay(scans, RESOLUTION, max_range=SENSOR_RANGE, ks=NCA_KS)
         t_replay = time.perf_counter() - t0
         assert replay.num_cells == len(labels)
         order = rng.permutation(len(combos))
@@ -254,7 +254,7 @@ def insert_table(details, repeats):
         t_query = np.zeros((repeats, len(scans)))
         for rep in range(repeats):
             octree = OccupancyOctree(RESOLUTION)
-            knn = KNNMap(RESOLUTION, sensor_range=SENSOR_RANGE)
+            knn = KNNMap(RESOLUTION, max_range=SENSOR_RANGE)
             for i, (points, origin) in enumerate(scans):
                 order = (0, 1) if (i + rep) % 2 == 0 else (1, 0)
                 for which in order:
@@ -303,7 +303,7 @@ def runtime_table(details, prefixes, repeats):
                                                  max_range=SENSOR_RANGE))
                 for k in NCA_KS:
                     t_knn[k] = min(t_knn[k], build_seconds(
-                        lambda: KNNMap(RESOLUTION, k=k, sensor_range=SENSOR_RANGE), part))
+                        lambda: KNNMap(RESOLUTION, k=k, max_range=SENSOR_RANGE), part))
             data.append((name, m, N, t_oct, t_knn))
     print(f"== 6. Run-time models (the paper's section 3.6): map builds from the first m "
           f"scans of each data set; N = points inserted; each time the fastest of "

@@ -37,10 +37,10 @@ resolution = 0.1
 maps = {
     "octree": OccupancyOctree(resolution),
     "BGK": BGKMap(resolution),
-    # the room's simulated sensor reaches 8 m (AKIMap's default sensor_range: 30 m)
+    # the room's simulated sensor reaches 8 m (AKIMap's default schedule_range: 30 m)
     "AKIMap (published)": AKIMap(resolution, variant="published", random_state=0,
-                                 sensor_range=8.0),
-    "AKIMap": AKIMap(resolution, random_state=0, sensor_range=8.0),
+                                 schedule_range=8.0),
+    "AKIMap": AKIMap(resolution, random_state=0, schedule_range=8.0),
 }
 seconds = {}
 for name, m in maps.items():
@@ -58,7 +58,7 @@ for name, m in maps.items():
 # octree knows only the cells the beams crossed; BGK's kernels blur surfaces
 # and leave rings of unknown cells between its free samples; the published
 # AKIMap's kernels follow the surfaces but are too thin to reach many cell
-# centres; the bandwidth floor closes those gaps.
+# centers; the bandwidth floor closes those gaps.
 z_sensor = float(np.mean([s.origin[2] for s in scans]))
 z = (np.floor(z_sensor / resolution) + 0.5) * resolution
 lo, hi = scene.bounds
@@ -86,7 +86,7 @@ plt.show()
 # %%
 # Scores against the ground truth
 # -------------------------------
-# The test points are the cell centres in the region the sensors saw: the box
+# The test points are the cell centers in the region the sensors saw: the box
 # around the end points and sensor positions, grown by one cell (the scanner
 # looks upward from 0.1 m and never sees the floor slab or the outside of the
 # walls). Each is labelled by the scene; unknown cells count as p = 0.5.

@@ -37,7 +37,7 @@ for ds in stereo_datasets():
     if ds.layout not in ("O", "L") or not ds.texture or ds.environment != "open":
         continue
     scans = ds.scans(StereoCamera(160, 90, depth_noise=ds.depth_noise), n_frames=20)
-    replay = ScanReplay(scans, 0.1, sensor_range=4.0)
+    replay = ScanReplay(scans, 0.1, max_range=4.0)
     labels = cell_labels(ds.scene(), replay.centers, 0.1)
     octomap = grid_search(replay, labels, OCTOMAP_GRID, method="octomap").best_score
     knn = grid_search(replay, labels, KNN_GRID).best_score

@@ -47,11 +47,11 @@ print(f"{len(scans)} scans, {sum(len(s.points) for s in scans)} points")
 # The k-NN distances and each scan's cells do not depend on the
 # probabilities, so a :class:`~occgp.knn.ScanReplay` computes them once and
 # the grid search replays every combination exactly. Each combination's map
-# is classified at thresholds ``p_t`` from 0.98 down to 0.02; the operating
+# is classified at occupancy thresholds from 0.98 down to 0.02; the operating
 # points (FDR, TPR) give the curve, whose area scores the combination. The
 # grids here are a part of the paper's (its Table 1).
 t0 = time.perf_counter()
-replay = ScanReplay(scans, 0.1, sensor_range=4.0, ks=(1,))
+replay = ScanReplay(scans, 0.1, max_range=4.0, ks=(1,))
 labels = cell_labels(scene, replay.centers, 0.1)
 print(f"{replay.num_cells} cells reached, {labels.sum()} of them occupied; "
       f"set up in {time.perf_counter() - t0:.1f} s")
@@ -83,7 +83,7 @@ def corner(row):
 best_octo, best_knn = octo.results[octo.best_index], knn.results[knn.best_index]
 t_octo, t_knn = corner(best_octo)[0], corner(best_knn)[0]
 octree = OccupancyOctree(0.1, **octo.best_params, occupancy_threshold=t_octo)
-knn_map = KNNMap(0.1, **knn.best_params, p_t=t_knn, sensor_range=4.0)
+knn_map = KNNMap(0.1, **knn.best_params, occupancy_threshold=t_knn, max_range=4.0)
 for points, origin in scans:
     octree.insert_scan(points, origin, max_range=4.0)
     knn_map.insert_scan(points, origin)
@@ -95,7 +95,7 @@ print(knn_map, f"scores: mean {knn_map.score_mean_:.3f} m, std {knn_map.score_st
 # The occupied cells of each map: true positives (a solid reaches into the
 # cell) in blue, false positives in red. Top row: seen from above, the cells
 # higher than 0.3 m (the boxes stand 0.9 m tall); the grey outlines are the
-# boxes. Bottom row: a vertical slice 0.5 m thick through the layout's centre.
+# boxes. Bottom row: a vertical slice 0.5 m thick through the layout's center.
 # Depth noise of 0.32 m at 4 m turns every surface into a thick shell of
 # points, the ground's too: most false positives lie in it, for both methods;
 # the k-NN model lowers the isolated points (speckle, the shell's fringe).
@@ -110,7 +110,7 @@ for col, (name, tree) in enumerate((("OctoMap", octree), ("k-NN", knn_map))):
     tp = occupied & labels
     fp = occupied & ~labels
     print(f"{name:<8} {tp.sum()} true and {fp.sum()} false positives "
-          f"(p_t = {tree.occupancy_threshold:.2f})")
+          f"(occupancy_threshold = {tree.occupancy_threshold:.2f})")
     top, side = axes[0, col], axes[1, col]
     for mask, colour, label in ((tp, "tab:blue", "true positive"),
                                 (fp, "tab:red", "false positive")):

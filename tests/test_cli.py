@@ -158,9 +158,10 @@ def test_map_command_builds_knn_map(tmp_path, capsys):
     paths, scans = _write_scans(tmp_path)
     out = tmp_path / "knn.ot"
     assert main(["map", *map(str, paths), "-o", str(out), "--method", "knn", "--k", "3",
-                 "--sensor-range", "6", "--p-u", "0.9", "--p-m", "0.3", "--p-t", "0.6",
-                 "--cdf", "truncated", "--no-progress"]) == 0
-    assert "2 scans, 1,000 points" in capsys.readouterr().out
+                 "--max-range", "6", "--p-u", "0.9", "--p-m", "0.3",
+                 "--occupancy-threshold", "0.6", "--cdf", "truncated", "--no-progress"]) == 0
+    captured = capsys.readouterr()
+    assert "2 scans, 1,000 points" in captured.out and "deprecated" not in captured.err
     params = dict(k=3, max_range=6.0, p_u=0.9, p_m=0.3, occupancy_threshold=0.6, cdf="truncated")
     expected, default = KNNMap(0.1, **params), KNNMap(0.1)
     for s in scans:
@@ -188,9 +189,9 @@ def test_map_command_builds_knn_map(tmp_path, capsys):
     ("--k", "0", r"argument --k: k must lie in \[1, 1000\], got 0"),
     ("--k", "1.5", r"argument --k: invalid int value"),
     ("--k", "5000", r"argument --k: k must lie in \[1, 1000\], got 5000"),
-    ("--sensor-range", "0", r"argument --sensor-range: max_range must lie in \(0.0, "),
-    ("--sensor-range", "nan", r"argument --sensor-range: max_range must lie in"),
-    ("--sensor-range", "1e30", r"argument --sensor-range: max_range must lie in"),
+    ("--max-range", "0", r"argument --max-range: max_range must lie in \(0.0, "),
+    ("--max-range", "nan", r"argument --max-range: max_range must lie in"),
+    ("--max-range", "1e30", r"argument --max-range: max_range must lie in"),
     ("--p-u", "1.5", r"argument --p-u: p_u must lie in \(0.0, 1.0\), got 1.5"),
     ("--p-u", "0.3", r"argument --p-u/--p-l: .*must satisfy p_u >= p_l"),
     ("--p-l", "0.9", r"argument --p-u/--p-l: .*must satisfy p_u >= p_l"),
@@ -198,12 +199,12 @@ def test_map_command_builds_knn_map(tmp_path, capsys):
     ("--p-m-out", "0.5", r"argument --p-m-out: p_m_out must be below 0.5"),
     ("--p-min", "0", r"argument --p-min: p_min must lie in \(0.0, 1.0\), got 0.0"),
     ("--p-min", "0.3", r"argument --p-m/--p-min: .*must satisfy p_m >= p_min"),
-    ("--p-max", "0.4", r"argument --p-max/--p-t: .*must satisfy p_max >= occupancy_threshold"),
+    ("--p-max", "0.4", r"argument --p-max/--occupancy-threshold: .*must satisfy "
+     r"p_max >= occupancy_threshold"),
     ("--p-max", "1", r"argument --p-max: p_max must lie in \(0.0, 1.0\), got 1.0"),
-    ("--p-t", "inf", r"argument --p-t: occupancy_threshold must lie in \(0.0, 1.0\), got inf"),
+    ("--occupancy-threshold", "inf", r"argument --occupancy-threshold: occupancy_threshold "
+     r"must lie in \(0.0, 1.0\), got inf"),
     ("--cdf", "cauchy", r"argument --cdf: invalid choice: 'cauchy'"),
-    ("--max-range", "3", r"argument --max-range: not with --method knn, whose range limit "
-     r"is --sensor-range"),
 ])
 def test_map_command_rejects_bad_knn_options(tmp_path, capsys, monkeypatch, option, value,
                                              message):
@@ -222,10 +223,47 @@ def test_map_command_rejects_knn_options_with_other_methods(tmp_path, capsys, mo
                                                              method):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit) as exc:
-        main(["map", "x.pcd", "-o", "m.bt", "--method", method, "--k", "3", "--p-t", "0.6"])
+        main(["map", "x.pcd", "-o", "m.bt", "--method", method, "--k", "3",
+              "--occupancy-threshold", "0.6"])
     assert exc.value.code == 2
-    assert f"argument --k/--p-t: applies to --method knn only, got --method {method}" in \
-        capsys.readouterr().err
+    assert (f"argument --k/--occupancy-threshold: applies to --method knn only, got --method "
+            f"{method}") in capsys.readouterr().err
+
+
+def test_map_command_reads_the_deprecated_knn_options_with_a_note(tmp_path, capsys):
+    paths, _ = _write_scans(tmp_path)
+    new, old = tmp_path / "new.bt", tmp_path / "old.bt"
+    assert main(["map", *map(str, paths), "-o", str(new), "--method", "knn",
+                 "--max-range", "6", "--occupancy-threshold", "0.6", "--no-progress"]) == 0
+    assert "deprecated" not in capsys.readouterr().err
+    assert main(["map", *map(str, paths), "-o", str(old), "--method", "knn",
+                 "--sensor-range", "6", "--p-t", "0.6", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert ("occgp map: note: --sensor-range is deprecated and will be removed in the next "
+            "release; use --max-range") in err
+    assert "occgp map: note: --p-t is deprecated and will be removed in the next release; " \
+        "use --occupancy-threshold" in err
+    assert old.read_bytes() == new.read_bytes()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--method", "knn", "--sensor-range", "6", "--max-range", "5"],
+     "argument --sensor-range: not with --max-range; give --max-range only"),
+    (["--method", "knn", "--p-t", "0.6", "--occupancy-threshold", "0.6"],
+     "argument --p-t: not with --occupancy-threshold; give --occupancy-threshold only"),
+    (["--method", "bgk", "--sensor-range", "6"],
+     "argument --sensor-range: applies to --method knn only (the range limit of every map is "
+     "--max-range), got --method bgk"),
+    (["--method", "knn", "--sensor-range", "0"],
+     "argument --max-range: max_range must lie in (0.0, "),
+])
+def test_map_command_rejects_bad_deprecated_knn_options(tmp_path, capsys, monkeypatch,
+                                                      args, message):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        main(["map", "x.pcd", "-o", "m.bt", *args])
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("kwargs, exc, message", [
@@ -264,7 +302,7 @@ def test_map_command_rejects_unknown_method(tmp_path, capsys, monkeypatch, metho
 # occgp map: bags, poses, outputs, continuing a map, options
 # --------------------------------------------------------------------------- #
 def _leaves(tree):
-    """(centres, log-odds) of a tree's leaves, sorted by centre."""
+    """(centers, log-odds) of a tree's leaves, sorted by center."""
     leaves = tree.leaves()
     order = np.lexsort(leaves.centers.T)
     return leaves.centers[order], leaves.log_odds[order]

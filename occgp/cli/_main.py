@@ -129,7 +129,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="range limit in metres: octree: longer beams are free space up to "
                    "it (default: no limit); bgk: longer beams are dropped (default: 8, or the "
                    "--input-map's); akimap: end points farther from the sensor are dropped "
-                   "(default: no limit); not with knn, whose range limit is --sensor-range")
+                   "(default: no limit); knn: farther points are not inserted and their "
+                   f"rays are cut here (default: {KNN_DEFAULTS['max_range']})")
     p.add_argument("--n-jobs", type=int, default=-1,
                    help="threads of the map; -1: every core; the map does not depend on it "
                    "(default: %(default)s)")
@@ -207,10 +208,8 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--k", type=int, default=None,
                    help=f"nearest neighbours scoring each point, in [1, 1000] "
                    f"(default: {d['k']})")
-    g.add_argument("--sensor-range", type=float, default=None, dest="max_range_knn",
-                   help=f"range s_c in metres: farther points are not inserted and their "
-                   f"rays are cut here, as --max-range cuts the octree's "
-                   f"(default: {d['max_range']}); the map's max_range")
+    g.add_argument("--sensor-range", type=float, default=None, metavar="M",
+                   help="deprecated, read as --max-range (default: not given)")
     g.add_argument("--p-u", type=float, default=None,
                    help=f"probability of the best-supported points (default: {d['p_u']})")
     g.add_argument("--p-l", type=float, default=None,
@@ -226,35 +225,49 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"lower clamping bound (default: {d['p_min']})")
     g.add_argument("--p-max", type=float, default=None,
                    help=f"upper clamping bound, < 1 (default: {d['p_max']})")
-    g.add_argument("--p-t", type=float, default=None, dest="occupancy_threshold",
-                   help=f"occupancy threshold, in [--p-min, --p-max] "
-                   f"(default: {d['occupancy_threshold']}); the map's occupancy_threshold")
+    g.add_argument("--occupancy-threshold", type=float, default=None,
+                   help=f"occupancy threshold (the paper's p_t), in [--p-min, --p-max] "
+                   f"(default: {d['occupancy_threshold']})")
+    g.add_argument("--p-t", type=float, default=None, metavar="P_T",
+                   help="deprecated, read as --occupancy-threshold (default: not given)")
     g.add_argument("--cdf", choices=CDFS, default=None,
                    help=f"the CDF of the scores: normal (the paper's) or truncated at 0 "
                    f"(default: {d['cdf']})")
     return parser
 
 
-#: The k-NN options whose argparse names differ from KNNMap's parameters (``--sensor-range``
-#: sets max_range, which --max-range names for the other maps; ``--p-t`` the threshold).
-_KNN_DEST = {"max_range": "max_range_knn"}
+#: The deprecated k-NN options (one release), by the option each one is read as.
+_OLD_KNN_OPTIONS = {"sensor_range": "max_range", "p_t": "occupancy_threshold"}
 
 
 def _knn_args(args) -> dict | None:
     """The k-NN options given on the command line (None: none), checked; exits with
-    parser.error (code 2) on a bad one or one given with another method."""
+    parser.error (code 2) on a bad one or one given with another method. A deprecated
+    option (--sensor-range, --p-t) is read as its new one, with a note on stderr."""
     parser = args.map_parser
-    given = {name: getattr(args, _KNN_DEST.get(name, name)) for name in KNN_OPTIONS
-             if getattr(args, _KNN_DEST.get(name, name)) is not None}
+    for old, new in _OLD_KNN_OPTIONS.items():
+        value = getattr(args, old)
+        if value is None:
+            continue
+        print(f"occgp map: note: {option_name(old)} is deprecated and will be removed in "
+              f"the next release; use {option_name(new)}", file=sys.stderr)
+        if getattr(args, new) is not None:
+            parser.error(f"argument {option_name(old)}: not with {option_name(new)}; give "
+                         f"{option_name(new)} only")
+        if new == "max_range" and args.method != "knn":
+            parser.error(f"argument {option_name(old)}: applies to --method knn only (the "
+                         f"range limit of every map is --max-range), got --method "
+                         f"{args.method}")
+        setattr(args, new, value)
+    knn_only = [name for name in KNN_OPTIONS if name != "max_range"]
+    given = {name: getattr(args, name) for name in knn_only if getattr(args, name) is not None}
     if args.method != "knn":
         if given:
             parser.error(f"argument {'/'.join(map(option_name, given))}: applies to --method "
                          f"knn only, got --method {args.method}")
         return None
     if args.max_range is not None:
-        parser.error(f"argument --max-range: not with --method knn, whose range limit is "
-                     f"--sensor-range (default: {KNN_DEFAULTS['max_range']}); it cuts "
-                     f"rays as --max-range does for the octree")
+        given["max_range"] = args.max_range
     try:
         check_knn_options(given)
     except (ValueError, TypeError) as exc:
@@ -288,7 +301,8 @@ def main(argv=None) -> int:
             demo(args.output, resolution=args.resolution, seed=args.seed, progress=progress)
         else:
             map_scans(args.scans, args.output, resolution=args.resolution,
-                      method=args.method, mode=args.mode, max_range=args.max_range,
+                      method=args.method, mode=args.mode,
+                      max_range=args.max_range if knn_params is None else None,
                       knn_params=knn_params, poses=args.poses, poses_format=args.poses_format,
                       topic=args.topic, fixed_frame=args.fixed_frame,
                       sensor_frame=args.sensor_frame, tf_tolerance=args.tf_tolerance,

@@ -440,10 +440,10 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         If `output` has a suffix other than those above or one that does not
         fit `method`; `method` or `mode` is not one of the choices (or `mode`
         is given with another method than the octree); `max_range` or
-        `resolution` is not positive, or `max_range` is given with
-        ``method="knn"``; `n_jobs` is 0; `knn_params` is given with another
-        method, names a parameter KNNMap does not take or holds a value
-        KNNMap rejects; `poses_format` is given without `poses` or is not a
+        `resolution` is not positive, or `max_range` is given both as itself
+        and in `knn_params`; `n_jobs` is 0; `knn_params` is given with
+        another method, names a parameter KNNMap does not take or holds a
+        value KNNMap rejects; `poses_format` is given without `poses` or is not a
         choice; the format of `poses` cannot be guessed, or it does not hold
         one pose per scan; a bag option is given and no bag is among `paths`;
         `input_map` does not fit `method`, holds another class of map, or its

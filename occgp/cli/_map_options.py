@@ -81,12 +81,10 @@ POSE_FORMATS = ("kitti", "tum")
 
 
 def option_name(name: str) -> str:
-    """The command-line option of a KNNMap parameter: ``p_m_out`` → ``--p-m-out``
-    (``max_range`` → ``--sensor-range``, ``occupancy_threshold`` → ``--p-t``)."""
-    return _KNN_OPTION_NAMES.get(name) or "--" + name.replace("_", "-")
-
-
-_KNN_OPTION_NAMES = {"max_range": "--sensor-range", "occupancy_threshold": "--p-t"}
+    """The command-line option of a KNNMap parameter: ``p_m_out`` → ``--p-m-out``,
+    ``max_range`` → ``--max-range`` (the deprecated ``--sensor-range`` and ``--p-t``
+    are read as ``--max-range`` and ``--occupancy-threshold``)."""
+    return "--" + name.replace("_", "-")
 
 
 def knn_error(parser: argparse.ArgumentParser, exc: Exception) -> None:
