@@ -53,10 +53,10 @@ def load_scene():
 
 
 def free_pose(tree, rng):
-    """A free cell centre near the middle of the map, at least 0.5 m from obstacles."""
+    """A free cell center near the middle of the map, at least 0.5 m from obstacles."""
     lo, hi = tree.bounds
-    centres = tree.leaves()[0]
-    free = centres[~tree.is_occupied(centres)]
+    centers = tree.leaves()[0]
+    free = centers[~tree.is_occupied(centers)]
     mid = (lo + hi) / 2
     order = np.argsort(np.linalg.norm((free - mid)[:, :2], axis=1))
     for c in free[order[:2000]]:

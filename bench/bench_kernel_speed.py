@@ -9,7 +9,7 @@ AUC of the map on the test set (:mod:`occgp.evaluation`). Data sets:
   ``bench/bench_kernel.py`` runs it; ``BGKMap(0.05)`` and ``AKIMap(0.05)``
   (occgp's variant, ``random_state=0``);
 * ``unstructured``: occgp's synthetic unstructured room (scan seed 0), scored
-  against the exact occupancy of every cell centre at 0.05 m; the same maps;
+  against the exact occupancy of every cell center at 0.05 m; the same maps;
 * ``hku_mb``: the real LiDAR sequence ``../shared/data/lidar_seq/hku_mb`` (Livox
   Avia, 457 keyframes of ~5,100 body-frame points, FAST-LIO2 poses; ranges up
   to 349 m), mapped at 0.1 m by ``OccupancyOctree(0.1)`` (its default

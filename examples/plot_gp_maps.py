@@ -65,7 +65,7 @@ print(f"GPOMIK PLSC: a = {maps['GPOMIK'].plsc_[0]:.3g}, b = {maps['GPOMIK'].plsc
 # %%
 # Evaluate on a grid
 # ------------------
-# :func:`occgp.gp.predict_grid` evaluates a fitted map at the centres of
+# :func:`occgp.gp.predict_grid` evaluates a fitted map at the centers of
 # 0.2 m cells over the room's bounds. Its arrays are indexed ``[ix, iy]``;
 # ``imshow`` wants rows of constant y, hence the transposes.
 lo, hi = room.bounds
@@ -106,7 +106,7 @@ plt.show()
 #
 # ROC AUC against the ground truth
 # --------------------------------
-# Every cell centre of the 0.2 m grid is a test point, labelled by the room.
+# Every cell center of the 0.2 m grid is a test point, labelled by the room.
 print(f"{len(truth):,} test points, {truth.mean():.1%} occupied\n")
 print(f"{'method':<13} {'AUC':>6}")
 for name, p in proba.items():

@@ -104,7 +104,7 @@ plt.show()
 # %%
 # ROC curves against the ground truth
 # -----------------------------------
-# Every cell centre of the 0.1 m grid is a test point, labelled by the room.
+# Every cell center of the 0.1 m grid is a test point, labelled by the room.
 points, _ = grid_points(lo, hi, resolution)
 truth = room.occupancy(points)
 fig, ax = plt.subplots(figsize=(5.5, 5), layout="constrained")

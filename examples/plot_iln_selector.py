@@ -78,7 +78,7 @@ print(format_region_table(rows))
 # -------------------------------
 # :meth:`~occgp.iln.CandidateSelector.candidate_table` gives every
 # candidate's range and probability (at the queries of
-# :func:`~occgp.iln.image_queries`: the 64-beam pixel centres in the 16-beam
+# :func:`~occgp.iln.image_queries`: the 64-beam pixel centers in the 16-beam
 # image); :func:`~occgp.iln.choose_candidates` applies the shipped model's two thresholds (chosen on held-out training
 # scenes). A sector ahead of the sensor: the true scan, then the choice per
 # pixel -- grey where the prior stays, colours where a copy, an extension or

@@ -61,9 +61,9 @@ if scans:
     origins = np.array(origins)
     out = Path(tempfile.mkdtemp()) / "akimap_sample.ply"
     tree.save_ply(out)
-    centres, sizes = tree.extract_points()
+    centers, sizes = tree.extract_points()
     print(f"{scans.n_points} points ({scans.n_dropped} non-finite dropped); "
-          f"{tree.num_leaves} leaves, {len(centres)} occupied; wrote {out.name} "
+          f"{tree.num_leaves} leaves, {len(centers)} occupied; wrote {out.name} "
           f"({out.stat().st_size // 1024} kB)")
 
     # %%
@@ -71,8 +71,8 @@ if scans:
     # ------------------
     # The occupied cells coloured by height, and the sensor's path from TF.
     fig, ax = plt.subplots(figsize=(7, 5), layout="constrained")
-    order = np.argsort(centres[:, 2])
-    sc = ax.scatter(centres[order, 0], centres[order, 1], c=centres[order, 2], s=2,
+    order = np.argsort(centers[:, 2])
+    sc = ax.scatter(centers[order, 0], centers[order, 1], c=centers[order, 2], s=2,
                     cmap="viridis", lw=0)
     ax.plot(origins[:, 0], origins[:, 1], "r.-", ms=3, lw=1, label="sensor path (TF)")
     ax.set_aspect("equal")

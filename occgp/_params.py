@@ -28,23 +28,25 @@ constraints accepts it:
 A parameter missing from the table is not checked one by one. Rules that tie
 parameters together go in ``_check_params_together``; renamed parameters in
 ``_deprecated_params`` (old name to new name), which keep the old name working
-with a :class:`DeprecationWarning` for one release.
+with a :class:`DeprecationWarning` for one release. A function's renamed keyword
+argument gets the same through :func:`renamed_keywords`.
 
 :data:`DEFAULT_RESOLUTION` is the one default cell edge of the maps.
 """
 
 from __future__ import annotations
 
+import functools
 import inspect
 import numbers
 import warnings
 from collections.abc import Callable, Iterable
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 from ._validation import check_bool, check_choice, check_int, check_real
 
 __all__ = ["DEFAULT_RESOLUTION", "Interval", "Options", "Check", "ParamsMixin",
-           "validate_params", "check_renamed", "deprecated_alias"]
+           "validate_params", "check_renamed", "deprecated_alias", "renamed_keywords"]
 
 #: The default edge length (metres) of the cells of every map that has cells.
 DEFAULT_RESOLUTION = 0.1
@@ -212,6 +214,35 @@ def check_renamed(renames: dict[str, str], params: dict[str, Any],
             raise TypeError(f"got both {old!r} (deprecated) and {new!r}; pass only {new!r}")
         out[new] = value
     return out
+
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def renamed_keywords(**renames: str) -> Callable[[_F], _F]:
+    """A decorator that keeps the old names (``old="new"``) of a function's renamed
+    keyword arguments working for one release, with a DeprecationWarning naming the
+    new one (:func:`check_renamed`; both names at once raise TypeError). Positional
+    calls and the new names pass through untouched; the signature shown is the
+    function's own.
+
+    Examples
+    --------
+    >>> @renamed_keywords(centres="centers")
+    ... def count(centers):
+    ...     return len(centers)
+    >>> count(centers=[1, 2])
+    2
+    """
+    def decorate(func: _F) -> _F:
+        @functools.wraps(func)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            if not renames.keys() & kwargs.keys():
+                return func(*args, **kwargs)
+            return func(*args, **check_renamed(renames, kwargs, owner=func.__name__,
+                                               stacklevel=3))
+        return wrapper  # type: ignore[return-value]
+    return decorate
 
 
 def deprecated_alias(new: str, old: str) -> property:

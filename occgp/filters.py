@@ -174,10 +174,10 @@ class GroundPlane(NamedTuple):
 
 def _plane_fit(pts: NDArray[np.float64]) -> NDArray[np.float64]:
     """Least-squares plane through `pts` (the normal is the direction of least spread)."""
-    centre = pts.mean(axis=0)
-    _, vecs = np.linalg.eigh(np.cov((pts - centre).T, bias=True))
+    center = pts.mean(axis=0)
+    _, vecs = np.linalg.eigh(np.cov((pts - center).T, bias=True))
     n = vecs[:, 0]
-    return np.append(n, -n @ centre)
+    return np.append(n, -n @ center)
 
 
 def _ransac_plane(pts, distance, cos_angle, max_iterations, rng, probability=0.99):

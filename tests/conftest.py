@@ -22,7 +22,7 @@ def data_path(*parts: str) -> Path:
 
 
 def tiny_room_scan():
-    """Wall points of a 2 m x 2 m x 1 m box seen from its centre, and the origin."""
+    """Wall points of a 2 m x 2 m x 1 m box seen from its center, and the origin."""
     rng = np.random.default_rng(0)
     n = 400
     u, z = rng.uniform(-1, 1, n), rng.uniform(0.05, 0.95, n)

@@ -294,7 +294,7 @@ def test_published_alpha_beta_equal_a_slow_reference():
 
 
 def test_wall_is_occupied_and_the_space_before_it_free():
-    points, origin = wall_scan(x=2.05)                          # on the cell centres
+    points, origin = wall_scan(x=2.05)                          # on the cell centers
     for variant in AKIMap.VARIANTS:
         m = AKIMap(0.1, variant=variant, random_state=0).update(points, origin)
         assert np.mean(m.occupancy(points) > 0.5) > 0.9
@@ -329,9 +329,9 @@ def test_free_sample_distance_and_floor_grow_with_coarse_cells(resolution, step,
     assert_array_equal(s1, s2)
 
 
-def test_bandwidth_floor_keeps_a_flat_wall_between_cell_centres():
+def test_bandwidth_floor_keeps_a_flat_wall_between_cell_centers():
     """A wall on a cell boundary: the published flat kernels (thickness sqrt(0.001) m)
-    miss the centres 5 cm away; the floor's do not."""
+    miss the centers 5 cm away; the floor's do not."""
     points, origin = wall_scan(x=2.0)
     published = AKIMap(0.1, variant="published", random_state=0).update(points, origin)
     occgp = AKIMap(0.1, random_state=0).update(points, origin)

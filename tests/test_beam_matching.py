@@ -87,7 +87,7 @@ def random_case(seed, dim, n_beams=120):
 @pytest.mark.parametrize("budget", [None, 7])
 def test_match_beams_equals_the_rule_beam_by_beam(dim, seed, tolerance, budget, monkeypatch):
     if budget is not None:                   # tiny chunks: many of them, and single
-        monkeypatch.setattr(_beams, "_PAIR_BUDGET", budget)   # centres above the budget
+        monkeypatch.setattr(_beams, "_PAIR_BUDGET", budget)   # centers above the budget
         monkeypatch.setattr(_beams, "_SECTION", 0.03)
     hits, starts, ends = random_case(seed + 10 * dim, dim)
     got = match_beams(hits, starts, ends, hit_tolerance=tolerance)

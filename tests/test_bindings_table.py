@@ -169,11 +169,11 @@ def test_adjust_key_at_depth_recipe(d):
     assert np.array_equal(m.coord_to_key(pts, depth=d), adjusted)
 
 
-def test_key_to_coord_of_the_depth_recipe_is_the_node_centre():
+def test_key_to_coord_of_the_depth_recipe_is_the_node_center():
     m = OccupancyOctree(0.1)
     # the depth-15 node holding key 32768 spans [0, 0.2) on each axis
-    centre = m.key_to_coord([[32768, 32768, 32768]], depth=15)
-    assert np.allclose(centre, 0.1)
+    center = m.key_to_coord([[32768, 32768, 32768]], depth=15)
+    assert np.allclose(center, 0.1)
 
 
 def test_module_names_resolve():

@@ -222,8 +222,8 @@ def test_average_fusion_is_averagenodecolor_point_by_point():
         expected[key] = c if prev is None or prev == [255, 255, 255] else \
             [(p + q) // 2 for p, q in zip(prev, c)]
     keys = list(expected)
-    centres = (np.array(keys) + 0.5) * 0.1
-    rgb, has = m.colors(centres)
+    centers = (np.array(keys) + 0.5) * 0.1
+    rgb, has = m.colors(centers)
     assert_array_equal(rgb, np.array([expected[k] for k in keys]))
     assert_array_equal(has, [expected[k] != [255, 255, 255] for k in keys])
     assert len(keys) > 20
@@ -438,8 +438,8 @@ def test_save_ply_writes_the_cells_colours(tmp_path, binary):
     m.save_ply(tmp_path / "m.ply", binary=binary)
     out = read_ply(tmp_path / "m.ply")
     v = out["vertex"] if isinstance(out, dict) else out[0]["vertex"]
-    centres, sizes, colors = m.extract_points()
-    assert_array_equal(np.column_stack([v["x"], v["y"], v["z"]]), centres.astype(np.float32))
+    centers, sizes, colors = m.extract_points()
+    assert_array_equal(np.column_stack([v["x"], v["y"], v["z"]]), centers.astype(np.float32))
     assert_array_equal(np.column_stack([v["red"], v["green"], v["blue"]]), colors)
     m.save_ply(tmp_path / "cubes.ply", cubes=True, binary=binary)
     cv = read_ply(tmp_path / "cubes.ply")
@@ -452,8 +452,8 @@ def test_save_pcd_writes_packed_rgb(tmp_path, binary):
     m = fill(ColorOctree(0.1), scans(n_scans=2, n=80))
     m.save_pcd(tmp_path / "m.pcd", binary=binary)
     scan, fields = read_pcd(tmp_path / "m.pcd", return_fields=True)
-    centres, _, colors = m.extract_points()
-    assert_array_equal(scan.points, centres.astype(np.float32))
+    centers, _, colors = m.extract_points()
+    assert_array_equal(scan.points, centers.astype(np.float32))
     assert fields["rgb"].dtype == np.uint32
     assert_array_equal(unpack_rgb(fields["rgb"]), colors)
     assert pack_rgb([[1, 2, 3]]).tolist() == [0x010203]

@@ -91,7 +91,7 @@ def test_default_poses_are_free(factory, seed):
 # --------------------------------------------------------------------------- #
 def test_occupancy_of_shell_points(scene):
     pts = np.array([
-        [0.0, 0.0, 1.0],      # room centre at 1 m: free
+        [0.0, 0.0, 1.0],      # room center at 1 m: free
         [0.0, 0.0, -0.05],    # floor
         [5.07, 0.0, 1.0],     # wall +x
         [-5.07, 1.0, 0.5],    # wall -x
@@ -118,11 +118,11 @@ def test_occupancy_of_structured_objects():
 def test_occupancy_of_unstructured_objects():
     scene = unstructured_room()
     pts = np.array([
-        [-1.8, -1.9, 0.5],        # sphere centre
+        [-1.8, -1.9, 0.5],        # sphere center
         [-1.8, -1.9, 1.01],       # just above it
         [-4.2, -2.6, 1.45],       # just below the cone apex
         [-4.2 + 0.1, -2.6, 1.45],  # beside the apex
-        [1.5, 2.2, 0.6],          # ellipsoid centre
+        [1.5, 2.2, 0.6],          # ellipsoid center
     ])
     assert scene.occupancy(pts).tolist() == [True, False, True, False, True]
 
@@ -137,7 +137,7 @@ def test_signed_distance_sign_matches_occupancy(scene):
 
 def test_signed_distance_known_values():
     scene = structured_room()
-    # room centre at 1 m: nearest surface is the floor or an object, not closer than 0.6 m
+    # room center at 1 m: nearest surface is the floor or an object, not closer than 0.6 m
     assert scene.signed_distance([[0.0, 0.0, 1.0]])[0] == pytest.approx(1.0)
     assert scene.signed_distance([[0.0, 0.0, -0.05]])[0] == pytest.approx(-0.05)
 
@@ -200,7 +200,7 @@ def test_ellipsoid_signed_distance_is_exact():
     assert np.all(np.abs(sd) <= brute + 1e-9)  # never beyond a surface point
     assert np.all(brute - np.abs(sd) < 0.02)   # and within the sampling error of the best
     assert_array_equal(sd < 0, e.contains(q))
-    # centre, and a degenerate interior point on the long axis (Eberly's closed form)
+    # center, and a degenerate interior point on the long axis (Eberly's closed form)
     special = np.array([[0.0, 0, 0], [0.5, 0, 0]]) @ e.rotation.T
     x0 = 9 * 0.5 / 8
     expected = -np.hypot(x0 - 0.5, np.sqrt(1 - x0**2 / 9))
@@ -222,7 +222,7 @@ def test_scene_ray_cast_known_distances():
     d, hit = structured_room().ray_cast(origin, dirs, max_range=8.0)
     assert_allclose(d, [1.0, 5.0, 8.0, 3.5])
     assert hit.tolist() == [True, True, False, True]
-    # unstructured: the sphere in the +x wall, centre (4.7, 0.2, 1.0), radius 0.45
+    # unstructured: the sphere in the +x wall, center (4.7, 0.2, 1.0), radius 0.45
     d, hit = unstructured_room().ray_cast(origin, [[1.0, 0, 0]])
     assert d[0] == pytest.approx(4.7 - np.sqrt(0.45**2 - 0.2**2))
 
@@ -350,7 +350,7 @@ def test_room_2d_geometry(room):
     assert_allclose(hi - lo, [22.4, 18.4])
     assert room.occupancy([[0.0, 0.0], [11.1, 0.0], [-3.0, -5.0], [-1.0, 6.5]]).tolist() == [
         False, True, True, True]
-    # to the outer wall, and down onto disc_2 (centre (2.5, -3), radius 0.8)
+    # to the outer wall, and down onto disc_2 (center (2.5, -3), radius 0.8)
     d, hit = room.ray_cast([[0.0, 0.0], [2.5, 0.0]], [[0.0, 1.0], [0.0, -1.0]])
     assert_allclose(d, [9.0, 2.2])
     assert hit.all()

@@ -21,7 +21,7 @@ BOX = np.array([[-1.5, -1.5, -1.0], [1.5, 1.25, 1.0]])
 
 
 def brute_force(m, field, unknown, signed):
-    """Distances to the nearest obstacle (and inside, non-obstacle) cell centre."""
+    """Distances to the nearest obstacle (and inside, non-obstacle) cell center."""
     c = field.centers().reshape(-1, 3)
     occ, unk = m.is_occupied(c, return_unknown=True)
     obstacle = occ | unk if unknown == "occupied" else occ

@@ -90,7 +90,7 @@ class MyScan(NamedTuple):
 
 
 def room_scans(n_scans=3, n=100, seed=0):
-    """Wall points of a 2 m x 2 m x 1 m box seen from near its centre."""
+    """Wall points of a 2 m x 2 m x 1 m box seen from near its center."""
     rng = np.random.default_rng(seed)
     scans = []
     for _ in range(n_scans):
@@ -209,11 +209,11 @@ class Cube:
         return np.all((points >= 0) & (points <= 1), axis=1)
 
 
-def test_grid_test_set_centres_and_labels():
+def test_grid_test_set_centers_and_labels():
     test = grid_test_set(Cube(), 0.5)
     assert test.points.shape == (64, 3)
     assert_allclose(np.unique(test.points[:, 0]), [-0.25, 0.25, 0.75, 1.25])
-    assert test.labels.sum() == 8  # centres 0.25 and 0.75 on each axis
+    assert test.labels.sum() == 8  # centers 0.25 and 0.75 on each axis
     assert_array_equal(test.labels, Cube().occupancy(test.points))
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from occgp.datasets import LaserScan2D, Scan, room_2d, structured_room
-from occgp.evaluation import TestSet, cell_labels, cells_in_view, exact_test_set
+from occgp.evaluation import TestSet, cell_labels, cells_in_view, exact_labels, exact_test_set
 
 
 @pytest.fixture(scope="module")
@@ -126,6 +126,26 @@ def test_cells_in_view_of_far_cells_is_false(room):
     assert got.tolist() == [False, False]
 
 
-def test_cells_in_view_rejects_bad_centres(room):
-    with pytest.raises(ValueError, match=r"centres must have shape \(n_points, 3\)"):
+def test_cells_in_view_rejects_bad_centers(room):
+    with pytest.raises(ValueError, match=r"centers must have shape \(n_points, 3\)"):
         cells_in_view(room, np.zeros((4, 5)), 0.1, room.scan(n_poses=1), max_range=8.0)
+
+
+def test_the_old_keyword_centres_still_works_with_a_warning(room):
+    scans = room.scan(n_poses=1)
+    cells = [scans[0].origin, [30.0, 0.0]]
+    want = cells_in_view(room, cells, 0.1, scans, max_range=8.0)
+    with pytest.warns(DeprecationWarning, match=r"cells_in_view: .*'centres' is deprecated"
+                      r".*use 'centers'"):
+        got = cells_in_view(room, centres=cells, resolution=0.1, scans=scans, max_range=8.0)
+    assert got.tolist() == want.tolist()
+    labels = exact_labels(room, cells, 0.1)
+    with pytest.warns(DeprecationWarning, match="exact_labels: .*use 'centers'"):
+        assert exact_labels(room, centres=cells, resolution=0.1).tolist() == labels.tolist()
+    cells3 = [[0.05, 0.05, 0.05], [30.0, 0.0, 0.05]]
+    with pytest.warns(DeprecationWarning, match="cell_labels: .*use 'centers'"):
+        old = cell_labels(structured_room(), centres=cells3, resolution=0.1)
+    assert old.tolist() == cell_labels(structured_room(), cells3, 0.1).tolist()
+    with pytest.raises(TypeError, match="got both 'centres' .* and 'centers'"), \
+            pytest.warns(DeprecationWarning):
+        exact_labels(room, centers=cells, centres=cells, resolution=0.1)

@@ -10,7 +10,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 from occgp import GridMap, OccupancyOctree
 from occgp.io import _octomap_format as fmt
 from occgp.nav._distance import distance_field
-from occgp.io._export import _CUBE_TRIANGLES, _finest_cells, save_pcd, save_ply, to_open3d
+from occgp.io._export import (_CUBE_TRIANGLES, _finest_cells, leaf_cells, save_pcd, save_ply,
+                              to_open3d)
 from occgp.io import read_pcd
 
 
@@ -80,18 +81,18 @@ def read_ply(path):
 # PLY
 # --------------------------------------------------------------------------- #
 @pytest.mark.parametrize("binary", [True, False])
-def test_ply_points_hold_leaf_centres_sizes_and_probabilities(small_map, tmp_path, binary):
+def test_ply_points_hold_leaf_centers_sizes_and_probabilities(small_map, tmp_path, binary):
     path = tmp_path / "map.ply"
     save_ply(small_map, path, binary=binary)
     data, comments = read_ply(path)
     v = data["vertex"]
-    centres, sizes, log_odds = small_map.leaves(occupied_only=True)
-    assert len(v) == len(centres) == 4
+    centers, sizes, log_odds = small_map.leaves(occupied_only=True)
+    assert len(v) == len(centers) == 4
     xyz = np.column_stack([v["x"], v["y"], v["z"]])
-    assert_array_equal(xyz, centres.astype(np.float32))
+    assert_array_equal(xyz, centers.astype(np.float32))
     assert_array_equal(v["size"], sizes.astype(np.float32))
     assert sorted(v["size"].tolist()) == [0.5, 0.5, 0.5, 1.0]        # the pruned block
-    assert_array_equal(v["probability"], small_map.occupancy(centres).astype(np.float32))
+    assert_array_equal(v["probability"], small_map.occupancy(centers).astype(np.float32))
     assert "resolution 0.5" in comments[0]
     # height colours: lowest cell at viridis' start, highest at its end
     rgb = np.column_stack([v["red"], v["green"], v["blue"]])
@@ -120,12 +121,12 @@ def test_ply_cubes_are_closed_outward_boxes(small_map, tmp_path):
     save_ply(small_map, tmp_path / "cubes.ply", cubes=True)
     data, _ = read_ply(tmp_path / "cubes.ply")
     v, f = data["vertex"], data["face"]
-    centres, sizes, _ = small_map.leaves(occupied_only=True)
-    n = len(centres)
+    centers, sizes, _ = small_map.leaves(occupied_only=True)
+    n = len(centers)
     assert len(v) == 8 * n and len(f) == 12 * n
     assert (f["n"] == 3).all()
     xyz = np.column_stack([v["x"], v["y"], v["z"]]).astype(np.float64).reshape(n, 8, 3)
-    assert_allclose(xyz.mean(axis=1), centres, atol=1e-6)
+    assert_allclose(xyz.mean(axis=1), centers, atol=1e-6)
     assert_allclose(xyz.max(axis=1) - xyz.min(axis=1), np.repeat(sizes[:, None], 3, 1),
                     atol=1e-6)
     assert_array_equal(v["size"].reshape(n, 8), np.repeat(sizes[:, None], 8, 1))
@@ -135,7 +136,7 @@ def test_ply_cubes_are_closed_outward_boxes(small_map, tmp_path):
     flat = xyz.reshape(-1, 3)
     a, b, c = flat[f["v"][:, 0]], flat[f["v"][:, 1]], flat[f["v"][:, 2]]
     normal = np.cross(b - a, c - a)
-    outward = (a + b + c) / 3 - np.repeat(centres, 12, axis=0)
+    outward = (a + b + c) / 3 - np.repeat(centers, 12, axis=0)
     assert (np.einsum("ij,ij->i", normal, outward) > 0).all()
     area = 0.5 * np.linalg.norm(normal, axis=1).reshape(n, 12).sum(axis=1)
     assert_allclose(area, 6 * sizes**2, rtol=1e-6)
@@ -166,11 +167,11 @@ def test_pcd_round_trip(small_map, tmp_path, binary):
     path = tmp_path / "map.pcd"
     save_pcd(small_map, path, binary=binary)
     scan, fields = read_pcd(path, return_fields=True)
-    centres, _, _ = small_map.leaves(occupied_only=True)
-    assert_array_equal(scan.points, centres.astype(np.float32))
+    centers, _, _ = small_map.leaves(occupied_only=True)
+    assert_array_equal(scan.points, centers.astype(np.float32))
     assert_array_equal(scan.origin, [0.0, 0.0, 0.0])
     assert set(fields) == {"x", "y", "z", "intensity"}
-    assert_array_equal(fields["intensity"], small_map.occupancy(centres).astype(np.float32))
+    assert_array_equal(fields["intensity"], small_map.occupancy(centers).astype(np.float32))
     header = open(path, "rb").read(400)
     assert b"VERSION 0.7" in header
     assert (b"DATA binary" if binary else b"DATA ascii") in header
@@ -181,7 +182,7 @@ def test_pcd_round_trip(small_map, tmp_path, binary):
 # --------------------------------------------------------------------------- #
 # finest cells and Open3D
 # --------------------------------------------------------------------------- #
-def test_finest_cells_are_the_expanded_maps_centres(small_map):
+def test_finest_cells_are_the_expanded_maps_centers(small_map):
     expanded = OccupancyOctree.from_bytes(small_map.to_bytes()).expand()
     for occupied in (True, False):
         got = _finest_cells(small_map, occupied)
@@ -191,6 +192,16 @@ def test_finest_cells_are_the_expanded_maps_centres(small_map):
         order_w = np.lexsort(want.T)
         assert_array_equal(got[order_g], want[order_w])      # bit for bit (keyToCoord)
     assert len(_finest_cells(small_map)) == 3 + 8
+
+
+def test_leaf_cells_takes_the_old_keyword_centres_with_a_warning(small_map):
+    centers, sizes, _ = small_map.leaves()
+    index, owner = leaf_cells(centers, sizes, 0.5)
+    assert len(index) == len(owner) == (len(sizes) - 1) + 8      # one pruned 2x2x2 block
+    with pytest.warns(DeprecationWarning, match="leaf_cells: .*'centres' .*use 'centers'"):
+        old = leaf_cells(centres=centers, sizes=sizes, resolution=0.5)
+    assert_array_equal(old[0], index)
+    assert_array_equal(old[1], owner)
 
 
 def test_finest_cells_cap_is_checked_before_allocating(small_map):
@@ -230,9 +241,9 @@ def test_to_open3d_geometries(small_map, tmp_path):
     assert grid.voxel_size == 0.5
     voxels = grid.get_voxels()
     assert len(voxels) == 11
-    centres = np.array([grid.get_voxel_center_coordinate(v.grid_index) for v in voxels])
+    centers = np.array([grid.get_voxel_center_coordinate(v.grid_index) for v in voxels])
     want = _finest_cells(small_map)
-    assert_allclose(centres[np.lexsort(centres.T)], want[np.lexsort(want.T)], atol=1e-9)
+    assert_allclose(centers[np.lexsort(centers.T)], want[np.lexsort(want.T)], atol=1e-9)
     cloud = to_open3d(small_map, kind="points", occupied=False)
     assert isinstance(cloud, o3d.geometry.PointCloud)
     assert_allclose(np.asarray(cloud.points), small_map.extract_points(False)[0])
@@ -278,15 +289,15 @@ def test_writers_reject_bad_input(small_map, tmp_path):
 # --------------------------------------------------------------------------- #
 # distance field
 # --------------------------------------------------------------------------- #
-def test_distance_field_of_one_cell_is_the_distance_to_its_centre():
+def test_distance_field_of_one_cell_is_the_distance_to_its_center():
     m = OccupancyOctree(0.25).set_cells([[0.6, -0.1, 1.1]], [2.0])
     c = m.key_to_coord(m.coord_to_key([[0.6, -0.1, 1.1]]))[0]
     field = distance_field(m, [[-0.4, -1.0, 0.3], [1.3, 0.9, 1.9]], unknown="free")
     assert field.resolution == 0.25
     assert_array_equal(field.origin, [-0.5, -1.0, 0.25])           # aligned to the cells
     assert field.distances.shape == (8, 8, 7)
-    centres = field.centers()
-    assert_allclose(field.distances, np.linalg.norm(centres - c, axis=-1),
+    centers = field.centers()
+    assert_allclose(field.distances, np.linalg.norm(centers - c, axis=-1),
                     rtol=1e-14, atol=1e-15)
     assert field.distances.min() == 0.0
 

@@ -95,10 +95,10 @@ def test_ray_longer_than_liboctomaps_key_buffer(mode):
     assert maps[0].num_leaves > 196000
     for other in maps[1:]:
         assert_same_leaves(other, maps[0])
-    # discretize=True too: liboctomap's rule (one ray per end cell, to its centre)
+    # discretize=True too: liboctomap's rule (one ray per end cell, to its center)
     d = OccupancyOctree(0.1).insert_scan(points + points, origin, discretize=True)
-    centres = (np.floor(np.array(points) / 0.1) + 0.5) * 0.1
-    assert_same_leaves(d, OccupancyOctree(0.1).insert_scan(centres, origin, method="auto"))
+    centers = (np.floor(np.array(points) / 0.1) + 0.5) * 0.1
+    assert_same_leaves(d, OccupancyOctree(0.1).insert_scan(centers, origin, method="auto"))
 
 
 @pytest.mark.parametrize("cls", [OccupancyOctree, GridMap])

@@ -46,7 +46,7 @@ def test_default_layout(plan):
 def test_rooms_corridors_and_doorways_have_their_sizes(kwargs):
     scene = floor_plan_2d(**kwargs)
     t = scene.wall_thickness
-    size = scene.rooms[:, 1] - scene.rooms[:, 0] + t       # between wall centre lines
+    size = scene.rooms[:, 1] - scene.rooms[:, 0] + t       # between wall center lines
     assert size.min() >= 4.0 - 1e-9 and size.max() <= 10.0 + 1e-9
     across = (scene.corridors[:, 1] - scene.corridors[:, 0]).min(axis=1)
     assert across.min() >= 2.0 and across.max() <= 3.0
@@ -97,17 +97,17 @@ def test_poses_stay_clear(plan):
 
 
 def test_doorways_are_open_and_their_jambs_are_walls(plan):
-    centre = plan.doorways.mean(axis=1)
+    center = plan.doorways.mean(axis=1)
     along = plan.doorways[:, 1] - plan.doorways[:, 0]
     half = np.linalg.norm(along, axis=1) / 2
     along /= 2 * half[:, None]
     normal = np.column_stack([-along[:, 1], along[:, 0]])
     for sign in (1.0, -1.0):              # across the doorway, both ways: no hit
-        _, hit = plan.ray_cast(centre - sign * 0.6 * normal, sign * normal, max_range=1.2)
+        _, hit = plan.ray_cast(center - sign * 0.6 * normal, sign * normal, max_range=1.2)
         assert not hit.any()
     # beside the doorway, 5 cm past a jamb, the same ray meets the wall's face
     t = plan.wall_thickness
-    beside = centre + (half + 0.05)[:, None] * along
+    beside = center + (half + 0.05)[:, None] * along
     d, hit = plan.ray_cast(beside - 0.6 * normal, normal, max_range=1.2)
     assert hit.all()
     assert_allclose(d, 0.6 - t / 2, atol=1e-12)
@@ -121,7 +121,7 @@ def test_occupancy_is_exact_on_hand_picked_points(plan):
               [0.0, -20.1], [0.0, 20.2 - e], [0.0, -20.2 - e]]
     assert plan.occupancy(points).tolist() == [False, True, True, False, False, True,
                                                True, False]
-    # inside every solid: a wall's or a box's centre, a disc's centre
+    # inside every solid: a wall's or a box's center, a disc's center
     assert plan.occupancy([s.center for s in plan.solids]).all()
     # every corridor is free (no furniture in corridors)
     for lo, hi in plan.corridors:

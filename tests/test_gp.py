@@ -103,7 +103,7 @@ def test_order_grows_with_the_length(rule, cls):
 
 @pytest.mark.parametrize("rule", [ClenshawCurtis, Simpson])
 def test_chosen_order_meets_the_tolerance_on_a_kink_free_piece(rule):
-    # squared exponential bump centred in a piece: the order picked for its length
+    # squared exponential bump centered in a piece: the order picked for its length
     # integrates it to the tolerance relative to the half mass sqrt(pi / 2)
     quadrature, kernel = rule(), SquaredExponential()
     for L in [0.1, 0.7, 2.0, 6.0]:

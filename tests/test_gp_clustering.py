@@ -230,8 +230,8 @@ def test_rejected_partial_fit_leaves_the_clusterer_unchanged():
 
 
 # =================================================================== Dirichlet process
-def _blobs(rng, centres=((0, 0), (6, 0), (0, 6)), n=60, sd=0.3):
-    return np.vstack([rng.normal(c, sd, (n, len(c))) for c in centres])
+def _blobs(rng, centers=((0, 0), (6, 0), (0, 6)), n=60, sd=0.3):
+    return np.vstack([rng.normal(c, sd, (n, len(c))) for c in centers])
 
 
 def test_dirichlet_process_finds_three_blobs():
@@ -245,7 +245,7 @@ def test_dirichlet_process_finds_three_blobs():
 
 
 def test_dirichlet_process_is_deterministic_for_a_seed():
-    hits = _blobs(np.random.default_rng(1), centres=((0, 0), (2, 0), (1, 2)), n=30, sd=0.6)
+    hits = _blobs(np.random.default_rng(1), centers=((0, 0), (2, 0), (1, 2)), n=30, sd=0.6)
     a = DirichletProcessClustering(max_clusters=10, random_state=3).fit_predict(hits, hits)
     b = DirichletProcessClustering(max_clusters=10, random_state=3).fit_predict(hits, hits)
     assert_array_equal(a, b)
@@ -254,8 +254,8 @@ def test_dirichlet_process_is_deterministic_for_a_seed():
 
 @pytest.mark.parametrize("dim", [1, 3])
 def test_dirichlet_process_in_one_and_three_dimensions(dim):
-    centres = [(0,) * dim, (8,) * dim]
-    hits = _blobs(np.random.default_rng(2), centres=centres, n=40)
+    centers = [(0,) * dim, (8,) * dim]
+    hits = _blobs(np.random.default_rng(2), centers=centers, n=40)
     dp = DirichletProcessClustering(random_state=0).fit(hits, np.zeros_like(hits))
     assert dp.n_clusters_ == 2 and dp.n_dims_ == dim
 
@@ -337,7 +337,7 @@ def test_plane_clustering_finds_the_three_faces_of_a_box_corner():
 
 
 def test_plane_clustering_falls_back_to_the_dirichlet_process():
-    hits = _blobs(np.random.default_rng(5), centres=((0, 0, 0), (5, 5, 5)), n=40)
+    hits = _blobs(np.random.default_rng(5), centers=((0, 0, 0), (5, 5, 5)), n=40)
     pc = PlaneClustering(random_state=0).fit(hits, np.zeros_like(hits))
     assert pc.n_planes_ == 0 and pc.n_clusters_ == 2
     _one_label_per_group(pc.labels_, np.repeat([0, 1], 40))

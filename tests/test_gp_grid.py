@@ -50,7 +50,7 @@ def test_traversal_matches_brute_force(dim):
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_traversal_through_corners_matches_brute_force(dim):
-    # Endpoints at cell centres: many segments pass exactly through grid corners
+    # Endpoints at cell centers: many segments pass exactly through grid corners
     # and edges, which the samples never hit (their t has a denominator of 2e5).
     rng = np.random.default_rng(1)
     starts = rng.integers(-4, 4, (40, dim)) + 0.5
@@ -145,10 +145,10 @@ def test_unknown_cells():
 
 def test_cells():
     grid = OccupancyGrid(resolution=0.5).fit([[1.2, -0.1]], [[0.1, 0.1]], [[1.2, 0.1]])
-    centres, proba = grid.cells()
-    assert_allclose(centres, [[0.25, 0.25], [0.75, 0.25], [1.25, -0.25]])
+    centers, proba = grid.cells()
+    assert_allclose(centers, [[0.25, 0.25], [0.75, 0.25], [1.25, -0.25]])
     assert_allclose(proba, [0.4, 0.4, 0.7])
-    assert_allclose(grid.predict_proba(centres), proba)
+    assert_allclose(grid.predict_proba(centers), proba)
 
 
 def test_zero_length_and_single_cell_segments_mark_nothing():
@@ -339,10 +339,10 @@ def test_lookup_near_and_far_cells(far):
     rng = np.random.default_rng(0)
     hits = np.vstack([rng.uniform(-2, 2, (50, 3)), [[-far, 0.5, 0.5], [far, -far, far]]])
     grid = OccupancyGrid(resolution=1.0).fit(hits, None, None)
-    centres, _ = grid.cells()
-    assert_array_equal(grid.is_known(centres), True)
+    centers, _ = grid.cells()
+    assert_array_equal(grid.is_known(centers), True)
     assert_array_equal(grid.is_known(hits), True)
-    misses = centres + [[0.0, 0.0, 3 * far]]
+    misses = centers + [[0.0, 0.0, 3 * far]]
     assert_array_equal(grid.is_known(np.vstack([misses, [[far, far, far]]])), False)
 
 

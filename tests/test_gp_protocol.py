@@ -222,8 +222,8 @@ def test_grid_to_octree_copies_its_cells(mapped):
     tree = m.to_octree()
     assert tree.resolution == m.resolution
     assert len(tree.leaves().centers) == m.num_cells
-    centres, proba = m.cells()
-    assert_allclose(tree.occupancy(np.column_stack([centres, np.zeros(len(centres))])), proba,
+    centers, proba = m.cells()
+    assert_allclose(tree.occupancy(np.column_stack([centers, np.zeros(len(centers))])), proba,
                     rtol=1e-6)
 
 
@@ -232,8 +232,8 @@ def test_grid_3d_insert_scan_and_octree():
                                                   [0.1, 0.1, 0.3])
     assert m.n_dims_ == 3 and isinstance(m, OccupancyMap)
     tree = m.to_octree()
-    centres, proba = m.cells()
-    assert_allclose(tree.occupancy(centres), proba, rtol=1e-6)
+    centers, proba = m.cells()
+    assert_allclose(tree.occupancy(centers), proba, rtol=1e-6)
 
 
 # --------------------------------------------------------------- bad input

@@ -152,7 +152,7 @@ def test_borders_use_the_one_side_available():
     m = EdgeAwareInterpolation()
     # between rows 0 and 1: only the lower extension (rows 1, 2) exists, and it misses P
     np.testing.assert_allclose(m.predict(img, [[0.8, 2.0], [1.3, 2.0]]), [10.0, 20.0])
-    # beyond the outermost row centres: that row alone
+    # beyond the outermost row centers: that row alone
     np.testing.assert_allclose(m.predict(img, [[0.1, 2.0], [3.0, 2.0]]), [10.0, 20.0])
     # two rows: no extension exists, inverse bilinear stays
     two = img[:2]

@@ -121,9 +121,9 @@ def test_bilinear_equals_direct_formula():
         + img[i + 1, j] * a * (1 - b) + img[i + 1, j + 1] * a * b
     )
     np.testing.assert_allclose(Bilinear().predict(img, q), direct, rtol=1e-5)
-    # at pixel centres it returns the pixel
-    centres = np.array([[2.5, 3.5], [0.5, 0.5], [7.5, 31.5]], dtype=np.float32)
-    np.testing.assert_allclose(Bilinear().predict(img, centres), img[[2, 0, 7], [3, 0, 31]], rtol=1e-6)
+    # at pixel centers it returns the pixel
+    centers = np.array([[2.5, 3.5], [0.5, 0.5], [7.5, 31.5]], dtype=np.float32)
+    np.testing.assert_allclose(Bilinear().predict(img, centers), img[[2, 0, 7], [3, 0, 31]], rtol=1e-6)
 
 
 def test_inverse_bilinear_equals_direct_formula():

@@ -82,7 +82,7 @@ def test_candidates_at_the_border_and_in_no_returns():
     img[:, 5:] = 0.0
     q = np.array([[0.2, 2.0], [3.9, 2.0], [2.0, 6.5]], np.float32)
     ranges, exists, _ = _cands(img, q, wrap=False)
-    assert not exists[0, K["up"]] and not exists[0, K["ext-up"]]  # above row 0's centre
+    assert not exists[0, K["up"]] and not exists[0, K["ext-up"]]  # above row 0's center
     assert not exists[1, K["down"]] and not exists[1, K["ext-down"]]
     assert ranges[2, K["prior"]] == 0.0 and not exists[2, K["up"]]  # inside the no-returns
     assert (ranges[~exists] == 0).all()

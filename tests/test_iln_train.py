@@ -85,7 +85,7 @@ def test_two_steps_lower_the_loss_on_a_fixed_batch():
     assert losses[2] < losses[1] < losses[0]
 
 
-def test_query_table_maps_target_centres_to_input_pixels():
+def test_query_table_maps_target_centers_to_input_pixels():
     lm = type("M", (), {"vertical_fov": (-15.0, 15.0), "horizontal_fov": 360.0})
     lo, hi = lm(), lm()
     lo.rows, lo.cols, hi.rows, hi.cols = 4, 32, 8, 64

@@ -301,7 +301,7 @@ def test_bad_max_cells_per_update(value, exc, match):
 
 def test_extreme_parameters_give_the_right_map():
     wall, origin = wall60()
-    # cells of 1e20 m and ell in metres: no cell centre within ell of any sample
+    # cells of 1e20 m and ell in metres: no cell center within ell of any sample
     assert BGKMap(1e20, ell=0.2).update(wall, origin).num_cells == 0
     # free samples farther apart than every beam: only the origin is free
     samples, labels = BGKMap(0.1, free_resolution=1e30).training_data(wall, origin)

@@ -22,7 +22,7 @@ def two_maps():
 
 
 def finest(tree):
-    """Centres and log-odds of every finest cell a map knows (leaves expanded)."""
+    """Centers and log-odds of every finest cell a map knows (leaves expanded)."""
     lv = tree.leaves()
     out_c, out_v = [], []
     for c, s, v in zip(lv.centers, lv.sizes, lv.log_odds):
@@ -49,22 +49,22 @@ def copy(tree):
 @pytest.mark.slow
 def test_add_equals_update_cells_by_hand():
     a, b = two_maps()
-    centres, values = finest(b)
-    assert len(centres) > len(b.leaves().sizes)            # b has pruned leaves
-    expected = copy(a).update_cells(centres, values)
+    centers, values = finest(b)
+    assert len(centers) > len(b.leaves().sizes)            # b has pruned leaves
+    expected = copy(a).update_cells(centers, values)
     assert same_leaves(copy(a).merge(b), expected)
 
 
 @pytest.mark.slow
 def test_max_equals_set_cells_by_hand():
     a, b = two_maps()
-    centres, values = finest(b)
-    mine = a.log_odds(centres)
+    centers, values = finest(b)
+    mine = a.log_odds(centers)
     take = np.isnan(mine) | (values > mine)
-    expected = copy(a).set_cells(centres[take], values[take])
+    expected = copy(a).set_cells(centers[take], values[take])
     merged = copy(a).merge(b, rule="max")
     assert same_leaves(merged, expected)
-    assert np.all(merged.log_odds(centres) >= np.fmin(values, merged.clamping_max))
+    assert np.all(merged.log_odds(centers) >= np.fmin(values, merged.clamping_max))
 
 
 @pytest.mark.slow
@@ -74,8 +74,8 @@ def test_identity_and_whole_cell_transforms_are_exact():
     # a quarter turn about z and a shift by whole cells map cells onto cells
     t = np.array([[0.0, -1.0, 0.0, 0.3], [1.0, 0.0, 0.0, -0.2], [0.0, 0.0, 1.0, 0.5],
                   [0.0, 0.0, 0.0, 1.0]])
-    centres, values = finest(b)
-    moved = centres @ t[:3, :3].T + t[:3, 3]
+    centers, values = finest(b)
+    moved = centers @ t[:3, :3].T + t[:3, 3]
     expected = copy(a).update_cells(moved, values)
     assert same_leaves(copy(a).merge(b, t), expected)
 
@@ -101,11 +101,11 @@ def test_merging_empty_maps(rule, transform):
     # into an empty map: as into a map that knows nothing (a fresh copy of the
     # reference's parameters), the whole of a's evidence, nothing else
     fresh = OccupancyOctree(RES).merge(a, t, rule=rule)
-    centres, values = finest(fresh)
+    centers, values = finest(fresh)
     if t is None:
         assert same_leaves(fresh, a)
     else:
-        pre = (centres - t[:3, 3]) @ t[:3, :3]
+        pre = (centers - t[:3, 3]) @ t[:3, :3]
         assert np.array_equal(values.astype(np.float64), a.log_odds(pre))
 
 
@@ -118,17 +118,17 @@ def test_any_rotation_resamples_every_cell_once():
                  [0, 0, 1]]
     t[:3, 3] = [1.234, -0.5, 0.05]
     empty = OccupancyOctree(RES).merge(b, t)
-    centres, values = finest(empty)
-    # each cell holds the value of the cell of b at its centre's preimage
-    pre = (centres - t[:3, 3]) @ t[:3, :3]
+    centers, values = finest(empty)
+    # each cell holds the value of the cell of b at its center's preimage
+    pre = (centers - t[:3, 3]) @ t[:3, :3]
     assert np.array_equal(values.astype(np.float64), b.log_odds(pre))
     # and no cell whose preimage b knows is left out: the cells around the merged ones
-    around = (centres[:, None, :] + RES * np.array(
+    around = (centers[:, None, :] + RES * np.array(
         [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])).reshape(-1, 3)
     missing = np.isnan(empty.log_odds(around))
     assert np.isnan(b.log_odds((around[missing] - t[:3, 3]) @ t[:3, :3])).all()
     # the volume is kept up to resampling
-    assert abs(len(centres) / len(finest(b)[0]) - 1) < 0.05
+    assert abs(len(centers) / len(finest(b)[0]) - 1) < 0.05
 
 
 def test_merge_takes_grid_maps_and_tracks_changes():

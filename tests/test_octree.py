@@ -24,7 +24,7 @@ def random_scans(rng, n_scans=3, n_points=60, spread=2.0):
 
 
 def assert_same_leaves(a, b):
-    """Every leaf of two trees: same centre, size and log-odds."""
+    """Every leaf of two trees: same center, size and log-odds."""
     la, lb = a.leaves(), b.leaves()
     order_a = np.lexsort((la.sizes, *la.centers.T))
     order_b = np.lexsort((lb.sizes, *lb.centers.T))

@@ -240,7 +240,7 @@ def test_coord_to_key_at_a_depth_is_liboctomaps(depth):
     diff = 16 - depth
     want = keyval + 32768 if diff == 0 else ((keyval >> diff) << diff) + (1 << (diff - 1)) + 32768
     assert np.array_equal(keys, want)
-    # the key names the depth-d node holding the point: same centre, same value
+    # the key names the depth-d node holding the point: same center, same value
     assert np.array_equal(m.key_to_coord(keys, depth=depth),
                           m.key_to_coord(m.coord_to_key(pts), depth=depth))
 
@@ -407,14 +407,14 @@ def test_is_at_threshold_is_liboctomaps_comparison(room):
 
 
 # ---------------------------------------------------------------------- ray intersections
-def _ray_intersection_reference(origin, direction, centre, resolution, delta):
+def _ray_intersection_reference(origin, direction, center, resolution, delta):
     """liboctomap's getRayIntersection in its float / double arithmetic (numpy scalars),
     with the direction normalised as point3d::normalized does."""
     o = origin.astype(f32)
     d = direction.astype(f32)
     nsq = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
     d = d / f32(np.sqrt(np.float64(nsq)))
-    c = centre.astype(f32)
+    c = center.astype(f32)
     half = f32(resolution / 2.0)
     lo = [c[a] - half for a in range(3)]
     hi = [c[a] + half for a in range(3)]
@@ -440,21 +440,21 @@ def test_ray_intersections_are_liboctomaps(delta):
     rng = np.random.default_rng(5)
     n = 300
     origins = rng.uniform(-2, 2, (n, 3))
-    centres = (np.floor(rng.uniform(-2, 2, (n, 3)) / RES) + 0.5) * RES
-    aim = centres + rng.uniform(-0.08, 0.08, (n, 3))       # most rays hit, some miss
+    centers = (np.floor(rng.uniform(-2, 2, (n, 3)) / RES) + 0.5) * RES
+    aim = centers + rng.uniform(-0.08, 0.08, (n, 3))       # most rays hit, some miss
     directions = aim - origins
     directions[:20, 1:] = 0.0                             # parallel to two axes
-    points, found = m.ray_intersections(origins, directions, centres, delta=delta)
+    points, found = m.ray_intersections(origins, directions, centers, delta=delta)
     assert 0 < found.sum() < n
     for i in range(n):
-        want = _ray_intersection_reference(origins[i], directions[i], centres[i], RES, delta)
+        want = _ray_intersection_reference(origins[i], directions[i], centers[i], RES, delta)
         if want is None:
             assert not found[i] and np.isnan(points[i]).all()
         else:
             assert found[i] and np.array_equal(points[i], want), i
     # with delta 0 the points lie on the cube's surface, on the ray
     if delta == 0:
-        off = np.abs(points[found] - centres[found])
+        off = np.abs(points[found] - centers[found])
         assert np.allclose(off.max(axis=1), RES / 2, atol=1e-5)
         assert (off <= RES / 2 + 1e-5).all()
 
@@ -465,7 +465,7 @@ def test_ray_intersection_of_cast_rays_hits():
     assert hits.all()
     points, found = m.ray_intersections([0.05, 0.05, 0.05], [[0.97, 0.28, 0.0]], ends)
     assert found.all() and points[0, 0] == pytest.approx(1.0, abs=1e-6)
-    # the shared origin and a per-ray origin agree; a centre may be shared too
+    # the shared origin and a per-ray origin agree; a center may be shared too
     p2, _ = m.ray_intersections([[0.05, 0.05, 0.05]], [[0.97, 0.28, 0.0]], ends[0])
     assert np.array_equal(points, p2)
 

@@ -55,26 +55,26 @@ def test_set_cells_last_value_wins_and_clamps():
 def test_keys_round_trip_against_liboctomap_cells():
     rng = np.random.default_rng(1)
     m = OccupancyOctree(0.07).insert_scan(rng.uniform(-3, 3, (200, 3)), [0.01, 0.02, 0.03])
-    centres, sizes, _ = m.expand().leaves()
-    keys = m.coord_to_key(centres)
+    centers, sizes, _ = m.expand().leaves()
+    keys = m.coord_to_key(centers)
     # liboctomap: floor of the single-precision coordinate times 1 / resolution
-    ref = np.floor(centres.astype(np.float32).astype(np.float64) * (1 / 0.07)) + MAX_VAL
+    ref = np.floor(centers.astype(np.float32).astype(np.float64) * (1 / 0.07)) + MAX_VAL
     np.testing.assert_array_equal(keys, ref)
-    np.testing.assert_array_equal(m.key_to_coord(keys), centres)
+    np.testing.assert_array_equal(m.key_to_coord(keys), centers)
     assert keys.dtype == np.uint16
 
 
-def test_key_to_coord_at_depth_is_the_pruned_leaf_centre():
+def test_key_to_coord_at_depth_is_the_pruned_leaf_center():
     # a fully observed 0.8 m cube of free space prunes into coarse leaves
     m = OccupancyOctree(0.1)
     g = (np.arange(8) + 0.5) * 0.1
     cube = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
     m.set_cells(cube, -1.0)
-    centres, sizes, _ = m.leaves()
-    assert len(centres) == 1 and sizes[0] == pytest.approx(0.8)
+    centers, sizes, _ = m.leaves()
+    assert len(centers) == 1 and sizes[0] == pytest.approx(0.8)
     depth = 16 - 3
     np.testing.assert_allclose(m.key_to_coord(m.coord_to_key(cube[:5]), depth),
-                               np.repeat(centres, 5, axis=0))
+                               np.repeat(centers, 5, axis=0))
 
 
 def test_extract_points_splits_the_leaves():
@@ -147,8 +147,8 @@ def test_bbox_rays_ending_outside_change_nothing():
     assert m.num_leaves == 0
     m.insert_scan([[1.0, 0.05, 0.5]], [-3.05, 0.05, 0.5], bbox=BOX, method="culling")
     # the ray's cells inside the box only: x from -1.0 to its end cell at 1.0
-    centres = m.extract_points(occupied=False)[0]
-    assert centres[:, 0].min() > -1.0 and m.is_occupied([[1.0, 0.05, 0.5]])[0]
+    centers = m.extract_points(occupied=False)[0]
+    assert centers[:, 0].min() > -1.0 and m.is_occupied([[1.0, 0.05, 0.5]])[0]
 
 
 @pytest.mark.parametrize("bbox, match", [

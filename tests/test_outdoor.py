@@ -55,7 +55,7 @@ def test_occupancy_and_ray_cast_are_exact(scene):
         assert hit[0] and d[0] == pytest.approx(1.73)
     assert not scene.occupancy(origins).any()
     assert scene.occupancy([[0.0, 0.0, -0.5], [0.0, 0.0, 0.0]]).all()
-    # a building's centre is occupied; a ray at it stops on its face
+    # a building's center is occupied; a ray at it stops on its face
     b = next(s for s, label in zip(scene.solids, scene.labels) if label == "building")
     assert scene.occupancy(b.center[None])[0]
     d, hit = scene.ray_cast(b.center + [0.0, 0.0, 100.0], [[0.0, 0.0, -1.0]])

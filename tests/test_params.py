@@ -1,5 +1,6 @@
 """The one parameter mechanism (occgp._params) and the one name per concept."""
 
+import warnings
 from numbers import Integral, Real
 
 import numpy as np
@@ -9,7 +10,7 @@ from sklearn.base import clone
 import occgp
 from occgp import AKIMap, KNNMap
 from occgp._params import (DEFAULT_RESOLUTION, Check, Interval, Options, ParamsMixin,
-                           validate_params)
+                           renamed_keywords, validate_params)
 from occgp._validation import check_n_jobs
 from occgp.knn import ScanReplay, check_knn_params
 
@@ -192,3 +193,22 @@ def test_every_map_has_the_one_names(name):
     assert after.keys() == before.keys()
     assert all(after[k] is before[k] or after[k] == before[k] for k in before)
     clone(m)
+
+
+def test_renamed_keywords_keeps_the_old_name_for_one_release():
+    @renamed_keywords(centres="centers")
+    def count(centers, *, scale=1):
+        """Count."""
+        return len(centers) * scale
+
+    assert count.__name__ == "count" and count.__doc__ == "Count."
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert count([1, 2]) == count(centers=[1, 2], scale=1) == 2
+    with pytest.warns(DeprecationWarning, match="count: the parameter 'centres' is deprecated "
+                      "and will be removed in the next release; use 'centers' instead") as rec:
+        assert count(centres=[1, 2, 3], scale=2) == 6
+    assert rec[0].filename == __file__                       # points at the caller
+    with pytest.raises(TypeError, match="got both 'centres' .* and 'centers'"), \
+            pytest.warns(DeprecationWarning):
+        count(centers=[1], centres=[1])

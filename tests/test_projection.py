@@ -50,21 +50,21 @@ def make_map(kind):
     if kind == "color":
         return ColorOctree(0.1).insert_scan(pts, org, colors=np.ones((len(pts), 3)))
     m = random_octree()   # the same cells in a grid
-    centres, states = finest_cells(m)
+    centers, states = finest_cells(m)
     values = np.where(states == 1, 2.0, -2.0)
-    return grid_with(np.floor(centres / 0.1).astype(np.int64), values)
+    return grid_with(np.floor(centers / 0.1).astype(np.int64), values)
 
 
 def finest_cells(m):
-    """(centres (n, 3), state (n,): 1 occupied, 0 free) of every finest cell the map's
+    """(centers (n, 3), state (n,): 1 occupied, 0 free) of every finest cell the map's
     leaves cover, each state read back through ``is_occupied``."""
     table = m.leaves() if hasattr(m, "leaves") else m.cells()
-    centres, sizes = table[0], table[1]
+    centers, sizes = table[0], table[1]
     res = m.resolution
     out = []
     for size in np.unique(sizes):
         side = int(round(size / res))
-        rows = centres[sizes == size]
+        rows = centers[sizes == size]
         off = (np.arange(side) - (side - 1) / 2.0) * res
         cube = np.stack(np.meshgrid(off, off, off, indexing="ij"), -1).reshape(-1, 3)
         out.append((rows[:, None, :] + cube[None]).reshape(-1, 3))
@@ -78,7 +78,7 @@ def reference(m, z_min, z_max, grid):
     """The projection's rule cell by cell on the finest cells, over `grid`'s cells."""
     c, state = finest_cells(m)
     res = m.resolution
-    k = np.floor(c / res + 1e-6).astype(np.int64)       # finest indices (centres: +0.5)
+    k = np.floor(c / res + 1e-6).astype(np.int64)       # finest indices (centers: +0.5)
     in_band = (k[:, 2] * res <= z_max) & ((k[:, 2] + 1) * res > z_min)
     f = int(round(grid.resolution / res))
     first = np.rint(grid.origin / grid.resolution).astype(np.int64)
@@ -221,10 +221,10 @@ def test_project_2d_rejects_bad_input(kwargs, exc, match):
 def test_grid_cells_and_ros_arrays():
     states = np.array([[1, 0, -1], [0, 0, 1]], dtype=np.int8)   # nx=2, ny=3
     grid = OccupancyGrid2D(states, origin=[-1.0, 2.0], resolution=0.5)
-    centres = grid.cell_centers()
-    assert centres.shape == (2, 3, 2)
-    assert_allclose(centres[1, 2], [-0.25, 3.25])
-    idx = grid.world_to_cell(centres.reshape(-1, 2))
+    centers = grid.cell_centers()
+    assert centers.shape == (2, 3, 2)
+    assert_allclose(centers[1, 2], [-0.25, 3.25])
+    idx = grid.world_to_cell(centers.reshape(-1, 2))
     assert_array_equal(idx.reshape(2, 3, 2)[..., 0], [[0] * 3, [1] * 3])
     assert_array_equal(grid.world_to_cell([[-1.0, 2.0], [-1.01, 3.6]]), [[0, 0], [-1, 3]])
     ros = grid.to_ros_array()

@@ -32,7 +32,7 @@ def pixel_points(pair, rig):
 
 
 def project(points, pair, rig):
-    """Pixel coordinates (col, row, as floats with centres at +0.5) and depth of world
+    """Pixel coordinates (col, row, as floats with centers at +0.5) and depth of world
     points in a camera of `pair`'s pose."""
     cam = (points - pair.position) @ pair.rotation
     f, cx, cy = rig.intrinsics

@@ -28,13 +28,13 @@ def replay():
     return scans, ScanReplay(scans, 0.2, max_range=3.0, ks=(1, 3))
 
 
-def curve_of(m, centres, labels, thresholds):
+def curve_of(m, centers, labels, thresholds):
     """TPR and FDR of a built map at each threshold, from its own is_occupied."""
     tpr, fdr = [], []
     for t in thresholds:
         occ = type(m).from_bytes(m.to_bytes(), **{**m._sensor_params(),
                                                    "occupancy_threshold": t}
-                                 ).is_occupied(centres)
+                                 ).is_occupied(centers)
         if occ.any():
             tpr.append((occ & labels).sum() / labels.sum())
             fdr.append((occ & ~labels).sum() / occ.sum())
@@ -131,10 +131,10 @@ def test_the_search_uses_no_deprecated_name(replay):
 
 
 def test_cell_labels_mark_cells_a_surface_crosses():
-    centres = np.array([[1.9, 0, 0], [2.1, 0, 0], [1.7, 0, 0]])
-    # the wall starts at 1.95: the cell [1.8, 2.0) holds it, its centre does not
-    assert cell_labels(Wall(), centres, 0.2).tolist() == [True, True, False]
-    assert cell_labels(Wall(), centres, 0.2, samples=1).tolist() == [False, True, False]
+    centers = np.array([[1.9, 0, 0], [2.1, 0, 0], [1.7, 0, 0]])
+    # the wall starts at 1.95: the cell [1.8, 2.0) holds it, its center does not
+    assert cell_labels(Wall(), centers, 0.2).tolist() == [True, True, False]
+    assert cell_labels(Wall(), centers, 0.2, samples=1).tolist() == [False, True, False]
     # a surface on a cell border: both cells beside it
     from occgp.datasets import tetromino_scene
     scene = tetromino_scene("I")

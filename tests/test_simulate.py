@@ -154,7 +154,7 @@ def test_octree_points_lie_in_the_first_occupied_cell(box_map):
     cells = np.floor(points / RES)
     dist_to_face = np.minimum(points / RES - cells, cells + 1 - points / RES).min(axis=1)
     assert (dist_to_face < 1e-3).all()
-    # and many returns in one cell are spread, not stacked on its centre
+    # and many returns in one cell are spread, not stacked on its center
     assert len(np.unique(points.round(6), axis=0)) == len(points)
     # nothing occupied lies before them: casting towards a point stops in its cell
     ends, hit = box_map.cast_rays(BOX_ORIGIN, points - BOX_ORIGIN, ignore_unknown=True)

@@ -48,7 +48,7 @@ def test_tetromino_scene_buildings_are_seeded():
     a, b = tetromino_scene("L", seed=3), tetromino_scene("L", seed=3)
     assert_array_equal(a.solids[-1].center, b.solids[-1].center)
     assert not np.array_equal(a.solids[-1].center, tetromino_scene("L", seed=4).solids[-1].center)
-    # near facades 5 to 7 m from the centre
+    # near facades 5 to 7 m from the center
     for s in a.solids[-3:]:
         assert 5.0 - 1e-9 <= s.signed_distance(np.array([[0.0, 0.0, 2.0]]))[0] <= 7.0 + 1e-9
 

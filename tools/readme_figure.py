@@ -32,7 +32,7 @@ MAPS = {
 
 
 def lattice(lo, hi, res):
-    """The centres of the cells inside [lo, hi] on each axis (as the demo's slice)."""
+    """The centers of the cells inside [lo, hi] on each axis (as the demo's slice)."""
     return [(np.arange(np.ceil(a / res - 0.5 - 1e-9), np.floor(b / res - 0.5 + 1e-9) + 1)
              + 0.5) * res for a, b in zip(lo, hi)]
 

@@ -202,7 +202,7 @@ def demo(outdir: str | Path = "demo_out", *, resolution: float = 0.1, seed: int 
     **3D.** The structured room (10 x 7 x 2 m) is scanned like the la3dm data
     set (4 poses x 3 scans x 3500 points, ranges up to 8 m); every method of
     :func:`mapping_methods` maps all the scans. **Protocol:** the test points
-    are the centres of the cells of `resolution` that the scans could see
+    are the centers of the cells of `resolution` that the scans could see
     (:func:`occgp.evaluation.exact_test_set`: within 8 m of a scan's origin,
     in its field of view, in line of sight by exact ray casting), labelled by
     the room's exact geometry (occupied where a solid reaches into the
@@ -326,17 +326,17 @@ def demo(outdir: str | Path = "demo_out", *, resolution: float = 0.1, seed: int 
 
 
 def _lattice(lo, hi, res):
-    """The centres ``(k + 0.5) * res`` of the map cells inside ``[lo, hi]`` on each axis."""
+    """The centers ``(k + 0.5) * res`` of the map cells inside ``[lo, hi]`` on each axis."""
     return [(np.arange(np.ceil(a / res - 0.5 - 1e-9), np.floor(b / res - 0.5 + 1e-9) + 1)
              + 0.5) * res for a, b in zip(lo, hi)]
 
 
-def _truth_panel(scene, centres, res, scans):
+def _truth_panel(scene, centers, res, scans):
     """The cells' exact labels (closed-cell rule), NaN where no scan could see them."""
     from ..evaluation import cells_in_view, exact_labels
 
-    truth = exact_labels(scene, centres, res).astype(float)
-    truth[~cells_in_view(scene, centres, res, scans, max_range=_DEMO_RANGE)] = np.nan
+    truth = exact_labels(scene, centers, res).astype(float)
+    truth[~cells_in_view(scene, centers, res, scans, max_range=_DEMO_RANGE)] = np.nan
     return truth
 
 

@@ -52,7 +52,7 @@ class SensorSetting2D(NamedTuple):
         Beams per scan, spread evenly over `fov` (both ends included, except
         over a full turn, where the last beam is not the first one again).
     fov : float
-        Field of view, radians, centred on the heading.
+        Field of view, radians, centered on the heading.
     max_range : float
         Range of the laser, metres; beams without a return report it.
     range_noise : float
@@ -302,7 +302,7 @@ class FamilyScene2D:
         """The query grid over the scene's bounds and its exact occupancy.
 
         The cells are those of :func:`occgp.gp.grid_points` over
-        ``scene.bounds`` (outer walls included): cell ``(i, j)`` has its centre
+        ``scene.bounds`` (outer walls included): cell ``(i, j)`` has its center
         at ``lower + ((i, j) + 0.5) * resolution``, in the same order.
 
         Parameters
@@ -315,9 +315,9 @@ class FamilyScene2D:
         Returns
         -------
         points : ndarray of shape (n_cells, 2)
-            Cell centres, x major (``truth.reshape(shape)`` is indexed ``[ix, iy]``).
+            Cell centers, x major (``truth.reshape(shape)`` is indexed ``[ix, iy]``).
         truth : ndarray of shape (n_cells,), dtype bool
-            Whether each centre lies in a solid (:meth:`Scene2D.occupancy`);
+            Whether each center lies in a solid (:meth:`Scene2D.occupancy`);
             :meth:`view` says which cells the laser saw.
         shape : tuple of int
             Cells along x and y.

@@ -72,7 +72,7 @@ def warehouse_layout(rng, width, height, t):
         b_lo, b_hi = b_hi, b_lo
     u0, u1 = -U / 2 + b_lo, U / 2 - b_hi      # extent of the racks along u
     # rows across v: [wall rack], aisle, rack, aisle, rack, ..., aisle
-    racks_v, aisles = [], []                  # (v_lo, v_hi) of racks; (centre, width) of aisles
+    racks_v, aisles = [], []                  # (v_lo, v_hi) of racks; (center, width) of aisles
     v = -V / 2
     if rng.random() < 0.5:                    # a single-sided rack against the wall
         d = rng.uniform(0.5, 0.8)
@@ -94,7 +94,7 @@ def warehouse_layout(rng, width, height, t):
     # cross aisles split every rack row into segments
     length = u1 - u0
     n_cross = int(length // rng.uniform(12.0, 18.0))
-    cross = []                                # (centre, width)
+    cross = []                                # (center, width)
     if n_cross:
         widths = rng.uniform(2.0, 3.0, n_cross)
         seg = (length - widths.sum()) / (n_cross + 1)
@@ -146,16 +146,16 @@ def warehouse_layout(rng, width, height, t):
             va, vb = racks_v[int(rng.integers(len(racks_v)))]
             end = cuts[int(rng.integers(len(cuts)))]
             side = 1.0 if end in cuts[1::2] else -1.0
-            centre = [end + side * r, (va + vb) / 2]
+            center = [end + side * r, (va + vb) / 2]
         else:
             lo_band = b_lo > b_hi
             band = (-U / 2 + r + 0.3, u0 - r - 0.3) if lo_band else (u1 + r + 0.3,
                                                                       U / 2 - r - 0.3)
             if band[1] <= band[0]:
                 continue
-            centre = [rng.uniform(*band), rng.uniform(-V / 2 + r + 0.3, V / 2 - r - 0.3)]
-        pillar = (Circle(world(centre), r) if rng.random() < 0.5
-                  else Rect(world(centre), [r, r]))
+            center = [rng.uniform(*band), rng.uniform(-V / 2 + r + 0.3, V / 2 - r - 0.3)]
+        pillar = (Circle(world(center), r) if rng.random() < 0.5
+                  else Rect(world(center), [r, r]))
         if _clear_of(pillar, samples):
             solids.append(pillar)
             labels.append(f"pillar_{placed}")
@@ -183,7 +183,7 @@ def hall_layout(rng, width, height, t):
         the pillar rows (a serpentine) and returns to its start along an end lane and
         the first lane.
     """
-    margin = 3.0                              # pillar centres keep this far from the walls
+    margin = 3.0                              # pillar centers keep this far from the walls
     sx, sy = rng.uniform(4.0, 7.0, 2)
     nx = max(int((width - 2 * margin) // sx) + 1, 1)
     ny = max(int((height - 2 * margin) // sy) + 1, 1)
@@ -221,7 +221,7 @@ def hall_layout(rng, width, height, t):
 
     # free-standing walls, clear of the path and of the pillars
     samples = path_samples(path)
-    centres = np.array([p.center for p in pillars]).reshape(-1, 2)
+    centers = np.array([p.center for p in pillars]).reshape(-1, 2)
     reach = np.asarray(reach)
     n_walls = int(rng.integers(2, 6))
     placed = 0
@@ -238,7 +238,7 @@ def hall_layout(rng, width, height, t):
         if np.any(lo < [-width / 2 + 0.3, -height / 2 + 0.3]) or \
                 np.any(hi > [width / 2 - 0.3, height / 2 - 0.3]):
             continue
-        if len(centres) and np.any(wall.signed_distance(centres) < reach + 0.3):
+        if len(centers) and np.any(wall.signed_distance(centers) < reach + 0.3):
             continue
         if not _clear_of(wall, samples):
             continue
@@ -251,7 +251,7 @@ def hall_layout(rng, width, height, t):
 
 # ------------------------------------------------------------------------ cluttered
 def _piece(rng):
-    """One piece of furniture in its own frame: (kind, [(centre, half or radius, angle)])."""
+    """One piece of furniture in its own frame: (kind, [(center, half or radius, angle)])."""
     u = rng.random()
     if u < 0.25:
         return "disc", [((0.0, 0.0), rng.uniform(0.2, 0.6), None)]
@@ -269,12 +269,12 @@ def _piece(rng):
     return "star", [((0.0, 0.0), (a, w), np.pi * i / k) for i in range(k)]
 
 
-def _place(parts, centre, angle):
+def _place(parts, center, angle):
     c, s = np.cos(angle), np.sin(angle)
     rot = np.array([[c, -s], [s, c]])
     out = []
     for offset, size, a in parts:
-        p = np.asarray(centre) + rot @ np.asarray(offset)
+        p = np.asarray(center) + rot @ np.asarray(offset)
         out.append(Circle(p, size) if a is None else Rect(p, size, a + angle))
     return out
 
@@ -299,14 +299,14 @@ def furnish_densely(rng, plan: FloorPlan2D) -> FloorPlan2D:
     """
     solids, labels = list(plan.solids), list(plan.labels)
     samples = path_samples(plan.path)
-    door_centre = plan.doorways.mean(axis=1)
+    door_center = plan.doorways.mean(axis=1)
     door_half = np.linalg.norm(plan.doorways[:, 1] - plan.doorways[:, 0], axis=1) / 2
     n_piece = 0
     for lo, hi in plan.rooms:
         near = np.all((samples >= lo - 1.0) & (samples <= hi + 1.0), axis=1)
         room_samples = samples[near]
-        at_door = np.all((door_centre >= lo - 1.0) & (door_centre <= hi + 1.0), axis=1)
-        doors, halves = door_centre[at_door], door_half[at_door]
+        at_door = np.all((door_center >= lo - 1.0) & (door_center <= hi + 1.0), axis=1)
+        doors, halves = door_center[at_door], door_half[at_door]
         area = float(np.prod(hi - lo))
         placed_parts, outlines = [], []
         for _ in range(min(int(area / rng.uniform(3.0, 5.0)), 25)):

@@ -17,7 +17,7 @@ __all__ = ["FloorPlan2D", "floor_plan_2d"]
 
 #: Smallest and largest width and height of the building's interior, metres.
 SIZE_RANGE = (12.0, 1000.0)
-#: Room sizes between wall centre lines, metres.
+#: Room sizes between wall center lines, metres.
 ROOM_SIZE = (4.0, 10.0)
 _CLEARANCE = 0.5        # the path's distance to every solid, at least
 _MARGIN = 1.0           # path vertices inside a room keep this far from its walls
@@ -42,7 +42,7 @@ class FloorPlan2D(Scene2D):
     corridors : array-like of shape (n_corridors, 2, 2)
         The free rectangles of the corridors, as `rooms`.
     doorways : array-like of shape (n_doorways, 2, 2)
-        The two jambs of every doorway, on the centre line of its wall: a
+        The two jambs of every doorway, on the center line of its wall: a
         doorway is the open gap between them, across the whole wall.
 
     Attributes
@@ -135,8 +135,8 @@ def _furnish(rng, room, path_points, doors, count, first_box, first_disc):
         if np.any(hi <= lo):
             continue
         for _ in range(_ATTEMPTS):
-            centre = rng.uniform(lo, hi)
-            cand = Rect(centre, half, angle) if is_box else Circle(centre, radius)
+            center = rng.uniform(lo, hi)
+            cand = Rect(center, half, angle) if is_box else Circle(center, radius)
             if cand.signed_distance(path_points).min() < _CLEARANCE + 0.05:
                 continue
             if len(doors) and np.any(cand.signed_distance(doors[:, :2]) < doors[:, 2] + 0.6):
@@ -167,7 +167,7 @@ def floor_plan_2d(seed: int = 0, *, width: float = 60.0, height: float = 40.0,
     corridor, 2.5-3 m wide, the others are 2-2.5 m wide. Vertical side
     corridors, 2-3 m wide, cross the rows between corridors near both ends
     of the building (and every ~25 m in wider ones). Rooms measure 4-10 m
-    between wall centre lines. Every room has a doorway 1.1-1.5 m wide onto
+    between wall center lines. Every room has a doorway 1.1-1.5 m wide onto
     a corridor; some rooms have a second one onto their other corridor or a
     side corridor, and some neighbouring rooms are interconnected by a
     doorway 0.9-1.5 m wide. Rooms hold up to `furniture` boxes (some rotated)
@@ -265,7 +265,7 @@ def floor_plan_2d(seed: int = 0, *, width: float = 60.0, height: float = 40.0,
     furniture = check_int(furniture, "furniture", low=0, high=10)
     rng = np.random.default_rng(seed)
     x0, x1, y0, y1 = -width / 2, width / 2, -height / 2, height / 2
-    # every wall, the outer ones included, is centred on a line: a cell between two lines
+    # every wall, the outer ones included, is centered on a line: a cell between two lines
     # is free inside them by t / 2
     X_lo, X_hi, Y_lo, Y_hi = x0 - t / 2, x1 + t / 2, y0 - t / 2, y1 + t / 2
 
@@ -289,7 +289,7 @@ def floor_plan_2d(seed: int = 0, *, width: float = 60.0, height: float = 40.0,
 
     # ---- side corridors across the inner rows (between two corridors) -----------------
     span_x = X_hi - X_lo
-    side = []                           # (x_a, x_b) wall centre lines of each side corridor
+    side = []                           # (x_a, x_b) wall center lines of each side corridor
     if n_corr >= 2:
         n_side = 1 if width < 30 else max(2, round(width / 25))
         side_w = rng.uniform(2.0, 3.0, n_side)
@@ -297,17 +297,17 @@ def floor_plan_2d(seed: int = 0, *, width: float = 60.0, height: float = 40.0,
             band = side_w[0] + t
             slack = (span_x - band) / 2 - ROOM_SIZE[0]
             c = (X_lo + X_hi) / 2 + rng.uniform(-1, 1) * min(slack, 0.2 * span_x)
-            centres = [c]
+            centers = [c]
         else:
             first = X_lo + rng.uniform(4.5, 8.0) + (side_w[0] + t) / 2
             last = X_hi - rng.uniform(4.5, 8.0) - (side_w[-1] + t) / 2
             gap = (last - first) / (n_side - 1)
-            centres = [first] + [first + i * gap + rng.uniform(-0.2, 0.2) * gap
+            centers = [first] + [first + i * gap + rng.uniform(-0.2, 0.2) * gap
                                  for i in range(1, n_side - 1)] + [last]
-        side = [(c - (w + t) / 2, c + (w + t) / 2) for c, w in zip(centres, side_w)]
+        side = [(c - (w + t) / 2, c + (w + t) / 2) for c, w in zip(centers, side_w)]
 
     # ---- rooms ----------------------------------------------------------------------
-    rooms = []                          # dicts: x (a, b), y (a, b) centre lines, row, ...
+    rooms = []                          # dicts: x (a, b), y (a, b) center lines, row, ...
     for r, (ya, yb) in enumerate(row_y):
         inner = 0 < r < n_corr
         cuts = [X_lo] + [v for s in (side if inner else []) for v in s] + [X_hi]
@@ -424,7 +424,7 @@ def floor_plan_2d(seed: int = 0, *, width: float = 60.0, height: float = 40.0,
         into = 1.0 if room["row"] > c else -1.0     # the room lies above its corridor
         door_face = fy0 if into > 0 else fy1
         e = [dx, door_face + into * _ENTRY]
-        # a point at most _DEPTH into the room, between the doorway and the room's centre
+        # a point at most _DEPTH into the room, between the doorway and the room's center
         depth = min((fy1 - fy0) / 2, _DEPTH) + rng.uniform(-0.3, 0.3)
         x_mid = dx + rng.uniform(0.3, 0.7) * ((fx0 + fx1) / 2 - dx)
         mid = np.clip([x_mid, door_face + into * depth],
@@ -480,12 +480,12 @@ def floor_plan_2d(seed: int = 0, *, width: float = 60.0, height: float = 40.0,
     # ---- furniture, clear of the path, the walls, the doorways and one another ----------
     n_box = n_disc = 0
     door_arr = np.array(doorways).reshape(-1, 2, 2)
-    door_centre = door_arr.mean(axis=1)
+    door_center = door_arr.mean(axis=1)
     door_half = np.linalg.norm(door_arr[:, 1] - door_arr[:, 0], axis=1) / 2
     for k, room in enumerate(rooms):
         box = free(room)
-        near = np.all((door_centre >= box[0] - t) & (door_centre <= box[1] + t), axis=1)
-        doors = np.column_stack([door_centre[near], door_half[near]])
+        near = np.all((door_center >= box[0] - t) & (door_center <= box[1] + t), axis=1)
+        doors = np.column_stack([door_center[near], door_half[near]])
         pieces, names, n_box, n_disc = _furnish(
             rng, box, path_samples(excursions[k]), doors, furniture, n_box, n_disc)
         solids += pieces

@@ -1,6 +1,6 @@
 """Convex solid primitives with exact membership, distance and ray casting.
 
-Every primitive lives in its own local frame, given by a centre ``c`` and a
+Every primitive lives in its own local frame, given by a center ``c`` and a
 rotation matrix ``R`` whose columns are the local axes in the world frame
 (``world = R @ local + c``). Rays are moved into the local frame, where the
 solid has a canonical shape; since ``R`` is orthonormal, ray parameters
@@ -91,7 +91,7 @@ def _segment_distance(px, py, ax, ay, bx, by):
 # primitives
 # --------------------------------------------------------------------------- #
 class _Solid:
-    """Common frame handling: centre ``center`` and rotation ``rotation``."""
+    """Common frame handling: center ``center`` and rotation ``rotation``."""
 
     def __init__(self, center, rotation=None):
         self.center = np.asarray(center, dtype=np.float64).reshape(3)
@@ -253,7 +253,7 @@ class Frustum(_Solid):
 
     The radius varies linearly from `radius_bottom` at ``z = 0`` to
     `radius_top` at ``z = height``: equal radii give a capped cylinder,
-    ``radius_top = 0`` a cone. `center` is the centre of the bottom disc.
+    ``radius_top = 0`` a cone. `center` is the center of the bottom disc.
 
     Examples
     --------

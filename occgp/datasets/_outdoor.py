@@ -8,7 +8,7 @@ as in the rooms:
 * the **ground**, a slab whose top is z = 0, reaching ``ground_margin``
   metres beyond the square (so that low beams hit ground, not sky), with
   sloped **hills**: tilted slabs half buried in the ground off the roads;
-* a **main road** along x (8 m wide, centred on y = 0) and a **cross road**
+* a **main road** along x (8 m wide, centered on y = 0) and a **cross road**
   along y at a seeded x, both flat at z = 0, with **curbs** 0.15 m high;
 * **buildings**: boxes of seeded footprint (6-20 m) and height (3-25 m)
   along both sides of the roads, a few turned slightly;
@@ -80,7 +80,7 @@ class OutdoorScene(Scene):
         Side of the square, metres.
     seed : int
     cross_x : float
-        x of the cross road's centre line.
+        x of the cross road's center line.
     ground_margin : float
         How far the ground slab reaches beyond the square, metres.
     vegetation : bool
@@ -391,15 +391,15 @@ def _hills(b, rng, half, cross):
         placed += 1
 
 
-def _free_of(solids, centres, margin):
-    """Whether each of `centres` (n, 3) lies at least `margin` outside every solid."""
-    if not len(solids) or not len(centres):
-        return np.ones(len(centres), dtype=bool)
-    return np.min([s.signed_distance(centres) for s in solids], axis=0) >= margin
+def _free_of(solids, centers, margin):
+    """Whether each of `centers` (n, 3) lies at least `margin` outside every solid."""
+    if not len(solids) or not len(centers):
+        return np.ones(len(centers), dtype=bool)
+    return np.min([s.signed_distance(centers) for s in solids], axis=0) >= margin
 
 
 def _off_roads(xy, cross, reach):
-    """Whether points (n, 2) lie farther than `reach` from both roads' centre lines."""
+    """Whether points (n, 2) lie farther than `reach` from both roads' center lines."""
     return (np.abs(xy[:, 1]) > reach) & (np.abs(xy[:, 0] - cross) > reach)
 
 
@@ -438,9 +438,9 @@ def _hedges(b, rng, half, cross, objects):
                     across_k = side * (across + rng.uniform(-0.1, 0.1, n))
                     xy = np.column_stack([along, across_k]) if axis == 0 else \
                         np.column_stack([cross + across_k, along])
-                    centres = np.column_stack([xy, rz * 0.6])
-                    if _free_of(objects, centres, 0.3).all():
-                        for c, r in zip(centres, np.column_stack([rx, ry, rz])):
+                    centers = np.column_stack([xy, rz * 0.6])
+                    if _free_of(objects, centers, 0.3).all():
+                        for c, r in zip(centers, np.column_stack([rx, ry, rz])):
                             b.add("hedge", Ellipsoid(c, r, rotation_matrix(
                                 0.0 if axis == 0 else np.pi / 2)))
                     a += length + rng.uniform(2.0, 10.0)

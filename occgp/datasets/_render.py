@@ -45,8 +45,8 @@ class StereoRig:
 
     Two identical pinhole cameras with the same rotation; the right camera
     sits `baseline` metres along the left camera's x (right) axis. Pixel
-    ``(row, col)`` has its centre at ``(col + 0.5, row + 0.5)``; the principal
-    point is the image centre ``(width / 2, height / 2)``, x to the right, y
+    ``(row, col)`` has its center at ``(col + 0.5, row + 0.5)``; the principal
+    point is the image center ``(width / 2, height / 2)``, x to the right, y
     down, z forward (OpenCV's convention). A point at depth ``z`` has the
     disparity ``focal_length * baseline / z`` (pixels, left column minus right
     column).
@@ -61,7 +61,7 @@ class StereoRig:
     focal_length : float, default=337.2
         Focal length in pixels, in (0, 1e5].
     baseline : float, default=0.12
-        Distance between the camera centres, metres, in (0, 10].
+        Distance between the camera centers, metres, in (0, 10].
     max_depth : float, default=8.0
         Longest depth a matcher should trust, metres, in (0, 1000] (kept for
         the disparity-to-points step; the renderer draws everything).
@@ -175,7 +175,7 @@ class StereoRig:
 
     @property
     def intrinsics(self) -> tuple[float, float, float]:
-        """``(focal_length, cx, cy)`` in pixels, the principal point at the image centre."""
+        """``(focal_length, cx, cy)`` in pixels, the principal point at the image center."""
         return (self.focal_length, self.width / 2, self.height / 2)
 
     @property
@@ -205,11 +205,11 @@ class StereoPair(NamedTuple):
         Index into ``scene.solids`` of what each left pixel sees, -1 for the
         sky; None unless rendered with ``truth=True``.
     position : ndarray of shape (3,)
-        Centre of the left camera, world frame.
+        Center of the left camera, world frame.
     rotation : ndarray of shape (3, 3)
         Camera-to-world rotation of the left camera: its columns are the
         camera's x (right), y (down) and z (forward) axes in the world frame.
-        The right camera's centre is ``position + baseline * rotation[:, 0]``.
+        The right camera's center is ``position + baseline * rotation[:, 0]``.
     """
 
     left: NDArray[np.uint8]
@@ -272,7 +272,7 @@ def render_stereo(scene: Scene, position: ArrayLike, look_at: ArrayLike,
                   materials: Sequence[str] | Mapping[str, str] | None = None) -> StereoPair:
     """Render the rectified grey stereo pair a :class:`StereoRig` sees of a scene.
 
-    Each camera casts one ray through each pixel centre; the first hit
+    Each camera casts one ray through each pixel center; the first hit
     (exact) is shaded as ``albedo * (ambient + (1 - ambient) * max(0, n . sun)
     * lit)``, times 255, where the albedo comes from the solid's procedural
     texture at the hit, ``n`` is the surface normal and ``lit`` is 0 where a
@@ -290,7 +290,7 @@ def render_stereo(scene: Scene, position: ArrayLike, look_at: ArrayLike,
     scene : Scene
         What the cameras see, e.g. a :func:`tetromino_scene`.
     position : array-like of shape (3,)
-        Centre of the left camera, world frame, metres; both cameras must
+        Center of the left camera, world frame, metres; both cameras must
         stand in free space.
     look_at : array-like of shape (3,)
         A point on the left camera's optical axis; the image's up is toward
@@ -436,7 +436,7 @@ def _screen_rect(lo, hi, origin, rotation, rig):
     f, cx, cy = rig.intrinsics
     u = f * p[:, 0] / p[:, 2] + cx
     v = f * p[:, 1] / p[:, 2] + cy
-    # pixel (r, c) has its centre at (c + 0.5, r + 0.5); one pixel of margin for rounding
+    # pixel (r, c) has its center at (c + 0.5, r + 0.5); one pixel of margin for rounding
     c0 = int(np.clip(np.floor(u.min() - 0.5) - 1, 0, rig.width))
     c1 = int(np.clip(np.ceil(u.max() - 0.5) + 2, 0, rig.width))
     r0 = int(np.clip(np.floor(v.min() - 0.5) - 1, 0, rig.height))

@@ -270,7 +270,7 @@ class Scene2D:
         n_beams : int, default=17
             Beams per scan, evenly spread over `fov` (both ends included).
         fov : float, default=pi
-            Field of view, radians, centred on the heading.
+            Field of view, radians, centered on the heading.
         max_range : float, default=8.0
             Beams with no return closer than this have ``hit`` False and
             range `max_range`.

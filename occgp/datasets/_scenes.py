@@ -311,7 +311,7 @@ class Scene:
         --------
         >>> room = structured_room()
         >>> moved = room.moved("crate", [-1.0, 0.0, 0.0])
-        >>> point = [[1.3, -1.1, 0.25]]         # 1 m left of the crate's centre
+        >>> point = [[1.3, -1.1, 0.25]]         # 1 m left of the crate's center
         >>> room.occupancy(point).tolist(), moved.occupancy(point).tolist()
         ([False], [True])
         """

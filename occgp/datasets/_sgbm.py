@@ -218,7 +218,7 @@ def disparity_to_points(disparity: ArrayLike, rig: StereoRig, position: ArrayLik
                         max_depth: float | None = None) -> NDArray[np.float64]:
     """Triangulate a left-camera disparity map into world points.
 
-    A pixel ``(v, u)`` (row, column; centre at ``u + 0.5``) with disparity
+    A pixel ``(v, u)`` (row, column; center at ``u + 0.5``) with disparity
     ``d`` lies at depth ``z = f B / d`` on its ray, ``x = (u + 0.5 - W/2) z /
     f``, ``y = (v + 0.5 - H/2) z / f`` in the camera frame (x right, y down, z
     forward), then ``position + rotation @ (x, y, z)``.
@@ -230,7 +230,7 @@ def disparity_to_points(disparity: ArrayLike, rig: StereoRig, position: ArrayLik
     rig : StereoRig
         Focal length `f`, baseline `B` and image size.
     position : array-like of shape (3,)
-        Left camera centre, world frame, metres.
+        Left camera center, world frame, metres.
     rotation : array-like of shape (3, 3)
         Camera-to-world rotation (columns: the camera's x, y, z axes).
     max_depth : float or None, default=None
@@ -275,7 +275,7 @@ def render_orbit(scene, rig: StereoRig | None = None, *, n_frames: int = 40, orb
     """Render the stereo pairs of the keyframes of an orbit around a scene.
 
     The orbit of :func:`~occgp.datasets.simulate_stereo` (`orbits` circles of
-    `n_frames` keyframes at `radius` and `height` around the layout's centre,
+    `n_frames` keyframes at `radius` and `height` around the layout's center,
     looking at it); keyframe ``i`` renders with the ``i``-th word of
     ``numpy.random.SeedSequence(seed).generate_state(n_frames * orbits)`` as
     its seed.
@@ -409,7 +409,7 @@ def stereo_scans(pairs: Sequence[StereoPair], rig: StereoRig,
     -------
     scans : list of Scan
         One per pair, ``Scan(points, origin)`` with the (estimated) left
-        camera centre as origin.
+        camera center as origin.
 
     Raises
     ------

@@ -33,7 +33,7 @@ class LidarSensor:
     """A spinning 3D laser scanner with a regular grid of beams.
 
     Beams lie on a grid of `n_vertical` elevations x `n_horizontal` azimuths,
-    each at the centre of its bin (so a full turn repeats no azimuth).
+    each at the center of its bin (so a full turn repeats no azimuth).
 
     Parameters
     ----------
@@ -102,7 +102,7 @@ class LidarSensor:
         ----------
         heading : float, default=0.0
             Yaw of the sensor, radians about +z from +x; the sector is
-            centred on it.
+            centered on it.
 
         Returns
         -------
@@ -378,7 +378,7 @@ class _OctreeWorld:
         return ok & self.known_free(samples.reshape(-1, 3)).reshape(len(dirs), -1).all(axis=1)
 
     def _occupied_cells(self):
-        """Centres of the occupied cells at the finest resolution (cached, with a k-d tree)."""
+        """Centers of the occupied cells at the finest resolution (cached, with a k-d tree)."""
         if self._cells is None:
             centers, sizes, _ = self.tree.leaves(occupied_only=True)
             self._cells = _finest_cells(centers, sizes, self.res)
@@ -390,7 +390,7 @@ class _OctreeWorld:
         cells = self._occupied_cells()
         if len(cells) == 0 or clearance == 0:
             return np.ones(len(points), dtype=bool)
-        # a cell within `clearance` has its centre within `reach`; check the k nearest
+        # a cell within `clearance` has its center within `reach`; check the k nearest
         half, k = self.res / 2, min(_NEIGHBOURS, len(cells))
         reach = clearance + np.sqrt(3) * half
         dist, idx = self._kdtree.query(points, k=k, distance_upper_bound=reach)
@@ -403,7 +403,7 @@ class _OctreeWorld:
         return ~near & ~unsure
 
     def default_height(self):
-        """1 m above the top of the densest occupied layer in the lower half (a cell centre)."""
+        """1 m above the top of the densest occupied layer in the lower half (a cell center)."""
         layer = np.floor(self._occupied_cells()[:, 2] / self.res).astype(np.int64)
         if len(layer) == 0:
             raise ValueError("environment has no occupied cells: give height explicitly")
@@ -466,7 +466,7 @@ def _valid_poses(world, points, clearance):
 
 
 def _finest_cells(centers, sizes, res):
-    """Centres of the finest cells that make up the given leaves."""
+    """Centers of the finest cells that make up the given leaves."""
     out = [np.empty((0, 3))]
     for size in np.unique(sizes):
         g = (np.arange(round(size / res)) - (round(size / res) - 1) / 2) * res

@@ -77,7 +77,7 @@ class TetrominoScene(Scene):
     environment : str
         ``"buildings"`` or ``"open"``.
     target_center : ndarray of shape (3,)
-        Centre of the layout at half its height, where the camera looks.
+        Center of the layout at half its height, where the camera looks.
     targets : list of Box
         The boxes of the layout (the weakly textured surfaces when `texture`
         is False).
@@ -105,11 +105,11 @@ def tetromino_scene(layout: str = "I", *, texture: bool = True, environment: str
 
     Each of the tetromino's 4 cells (0.8 m apart) holds a pair of stacked
     boxes: a 0.7 x 0.7 x 0.5 m box on the ground and a 0.5 x 0.5 x 0.4 m box
-    centred on top of it (0.9 m in all). The layout is centred on the origin.
+    centered on top of it (0.9 m in all). The layout is centered on the origin.
     The ground is a 0.15 m slab under ``z = 0`` covering ``[-15, 15]^2``.
     With ``environment="buildings"``, three building blocks stand around the
     layout (bearings 120 degrees apart, turned and jittered by the seed):
-    near facades 5 to 7 m from the centre, 6 to 10 m wide, 3 to 5 m deep and
+    near facades 5 to 7 m from the center, 6 to 10 m wide, 3 to 5 m deep and
     4 to 9 m tall. ``"open"`` is the ground alone (an open lot).
 
     Parameters
@@ -181,7 +181,7 @@ class StereoCamera:
     The paper's camera is a ZED at 1280 x 720 pixels with a 90 degree
     horizontal field of view; the default here is that image downscaled by 4
     (320 x 180), for speed (point clouds are voxel-filtered at 0.1 m anyway).
-    Pixels are square; one ray passes through the centre of each pixel.
+    Pixels are square; one ray passes through the center of each pixel.
 
     Error model, per frame (see :meth:`capture`):
 
@@ -294,7 +294,7 @@ class StereoCamera:
             ``texture=False`` and ``targets`` (a :class:`TetrominoScene`);
             any other scene counts as textured.
         position : array-like of shape (3,)
-            Camera centre in the world frame, metres; must lie in free space.
+            Camera center in the world frame, metres; must lie in free space.
         look_at : array-like of shape (3,)
             A point on the optical axis; the image's up is toward +z.
         seed : int, numpy.random.Generator or None, default=0
@@ -450,7 +450,7 @@ def _voxel_filter(points, voxel):
 
 
 def orbit_positions(scene, n_frames, orbits, radius, height):
-    """Camera centres of the orbit of :func:`simulate_stereo` (checked arguments) and the
+    """Camera centers of the orbit of :func:`simulate_stereo` (checked arguments) and the
     point they look at: ``(positions of shape (n_frames * orbits, 3), center)``."""
     center = getattr(scene, "target_center", None)
     if center is None:
@@ -475,10 +475,10 @@ def simulate_stereo(scene: Scene, camera: StereoCamera = StereoCamera(), *, n_fr
                     progress: bool | None = False) -> list[Scan]:
     """Fly a stereo camera around a scene's layout and return its voxel-filtered clouds.
 
-    The camera circles the layout's centre (``scene.target_center``; for
-    another :class:`~occgp.datasets.Scene`, the centre of its interior at
+    The camera circles the layout's center (``scene.target_center``; for
+    another :class:`~occgp.datasets.Scene`, the center of its interior at
     0.5 m above its floor) `orbits` times at `radius` and `height`, with
-    `n_frames` frames per orbit, looking at the centre. Frame ``i`` of orbit
+    `n_frames` frames per orbit, looking at the center. Frame ``i`` of orbit
     ``o`` is at azimuth ``2 pi (i + o / orbits) / n_frames``: later orbits
     interleave with the first. Each frame is captured with
     :meth:`StereoCamera.capture` (one ray per pixel, noise, speckle, missing
@@ -511,7 +511,7 @@ def simulate_stereo(scene: Scene, camera: StereoCamera = StereoCamera(), *, n_fr
     -------
     scans : list of Scan
         ``n_frames * orbits`` scans, ``Scan(points, origin)`` with the camera
-        centre as origin.
+        center as origin.
 
     Raises
     ------

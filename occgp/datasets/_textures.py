@@ -157,7 +157,7 @@ def _fbm(u, v, footprint, octaves, seed, salt):
 
 
 def _band(x, lo, hi, footprint):
-    """Share of a pixel of width `footprint` centred at `x` that lies in [lo, hi]."""
+    """Share of a pixel of width `footprint` centered at `x` that lies in [lo, hi]."""
     half = 0.5 * np.maximum(footprint, 1e-12)
     return np.clip((np.minimum(x + half, hi) - np.maximum(x - half, lo)) / (2 * half), 0.0, 1.0)
 
@@ -166,8 +166,8 @@ def _periodic_band(x, period, lo, hi, footprint):
     """:func:`_band` of the periodic band ``[lo, hi] + k * period`` (``0 <= lo < hi <=
     period``): exact for footprints up to the gap between bands, the band's duty cycle
     beyond half a period."""
-    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    d = np.abs(np.mod(x - centre + 0.5 * period, period) - 0.5 * period)
+    center, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    d = np.abs(np.mod(x - center + 0.5 * period, period) - 0.5 * period)
     cover = _band(d, -half, half, footprint)
     wide = footprint > 0.5 * period
     if np.any(wide):

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
+from .._params import renamed_keywords
 from .._validation import as_point, as_points, check_int, check_real, check_seed
 from ..datasets._labels import CELL_SECTIONS as _CELL_SECTIONS, cell_labels
 from ._protocols import TestSet, grid_test_set
@@ -113,17 +114,17 @@ def _cell_keys(points, resolution):
     return keys.view(np.dtype((np.void, keys.dtype.itemsize * keys.shape[1]))).ravel()
 
 
-def _visible(scene, centres, views, max_range, resolution):
+def _visible(scene, centers, views, max_range, resolution):
     """Whether some view sees each cell: it holds a return, or it is in range, in the
-    view's sector (its centre, or a point of the cell) and in line of sight."""
-    dim = centres.shape[1]
+    view's sector (its center, or a point of the cell) and in line of sight."""
+    dim = centers.shape[1]
     margin = 0.5 * math.sqrt(dim) * resolution      # half a cell diagonal
     returns = np.vstack([v[2] for v in views])
-    seen = np.isin(_cell_keys(centres, resolution), _cell_keys(returns, resolution))
+    seen = np.isin(_cell_keys(centers, resolution), _cell_keys(returns, resolution))
     for origin, dirs, _ in views:
         mean, (lo, hi), el_span = _sector(dirs)
         todo = np.flatnonzero(~seen)
-        rays = centres[todo] - origin
+        rays = centers[todo] - origin
         dist = np.linalg.norm(rays, axis=1)
         at = dist <= margin                  # the cell holding the sensor
         seen[todo[at]] = True
@@ -132,7 +133,7 @@ def _visible(scene, centres, views, max_range, resolution):
         unit = rays / dist[:, None]
         sector = (mean, lo, hi, el_span)
         inside = _in_sector(unit, sector)
-        # a cell whose centre is outside but whose bounding sphere reaches into the
+        # a cell whose center is outside but whose bounding sphere reaches into the
         # sector is in it when a point of the cell (a 3**dim grid, just inside) is
         band = np.flatnonzero(~inside & _in_sector(unit, sector, np.arcsin(
             np.minimum(margin / dist, 1.0))))
@@ -151,23 +152,24 @@ def _visible(scene, centres, views, max_range, resolution):
     return seen
 
 
-def cells_in_view(scene: Any, centres: ArrayLike, resolution: float, scans: Iterable[Any], *,
+@renamed_keywords(centres="centers")
+def cells_in_view(scene: Any, centers: ArrayLike, resolution: float, scans: Iterable[Any], *,
                   max_range: float) -> NDArray[np.bool_]:
     """Whether some scan could see each cell (the region of :func:`exact_test_set`).
 
-    A cell (edge `resolution`, centred at a row of `centres`) is in view of a
+    A cell (edge `resolution`, centered at a row of `centers`) is in view of a
     scan when it holds one of the scan's returns (cells of the lattice aligned
-    with the world origin), or when its centre lies within `max_range` of the
+    with the world origin), or when its center lies within `max_range` of the
     scan's origin, in the scan's angular sector (read from its rays; the
-    centre, or one of a 3**dim grid of points just inside the cell) and in
+    center, or one of a 3**dim grid of points just inside the cell) and in
     line of sight (see the Notes of :func:`exact_test_set`).
 
     Parameters
     ----------
     scene : object
         With ``ray_cast(origin, directions, max_range) -> (distances, hit)``.
-    centres : array-like of shape (n_cells, n_dims)
-        Cell centres, ``n_dims`` that of the scans (2 or 3).
+    centers : array-like of shape (n_cells, n_dims)
+        Cell centers, ``n_dims`` that of the scans (2 or 3) (``centres`` before, a name deprecated for one release).
     resolution : float
         Cell edge, metres, > 0.
     scans : iterable of (points, origin) or LaserScan2D
@@ -181,7 +183,7 @@ def cells_in_view(scene: Any, centres: ArrayLike, resolution: float, scans: Iter
     Raises
     ------
     ValueError
-        If `resolution` or `max_range` is not positive, `centres` is not of
+        If `resolution` or `max_range` is not positive, `centers` is not of
         shape (n_cells, n_dims) or not finite, or `scans` is empty or holds
         a scan of another dimension or without rays.
     TypeError
@@ -203,10 +205,10 @@ def cells_in_view(scene: Any, centres: ArrayLike, resolution: float, scans: Iter
     scans = list(scans)
     if not scans:
         raise ValueError("scans must hold at least one scan, got none")
-    shape = np.shape(centres)
+    shape = np.shape(centers)
     dim = shape[1] if len(shape) == 2 and shape[1] == 2 else 3
-    centres = as_points(centres, "centres", dim=dim)
-    return _visible(scene, centres, _views(scans, dim), max_range, resolution)
+    centers = as_points(centers, "centers", dim=dim)
+    return _visible(scene, centers, _views(scans, dim), max_range, resolution)
 
 
 def exact_test_set(scene: Any, resolution: float, scans: Iterable[Any], *, max_range: float,
@@ -214,7 +216,7 @@ def exact_test_set(scene: Any, resolution: float, scans: Iterable[Any], *, max_r
                    bbox: tuple[ArrayLike, ArrayLike] | None = None):
     """Ground-truth test cells of a synthetic scene, where its scans could see.
 
-    The candidates are the cell centres ``(k + 0.5) * resolution`` (k
+    The candidates are the cell centers ``(k + 0.5) * resolution`` (k
     integer) of the lattice aligned with the world origin inside
     ``scene.bounds`` (or `bbox`), i.e. the cells of an octree or grid map of
     that resolution (see :func:`~occgp.evaluation.grid_test_set`). A cell is
@@ -252,7 +254,7 @@ def exact_test_set(scene: Any, resolution: float, scans: Iterable[Any], *, max_r
     Returns
     -------
     test_set : TestSet
-        Cell centres of shape (n_points, 3), or (n_points, 2) for a 2D scene,
+        Cell centers of shape (n_points, 3), or (n_points, 2) for a 2D scene,
         in lattice order (z fastest, then y, then x), and their labels.
 
     Raises
@@ -272,16 +274,16 @@ def exact_test_set(scene: Any, resolution: float, scans: Iterable[Any], *, max_r
     A scan could see a cell when the cell holds one of the scan's returns,
     or when all of these hold:
 
-    * its centre lies within `max_range` of the scan's origin;
-    * the direction from the origin to its centre, or to one of a 3**dim
+    * its center lies within `max_range` of the scan's origin;
+    * the direction from the origin to its center, or to one of a 3**dim
       grid of points just inside its faces, lies in the scan's angular
       sector: the azimuth span of the scan's rays about their mean azimuth
       and, in 3D, their elevation span (the sector is read from the rays
       themselves, so a 117-degree, 0-42-degree la3dm scan sees only that
       wedge; the layer of cells below a level scanner is out of it);
     * it is in line of sight: the exact ray from the origin towards the
-      centre (``scene.ray_cast``) reaches within half a cell diagonal of the
-      centre before it meets a solid.
+      center (``scene.ray_cast``) reaches within half a cell diagonal of the
+      center before it meets a solid.
 
     Cells no scan could see (inside solids, behind walls, out of range or out
     of every field of view) are left out: no map can know them, they would
@@ -317,25 +319,25 @@ def exact_test_set(scene: Any, resolution: float, scans: Iterable[Any], *, max_r
     else:
         box = (lo, hi)
 
-    def observed(centres):
-        return _visible(scene, np.ascontiguousarray(centres[:, :dim]), views, max_range,
+    def observed(centers):
+        return _visible(scene, np.ascontiguousarray(centers[:, :dim]), views, max_range,
                         resolution)
 
     # the lattice and the visibility first; labels only for the cells in view
     grid = grid_test_set(_AllFree(), resolution, bbox=box, observed=observed)
-    centres = grid.points[:, :dim]
-    labels = exact_labels(scene, centres, resolution, samples=samples)
+    centers = grid.points[:, :dim]
+    labels = exact_labels(scene, centers, resolution, samples=samples)
     occ, free = np.flatnonzero(labels), np.flatnonzero(~labels)
     if not len(occ) or not len(free):
-        raise ValueError(f"the {len(centres)} cells in view hold {len(occ)} occupied and "
+        raise ValueError(f"the {len(centers)} cells in view hold {len(occ)} occupied and "
                          f"{len(free)} free cells; a test set needs both")
     if balance:
         n = min(len(occ), len(free))
         occ = np.sort(rng.choice(occ, n, replace=False)) if len(occ) > n else occ
         free = np.sort(rng.choice(free, n, replace=False)) if len(free) > n else free
         rows = np.sort(np.r_[occ, free])
-        centres, labels = centres[rows], labels[rows]
-    return TestSet(np.ascontiguousarray(centres[:, :dim]), labels)
+        centers, labels = centers[rows], labels[rows]
+    return TestSet(np.ascontiguousarray(centers[:, :dim]), labels)
 
 
 class _Indexed:
@@ -376,7 +378,8 @@ class _Indexed:
 
 
 @fill_doc(cell_sections=_CELL_SECTIONS)
-def exact_labels(scene: Any, centres: ArrayLike, resolution: float, samples: int = 5,
+@renamed_keywords(centres="centers")
+def exact_labels(scene: Any, centers: ArrayLike, resolution: float, samples: int = 5,
                  ) -> NDArray[np.bool_]:
     """Exact labels of 2D or 3D cells: :func:`cell_labels` for any scene of occgp.
 
@@ -392,14 +395,14 @@ def exact_labels(scene: Any, centres: ArrayLike, resolution: float, samples: int
         With ``occupancy(points) -> bool array`` (closed solids), optionally
         ``signed_distance(points)``: a :class:`occgp.datasets.Scene` or
         :class:`occgp.datasets.Scene2D`.
-    centres : array-like of shape (n_cells, 3) or (n_cells, 2)
-        Cell centres, of the scene's dimension.
+    centers : array-like of shape (n_cells, 3) or (n_cells, 2)
+        Cell centers, of the scene's dimension (``centres`` before, a name deprecated for one release).
     {cell_sections}
 
     Raises
     ------
     ValueError
-        If `centres` is not of shape (n_cells, 3) or (n_cells, 2) or not
+        If `centers` is not of shape (n_cells, 3) or (n_cells, 2) or not
         finite, `resolution` is not positive, `samples` is out of range, or
         ``scene.occupancy`` answers with the wrong shape.
 
@@ -411,12 +414,12 @@ def exact_labels(scene: Any, centres: ArrayLike, resolution: float, samples: int
     >>> exact_labels(room, [[0.0, 0.0], corner], 0.1).tolist()
     [False, True]
     """
-    centres = np.asarray(centres, dtype=np.float64)
-    if centres.ndim == 2 and centres.shape[1] == 2:
-        lifted = np.column_stack([centres, np.zeros(len(centres))])
+    centers = np.asarray(centers, dtype=np.float64)
+    if centers.ndim == 2 and centers.shape[1] == 2:
+        lifted = np.column_stack([centers, np.zeros(len(centers))])
         return cell_labels(_Lifted(scene), lifted, resolution, samples=samples)
     truth = _Indexed(scene) if _Indexed.wraps(scene) else scene
-    return cell_labels(truth, centres, resolution, samples=samples)
+    return cell_labels(truth, centers, resolution, samples=samples)
 
 
 class _AllFree:

@@ -243,11 +243,11 @@ def grid_test_set(scene: Any, resolution: float, *,
                   ) -> TestSet:
     """Ground-truth test points on a regular grid of a synthetic scene.
 
-    The points are the centres ``(k + 0.5) * resolution`` (k integer) of the
-    lattice aligned with the world origin, i.e. the cell centres of an
+    The points are the centers ``(k + 0.5) * resolution`` (k integer) of the
+    lattice aligned with the world origin, i.e. the cell centers of an
     octree or grid map of that resolution, that lie in the closed box; an axis
     too thin to hold one gets the single coordinate of its middle. Labels
-    are ``scene.occupancy(centres)``.
+    are ``scene.occupancy(centers)``.
 
     Parameters
     ----------
@@ -260,13 +260,13 @@ def grid_test_set(scene: Any, resolution: float, *,
         Box ``(min, max)`` to cover instead of ``scene.bounds``.
     observed : callable, optional
         ``observed(points) -> bool array of shape (n_points,)`` keeping only
-        the centres it marks ``True`` (e.g. cells within sensor range).
+        the centers it marks ``True`` (e.g. cells within sensor range).
         Default: keep all.
 
     Returns
     -------
     test_set : TestSet
-        Grid centres (z varying fastest, then y, then x) and their labels.
+        Grid centers (z varying fastest, then y, then x) and their labels.
 
     Raises
     ------
@@ -293,7 +293,7 @@ def grid_test_set(scene: Any, resolution: float, *,
     lo, hi = as_point(box[0], f"{name}[0]"), as_point(box[1], f"{name}[1]")
     if (lo > hi).any():
         raise ValueError(f"{name} must have min <= max on every axis, got {lo} and {hi}")
-    # the closed box, up to round-off: count the centres before making them
+    # the closed box, up to round-off: count the centers before making them
     first = [math.ceil(lo[a] / resolution - 0.5 - 1e-9) for a in range(3)]
     last = [math.floor(hi[a] / resolution - 0.5 + 1e-9) for a in range(3)]
     counts = [max(last[a] - first[a] + 1, 1) for a in range(3)]
@@ -306,17 +306,17 @@ def grid_test_set(scene: Any, resolution: float, *,
     for a in range(3):
         k = np.arange(first[a], last[a] + 1)
         axes.append((k + 0.5) * resolution if k.size else np.array([(lo[a] + hi[a]) / 2]))
-    centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    centers = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     if observed is not None:
-        keep = np.asarray(observed(centres), dtype=bool)
+        keep = np.asarray(observed(centers), dtype=bool)
         if keep.shape != (n,):
             raise ValueError(f"observed(points) must return shape ({n},), got {keep.shape}")
-        centres = centres[keep]
-    labels = np.asarray(scene.occupancy(centres), dtype=bool)
-    if labels.shape != (len(centres),):
-        raise ValueError(f"scene.occupancy(points) must return shape ({len(centres)},), "
+        centers = centers[keep]
+    labels = np.asarray(scene.occupancy(centers), dtype=bool)
+    if labels.shape != (len(centers),):
+        raise ValueError(f"scene.occupancy(points) must return shape ({len(centers)},), "
                          f"got {labels.shape}")
-    return TestSet(np.ascontiguousarray(centres), labels)
+    return TestSet(np.ascontiguousarray(centers), labels)
 
 
 # ------------------------------------------------------------------- scoring

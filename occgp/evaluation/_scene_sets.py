@@ -182,7 +182,7 @@ def evaluate_scene_set(methods: Mapping[str, Callable[[], Any]], seeds: Iterable
     of a grid over its bounds (:meth:`~occgp.datasets.FamilyScene2D.grid`).
     Each method is built fresh by its factory, fitted with ``fit(hits,
     segment_starts, segment_ends)`` (:func:`occgp.gp.observations_from_scans`)
-    and queried on the cell centres; its probabilities are scored against
+    and queried on the cell centers; its probabilities are scored against
     the truth with :func:`occgp.metrics.roc_auc` and :func:`fpr_at_tpr`
     (unknown cells, NaN, count as 0.5) on the cells of `region`: by default
     those the laser saw (:meth:`~occgp.datasets.FamilyScene2D.view`), since

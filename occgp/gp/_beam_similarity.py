@@ -39,11 +39,11 @@ def _reach(value, table):
     return np.sqrt(s[np.minimum(count, len(s) - 1)])
 
 
-def _pairs(tree, centres, radii):
-    """(row, column) pairs of the tree's points within `radii` of each centre."""
-    if not len(centres):
+def _pairs(tree, centers, radii):
+    """(row, column) pairs of the tree's points within `radii` of each center."""
+    if not len(centers):
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    found = cKDTree(centres).sparse_distance_matrix(tree, float(np.max(radii)),
+    found = cKDTree(centers).sparse_distance_matrix(tree, float(np.max(radii)),
                                                      output_type="ndarray")
     keep = found["v"] <= radii[found["i"]]
     return found["i"][keep].astype(np.int64), found["j"][keep].astype(np.int64)
@@ -140,9 +140,9 @@ def _candidates(tree, f_mid, f_half, fs, fe, r_half_max, radius, value):
             first = np.cumsum(m) - m
             t = (np.arange(len(owner)) - first[owner]) * step[owner] - extend[owner]
             u = (fe[rows] - fs[rows]) / length[rows, None]
-            centres = fs[rows][owner] + t[:, None] * u[owner]
+            centers = fs[rows][owner] + t[:, None] * u[owner]
             ball = np.sqrt(w ** 2 + (0.5 * step) ** 2)[owner]
-            k, j = _pairs(tree, centres, ball)
+            k, j = _pairs(tree, centers, ball)
             key = np.unique(rows[owner[k]] * len(tree.data) + j)
             parts.append((key // len(tree.data), key % len(tree.data)))
     rows = np.flatnonzero(disc)

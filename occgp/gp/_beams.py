@@ -195,10 +195,10 @@ def _match(hits, starts, ends, tolerance):
     active = np.arange(len(free))
     for k in range(n_sections):
         lo = -slack[active] + k * step[active]     # this section: lo .. lo + step
-        centres = e[active] + (lo + 0.5 * step[active])[:, None] * u[active]
+        centers = e[active] + (lo + 0.5 * step[active])[:, None] * u[active]
         # the ball holds the section's slice of the capsule with a margin of slack
         radius = float(np.max(0.5 * step[active] + 2.0 * slack[active]))
-        for rows, cols in _bounded_pairs(tree, centres, radius):
+        for rows, cols in _bounded_pairs(tree, centers, radius):
             i, j = active[rows], spare[cols]
             w = hits[j] - e[i]
             t = w[:, 0] * u[i, 0]                  # distance beyond the end, along the ray
@@ -217,19 +217,19 @@ def _match(hits, starts, ends, tolerance):
     return out
 
 
-def _bounded_pairs(tree, centres, radius, budget=None):
-    """(row, column) pairs of the tree's points within `radius` of each centre, in
-    chunks of whole centres of at most `budget` pairs (one centre may exceed it
+def _bounded_pairs(tree, centers, radius, budget=None):
+    """(row, column) pairs of the tree's points within `radius` of each center, in
+    chunks of whole centers of at most `budget` pairs (one center may exceed it
     alone: at most the tree's size)."""
     budget = _PAIR_BUDGET if budget is None else budget
-    counts = tree.query_ball_point(centres, radius, return_length=True)   # no pairs kept
+    counts = tree.query_ball_point(centers, radius, return_length=True)   # no pairs kept
     ends = np.cumsum(counts)
     start = 0
-    while start < len(centres):
+    while start < len(centers):
         base = ends[start - 1] if start else 0
         stop = max(start + 1, int(np.searchsorted(ends, base + budget, side="right")))
         if ends[stop - 1] > base:
-            found = cKDTree(centres[start:stop]).sparse_distance_matrix(
+            found = cKDTree(centers[start:stop]).sparse_distance_matrix(
                 tree, radius, output_type="ndarray")
             yield found["i"].astype(np.int64) + start, found["j"].astype(np.int64)
         start = stop

@@ -1,8 +1,8 @@
-"""Evaluation of fitted maps on the cell centres of a regular grid.
+"""Evaluation of fitted maps on the cell centers of a regular grid.
 
 :func:`grid_points` and :func:`predict_grid` evaluate any fitted map (a
 Gaussian-process model, the log-odds :class:`~occgp.gp.OccupancyGrid`) on the
-cell centres of a box.
+cell centers of a box.
 """
 
 from __future__ import annotations
@@ -57,9 +57,9 @@ def _grid_shape(lower, upper, resolution, max_points):
 
 def grid_points(lower: ArrayLike, upper: ArrayLike, resolution: float, *,
                 max_points: int = MAX_GRID_POINTS) -> tuple[NDArray[np.float64], tuple[int, ...]]:
-    """Centres of a regular grid of cells covering the box [lower, upper).
+    """Centers of a regular grid of cells covering the box [lower, upper).
 
-    Cell ``i`` along axis ``d`` has its centre at
+    Cell ``i`` along axis ``d`` has its center at
     ``lower[d] + (i + 0.5) * resolution``; there are
     ``ceil((upper[d] - lower[d]) / resolution)`` cells along axis ``d`` (up to
     a 1e-9 tolerance), so the last cell may stick out of the box.
@@ -80,7 +80,7 @@ def grid_points(lower: ArrayLike, upper: ArrayLike, resolution: float, *,
     Returns
     -------
     points : ndarray of shape (n_points, n_dims)
-        The cell centres, ordered so that ``values.reshape(shape)`` is indexed
+        The cell centers, ordered so that ``values.reshape(shape)`` is indexed
         ``[i_0, i_1(, i_2)]`` (the first axis is x).
     shape : tuple of int
         Number of cells along each axis.
@@ -117,7 +117,7 @@ _OUTPUTS = ("proba", "mean", "var")
 def predict_grid(model, lower: ArrayLike, upper: ArrayLike, resolution: float, *,
                  output: str = "proba", batch_size: int = 50_000,
                  max_points: int = MAX_GRID_POINTS) -> NDArray[np.float64]:
-    """Evaluate a fitted map on the cell centres of a regular grid.
+    """Evaluate a fitted map on the cell centers of a regular grid.
 
     Parameters
     ----------
@@ -139,7 +139,7 @@ def predict_grid(model, lower: ArrayLike, upper: ArrayLike, resolution: float, *
     Returns
     -------
     values : ndarray of shape ``shape``
-        The values at the cell centres, indexed ``[i_0, i_1(, i_2)]``, where
+        The values at the cell centers, indexed ``[i_0, i_1(, i_2)]``, where
         ``shape`` is that of :func:`grid_points`.
 
     Raises

@@ -35,7 +35,7 @@ class _LineSet(NamedTuple):
 
     n: NDArray[np.float64]
     mean: NDArray[np.float64]      # (k, 2)
-    scatter: NDArray[np.float64]   # (k, 3): sums of centred xx, xy, yy
+    scatter: NDArray[np.float64]   # (k, 3): sums of centered xx, xy, yy
     direction: NDArray[np.float64]
     tmin: NDArray[np.float64]
     tmax: NDArray[np.float64]

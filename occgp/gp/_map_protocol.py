@@ -284,7 +284,7 @@ class MapProtocol(ParamsMixin):
     def to_octree(self, resolution: float | None = None):
         """The map as an :class:`~occgp.OccupancyOctree`: its posterior as log-odds.
 
-        The model's :meth:`occupancy` at the centres of the octree's cells
+        The model's :meth:`occupancy` at the centers of the octree's cells
         that cover :attr:`bounds` becomes their log-odds (clamped by the
         octree to [0.001, 0.999]); unknown cells stay unknown. A 2D model
         gives one layer of cells: those holding z = 0 (from 0 to
@@ -319,15 +319,15 @@ class MapProtocol(ParamsMixin):
                                    self.occupancy_threshold, "occupancy_threshold"))
         if not self._fitted():
             return tree
-        centres, log_odds = self._octree_cells(res)
-        if len(centres):
-            if centres.shape[1] == 2:
-                centres = np.column_stack([centres, np.zeros(len(centres))])
-            tree.set_cells(centres, np.clip(log_odds, -_MAX_LOG_ODDS, _MAX_LOG_ODDS))
+        centers, log_odds = self._octree_cells(res)
+        if len(centers):
+            if centers.shape[1] == 2:
+                centers = np.column_stack([centers, np.zeros(len(centers))])
+            tree.set_cells(centers, np.clip(log_odds, -_MAX_LOG_ODDS, _MAX_LOG_ODDS))
         return tree
 
     def _octree_cells(self, res):
-        """Centres and log-odds of the known cells of edge `res` covering the bounds."""
+        """Centers and log-odds of the known cells of edge `res` covering the bounds."""
         lo, hi = self.bounds
         first, last = np.floor(lo / res), np.floor(hi / res)
         with np.errstate(over="ignore"):
@@ -336,7 +336,7 @@ class MapProtocol(ParamsMixin):
             raise ValueError(f"the map's bounds hold {total:.4g} cells at resolution {res!r}, "
                              f"more than {MAX_OCTREE_CELLS}; use a coarser resolution")
         axes = [(np.arange(a, b + 1) + 0.5) * res for a, b in zip(first, last)]
-        centres = np.column_stack([m.ravel() for m in np.meshgrid(*axes, indexing="ij")])
-        p = self.occupancy(centres)
+        centers = np.column_stack([m.ravel() for m in np.meshgrid(*axes, indexing="ij")])
+        p = self.occupancy(centers)
         known = ~np.isnan(p)
-        return centres[known], logit(p[known])
+        return centers[known], logit(p[known])

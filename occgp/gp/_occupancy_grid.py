@@ -548,12 +548,12 @@ class OccupancyGrid(MapProtocol, BaseEstimator):
         return self._lookup(X)[1]
 
     def cells(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Centres and occupancy probabilities of the observed cells.
+        """Centers and occupancy probabilities of the observed cells.
 
         Returns
         -------
-        centres : ndarray of shape (n_cells, n_dims)
-            Cell centres ``(keys_ + 0.5) * resolution``, in metres.
+        centers : ndarray of shape (n_cells, n_dims)
+            Cell centers ``(keys_ + 0.5) * resolution``, in metres.
         proba : ndarray of shape (n_cells,)
             Occupancy probability of each cell.
 

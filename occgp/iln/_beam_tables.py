@@ -3,16 +3,16 @@
 A real sensor's beams are not always evenly spaced: the Velodyne HDL-64E has
 two laser blocks of different pitches, and every unit is calibrated beam by
 beam. A :class:`~occgp.iln.LidarModel` with ``beam_elevations`` puts row ``i``'s
-centre at the table's entry ``i`` (degrees, top beam first, strictly
+center at the table's entry ``i`` (degrees, top beam first, strictly
 decreasing) instead of a uniform bin. Between rows, a fractional row
-coordinate ``v`` (pixel units, row ``i``'s centre at ``i + 0.5``) maps to an
+coordinate ``v`` (pixel units, row ``i``'s center at ``i + 0.5``) maps to an
 elevation **linearly between the neighbouring table entries**; the knots are
 ``(0, high)``, ``(i + 0.5, table[i])`` for every row and ``(rows, low)``, with
 ``(low, high)`` the model's ``vertical_fov`` (its edges), and beyond them the
 end segments extend linearly. A row boundary (integer ``v``) thus lies midway
 between two beams, so binning a point by its elevation gives it the nearest
 beam. Resizing a model (``with_size``) samples this piecewise-linear map at
-the new row centres ``(k + 0.5) * rows / new_rows``.
+the new row centers ``(k + 0.5) * rows / new_rows``.
 
 This module holds the arithmetic of the tables, the tables of the presets and
 the estimation of a table from a real frame; :mod:`occgp.iln._range` uses it.
@@ -154,22 +154,22 @@ def cluster_table(elevation, rows, iterations=50):
     """Table of `rows` beams from elevations alone: 1-D k-medians (Lloyd's iterations on the
     sorted elevations, started at evenly spaced quantiles). Returns ``(table, row of each point)``."""
     e = np.sort(np.asarray(elevation, dtype=np.float64))[::-1]
-    centres = np.quantile(e, (np.arange(rows) + 0.5) / rows)[::-1].copy()
+    centers = np.quantile(e, (np.arange(rows) + 0.5) / rows)[::-1].copy()
     for _ in range(iterations):
-        bounds = (centres[:-1] + centres[1:]) / 2
+        bounds = (centers[:-1] + centers[1:]) / 2
         label = np.searchsorted(-bounds, -e, side="right")
-        new = centres.copy()
+        new = centers.copy()
         for r in range(rows):
             part = e[label == r]
             if len(part):
                 new[r] = np.median(part)
         new = np.sort(new)[::-1]
-        if np.allclose(new, centres):
+        if np.allclose(new, centers):
             break
-        centres = new
-    bounds = (centres[:-1] + centres[1:]) / 2
+        centers = new
+    bounds = (centers[:-1] + centers[1:]) / 2
     rows_of = np.searchsorted(-bounds, -np.asarray(elevation, dtype=np.float64), side="right")
-    return centres, rows_of.astype(np.int64)
+    return centers, rows_of.astype(np.int64)
 
 
 def estimate_table(elevation, rows, ring=None):

@@ -60,13 +60,13 @@ class LidarModel:
         floats.
     horizontal_fov : float, default=360.0
         Width of the horizontal field of view, degrees, in (0, 360],
-        centred on +x.
+        centered on +x.
     max_range : float, default=80.0
         Farthest return, metres, in (0, 1e5].
     beam_elevations : sequence of float, optional
         Per-beam elevation table, degrees, one per row, top beam first,
         strictly decreasing and strictly inside `vertical_fov`: row ``i``'s
-        centre looks at ``beam_elevations[i]``, and fractional rows map to
+        center looks at ``beam_elevations[i]``, and fractional rows map to
         elevations linearly between entries (and between the end entries and
         the field of view's edges). Stored as a tuple of floats. Default:
         uniform rows.
@@ -151,7 +151,7 @@ class LidarModel:
 
     @classmethod
     @_preset("nuScenes' Velodyne HDL-32E: -30.67 to 10.67 degrees, 360 degrees, 100 m.\n\n"
-             "        With `table`, beam centres from +10.67 to -30.67 degrees, 4/3 degree\n"
+             "        With `table`, beam centers from +10.67 to -30.67 degrees, 4/3 degree\n"
              "        apart (field of view -31.33 to 11.33).", 32, table=True)
     def hdl32e(cls, rows: int = 32, cols: int = 1024, *, table: bool = False) -> "LidarModel":
         if not check_bool(table, "table"):
@@ -331,7 +331,7 @@ class LidarModel:
         return self.horizontal_fov == 360.0
 
     def elevations(self) -> NDArray[np.float64]:
-        """Elevation of each row's centre, degrees, top row first.
+        """Elevation of each row's center, degrees, top row first.
 
         Returns
         -------
@@ -345,7 +345,7 @@ class LidarModel:
         return high - (np.arange(self.rows) + 0.5) * (high - low) / self.rows
 
     def azimuths(self) -> NDArray[np.float64]:
-        """Azimuth of each column's centre, degrees, left edge first.
+        """Azimuth of each column's center, degrees, left edge first.
 
         Returns
         -------
@@ -356,7 +356,7 @@ class LidarModel:
         return h / 2 - (np.arange(self.cols) + 0.5) * h / self.cols
 
     def pixel_angles(self) -> tuple:
-        """Elevation and azimuth grids of the pixel centres, degrees.
+        """Elevation and azimuth grids of the pixel centers, degrees.
 
         Returns
         -------
@@ -366,12 +366,12 @@ class LidarModel:
         return e, a
 
     def directions(self) -> NDArray[np.float64]:
-        """Unit ray directions of the pixel centres in the sensor frame.
+        """Unit ray directions of the pixel centers in the sensor frame.
 
         Returns
         -------
         ndarray of float64, shape (rows, cols, 3)
-            ``(x, y, z)`` of each pixel centre's direction (+x forward, +z up).
+            ``(x, y, z)`` of each pixel center's direction (+x forward, +z up).
         """
         e = np.radians(self.elevations())[:, None]
         a = np.radians(self.azimuths())[None, :]
@@ -381,7 +381,7 @@ class LidarModel:
     def angles_to_pixels(self, elevation: ArrayLike, azimuth: ArrayLike) -> tuple:
         """Fractional pixel coordinates ``(v, u)`` of directions given by angles (degrees).
 
-        Pixel centres fall at integer + 0.5. Azimuths are first wrapped into
+        Pixel centers fall at integer + 0.5. Azimuths are first wrapped into
         [-180, 180). For a 360-degree model ``u`` is wrapped into
         ``[0, cols)``; for a cropped one, directions outside the field of
         view get ``u`` outside ``[0, cols)`` (and elevations outside it a
@@ -436,10 +436,10 @@ class LidarModel:
         Parameters
         ----------
         v : array-like of real numbers
-            Fractional row coordinates, pixel units (row ``i``'s centre at
+            Fractional row coordinates, pixel units (row ``i``'s center at
             ``i + 0.5``); any finite value, not limited to ``[0, rows)``.
         u : array-like of real numbers
-            Fractional column coordinates, pixel units (column ``j``'s centre
+            Fractional column coordinates, pixel units (column ``j``'s center
             at ``j + 0.5``); any finite value, not limited to ``[0, cols)``.
 
         Returns

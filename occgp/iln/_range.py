@@ -17,7 +17,7 @@ With ``beam_elevations`` (a per-beam table, see :mod:`occgp.iln._beam_tables`), 
 elevations linearly between neighbouring entries.
 
 Continuous pixel coordinates ``(v, u)`` count in pixel units with pixel
-centres at integer + 0.5: pixel ``(i, j)`` covers ``i <= v < i + 1`` and
+centers at integer + 0.5: pixel ``(i, j)`` covers ``i <= v < i + 1`` and
 ``j <= u < j + 1``.
 This module holds the conversions between points and range images; the
 :class:`LidarModel` itself is in ``_lidar_model.py`` (re-exported here).
@@ -44,7 +44,7 @@ _EDGE = 1e-7  # pixels: points this close beyond a field of view's edge fall on 
 
 
 def pixel_angles(model) -> tuple[np.ndarray, np.ndarray]:
-    """Elevation and azimuth grids (rows, cols) of the pixel centres of `model`, degrees.
+    """Elevation and azimuth grids (rows, cols) of the pixel centers of `model`, degrees.
 
     `model` is a :class:`LidarModel` or any object with its ``rows``, ``cols``,
     ``vertical_fov`` and ``horizontal_fov`` (the models of occgp.iln.models accept both).
@@ -61,7 +61,7 @@ def pixel_angles(model) -> tuple[np.ndarray, np.ndarray]:
 
 
 def angles_to_pixels(model, elev: np.ndarray, azim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Fractional ``(v, u)`` of angles (degrees) in `model` (pixel centres at integer + 0.5).
+    """Fractional ``(v, u)`` of angles (degrees) in `model` (pixel centers at integer + 0.5).
 
     `model` as in :func:`pixel_angles`; ``u`` wraps around for a 360-degree model.
     """
@@ -176,7 +176,7 @@ def points_to_range_image(points: ArrayLike, model: LidarModel) -> NDArray[np.fl
 
 
 def range_image_to_points(image: ArrayLike, model: LidarModel, *, return_pixels: bool = False):
-    """Sensor-frame points of a range image, along the pixel-centre directions.
+    """Sensor-frame points of a range image, along the pixel-center directions.
 
     Pixels without a return (0.0) are skipped. Points come in row-major
     pixel order.

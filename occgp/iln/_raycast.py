@@ -1,4 +1,4 @@
-"""Exact range images of scenes of analytic solids, ray cast one ray per pixel centre.
+"""Exact range images of scenes of analytic solids, ray cast one ray per pixel center.
 
 :func:`simulate_range_image` (re-exported by :mod:`occgp.iln.data` and
 :mod:`occgp.iln`) culls each solid to the block of pixels its angular extent
@@ -40,10 +40,10 @@ def _angular_boxes(lo, hi):
     e_hi = np.degrees(np.arctan2(hi[:, 2], np.where(hi[:, 2] > 0, near, far)))
     e_lo = np.degrees(np.arctan2(lo[:, 2], np.where(lo[:, 2] > 0, far, near)))
     around = (lo[:, 0] <= 0.0) & (hi[:, 0] >= 0.0) & (lo[:, 1] <= 0.0) & (hi[:, 1] >= 0.0)
-    centre = np.degrees(np.arctan2((lo[:, 1] + hi[:, 1]) / 2, (lo[:, 0] + hi[:, 0]) / 2))
+    center = np.degrees(np.arctan2((lo[:, 1] + hi[:, 1]) / 2, (lo[:, 0] + hi[:, 0]) / 2))
     corners = np.degrees(np.arctan2(np.repeat(y, 2, axis=1), np.tile(x, 2)))
-    delta = (corners - centre[:, None] + 180.0) % 360.0 - 180.0
-    return e_lo, e_hi, centre + delta.min(axis=1), centre + delta.max(axis=1), around
+    delta = (corners - center[:, None] + 180.0) % 360.0 - 180.0
+    return e_lo, e_hi, center + delta.min(axis=1), center + delta.max(axis=1), around
 
 
 def _intersect(solid, origin, directions):
@@ -85,15 +85,15 @@ def _world_boxes(solids):
                 half[row] = (r, r, s.height / 2)
                 offset[row, 2] = s.height / 2
         rot = np.stack([solids[k].rotation for k in prim])
-        centre = np.stack([solids[k].center for k in prim])
+        center = np.stack([solids[k].center for k in prim])
         local = _SIGNS[None] * half[:, None] + offset[:, None]
-        world = np.einsum("nkj,nij->nki", local, rot) + centre[:, None]
+        world = np.einsum("nkj,nij->nki", local, rot) + center[:, None]
         lo[prim], hi[prim] = world.min(axis=1), world.max(axis=1)
     return lo, hi
 
 
 def _cropped_columns(arc, model):
-    """Columns (j0, j1) of a cropped model whose centres may lie in the azimuth arc."""
+    """Columns (j0, j1) of a cropped model whose centers may lie in the azimuth arc."""
     a, b = arc
     pieces = [(a, b)]
     if a < -180.0:
@@ -111,12 +111,12 @@ def _cropped_columns(arc, model):
 
 
 def simulate_range_image(scene, pose, model: LidarModel, *, return_ids: bool = False):
-    """Ray cast a range image of `scene` from `pose`, one ray per pixel centre, exactly.
+    """Ray cast a range image of `scene` from `pose`, one ray per pixel center, exactly.
 
     Each solid is first culled to the block of pixels its (conservative)
     angular extent covers as seen from the sensor, and only those rays are
     intersected with it; the result equals ``scene.ray_cast`` over every
-    pixel-centre direction (first hit, up to ``model.max_range``).
+    pixel-center direction (first hit, up to ``model.max_range``).
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """Training data for occgp.iln: range images ray cast in procedural outdoor scenes.
 
-:func:`simulate_range_image` casts one ray per pixel centre of a
+:func:`simulate_range_image` casts one ray per pixel center of a
 :class:`~occgp.iln._range.LidarModel` into a scene made of analytic solids
 (e.g. :func:`occgp.datasets.outdoor_scene`), exactly. :func:`make_dataset`
 writes shards of such images, the same poses at several resolutions, and

@@ -85,7 +85,7 @@ def evaluate(models: Any, test_images: Mapping[Any, Any], *,
     true image of that resolution: the MAE of the ranges over the pixels
     where the truth has a return (a predicted no-return counts with the true
     range as its error), and IoU, precision, recall and F1 of the two point
-    clouds (pixel-centre directions, no-return pixels dropped) on a
+    clouds (pixel-center directions, no-return pixels dropped) on a
     `voxel_size` grid in the sensor frame. Each score is the mean over the
     images (images whose truth holds no return are skipped, and counted in
     ``n_images``' complement).

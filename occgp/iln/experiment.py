@@ -84,15 +84,15 @@ def _test_cells(scene, truth_scans, lidar, resolution, n_cells, test_range, rng)
     k_lo = np.floor(lo / resolution).astype(np.int64)
     k_hi = np.maximum(np.ceil(hi / resolution).astype(np.int64), k_lo + 1)
     keys = np.unique(rng.integers(k_lo, k_hi, size=(n_cells, 3)), axis=0)
-    centres = (keys + 0.5) * resolution
-    seen = cells_in_view(scene, centres, resolution, truth_scans, max_range=test_range)
-    centres = centres[seen]
-    labels = exact_labels(scene, centres, resolution)
+    centers = (keys + 0.5) * resolution
+    seen = cells_in_view(scene, centers, resolution, truth_scans, max_range=test_range)
+    centers = centers[seen]
+    labels = exact_labels(scene, centers, resolution)
     n_occ = int(labels.sum())
     if n_occ == 0 or n_occ == len(labels):
         raise ValueError(f"the {len(labels)} sampled test cells in view hold {n_occ} occupied "
                          f"ones; a test set needs both classes (raise n_test_cells)")
-    return TestSet(np.ascontiguousarray(centres), labels)
+    return TestSet(np.ascontiguousarray(centers), labels)
 
 
 def _world(points, pose):
@@ -124,7 +124,7 @@ def mapping_experiment(models: Any = None, *, scene: Any = None, poses: Any = No
     * the true scans of each of `truth_sizes` (``"64x1024 (true)"``).
 
     **Ground truth.** The test cells are a seeded uniform sample of
-    `n_test_cells` cells of the map's lattice (cell centres ``(k + 0.5) *
+    `n_test_cells` cells of the map's lattice (cell centers ``(k + 0.5) *
     resolution``) in the box around the trajectory reaching `test_range`
     beyond its ends in x and y and from just below the ground to the top
     of the field of view at that distance, kept where a true scan of the

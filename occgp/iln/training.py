@@ -27,7 +27,7 @@
     resume: null                   # a checkpoint (last.pt) to continue from
 
 Each step draws a batch of images (a seeded, per-epoch shuffle, split across processes by a
-``DistributedSampler``), samples ``queries_per_image`` random pixel centres of each image's
+``DistributedSampler``), samples ``queries_per_image`` random pixel centers of each image's
 targets (high-resolution images of the same pose; with several target sizes the queries are
 split evenly between them, so that the model sees the vertical and horizontal offsets of every
 size), converts them to the input image's pixel coordinates through the LidarModels, and
@@ -221,7 +221,7 @@ def _check_config(cfg: dict) -> dict:
 
 
 def _query_table(in_model, out_model) -> torch.Tensor:
-    """Input-pixel coordinates (v, u) of every target pixel centre, shape (rows * cols, 2)."""
+    """Input-pixel coordinates (v, u) of every target pixel center, shape (rows * cols, 2)."""
     elev, azim = pixel_angles(out_model)
     v, u = angles_to_pixels(in_model, elev.ravel(), azim.ravel())
     v = np.clip(v, 0, in_model.rows)
@@ -237,7 +237,7 @@ def sample_queries(targets: torch.Tensor, table: torch.Tensor, n: int, generator
     targets : torch.Tensor of shape (batch, rows, cols)
         Target (high-resolution) range images.
     table : torch.Tensor of shape (rows * cols, 2)
-        Input-pixel coordinates (v, u) of each target pixel centre.
+        Input-pixel coordinates (v, u) of each target pixel center.
     n : int
         Queries per image (drawn uniformly, with replacement).
     generator : torch.Generator
@@ -272,7 +272,7 @@ def sample_hard_queries(images: torch.Tensor, targets: torch.Tensor, table: torc
     targets : torch.Tensor of shape (batch, rows, cols)
         Target images.
     table : torch.Tensor of shape (rows * cols, 2)
-        Input-pixel coordinates (v, u) of each target pixel centre.
+        Input-pixel coordinates (v, u) of each target pixel center.
     n : int
         Queries per image.
     hard_fraction : float

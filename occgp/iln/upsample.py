@@ -100,7 +100,7 @@ def upsample_range_image(range_image: ArrayLike, *, rows: int = 64, cols: int = 
                          device: Any = None) -> NDArray[np.float32]:
     """Up-sample a range image to ``(rows, cols)`` over the same fields of view.
 
-    Every output pixel centre is turned into its elevation and azimuth and
+    Every output pixel center is turned into its elevation and azimuth and
     queried in the input image (:func:`occgp.iln.models.upsample_image`);
     ranges a value-predicting model puts beyond ``lidar.max_range`` are cut
     to it, and 0.0 (no return) stays wherever the model returns no return.
@@ -164,7 +164,7 @@ def upsample(points_or_range_image: ArrayLike, *, rows: int = 64, cols: int = 10
     :func:`~occgp.iln._range.points_to_range_image`: the nearest return per
     pixel) is up-sampled to ``(rows, cols)`` over the same fields of view by
     :func:`upsample_range_image`, and each output pixel with a return gives a
-    point along its pixel-centre direction. No-return pixels are dropped.
+    point along its pixel-center direction. No-return pixels are dropped.
 
     Parameters
     ----------

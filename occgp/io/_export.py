@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._atomic import atomic_open
 from .._map_types import check_log_odds_map
+from .._params import renamed_keywords
 from .._validation import as_path, check_bool, check_choice, check_int
 from ._pcd import write_pcd
 
@@ -24,7 +25,7 @@ if TYPE_CHECKING:  # annotations only: the maps import this module
 __all__ = ["save_ply", "save_pcd", "to_open3d", "MAX_VOXELS", "pack_rgb", "unpack_rgb"]
 
 #: Default cap on the finest voxels :func:`to_open3d` builds (about 56 bytes each
-#: while the voxel grid is built: centres, colours and Open3D's own copy).
+#: while the voxel grid is built: centers, colours and Open3D's own copy).
 MAX_VOXELS = 2**22
 #: The most cubes one PLY mesh holds: 8 vertices each, indexed by int32.
 _MAX_CUBES = (2**31 - 1) // 8
@@ -51,11 +52,11 @@ def _check_map(tree: object) -> LogOddsMap:
 
 
 def _selected_leaves(tree: LogOddsMap, occupied: bool, with_colors: bool = False):
-    """(centres, sizes, probabilities) of the occupied (or the free) leaves, and with
+    """(centers, sizes, probabilities) of the occupied (or the free) leaves, and with
     `with_colors` their colours (uint8 (n, 3); None for a map without colours)."""
     occupied = check_bool(occupied, "occupied")
     table = (getattr(tree, "leaves", None) or getattr(tree, "cells"))()
-    centres, sizes, values = table[:3]
+    centers, sizes, values = table[:3]
     colors = getattr(table, "colors", None)
     if hasattr(tree, "_log_odds_thresholds"):
         threshold = np.float32(tree._log_odds_thresholds()[2])
@@ -63,10 +64,10 @@ def _selected_leaves(tree: LogOddsMap, occupied: bool, with_colors: bool = False
         p = tree.occupancy_threshold
         threshold = np.float32(np.log(p / (1.0 - p)))
     keep = (values >= threshold) == occupied
-    centres, sizes, values = centres[keep], sizes[keep], values[keep]
+    centers, sizes, values = centers[keep], sizes[keep], values[keep]
     # liboctomap's probability(): 1 - 1 / (1 + exp(l))
     prob = 1.0 - 1.0 / (1.0 + np.exp(values.astype(np.float64)))
-    out = np.ascontiguousarray(centres), np.ascontiguousarray(sizes), prob
+    out = np.ascontiguousarray(centers), np.ascontiguousarray(sizes), prob
     if with_colors:
         return (*out, None if colors is None else np.ascontiguousarray(colors[keep]))
     return out
@@ -96,17 +97,19 @@ def _check_cap(sizes, resolution, max_cells, what, cap_name) -> int:
     if total > max_cells:
         raise ValueError(
             f"the {what} leaves expand to {total} finest cells of {resolution:g} m, more "
-            f"than {cap_name}={max_cells}; raise {cap_name}, or export the leaf centres "
+            f"than {cap_name}={max_cells}; raise {cap_name}, or export the leaf centers "
             f"(kind='points')")
     return total
 
 
-def leaf_cells(centres: np.ndarray, sizes: np.ndarray,
+@renamed_keywords(centres="centers")
+def leaf_cells(centers: np.ndarray, sizes: np.ndarray,
                resolution: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """The finest cells that leaves cover: their integer indices (the cell of edge
-    `resolution` whose centre is ``(index + 0.5) * resolution``), shape (n, 3), and for
+    `resolution` whose center is ``(index + 0.5) * resolution``), shape (n, 3), and for
     each the row of its leaf. A leaf of edge ``resolution * 2**k`` covers ``8**k`` cells;
-    callers check the total first (:func:`_check_cap`)."""
+    callers check the total first (:func:`_check_cap`). The keyword ``centres``, the
+    old name of `centers`, is deprecated."""
     k, _ = _level_counts(sizes, resolution)
     total = int(np.sum(np.left_shift(np.int64(1), 3 * k))) if len(k) else 0
     index = np.empty((total, 3), dtype=np.int64)
@@ -116,7 +119,7 @@ def leaf_cells(centres: np.ndarray, sizes: np.ndarray,
         rows = np.flatnonzero(k == level)
         side = 1 << int(level)
         # integer index of each leaf's lowest finest cell (exact: |index| <= 2**15)
-        low = np.rint(centres[rows] / resolution - side / 2.0).astype(np.int64)
+        low = np.rint(centers[rows] / resolution - side / 2.0).astype(np.int64)
         ar = np.arange(side)
         offsets = np.stack(np.meshgrid(ar, ar, ar, indexing="ij"), axis=-1).reshape(-1, 3)
         n = len(rows) * len(offsets)
@@ -126,23 +129,23 @@ def leaf_cells(centres: np.ndarray, sizes: np.ndarray,
     return index, owner
 
 
-def _expand_leaves(centres, sizes, resolution, max_cells, what, cap_name):
-    """Finest-cell centres of leaves, and for each the index of its leaf.
+def _expand_leaves(centers, sizes, resolution, max_cells, what, cap_name):
+    """Finest-cell centers of leaves, and for each the index of its leaf.
 
-    The centres are computed as liboctomap's ``keyToCoord`` at depth 16 computes
+    The centers are computed as liboctomap's ``keyToCoord`` at depth 16 computes
     them: ``(index + 0.5) * resolution``.
     """
     _check_cap(sizes, resolution, max_cells, what, cap_name)
-    index, owner = leaf_cells(centres, sizes, resolution)
+    index, owner = leaf_cells(centers, sizes, resolution)
     return (index + 0.5) * resolution, owner
 
 
 def _finest_cells(tree: LogOddsMap, occupied: bool = True,
                   max_cells: int = MAX_VOXELS) -> NDArray[np.float64]:
-    """Centres of the finest cells (edge = resolution) that the selected leaves cover.
+    """Centers of the finest cells (edge = resolution) that the selected leaves cover.
 
-    Pruned leaves are expanded to their ``8**k`` finest cells, whose centres are
-    liboctomap's ``keyToCoord`` at depth 16 (the centres of the map after
+    Pruned leaves are expanded to their ``8**k`` finest cells, whose centers are
+    liboctomap's ``keyToCoord`` at depth 16 (the centers of the map after
     :meth:`~occgp.OccupancyOctree.expand`).
 
     Raises
@@ -152,9 +155,9 @@ def _finest_cells(tree: LogOddsMap, occupied: bool = True,
     """
     _check_map(tree)
     max_cells = check_int(max_cells, "max_cells", low=0)
-    centres, sizes, _ = _selected_leaves(tree, occupied)[:3]
+    centers, sizes, _ = _selected_leaves(tree, occupied)[:3]
     what = "occupied" if occupied else "free"
-    return _expand_leaves(centres, sizes, tree.resolution, max_cells, what, "max_cells")[0]
+    return _expand_leaves(centers, sizes, tree.resolution, max_cells, what, "max_cells")[0]
 
 
 def _ascii_rows(fh, table: np.ndarray, fmts: list[str]) -> None:
@@ -175,22 +178,22 @@ def save_ply(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
     binary = check_bool(binary, "binary")
     cubes = check_bool(cubes, "cubes")
     color = check_bool(color, "color")
-    centres, sizes, prob, own_colors = _selected_leaves(tree, occupied, with_colors=True)
+    centers, sizes, prob, own_colors = _selected_leaves(tree, occupied, with_colors=True)
     path = as_path(path)
-    n = len(centres)
+    n = len(centers)
     if cubes and n > _MAX_CUBES:
         raise ValueError(f"save_ply(cubes=True) writes at most {_MAX_CUBES} cubes (int32 "
                          f"vertex indices), the map has {n} such leaves; use cubes=False")
     columns = [("x", "f4"), ("y", "f4"), ("z", "f4"), ("size", "f4"), ("probability", "f4")]
     if color:
         columns += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
-    per_leaf = np.column_stack([centres, sizes, prob]) if n else np.empty((0, 5))
+    per_leaf = np.column_stack([centers, sizes, prob]) if n else np.empty((0, 5))
     if color:
-        per_leaf = np.column_stack([per_leaf, _height_colors(centres[:, 2])
+        per_leaf = np.column_stack([per_leaf, _height_colors(centers[:, 2])
                                     if own_colors is None else own_colors])
     if cubes:
         vertices = np.repeat(per_leaf, 8, axis=0)
-        corners = (centres[:, None, :]
+        corners = (centers[:, None, :]
                    + (_CUBE_CORNERS[None] - 0.5) * sizes[:, None, None]).reshape(-1, 3)
         vertices[:, :3] = corners
         faces = (np.arange(n, dtype=np.int64)[:, None, None] * 8
@@ -234,15 +237,15 @@ def save_ply(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = Tr
 # PCD
 # --------------------------------------------------------------------------- #
 def save_pcd(tree: LogOddsMap, path, *, occupied: bool = True, binary: bool = True) -> None:
-    """Write `tree`'s occupied (or free) leaf centres to a PCD file: :meth:`occgp.OccupancyOctree.save_pcd`."""
+    """Write `tree`'s occupied (or free) leaf centers to a PCD file: :meth:`occgp.OccupancyOctree.save_pcd`."""
     _check_map(tree)
     binary = check_bool(binary, "binary")
-    centres, _, prob, colors = _selected_leaves(tree, occupied, with_colors=True)
+    centers, _, prob, colors = _selected_leaves(tree, occupied, with_colors=True)
     path = as_path(path)
     fields = {"intensity": prob.astype(np.float32)}
     if colors is not None:
         fields["rgb"] = pack_rgb(colors)
-    write_pcd(path, centres, data="binary" if binary else "ascii", fields=fields)
+    write_pcd(path, centers, data="binary" if binary else "ascii", fields=fields)
 
 
 def pack_rgb(colors: np.ndarray) -> NDArray[np.uint32]:
@@ -278,27 +281,27 @@ def to_open3d(tree: LogOddsMap, *, kind: str = "voxels", occupied: bool = True,
     _check_map(tree)
     kind = check_choice(kind, "kind", _KINDS)
     max_voxels = check_int(max_voxels, "max_voxels", low=0)
-    centres, sizes, _, own_colors = _selected_leaves(tree, occupied, with_colors=True)
+    centers, sizes, _, own_colors = _selected_leaves(tree, occupied, with_colors=True)
     res = tree.resolution
     what = "occupied" if occupied else "free"
     if kind == "voxels":  # the cap first: a ValueError is the same with or without Open3D
         _check_cap(sizes, res, max_voxels, what, "max_voxels")
     o3d = _import_open3d()
     if kind == "voxels":
-        centres, owner = _expand_leaves(centres, sizes, res, max_voxels, what, "max_voxels")
+        centers, owner = _expand_leaves(centers, sizes, res, max_voxels, what, "max_voxels")
         if own_colors is not None:
             own_colors = own_colors[owner]
     cloud = o3d.geometry.PointCloud()
-    cloud.points = o3d.utility.Vector3dVector(centres)
-    rgb = _height_colors(centres[:, 2]) if own_colors is None else own_colors
+    cloud.points = o3d.utility.Vector3dVector(centers)
+    rgb = _height_colors(centers[:, 2]) if own_colors is None else own_colors
     cloud.colors = o3d.utility.Vector3dVector(rgb / 255.0)
     if kind == "points":
         return cloud
-    if len(centres) == 0:
+    if len(centers) == 0:
         grid = o3d.geometry.VoxelGrid()
         grid.voxel_size = res
         return grid
-    # voxel index floor((centre - low) / res): centres sit mid-voxel, far from a boundary
-    low = centres.min(axis=0) - 0.5 * res
-    high = centres.max(axis=0) + 0.5 * res
+    # voxel index floor((center - low) / res): centers sit mid-voxel, far from a boundary
+    low = centers.min(axis=0) - 0.5 * res
+    high = centers.max(axis=0) + 0.5 * res
     return o3d.geometry.VoxelGrid.create_from_point_cloud_within_bounds(cloud, res, low, high)

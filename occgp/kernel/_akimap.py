@@ -135,13 +135,13 @@ class AKIMap(KernelMapBase):
       of the others is inside); ``H = c^2 Sigma + f^2 I``, f the bandwidth
       floor.
 
-    Every cell whose centre lies inside a sample's support gets
+    Every cell whose center lies inside a sample's support gets
     ``|H|^-1/2 k(r) y`` added to alpha and ``|H|^-1/2 k(r) (1 - y)`` to beta
     (Eq. 3.8-3.9), ``r^2 = (c_m - x)^T H^-1 (c_m - x)``; occupancy is
     ``alpha / (alpha + beta)`` with `prior` added to both.
 
     Why the floor: a covariance of samples on a surface is nearly flat, and
-    its kernel then falls between cell centres; the floor gives such kernels
+    its kernel then falls between cell centers; the floor gives such kernels
     the thickness of a few cells (AUC 0.938 -> 0.980 on the la3dm structured
     scene at 0.05 m with the default, 3 cells there). Beyond about a third of
     the spacing of the free samples it smooths free space into surfaces: of

@@ -91,7 +91,7 @@ class BGKMap(KernelMapBase):
     more at ``length - free_resolution`` on every beam longer than
     `free_resolution`, and the sensor origin (free, label 0; la3dm's
     ``beam_sample``), both reduced to one centroid per cube of edge
-    `ds_resolution`. Every cell whose centre lies within `ell` of a sample
+    `ds_resolution`. Every cell whose center lies within `ell` of a sample
     gets ``k(r) y`` added to alpha and ``k(r) (1 - y)`` to beta, with
     ``r = distance / ell`` and k the sparse kernel times `sf2`. The occupancy
     of a cell is the posterior mean ``alpha / (alpha + beta)`` with `prior`

@@ -402,7 +402,7 @@ class KernelMapBase(ParamsMixin, KernelMapFiles, _KernelCells):
         Returns
         -------
         cells : KernelCells
-            Named tuple ``(centers, alpha, beta)``: the cells' centres, shape
+            Named tuple ``(centers, alpha, beta)``: the cells' centers, shape
             (n_cells, 3), and their evidence with `prior` added, shape (n_cells,).
         """
         keys, alpha, beta = self._cells_arrays()

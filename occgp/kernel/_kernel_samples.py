@@ -121,7 +121,7 @@ def check_max_cells(value) -> int:
 
 def support_cells(samples, extent, res) -> float:
     """Cells in the support boxes of the samples (as the accumulation visits them:
-    cell centres within `extent` of each sample, keys clamped to the key range),
+    cell centers within `extent` of each sample, keys clamped to the key range),
     counted by the compiled core in one pass."""
     return float(_support_cells(np.ascontiguousarray(samples, dtype=np.float64),
                                 np.ascontiguousarray(extent, dtype=np.float64),

@@ -16,7 +16,7 @@ from ._kernel_samples import cube_sums
 class KernelCells(NamedTuple):
     """The cells of a kernel map, as arrays (one row per cell)."""
 
-    #: Cell centres, shape (n_cells, 3), in metres.
+    #: Cell centers, shape (n_cells, 3), in metres.
     centers: NDArray[np.float64]
     #: Occupied evidence alpha (prior included), shape (n_cells,).
     alpha: NDArray[np.float64]

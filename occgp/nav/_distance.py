@@ -38,11 +38,11 @@ UNKNOWN_CHOICES = ("occupied", "free")
 class DistanceField(NamedTuple):
     """A Euclidean distance field on a regular grid (see :func:`distance_field`)."""
 
-    #: Distance (metres) from each cell's centre to the nearest obstacle cell's
-    #: centre, shape (nx, ny, nz), indexed [i, j, k] along x, y, z; 0 in obstacle
+    #: Distance (metres) from each cell's center to the nearest obstacle cell's
+    #: center, shape (nx, ny, nz), indexed [i, j, k] along x, y, z; 0 in obstacle
     #: cells, inf everywhere when the grid holds no obstacle. In a signed field,
     #: obstacle cells hold minus the distance to the nearest non-obstacle cell's
-    #: centre instead (see :meth:`occgp.OccupancyOctree.distance_field`).
+    #: center instead (see :meth:`occgp.OccupancyOctree.distance_field`).
     distances: NDArray[np.float64]
     #: The grid's minimum corner, shape (3,): cell [i, j, k] spans
     #: ``origin + [i, j, k] * resolution`` to ``origin + [i + 1, j + 1, k + 1] * resolution``.
@@ -51,7 +51,7 @@ class DistanceField(NamedTuple):
     resolution: float
 
     def centers(self) -> NDArray[np.float64]:
-        """Centres of every cell of the grid.
+        """Centers of every cell of the grid.
 
         Returns
         -------
@@ -139,7 +139,7 @@ def grid_of_box(bbox: ArrayLike, res: float, max_cells: float):
 
 
 def _obstacles(tree: LogOddsMap, shape, origin, res, unknown: str) -> NDArray[np.bool_]:
-    """The obstacle mask of the grid: the map's state at each cell's centre."""
+    """The obstacle mask of the grid: the map's state at each cell's center."""
     obstacle = np.empty(shape, dtype=bool)
     axes = [origin[a] + (np.arange(n) + 0.5) * res for a, n in enumerate(shape)]
     yz = np.stack(np.meshgrid(axes[1], axes[2], indexing="ij"), axis=-1).reshape(-1, 2)
@@ -206,18 +206,18 @@ def finish(d2: np.ndarray, inside: np.ndarray, signed: bool, res: float,
 def closest_and_gradient(cells: np.ndarray, near: np.ndarray, has: np.ndarray,
                          dist: np.ndarray, origin: np.ndarray, res: float,
                          want_closest: bool, want_gradient: bool):
-    """Centres of the nearest cells and the unit gradient, for cells of integer index
+    """Centers of the nearest cells and the unit gradient, for cells of integer index
     `cells` (..., 3) whose nearest cell index is `near` (..., 3) (grid indices from
     `origin`). NaN where `has` is False; a zero gradient where the distance is 0."""
     out = []
-    centre = origin + (near + 0.5) * res
-    centre[~has] = np.nan
+    center = origin + (near + 0.5) * res
+    center[~has] = np.nan
     if want_closest:
-        out.append(centre)
+        out.append(center)
     if want_gradient:
         here = origin + (cells + 0.5) * res
         with np.errstate(invalid="ignore", divide="ignore"):
-            grad = (here - centre) / dist[..., None]
+            grad = (here - center) / dist[..., None]
         grad[has & (dist == 0)] = 0.0
         out.append(grad)
     return out

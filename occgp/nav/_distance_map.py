@@ -41,12 +41,12 @@ class DistanceMap(BlockStore):
     grid) and is stored in cubic blocks of ``block_size**3`` cells, allocated
     only where the map knows at least one cell (inside `bbox` when given):
     memory grows with the known space, not with a bounding box. Each cell holds
-    the distance from its centre to the nearest obstacle cell's centre, as
+    the distance from its center to the nearest obstacle cell's center, as
     :meth:`occgp.OccupancyOctree.distance_field` defines it (obstacles: the
     occupied cells, and the unknown ones when ``unknown="occupied"``; with
     `signed`, obstacle cells hold minus the distance to the nearest
     non-obstacle cell), and the index of that nearest cell, from which
-    :meth:`query` gives the closest cell's centre and the gradient.
+    :meth:`query` gives the closest cell's center and the gradient.
 
     Each block is computed on a window of cells around it: the block padded by
     ``p`` cells, starting at ``p = block_size // 2`` and doubling until every
@@ -85,7 +85,7 @@ class DistanceMap(BlockStore):
         update that changes an obstacle).
     signed : bool, default=False
         Negative distances inside obstacles (minus the distance from the cell's
-        centre to the nearest non-obstacle cell's centre), as voxblox's and
+        center to the nearest non-obstacle cell's center), as voxblox's and
         nvblox's ESDF: a boundary obstacle cell holds ``-resolution`` and its
         free neighbour ``+resolution``; no cell holds 0.
     unknown : {"occupied", "free"}, default="occupied"
@@ -172,10 +172,10 @@ class DistanceMap(BlockStore):
         check_distance_map(tree)
         self._setup(tree.resolution)
         table = getattr(tree, "leaves", None) or getattr(tree, "cells")
-        centres, sizes = table()[:2]
-        occupied = tree.is_occupied(centres) if len(centres) else np.empty(0, bool)
+        centers, sizes = table()[:2]
+        occupied = tree.is_occupied(centers) if len(centers) else np.empty(0, bool)
         side = np.rint(np.asarray(sizes) / self._res).astype(np.int64)
-        low = np.rint(centres / self._res - side[:, None] / 2.0).astype(np.int64)
+        low = np.rint(centers / self._res - side[:, None] / 2.0).astype(np.int64)
         dlo, dhi = self._domain
         inside = ((low < dhi) & (low + side[:, None] > dlo)).all(axis=1)
         low, side, occupied = low[inside], side[inside], occupied[inside]
@@ -534,13 +534,13 @@ class DistanceMap(BlockStore):
         points : array-like of shape (n_points, 3)
             Points in metres, finite.
         return_closest : bool, default=False
-            Also return the centre of the cell each distance is measured to:
-            the nearest obstacle cell (an obstacle cell's own centre in an
+            Also return the center of the cell each distance is measured to:
+            the nearest obstacle cell (an obstacle cell's own center in an
             unsigned field), or in a signed field, for obstacle cells, the
             nearest non-obstacle cell.
         return_gradient : bool, default=False
             Also return the gradient of the distance: the unit vector
-            ``(centre - closest) / distance`` (away from the nearest obstacle;
+            ``(center - closest) / distance`` (away from the nearest obstacle;
             inside obstacles of a signed field, towards free space); zero in
             the obstacle cells of an unsigned field.
 
@@ -581,7 +581,7 @@ class DistanceMap(BlockStore):
             the allocated blocks (a grid of shape (0, 0, 0) when there are
             none).
         return_closest : bool, default=False
-            Also return the closest cells' centres, shape (nx, ny, nz, 3)
+            Also return the closest cells' centers, shape (nx, ny, nz, 3)
             (see :meth:`query`).
         return_gradient : bool, default=False
             Also return the gradient, shape (nx, ny, nz, 3) (see :meth:`query`).

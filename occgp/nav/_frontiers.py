@@ -29,11 +29,11 @@ class Frontiers(NamedTuple):
     grid's last axis fastest); each cluster's cells are contiguous in `cells`.
     """
 
-    #: Centres of the frontier cells, shape (n_cells, n_dims), metres; grouped by cluster.
+    #: Centers of the frontier cells, shape (n_cells, n_dims), metres; grouped by cluster.
     cells: NDArray[np.float64]
     #: The cluster of each cell, shape (n_cells,): an index into `sizes` and `centroids`.
     labels: NDArray[np.int64]
-    #: Mean of each cluster's cell centres, shape (n_clusters, n_dims), metres.
+    #: Mean of each cluster's cell centers, shape (n_clusters, n_dims), metres.
     centroids: NDArray[np.float64]
     #: Number of cells of each cluster, shape (n_clusters,), in decreasing order.
     sizes: NDArray[np.int64]
@@ -44,7 +44,7 @@ class Frontiers(NamedTuple):
         return len(self.sizes)
 
     def cluster(self, i: int) -> NDArray[np.float64]:
-        """The centres of the cells of one cluster.
+        """The centers of the cells of one cluster.
 
         Parameters
         ----------
@@ -54,7 +54,7 @@ class Frontiers(NamedTuple):
         Returns
         -------
         cells : ndarray of shape (sizes[i], n_dims)
-            Cell centres in metres.
+            Cell centers in metres.
 
         Raises
         ------

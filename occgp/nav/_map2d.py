@@ -85,7 +85,7 @@ class OccupancyGrid2D:
 
     # ------------------------------------------------------------------ cells
     def cell_centers(self) -> NDArray[np.float64]:
-        """Centres of every cell.
+        """Centers of every cell.
 
         Returns
         -------
@@ -300,7 +300,7 @@ class OccupancyGrid2D:
         Returns
         -------
         frontiers : Frontiers
-            Cell centres of shape (n_cells, 2), their clusters, and each
+            Cell centers of shape (n_cells, 2), their clusters, and each
             cluster's centroid and size (largest first).
 
         Raises

@@ -1,7 +1,7 @@
 """Range-image up-sampling models: ILN, a LIIF-style value predictor, bilinear and edge-aware rules.
 
 Every model maps a range image and continuous queries ``(v, u)`` in the input image's pixel
-coordinates (pixel centres at integer + 0.5, row 0 at the highest elevation) to ranges. A query
+coordinates (pixel centers at integer + 0.5, row 0 at the highest elevation) to ranges. A query
 reads the 4 input pixels around it: vertical neighbours are clamped to the image, horizontal
 neighbours wrap around for a 360° sensor (``wrap=True``) and are clamped otherwise.
 

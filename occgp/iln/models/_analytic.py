@@ -48,7 +48,7 @@ class EdgeAwareInterpolation(RangeModel):
     image and have a return at the query's column (horizontal weight on a pixel with a
     return). At the top (queries between rows 0 and 1) only the lower extension exists, at the
     bottom only the upper one; where neither exists (an image of 2 rows, or no-returns on both
-    sides) the query keeps ``P``. Queries outside the outermost row centres read that row
+    sides) the query keeps ``P``. Queries outside the outermost row centers read that row
     alone, as :class:`InverseBilinear` does. No-return neighbours are dropped as in
     :class:`InverseBilinear`, and a query whose ``P`` is no return stays no return. Where the
     nearer row has no return at the query's column (the edge of a no-return region, e.g. the

@@ -95,7 +95,7 @@ def query_frame(queries: torch.Tensor):
 def _neighbours(queries: torch.Tensor, rows: int, cols: int, wrap: bool):
     """The 4 input pixels around each query.
 
-    Returns flat pixel indices (B, N, 4), relative positions pixel centre − query in pixels
+    Returns flat pixel indices (B, N, 4), relative positions pixel center − query in pixels
     (B, N, 4, 2), and the bilinear weights (B, N, 4). Token order: (top, left), (top, right),
     (bottom, left), (bottom, right).
     """
@@ -103,7 +103,7 @@ def _neighbours(queries: torch.Tensor, rows: int, cols: int, wrap: bool):
     ii = torch.stack([i0, i0, i0 + 1, i0 + 1], dim=-1).clamp_(0, rows - 1)
     jj = torch.stack([j0, j0 + 1, j0, j0 + 1], dim=-1)
     if wrap:
-        dv_j = jj.to(queries.dtype) + 0.5  # unwrapped centre: |du| <= 1 across the seam
+        dv_j = jj.to(queries.dtype) + 0.5  # unwrapped center: |du| <= 1 across the seam
         jj = jj.remainder(cols)
     else:
         jj = jj.clamp_(0, cols - 1)
@@ -146,7 +146,7 @@ features : {features}
 images : torch.Tensor of shape (B, H, W)
     Range images divided by `max_range` (0 for no return).
 queries : torch.Tensor of shape (B, N, 2)
-    ``(v, u)`` in the images' pixel units (pixel centres at integer + 0.5),
+    ``(v, u)`` in the images' pixel units (pixel centers at integer + 0.5),
     ``0 <= v <= H``, ``0 <= u <= W``.
 wrap : bool
     Horizontal neighbours wrap around (360° sensor); clamped otherwise. Vertical
@@ -166,7 +166,7 @@ _IMAGE_PARAMS = """Parameters
 range_image : array-like or torch.Tensor of shape (rows, cols) or (batch, rows, cols)
     Ranges in metres, 0 where there is no return. Finite, in [0, 1e6].
 queries : array-like or torch.Tensor of shape (n_queries, 2) or (batch, n_queries, 2)
-    ``(v, u)`` in the input image's pixel units (pixel centres at integer + 0.5), with
+    ``(v, u)`` in the input image's pixel units (pixel centers at integer + 0.5), with
     ``0 <= v <= rows`` and ``0 <= u <= cols``. Unbatched queries with a batch of images
     are used for every image.
 wrap : bool, optional
@@ -289,7 +289,7 @@ class RangeModel(nn.Module):
         images : torch.Tensor of shape (B, H, W)
             Range images divided by `max_range` (0 for no return).
         queries : torch.Tensor of shape (B, N, 2)
-            ``(v, u)`` in the input images' pixel units (pixel centres at integer + 0.5),
+            ``(v, u)`` in the input images' pixel units (pixel centers at integer + 0.5),
             ``0 <= v <= H``, ``0 <= u <= W``.
         wrap : bool, optional
             Horizontal wrap-around; default: the model's `wrap`.

@@ -27,7 +27,7 @@ class Bilinear(RangeModel):
 
     With 4 returns this is the textbook formula. No-return neighbours are dropped and the
     weights of the others renormalised; a query whose weight lies entirely on no-return pixels
-    (all 4 lack a return, or it sits on a no-return pixel's centre line) returns 0.
+    (all 4 lack a return, or it sits on a no-return pixel's center line) returns 0.
 
     {params}
     """

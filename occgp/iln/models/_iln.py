@@ -58,7 +58,7 @@ class ILN(EncodedModel):
     """Implicit LiDAR Network: predicts interpolation weights over the 4 neighbouring pixels.
 
     For a query q and each of its 4 neighbouring input pixels t: the encoder feature z_t plus a
-    linear embedding of the relative position Δq_t (pixel centre − query, in pixels), and with
+    linear embedding of the relative position Δq_t (pixel center − query, in pixels), and with
     `range_tokens` one of its relative log range, gives the token z'_t; a pre-norm transformer of
     depth `depth` (`heads` heads) mixes the 4 tokens; a shared linear head, plus the fixed
     `weight_prior`, and a softmax give w_t, and the output is Σ w_t r_t (Eq. 4.3) with r_t the

@@ -20,7 +20,7 @@ def _check_lidar_model(m: Any, name: str) -> None:
 
 
 def image_queries(in_model, out_model):
-    """The queries of :func:`upsample_image`: `out_model`'s pixel centres in `in_model`'s pixels.
+    """The queries of :func:`upsample_image`: `out_model`'s pixel centers in `in_model`'s pixels.
 
     Parameters
     ----------
@@ -47,7 +47,7 @@ def image_queries(in_model, out_model):
 def upsample_image(model: RangeModel, image, in_model, out_model, chunk: int = DEFAULT_CHUNK):
     """Full range image of `out_model`'s resolution from an image of `in_model`.
 
-    Every out-resolution pixel centre is converted to its elevation and azimuth, then to
+    Every out-resolution pixel center is converted to its elevation and azimuth, then to
     fractional pixel coordinates of `in_model`, and queried. Pixels outside `in_model`'s field of
     view get 0 (no return).
 

@@ -29,7 +29,7 @@ class LIIF(EncodedModel):
     For each of the 4 neighbouring pixels, an MLP maps ``[z_t, Δq_t]`` (encoder feature and
     relative position in pixels) to a normalised range; the 4 predictions are blended with the
     area weights S_t / S (the area of the rectangle between the query and the diagonally opposite
-    pixel centre, i.e. bilinear weights). A prediction from a no-return pixel is dropped and the
+    pixel center, i.e. bilinear weights). A prediction from a no-return pixel is dropped and the
     remaining weights renormalised; with no weight left the query returns 0 (no return).
 
     Parameters
