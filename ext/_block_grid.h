@@ -7,7 +7,8 @@
 // last block it found, so the cells of one ray or one scan, which are mostly in the
 // same block as the cell before them, are found without hashing at all.
 //
-// Memory: a block is 2,112 bytes (512 floats, 8 words of mask) plus its root entry;
+// Memory: a block is 2,184 bytes (512 floats, a mask of the known cells, a mask of the
+// cells updated in the current scan and the scan it belongs to) plus its root entry;
 // memory_usage() counts both, and the bucket array.
 #ifndef OCCGP_BLOCK_GRID_H
 #define OCCGP_BLOCK_GRID_H
@@ -28,6 +29,8 @@ constexpr int kBlockCells = 1 << (3 * kBlockBits);      // 512
 
 struct GridBlock {
   uint64_t known[kBlockCells / 64];
+  uint64_t marked[kBlockCells / 64];  // cells updated in scan `epoch` (begin_scan)
+  uint32_t epoch;
   float value[kBlockCells];
 };
 
@@ -68,6 +71,8 @@ class BlockGrid {
     if (!slot) {
       slot.reset(new GridBlock);
       std::memset(slot->known, 0, sizeof(slot->known));
+      std::memset(slot->marked, 0, sizeof(slot->marked));
+      slot->epoch = 0;  // no scan's marks
     }
     return slot.get();
   }
@@ -156,9 +161,33 @@ class BlockGrid {
 
   void set(uint64_t packed, float value) { *emplace(packed).first = value; }
 
+  // Start a scan: every cell unmarked. The marks live in the blocks and are cleared
+  // lazily, when a block is first touched in the new scan (its epoch is behind).
+  void begin_scan() {
+    if (++epoch_ == 0) {  // wrapped after 2^32 scans: reset every block once
+      for (Root::iterator it = root_.begin(); it != root_.end(); ++it) it->second->epoch = 0;
+      epoch_ = 1;
+    }
+  }
+
+  // Mark cell `packed` of `block` as updated in this scan; false if it already was.
+  bool mark(GridBlock* block, uint64_t packed) const {
+    if (block->epoch != epoch_) {
+      std::memset(block->marked, 0, sizeof(block->marked));
+      block->epoch = epoch_;
+    }
+    const int i = cell_of(packed);
+    uint64_t& word = block->marked[i >> 6];
+    const uint64_t bit = 1ull << (i & 63);
+    if (word & bit) return false;
+    word |= bit;
+    return true;
+  }
+
  private:
   Root root_;
   size_t n_cells_ = 0;
+  uint32_t epoch_ = 0;
 };
 
 // Finds cells of one BlockGrid, remembering the last block it looked in: the cells of
@@ -175,6 +204,9 @@ class BlockAccessor {
   std::pair<float*, bool> emplace(uint64_t packed) {
     return grid_->emplace_in(block_for(block_of(packed), true), packed);
   }
+
+  // The block of a cell, created if missing.
+  GridBlock* block(uint64_t packed) { return block_for(block_of(packed), true); }
 
  private:
   GridBlock* block_for(uint64_t block_key, bool create) {

@@ -45,6 +45,16 @@ cdef extern from "_block_grid.h" namespace "occgp" nogil:
                      float threshold) except +
         void key_bounds(uint16_t* lo, uint16_t* hi)
 
+cdef extern from "_bresenham.h" namespace "occgp" nogil:
+    cdef struct BresenhamStats:
+        uint64_t rays
+        uint64_t visits
+        uint64_t updated
+    Status bresenham_scan(BlockGrid& grid, const float* points, Py_ssize_t n,
+                          const float* origin, double resolution, double max_range,
+                          float hit, float miss, float lo, float hi,
+                          BresenhamStats* stats) except +
+
 cdef extern from "_grid_apply.h" namespace "occgp" nogil:
     void apply_grid_updates(BlockGrid& cells, const vector[ScanCell]& found,
                             float lo, float hi, int n_threads) except +
@@ -166,6 +176,25 @@ cdef class _Grid:
                 apply_grid_updates(self._cells, found, lo, hi, n_threads)
                 clock_gettime(CLOCK_MONOTONIC, &done)
         return scan_result(status, stats, found.size(), done)
+
+    def _insert_bresenham(self, const float[:, ::1] points, const float[::1] origin,
+                          double max_range):
+        """Insert a scan with Bonxai's ray model (``ext/_bresenham.h``): one integer
+        Bresenham line per distinct end cell, each cell updated once. `max_range` < 0:
+        no limit. Returns (status, rays, visited cells, updated cells); nothing changed
+        unless status is ok."""
+        cdef OcTree* tree = self._get()
+        cdef BresenhamStats stats
+        cdef Status status
+        cdef float hit = tree.getProbHitLog(), miss = tree.getProbMissLog()
+        cdef float lo = tree.getClampingThresMinLog(), hi = tree.getClampingThresMaxLog()
+        cdef const float* first = &points[0, 0] if points.shape[0] else NULL
+        with self._lock:
+            with nogil:
+                status = bresenham_scan(self._cells, first, points.shape[0], &origin[0],
+                                        tree.getResolution(), max_range, hit, miss, lo, hi,
+                                        &stats)
+        return int(status), stats.rays, stats.visits, stats.updated
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):

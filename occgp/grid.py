@@ -11,12 +11,12 @@ from numpy.typing import ArrayLike
 from ._docfill import fill_doc
 from .io import _npz as _npz_io
 from ._grid import _Grid
-from .octree._logodds import N_JOBS, SENSOR_MODEL, Leaves, LogOddsMap
+from .octree._logodds import MODES, N_JOBS, SENSOR_MODEL, Leaves, LogOddsMap
 from .octree._options import InsertOptions, resolve_options
 from .maps import register
 from ._scan_input import join_free, prefilter
 from .octree._superray_policy import adaptive_threshold
-from ._validation import check_bool, n_threads
+from ._validation import check_bool, check_choice, check_real, n_threads
 
 if TYPE_CHECKING:
     from .octree._tree import OccupancyOctree
@@ -162,10 +162,12 @@ class GridMap(LogOddsMap, _Grid):
             do not pay; ``"plain"`` walks every ray, ``"superray"`` groups rays
             into super rays, ``"culling"`` skips the scan's culling region of
             fully free cells, grown over this grid's cells, after Kwon's
-            dissertation, ch. 2), `superray_threshold` and `min_range` (points
-            nearer to `origin` cast no ray), as for
-            :meth:`OccupancyOctree.insert_scan`; `discretize` and `bbox` must
-            keep their defaults.
+            dissertation, ch. 2), `superray_threshold`, `min_range` (points
+            nearer to `origin` cast no ray) and `discretize` (one ray per
+            distinct end cell, to its center: liboctomap's discretized map), as
+            for :meth:`OccupancyOctree.insert_scan`, and `ray_model`:
+            ``"bresenham"`` builds a different, faster map by Bonxai's rules
+            (see Notes); `bbox` must keep its default.
         **kwargs
             Those fields by name, as in earlier releases. ``n_jobs=`` is
             deprecated (a :class:`DeprecationWarning`; removed in the next
@@ -193,6 +195,24 @@ class GridMap(LogOddsMap, _Grid):
             (n_free, 3), holds NaN or inf or has an end outside the key range.
             The map is then unchanged.
 
+        Notes
+        -----
+        With ``ray_model="bresenham"`` (``ext/_bresenham.h``) the scan is
+        inserted as Bonxai's ``ProbabilisticMap.insertPointCloud`` inserts it: a
+        point's cell is ``floor(coordinate / resolution)`` per axis, as the
+        octree's key; a point at `max_range` or farther (None: no limit) is
+        moved onto the sphere of that radius and its cell is updated free. The
+        points are taken in order and a cell is updated once a scan, so a
+        point whose cell was updated already casts no ray; then each distinct
+        end cell (those of the hits first) casts one integer Bresenham line
+        from the origin's cell, whose cells before the end cell are updated
+        free when this scan has not updated them yet. The log-odds are float32
+        with OctoMap's sensor model and clamping (Bonxai keeps fixed-point
+        integers), and a cell is skipped only when this scan updated it
+        (Bonxai's three-valued marker also skips a cell updated exactly 3, 6,
+        ... scans earlier). Its free space differs from the 3D-DDA map's
+        (``bench/bench_grid.py`` measures the agreement); one thread.
+
         Examples
         --------
         >>> m = GridMap(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], mode="ray")
@@ -201,11 +221,20 @@ class GridMap(LogOddsMap, _Grid):
         >>> m.num_cells        # the cells the ray crosses, and its end cell
         10
         """
-        opts, n_jobs = resolve_options(options, kwargs, f"{type(self).__name__}.insert_scan",
-                                       ("method", "superray_threshold", "min_range"))
+        opts, n_jobs = resolve_options(
+            options, kwargs, f"{type(self).__name__}.insert_scan",
+            ("method", "superray_threshold", "min_range", "discretize", "ray_model"))
         threads = self._threads() if n_jobs is None else n_threads(n_jobs)
         points, free64, _ = prefilter(points, origin, opts.min_range, max_range, free_points)
         method, threshold = self._check_method(opts.method, opts.superray_threshold)
+        if opts.ray_model == "bresenham":
+            return self._insert_bresenham_scan(points, origin, max_range, mode, opts, free64)
+        if opts.discretize:
+            if check_choice(mode, "mode", MODES) != "scan":
+                raise ValueError("discretize=True is only defined for mode='scan'")
+            if free64 is not None:
+                raise ValueError("free_points do not combine with discretize=True")
+            points = self._discretized_points(points)
         scan = join_free(
             self._validated_scan(points, origin, max_range, mode,
                                  check_ends=free64 is not None),
@@ -218,6 +247,27 @@ class GridMap(LogOddsMap, _Grid):
                 pts, org, rng, mode == "ray", method.endswith("culling"), None, threshold,
                 False, self._max_scan_cells(), threads, free_only), pts, org, rng, method,
                 threshold)
+        return self
+
+    def _insert_bresenham_scan(self, points, origin, max_range, mode, opts, free64):
+        """insert_scan with ``ray_model="bresenham"`` (checked here; see its Notes)."""
+        if check_choice(mode, "mode", MODES) != "scan":
+            raise ValueError("ray_model='bresenham' is only defined for mode='scan'")
+        if opts.method != "auto" or opts.discretize or free64 is not None:
+            raise ValueError("ray_model='bresenham' takes no method, discretize or "
+                             "free_points: it casts one ray per distinct end cell")
+        rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
+        pts = self._as_float32_points(points, "points")
+        org = self._as_float32_origin(origin)
+        status, rays, visits, updated = self._insert_bresenham(pts, org, rng)
+        if status:
+            # an end cell without a key (the scan changed nothing): name the points
+            inside = self._in_range(pts) if rng < 0 else np.isfinite(pts).all(axis=1)
+            self._raise_out_of_range("points", inside if not inside.all()
+                                     else np.zeros(len(pts), bool),
+                                     " (after truncation at max_range)" if rng >= 0 else "")
+        self.last_insert_ = {"rays": int(rays), "traversed_cells": int(visits),
+                             "updated_cells": int(updated), "ray_model": "bresenham"}
         return self
 
     # ------------------------------------------------------------------ queries

@@ -94,10 +94,10 @@ def test_culling_keeps_end_points_out_of_the_region():
             assert m.log_odds([[1.05, 0.05, 0.05]]) == expected
 
 
-def test_culling_rejects_discretize():
+def test_discretize_needs_scan_mode():
     with pytest.raises(ValueError, match="discretize=True is only defined"):
         OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="culling",
-                                         discretize=True)
+                                         discretize=True, mode="ray")
     with pytest.raises(ValueError, match=r"method must be one of \('auto', 'plain', 'culling', "):
         OccupancyOctree(0.1).insert_scan([[1.0, 0, 0]], [0, 0, 0], method="fast")
 

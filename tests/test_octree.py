@@ -170,6 +170,38 @@ def test_scan_mode_equals_liboctomap_insert_point_cloud(octomap_insert_exe, tmp_
     assert_same_leaves(m, ref)
 
 
+@pytest.mark.parametrize("method", ["plain", "auto", "superray", "culling", "superray+culling"])
+@pytest.mark.parametrize("max_range", [None, 1.2])
+def test_discretize_equals_liboctomap_for_every_method(octomap_insert_exe, tmp_path, method,
+                                                       max_range):
+    """discretize=True through occgp's pipeline (every method but "plain") and on the
+    grid: liboctomap's insertPointCloud(..., discretize=true), leaf for leaf."""
+    from occgp import GridMap
+
+    rng = np.random.default_rng(1)
+    scans = random_scans(rng, n_scans=4, n_points=400)
+    # points sharing end cells, so that discretizing changes the rays
+    scans = [(np.vstack([p, p[:100] + 0.01]), o) for p, o in scans]
+    ref = OccupancyOctree.from_bytes(
+        octomap_insert(octomap_insert_exe, tmp_path, scans, 0.05, max_range=max_range,
+                       discretize=True))
+    m = OccupancyOctree(0.05)
+    grid = GridMap(0.05)
+    for points, origin in scans:
+        m.insert_scan(points, origin, max_range=max_range, discretize=True, method=method)
+        if method != "plain":
+            grid.insert_scan(points, origin, max_range=max_range, discretize=True,
+                             method=method)
+    assert_same_leaves(m, ref)
+    if method != "plain":
+        finest = ref.expand().leaves()
+        cells = grid.cells()
+        assert len(cells.centers) == len(finest.centers)
+        a, b = np.lexsort(cells.centers.T), np.lexsort(finest.centers.T)
+        assert_array_equal(cells.centers[a], finest.centers[b])
+        assert_array_equal(cells.log_odds[a], finest.log_odds[b].astype(np.float32))
+
+
 @pytest.mark.slow
 def test_scan_mode_equals_liboctomap_on_real_scan(octomap_insert_exe, tmp_path):
     from occgp.io import read_xyz

@@ -157,14 +157,18 @@ def insert_scan(
     stamping = self._stamped(stamp)
     discretize = opts.discretize
     mode = check_choice(mode, "mode", MODES)
-    method, threshold = self._check_method(
-        "plain" if discretize and opts.method == "auto" else opts.method,
-        opts.superray_threshold)
-    if discretize and (mode != "scan" or method != "plain"):
-        raise ValueError("discretize=True is only defined for mode='scan', method='plain'")
+    method, threshold = self._check_method(opts.method, opts.superray_threshold)
+    if discretize and mode != "scan":
+        raise ValueError("discretize=True is only defined for mode='scan'")
     if discretize and free64 is not None:
         raise ValueError("free_points do not combine with discretize=True")
     liboctomap = mode == "scan" and method == "plain" and free64 is None
+    if discretize:
+        # liboctomap's discretize (checks every point's key, before truncation); occgp's
+        # pipeline then runs on the distinct cells' centers
+        centers = self._discretized_points(points)
+        if not liboctomap:
+            points = centers
     box = None if opts.bbox is None else self._check_bbox(opts.bbox)
     scan = join_free(
         self._validated_scan(points, origin, max_range, mode,
@@ -175,10 +179,6 @@ def insert_scan(
         return self
     pts, org, rng, cells, free_only = scan
     if liboctomap:
-        if discretize and not (inside := self._in_range(pts)).all():
-            # liboctomap discretises before it truncates, with unchecked keys
-            self._raise_out_of_range("points", inside,
-                                     " (with discretize=True, before truncation)")
         # rays within liboctomap's key buffer, and a bound on the cells they reach
         # within MAX_SCAN_CELLS: otherwise occgp's traversal, which checks it
         reach = cells.sum() + len(cells)
@@ -193,7 +193,8 @@ def insert_scan(
         # traversal visits the cells computeRayKeys visits, and gives the map
         # insertPointCloud would give with a buffer large enough
         if discretize:
-            pts = _discretized(pts, self.resolution)
+            pts, org, rng, _ = self._validated_scan(centers, origin, max_range, mode,
+                                                    check_ends=False)
     key_box = None
     if box is not None:
         # liboctomap keeps the rays that end in the box within range, and of their
@@ -215,9 +216,3 @@ def insert_scan(
     self._record_insert(stats, pts, org, rng, method, threshold)
     return self
 
-
-def _discretized(points: np.ndarray, resolution: float) -> np.ndarray:
-    """liboctomap's ``discretize``: the centre of each distinct cell holding a point."""
-    keys = np.floor(points.astype(np.float64) * (1.0 / resolution))
-    keys = np.unique(keys, axis=0)
-    return np.ascontiguousarray((keys + 0.5) * resolution, dtype=np.float32)

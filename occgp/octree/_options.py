@@ -26,10 +26,12 @@ from numpy.typing import ArrayLike
 from .._scan_input import check_min_range
 from .._validation import as_numeric, check_bool, check_choice, check_int, check_n_jobs
 
-__all__ = ["InsertOptions", "METHODS", "resolve_options", "check_bbox"]
+__all__ = ["InsertOptions", "METHODS", "RAY_MODELS", "resolve_options", "check_bbox"]
 
 #: How the rays of a scan are traversed (see :class:`InsertOptions`).
 METHODS = ("auto", "plain", "culling", "superray", "superray+culling")
+#: How a ray's cells are found: liboctomap's 3D-DDA and rules, or Bonxai's (the grid).
+RAY_MODELS = ("octomap", "bresenham")
 
 
 def check_bbox(bbox: ArrayLike) -> np.ndarray:
@@ -71,7 +73,7 @@ class InsertOptions:
 default="auto"
         How the rays are traversed; every method gives the same map, bit for
         bit (the user guide's "Update methods" tells how each works).
-        ``"auto"`` is ``"superray+culling"`` (``"plain"`` with `discretize`).
+        ``"auto"`` is ``"superray+culling"``.
         ``"plain"`` traverses every ray in full (with ``mode="scan"``,
         liboctomap's ``insertPointCloud`` itself). ``"superray"`` traverses
         once for all the rays of a *super ray* (rays ending in a cell with at
@@ -86,10 +88,14 @@ default="auto"
         With the super-ray methods, the fewest end points a cell must hold for
         its rays to be grouped; at least 1.
     discretize : bool, default=False
-        Only with ``mode="scan"`` and ``method="plain"`` (or ``"auto"``): cast
-        one ray per distinct end cell, to its centre (liboctomap's
-        ``discretize``), which is faster for dense scans. Not with
-        `free_points`. The octree only.
+        Only with ``mode="scan"``: cast one ray per distinct end cell, to its
+        center (liboctomap's ``insertPointCloud(..., discretize=true)``), which
+        is faster for dense scans; a different map from the one of every point's
+        ray, identical, leaf for leaf, to liboctomap's discretized one for every
+        `method` (``"plain"`` calls liboctomap's own; the others run occgp's
+        pipeline on the distinct cells' centers). Every point, before truncation
+        at `max_range`, must lie in the key range. Not with `free_points`. The
+        octree and the grid.
     bbox : array-like of shape (2, 3), default=None
         ``[min_corner, max_corner]``: update only inside this box, as
         liboctomap's ``useBBXLimit`` does. A ray counts only when its end point
@@ -99,6 +105,16 @@ default="auto"
         nothing). Every method gives liboctomap's map. Both corners must lie in
         the map's key range. Stored as a tuple of two ``(x, y, z)`` tuples of
         the single-precision corners. The octree only.
+    ray_model : {"octomap", "bresenham"}, default="octomap"
+        How a ray's cells are found. ``"octomap"``: liboctomap's 3D-DDA and
+        update rules (every map above). ``"bresenham"``, the grid only: Bonxai's
+        ``ProbabilisticMap`` rules, a different and faster map -- one integer
+        Bresenham line from the origin's cell to each distinct end cell, each
+        cell updated once a scan, end cells first in point order, a point at
+        `max_range` or beyond moved onto that sphere with its cell updated free
+        (``ext/_bresenham.h`` and :class:`~occgp.GridMap` tell the rules). Only
+        with ``mode="scan"``, the default `method`, no `discretize`, no
+        `free_points`; on one thread.
     min_range : float, default=None
         Points nearer to the origin than this (and free points) are dropped
         before anything else: they cast no ray at all (octomap_server's
@@ -115,7 +131,7 @@ default="auto"
         If a field has the wrong type (`superray_threshold` not an int,
         `discretize` not a bool, `bbox` or `min_range` not numbers).
     ValueError
-        If `method` is not one of the methods, `superray_threshold` is below
+        If `method` or `ray_model` is not one of its choices, `superray_threshold` is below
         1, `bbox` is not of shape (2, 3), not finite or has min > max on an
         axis, or `min_range` is negative or not finite.
 
@@ -137,6 +153,7 @@ default="auto"
     discretize: bool = False
     bbox: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     min_range: float | None = None
+    ray_model: str = "octomap"
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -148,6 +165,7 @@ default="auto"
             box = check_bbox(self.bbox)
             set_(self, "bbox", tuple(tuple(float(v) for v in row) for row in box))
         set_(self, "min_range", check_min_range(self.min_range))
+        set_(self, "ray_model", check_choice(self.ray_model, "ray_model", RAY_MODELS))
 
     def replace(self, **changes: Any) -> "InsertOptions":
         """A copy with the fields in `changes` changed (checked as the constructor
@@ -168,10 +186,12 @@ default="auto"
 #: The options of an insertion that gives none.
 DEFAULT = InsertOptions()
 _FIELDS = tuple(f.name for f in dataclasses.fields(InsertOptions))
+#: The fields the octree takes (``ray_model`` is the grid's).
+OCTREE_FIELDS = tuple(name for name in _FIELDS if name != "ray_model")
 
 
 def resolve_options(options: InsertOptions | None, kwargs: dict, owner: str,
-                    supported: tuple[str, ...] = _FIELDS,
+                    supported: tuple[str, ...] = OCTREE_FIELDS,
                     threaded: bool = True) -> tuple[InsertOptions, int | None]:
     """The options of one ``insert_scan`` call: `options` (None: the defaults) with the
     fields given as keywords in `kwargs`, and the deprecated per-call ``n_jobs`` (None
