@@ -69,28 +69,18 @@ cdef extern from "octomap/octomap.h" namespace "octomap" nogil:
         float getLogOdds()
         void setLogOdds(float value)
 
-    cdef cppclass OcTree:
+    cdef cppclass OccupancyOcTreeBase[NODE]:
+        # What OcTree and ColorOcTree share: liboctomap's OccupancyOcTreeBase<NODE>
+        # (and the OcTreeBaseImpl<NODE, ...> under it), NODE their node type.
         cppclass leaf_iterator:
             leaf_iterator() except +
-            OcTreeNode& operator*()
+            NODE& operator*()
             leaf_iterator& operator++()
             bool operator==(const leaf_iterator&)
             bool operator!=(const leaf_iterator&)
             double getSize()
             unsigned getDepth()
             const OcTreeKey& getKey()
-
-        cppclass leaf_bbx_iterator:
-            leaf_bbx_iterator() except +
-            OcTreeNode& operator*()
-            leaf_bbx_iterator& operator++()
-            bool operator==(const leaf_bbx_iterator&)
-            bool operator!=(const leaf_bbx_iterator&)
-            double getSize()
-            unsigned getDepth()
-            const OcTreeKey& getKey()
-
-        OcTree(double resolution) except +
 
         # sensor model
         void setProbHit(double prob)
@@ -107,52 +97,73 @@ cdef extern from "octomap/octomap.h" namespace "octomap" nogil:
         # updates
         void insertPointCloud(const Pointcloud& scan, const point3d& sensor_origin,
                               double maxrange, bool lazy_eval, bool discretize) except +
+        NODE* updateNode(const OcTreeKey& key, float log_odds_update,
+                         bool lazy_eval) except +
+        bool computeRayKeys(const point3d& origin, const point3d& end,
+                            KeyRay& ray) except +
+
+        # queries
+        NODE* search(const OcTreeKey& key, unsigned int depth)
+        bool isNodeOccupied(const NODE* node)
+        bool coordToKeyChecked(const point3d& coord, OcTreeKey& key)
+        double keyToCoord(key_type key, unsigned depth)
+        leaf_iterator begin_leafs(unsigned char maxDepth) except +
+        leaf_iterator end_leafs()
+
+        # structure
+        double getResolution()
+        void setResolution(double r)
+        size_t size()
+        size_t getNumLeafNodes()
+        size_t memoryUsage()
+        void getMetricMin(double& x, double& y, double& z)
+        void getMetricMax(double& x, double& y, double& z)
+        void clear()
+
+        # serialisation
+        ostream& writeData(ostream& s) except +
+        istream& readData(istream& s) except +
+        istream& readBinaryData(istream& s) except +
+
+    cdef cppclass OcTree(OccupancyOcTreeBase[OcTreeNode]):
+        cppclass leaf_bbx_iterator:
+            leaf_bbx_iterator() except +
+            OcTreeNode& operator*()
+            leaf_bbx_iterator& operator++()
+            bool operator==(const leaf_bbx_iterator&)
+            bool operator!=(const leaf_bbx_iterator&)
+            double getSize()
+            unsigned getDepth()
+            const OcTreeKey& getKey()
+
+        OcTree(double resolution) except +
+
+        # updates
         OcTreeNode* setNodeValue(const OcTreeKey& key, float log_odds_value,
                                  bool lazy_eval) except +
         void updateInnerOccupancy() except +
         void useBBXLimit(bool enable)
         void setBBXMin(point3d& min)
         void setBBXMax(point3d& max)
-        OcTreeNode* updateNode(const OcTreeKey& key, float log_odds_update,
-                               bool lazy_eval) except +
-        bool computeRayKeys(const point3d& origin, const point3d& end,
-                            KeyRay& ray) except +
 
         # queries
-        OcTreeNode* search(const OcTreeKey& key, unsigned int depth)
-        bool isNodeOccupied(const OcTreeNode* node)
-        bool coordToKeyChecked(const point3d& coord, OcTreeKey& key)
-        double keyToCoord(key_type key, unsigned depth)
         bool castRay(const point3d& origin, const point3d& direction, point3d& end,
                      bool ignoreUnknownCells, double maxRange) except +
         bool getRayIntersection(const point3d& origin, const point3d& direction,
                                 const point3d& center, point3d& intersection, double delta)
         bool isNodeAtThreshold(const OcTreeNode* node)
-        leaf_iterator begin_leafs(unsigned char maxDepth) except +
-        leaf_iterator end_leafs()
         leaf_bbx_iterator begin_leafs_bbx(const OcTreeKey& min, const OcTreeKey& max,
                                           unsigned char maxDepth) except +
         leaf_bbx_iterator end_leafs_bbx()
 
         # structure
-        double getResolution()
-        void setResolution(double r)
         unsigned int getTreeDepth()
-        size_t size()
-        size_t getNumLeafNodes()
-        size_t memoryUsage()
-        void getMetricMin(double& x, double& y, double& z)
-        void getMetricMax(double& x, double& y, double& z)
         void prune() except +
         void expand() except +
-        void clear()
         void toMaxLikelihood()
 
         # serialisation
         ostream& writeBinaryData(ostream& s) except +
-        ostream& writeData(ostream& s) except +
-        istream& readBinaryData(istream& s) except +
-        istream& readData(istream& s) except +
 
 
 cdef extern from "octomap/ColorOcTree.h" namespace "octomap" nogil:
@@ -168,63 +179,14 @@ cdef extern from "octomap/ColorOcTree.h" namespace "octomap" nogil:
         bool isColorSet()
         void setColor(uint8_t r, uint8_t g, uint8_t b)
 
-    cdef cppclass ColorOcTree:
-        cppclass leaf_iterator:
-            leaf_iterator() except +
-            ColorOcTreeNode& operator*()
-            leaf_iterator& operator++()
-            bool operator==(const leaf_iterator&)
-            bool operator!=(const leaf_iterator&)
-            double getSize()
-            unsigned getDepth()
-            const OcTreeKey& getKey()
-
+    cdef cppclass ColorOcTree(OccupancyOcTreeBase[ColorOcTreeNode]):
         ColorOcTree(double resolution) except +
 
-        # sensor model
-        void setProbHit(double prob)
-        void setProbMiss(double prob)
-        void setClampingThresMin(double prob)
-        void setClampingThresMax(double prob)
-        void setOccupancyThres(double prob)
-        float getProbHitLog()
-        float getProbMissLog()
-        float getClampingThresMinLog()
-        float getClampingThresMaxLog()
-        float getOccupancyThresLog()
-
-        # updates
-        void insertPointCloud(const Pointcloud& scan, const point3d& sensor_origin,
-                              double maxrange, bool lazy_eval, bool discretize) except +
-        ColorOcTreeNode* updateNode(const OcTreeKey& key, float log_odds_update,
-                                    bool lazy_eval) except +
-        bool computeRayKeys(const point3d& origin, const point3d& end,
-                            KeyRay& ray) except +
+        # colours (the .ot data block: per node float log-odds, r, g, b, child mask)
         ColorOcTreeNode* averageNodeColor(const OcTreeKey& key, uint8_t r, uint8_t g,
                                           uint8_t b)
         ColorOcTreeNode* setNodeColor(const OcTreeKey& key, uint8_t r, uint8_t g, uint8_t b)
         void updateInnerOccupancy()
 
         # queries
-        ColorOcTreeNode* search(const OcTreeKey& key, unsigned int depth)
-        bool isNodeOccupied(const ColorOcTreeNode* node)
-        bool coordToKeyChecked(const point3d& coord, OcTreeKey& key)
         OcTreeKey coordToKey(const point3d& coord)
-        double keyToCoord(key_type key, unsigned depth)
-        leaf_iterator begin_leafs(unsigned char maxDepth) except +
-        leaf_iterator end_leafs()
-
-        # structure
-        double getResolution()
-        void setResolution(double r)
-        size_t size()
-        size_t getNumLeafNodes()
-        size_t memoryUsage()
-        void getMetricMin(double& x, double& y, double& z)
-        void getMetricMax(double& x, double& y, double& z)
-        void clear()
-
-        # serialisation (.ot data block: per node float log-odds, r, g, b, child mask)
-        ostream& writeData(ostream& s) except +
-        istream& readData(istream& s) except +
-        istream& readBinaryData(istream& s) except +

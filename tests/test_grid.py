@@ -2,12 +2,12 @@
 
 import copy
 import pickle
-import threading
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from _helpers import share_between_threads
 from conftest import data_path
 from occgp import GridMap, OccupancyOctree
 from octomap_reference import MAX_VAL, leaf_values, ray_mode_reference
@@ -213,29 +213,10 @@ def test_threads_share_a_map_safely(tiny_room):
     points, origin = tiny_room
     rng = np.random.default_rng(4)
     scans = [(points + rng.normal(0, 0.02, points.shape), origin) for _ in range(20)]
-    shared, errors = GridMap(0.05), []
-
-    def write():
-        for p, o in scans:
-            shared.insert_scan(p, o)
-
-    def read():
-        try:
-            for _ in range(50):
-                shared.occupancy(points)
-                shared.cells(occupied_only=True)
-        except Exception as exc:   # pragma: no cover - reported below
-            errors.append(exc)
-
-    threads = [threading.Thread(target=write)] + [threading.Thread(target=read) for _ in range(3)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    shared, sequential, errors = share_between_threads(
+        lambda: GridMap(0.05), scans,
+        lambda m: (m.occupancy(points), m.cells(occupied_only=True)))
     assert not errors
-    sequential = GridMap(0.05)
-    for p, o in scans:
-        sequential.insert_scan(p, o)
     assert_same_cells(grid_values(shared), grid_values(sequential))
 
 

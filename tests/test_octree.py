@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from _helpers import share_between_threads
 from conftest import data_path
 from occgp import OccupancyOctree
 from octomap_reference import leaf_values, octomap_insert, ray_mode_reference
@@ -315,35 +316,13 @@ def test_graph2tree_reads_what_occgp_writes_and_agrees(tmp_path):
 
 def test_threads_share_a_tree_safely(tiny_room):
     """Queries from several threads while another inserts: no crash, same final map."""
-    import threading
-
     points, origin = tiny_room
     rng = np.random.default_rng(4)
     scans = [(points + rng.normal(0, 0.02, points.shape), origin) for _ in range(20)]
-    shared = OccupancyOctree(0.05)
-    errors = []
-
-    def write():
-        for p, o in scans:
-            shared.insert_scan(p, o)
-
-    def read():
-        try:
-            for _ in range(50):
-                shared.occupancy(points)
-                shared.leaves(occupied_only=True)
-        except Exception as exc:   # pragma: no cover - reported below
-            errors.append(exc)
-
-    threads = [threading.Thread(target=write)] + [threading.Thread(target=read) for _ in range(3)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    shared, sequential, errors = share_between_threads(
+        lambda: OccupancyOctree(0.05), scans,
+        lambda m: (m.occupancy(points), m.leaves(occupied_only=True)))
     assert not errors
-    sequential = OccupancyOctree(0.05)
-    for p, o in scans:
-        sequential.insert_scan(p, o)
     assert_same_leaves(shared, sequential)
 
 

@@ -73,25 +73,16 @@ def assert_same_grid(a, b):
 @pytest.mark.parametrize("name,scans,resolution", SCENE_PARAMS)
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 @pytest.mark.parametrize("method", METHODS)
-def test_octree_is_identical_for_every_n_jobs(name, scans, resolution, mode, method):
+@pytest.mark.parametrize("cls, assert_same", [(OccupancyOctree, assert_same_octree),
+                                              (GridMap, assert_same_grid)],
+                         ids=["octree", "grid"])
+def test_map_is_identical_for_every_n_jobs(cls, assert_same, name, scans, resolution, mode,
+                                           method):
     kwargs = dict(mode=mode, method=method, superray_threshold=3)
-    ref, ref_counts = build(OccupancyOctree, scans, resolution, n_jobs=1, **kwargs)
+    ref, ref_counts = build(cls, scans, resolution, n_jobs=1, **kwargs)
     for n_jobs in N_JOBS[1:]:
-        m, counts = build(OccupancyOctree, scans, resolution, n_jobs=n_jobs, **kwargs)
-        assert_same_octree(m, ref)
-        # (superray+culling backs off from super rays by measured times: its counts vary)
-        assert counts == ref_counts or method == "superray+culling", n_jobs
-
-
-@pytest.mark.parametrize("name,scans,resolution", SCENE_PARAMS)
-@pytest.mark.parametrize("mode", ["scan", "ray"])
-@pytest.mark.parametrize("method", METHODS)
-def test_grid_is_identical_for_every_n_jobs(name, scans, resolution, mode, method):
-    kwargs = dict(mode=mode, method=method, superray_threshold=3)
-    ref, ref_counts = build(GridMap, scans, resolution, n_jobs=1, **kwargs)
-    for n_jobs in N_JOBS[1:]:
-        m, counts = build(GridMap, scans, resolution, n_jobs=n_jobs, **kwargs)
-        assert_same_grid(m, ref)
+        m, counts = build(cls, scans, resolution, n_jobs=n_jobs, **kwargs)
+        assert_same(m, ref)
         # (superray+culling backs off from super rays by measured times: its counts vary)
         assert counts == ref_counts or method == "superray+culling", n_jobs
 

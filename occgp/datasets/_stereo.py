@@ -34,6 +34,7 @@ from tqdm.auto import tqdm
 from .._validation import (as_point, as_points, check_bool, check_choice, check_int, check_real,
                            check_seed)
 from ._geometry import Box, rotation_matrix
+from ._render import camera_rotation
 from ..io._scan import Scan
 from ._scenes import Scene
 
@@ -265,22 +266,12 @@ class StereoCamera:
 
     def _rays(self, position, look_at):
         """Unit ray directions, row-major over the image, and the optical axis."""
-        forward = look_at - position
-        norm = np.linalg.norm(forward)
-        if not norm > 0:
-            raise ValueError(f"look_at must differ from position, got {look_at.tolist()} for both")
-        forward = forward / norm
-        right = np.cross(forward, [0.0, 0.0, 1.0])
-        if not np.linalg.norm(right) > 1e-9:
-            raise ValueError("look_at must not lie straight above or below position "
-                             "(the camera's roll would be undefined)")
-        right /= np.linalg.norm(right)
-        up = np.cross(right, forward)
+        right, down, forward = camera_rotation(position, look_at).T
         f = self.focal_length
         u = (np.arange(self.width) + 0.5 - self.width / 2) / f
         v = (np.arange(self.height) + 0.5 - self.height / 2) / f
         v, u = np.meshgrid(v, u, indexing="ij")
-        dirs = forward + u.reshape(-1, 1) * right - v.reshape(-1, 1) * up
+        dirs = forward + u.reshape(-1, 1) * right + v.reshape(-1, 1) * down
         return dirs / np.linalg.norm(dirs, axis=1, keepdims=True), forward
 
     def capture(self, scene: Scene, position: ArrayLike, look_at: ArrayLike, *,
