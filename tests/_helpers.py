@@ -2,6 +2,8 @@
 
 import threading
 
+import numpy as np
+
 
 def share_between_threads(make_map, scans, read, n_readers=3):
     """Insert `scans` into one map from a thread while `n_readers` others call
@@ -30,3 +32,16 @@ def share_between_threads(make_map, scans, read, n_readers=3):
     for p, o in scans:
         sequential.insert_scan(p, o)
     return shared, sequential, errors
+
+
+def random_scans(rng, n_scans=3, n_points=60, spread=2.0, *, origins=0.5, near=0.2):
+    """`n_scans` scans of `n_points` random rays each, from origins drawn uniformly in
+    ``[-origins, origins]^3``, of lengths uniform in ``[near, spread]``."""
+    scans = []
+    for _ in range(n_scans):
+        origin = rng.uniform(-origins, origins, 3)
+        direction = rng.normal(size=(n_points, 3))
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        points = origin + direction * rng.uniform(near, spread, (n_points, 1))
+        scans.append((points, origin))
+    return scans

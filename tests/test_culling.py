@@ -5,7 +5,8 @@ import pytest
 
 from occgp import GridMap, OccupancyOctree
 from conftest import data_path
-from test_octree import assert_same_leaves, random_scans
+from _helpers import random_scans
+from test_octree import assert_same_leaves
 
 
 def room_sequence(rng, n_scans=8, n_points=600):

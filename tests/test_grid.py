@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from _helpers import share_between_threads
+from _helpers import random_scans, share_between_threads
 from conftest import data_path
 from occgp import GridMap, OccupancyOctree
 from octomap_reference import MAX_VAL, leaf_values, ray_mode_reference
@@ -15,16 +15,9 @@ from octomap_reference import MAX_VAL, leaf_values, ray_mode_reference
 PARAMS = dict(prob_hit=0.75, prob_miss=0.35, clamping_min=0.12, clamping_max=0.97)
 
 
-def random_scans(rng, n_scans=4, n_points=150, spread=2.0):
+def grid_scans(rng, n_scans=4, n_points=150):
     """Scans of random rays from origins scattered around the map's center."""
-    scans = []
-    for _ in range(n_scans):
-        origin = rng.uniform(-0.7, 0.7, 3)
-        direction = rng.normal(size=(n_points, 3))
-        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-        points = origin + direction * rng.uniform(0.1, spread, (n_points, 1))
-        scans.append((points, origin))
-    return scans
+    return random_scans(rng, n_scans, n_points, origins=0.7, near=0.1)
 
 
 def with_revisits(scans):
@@ -61,7 +54,7 @@ def build_both(scans, resolution, **kwargs):
 @pytest.mark.parametrize("max_range", [None, 1.1])
 @pytest.mark.parametrize("resolution", [0.05, 0.1])
 def test_random_scans_equal_octree_cell_for_cell(mode, max_range, resolution):
-    scans = with_revisits(random_scans(np.random.default_rng(0)))
+    scans = with_revisits(grid_scans(np.random.default_rng(0)))
     grid, tree = build_both(scans, resolution, mode=mode, max_range=max_range)
     expected = leaf_values(tree)
     assert_same_cells(grid_values(grid), expected)
@@ -82,7 +75,7 @@ def test_tiny_room_equals_octree_cell_for_cell(tiny_room, mode, max_range):
 
 @pytest.mark.parametrize("max_range", [None, 0.9])
 def test_ray_mode_equals_pure_python_reference(max_range):
-    scans = with_revisits(random_scans(np.random.default_rng(1), n_scans=3, n_points=40))
+    scans = with_revisits(grid_scans(np.random.default_rng(1), n_scans=3, n_points=40))
     grid = GridMap(0.1)
     for points, origin in scans:
         grid.insert_scan(points, origin, mode="ray", max_range=max_range)
@@ -102,7 +95,7 @@ def test_real_scan_equals_octree():
 
 
 def test_weighted_rays_count_as_copies():
-    (points, origin), = random_scans(np.random.default_rng(5), n_scans=1, n_points=30)
+    (points, origin), = grid_scans(np.random.default_rng(5), n_scans=1, n_points=30)
     weights = np.random.default_rng(6).integers(1, 6, len(points)).astype(np.uint32)
     weighted = GridMap(0.1)
     weighted._insert(points.astype(np.float32), origin.astype(np.float32), -1.0, True, False,

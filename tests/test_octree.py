@@ -7,21 +7,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from _helpers import share_between_threads
+from _helpers import random_scans, share_between_threads
 from conftest import data_path
 from occgp import OccupancyOctree
 from octomap_reference import leaf_values, octomap_insert, ray_mode_reference
-
-
-def random_scans(rng, n_scans=3, n_points=60, spread=2.0):
-    scans = []
-    for _ in range(n_scans):
-        origin = rng.uniform(-0.5, 0.5, 3)
-        direction = rng.normal(size=(n_points, 3))
-        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-        points = origin + direction * rng.uniform(0.2, spread, (n_points, 1))
-        scans.append((points, origin))
-    return scans
 
 
 def assert_same_leaves(a, b):

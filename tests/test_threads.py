@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
+from _helpers import random_scans
 from occgp import GridMap, KNNMap, OccupancyOctree
 from occgp._status import Status
 from occgp.cli import main
@@ -11,7 +12,6 @@ from occgp.datasets import structured_room
 from occgp.io import write_pcd
 from occgp.knn import ScanReplay
 from test_culling import room_sequence
-from test_octree import random_scans
 
 N_JOBS = [1, 2, 3, 4, -1]
 METHODS = ["plain", "culling", "superray", "superray+culling"]
