@@ -556,7 +556,7 @@ def test_set_params_survive_pickle_and_load(tmp_path):
     (dict(prob_hit="0.7"), TypeError, r"prob_hit must be a real number"),
     (dict(prob_hit=0.8, prob_miss=1e30), ValueError, r"prob_miss"),
     (dict(resolution=0.2), ValueError, r"resolution is fixed"),
-    (dict(k=3), ValueError, r"'k' is not a parameter set_params can change"),
+    (dict(k=3), ValueError, r"'k' is not a parameter of OccupancyOctree"),
 ])
 def test_set_params_rejects_and_changes_nothing(params, exc, match):
     m = OccupancyOctree(RES)

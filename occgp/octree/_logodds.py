@@ -11,12 +11,14 @@ projection and frontiers (``occgp/nav/_planning.py``).
 
 from __future__ import annotations
 
+from numbers import Real
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
+from .._params import Check, Interval, ParamsMixin
 from .._octree import TREE_MAX_VAL
 from ..nav import _planning
 from . import _outputs
@@ -98,6 +100,23 @@ class LogOddsMap:
     :meth:`frontiers` (``occgp/nav/_planning.py``) are functions bound here.
     """
 
+    #: The constructor's parameters and what each may be (occgp._params; the maps'
+    #: get_params / set_params read it).
+    _parameter_constraints = {
+        "resolution": [Check(check_resolution, "a resolution in RESOLUTION_RANGE")],
+        "prob_hit": [Interval(Real, 0.5, 1.0, closed="neither")],
+        "prob_miss": [Interval(Real, 0.0, 0.5, closed="neither")],
+        "clamping_min": [Interval(Real, 0.0, 0.5, closed="neither")],
+        "clamping_max": [Interval(Real, 0.5, 1.0, closed="neither")],
+        "occupancy_threshold": [Check(check_probability, "a probability")],
+        "n_jobs": [None, Check(check_n_jobs, "an int != 0, or None")],
+    }
+    _deprecated_params: dict[str, str] = {}
+    # occgp's one parameter mechanism, bound here rather than inherited (the maps'
+    # class chain stays short): the table above, the values in self._params
+    _get_param_names = classmethod(ParamsMixin._get_param_names.__func__)
+    get_params = ParamsMixin.get_params
+
     #: What the map is called in error messages.
     _kind = "map"
     #: After a scan where grouping its rays into super rays took longer than the
@@ -161,22 +180,8 @@ class LogOddsMap:
         self._superray_pause = self.SUPERRAY_BACKOFF
 
     # ------------------------------------------------------------------ parameters
-    def get_params(self, deep: bool = True) -> dict:
-        """The constructor's parameters (scikit-learn's ``get_params``).
-
-        Parameters
-        ----------
-        deep : bool, default=True
-            Accepted for scikit-learn's API; a map holds no nested estimators.
-
-        Returns
-        -------
-        params : dict
-            Parameter name to value (``type(m)(**m.get_params())`` and
-            :func:`sklearn.base.clone` build an empty map with the same
-            parameters).
-        """
-        return dict(self._params)
+    def _get_param(self, name: str) -> Any:
+        return self._params.get(name)
 
     @property
     def resolution(self) -> float:
@@ -342,10 +347,9 @@ class LogOddsMap:
         TypeError
             If a value is not a real number.
         ValueError
-            If a name is not a settable parameter of this map (subclasses such
-            as :class:`occgp.KNNMap`, whose sensor model has other parameters,
-            have none), `resolution` differs from the map's, or a value lies
-            outside the constructor's range. The map is then unchanged.
+            If a name is not a parameter of the map's constructor, `resolution`
+            differs from the map's, or a value lies outside the constructor's
+            range. The map is then unchanged.
 
         Examples
         --------
@@ -354,23 +358,17 @@ class LogOddsMap:
         >>> m.prob_hit, m.get_params()["clamping_max"]
         (0.9, 0.99)
         """
-        settable = [k for k in _SENSOR_PARAMS + _RUN_PARAMS if k in self._params]
-        for name, value in params.items():
-            if name == "resolution" and "resolution" in self._params:
-                if value != self.resolution:
-                    raise ValueError(f"resolution is fixed at construction ({self.resolution!r}), "
-                                     f"got {value!r}; build a new map instead")
-            elif name not in settable:
-                raise ValueError(f"{name!r} is not a parameter set_params can change on "
-                                 f"{type(self).__name__} (settable: "
-                                 f"{', '.join(settable) or 'none'})")
-        if not settable:
-            return self
-        new = check_params({**self._params, **{k: v for k, v in params.items()
-                                               if k != "resolution"}})
-        self._set_sensor_model(*(new[k] for k in _SENSOR_PARAMS))
-        self._params = new
-        return self
+        return ParamsMixin.set_params(self, **params)
+
+    def _check_params_together(self, params: dict) -> dict:
+        if params["resolution"] != self.resolution:
+            raise ValueError(f"resolution is fixed at construction ({self.resolution!r}), "
+                             f"got {params['resolution']!r}; build a new map instead")
+        return check_params(params)
+
+    def _set_checked_params(self, params: dict, checked: dict) -> None:
+        self._set_sensor_model(*(checked[k] for k in _SENSOR_PARAMS))
+        self._params = checked
 
     # ------------------------------------------------------------------ maps out
     save_ply = _outputs.save_ply
