@@ -5,10 +5,14 @@ import threading
 import numpy as np
 
 
-def share_between_threads(make_map, scans, read, n_readers=3):
-    """Insert `scans` into one map from a thread while `n_readers` others call
-    ``read(map)`` 50 times each; return that map, one built from `scans` in a single
-    thread, and the exceptions the readers raised."""
+def share_between_threads(make_map, room, read, n_readers=3):
+    """Insert 20 noisy copies of the scan `room` (points, origin) into one map from a
+    thread while `n_readers` others call ``read(map, points)`` 50 times each; return
+    that map, one built from the same scans in a single thread, and the exceptions
+    the readers raised."""
+    points, origin = room
+    rng = np.random.default_rng(4)
+    scans = [(points + rng.normal(0, 0.02, points.shape), origin) for _ in range(20)]
     shared, errors = make_map(), []
 
     def write():
@@ -18,7 +22,7 @@ def share_between_threads(make_map, scans, read, n_readers=3):
     def reader():
         try:
             for _ in range(50):
-                read(shared)
+                read(shared, points)
         except Exception as exc:   # pragma: no cover - reported by the caller
             errors.append(exc)
 

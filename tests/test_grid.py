@@ -203,12 +203,9 @@ def test_corrupt_payload_is_refused(small_map):
 
 
 def test_threads_share_a_map_safely(tiny_room):
-    points, origin = tiny_room
-    rng = np.random.default_rng(4)
-    scans = [(points + rng.normal(0, 0.02, points.shape), origin) for _ in range(20)]
     shared, sequential, errors = share_between_threads(
-        lambda: GridMap(0.05), scans,
-        lambda m: (m.occupancy(points), m.cells(occupied_only=True)))
+        lambda: GridMap(0.05), tiny_room,
+        lambda m, points: (m.occupancy(points), m.cells(occupied_only=True)))
     assert not errors
     assert_same_cells(grid_values(shared), grid_values(sequential))
 

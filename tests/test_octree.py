@@ -305,12 +305,9 @@ def test_graph2tree_reads_what_occgp_writes_and_agrees(tmp_path):
 
 def test_threads_share_a_tree_safely(tiny_room):
     """Queries from several threads while another inserts: no crash, same final map."""
-    points, origin = tiny_room
-    rng = np.random.default_rng(4)
-    scans = [(points + rng.normal(0, 0.02, points.shape), origin) for _ in range(20)]
     shared, sequential, errors = share_between_threads(
-        lambda: OccupancyOctree(0.05), scans,
-        lambda m: (m.occupancy(points), m.leaves(occupied_only=True)))
+        lambda: OccupancyOctree(0.05), tiny_room,
+        lambda m, points: (m.occupancy(points), m.leaves(occupied_only=True)))
     assert not errors
     assert_same_leaves(shared, sequential)
 
