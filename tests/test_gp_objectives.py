@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
-from scipy.optimize import approx_fprime
 from scipy.stats import norm
 
+from _helpers import assert_gradient_matches
 from occgp.gp import ClenshawCurtis, Matern32, SparseKernel, SquaredExponential, integral_kernel
 from occgp.gp._gpr import loo_log_predictive, optimize_hyperparameters
 
@@ -32,14 +32,7 @@ def test_loo_gradient(name, dim):
     kernel = KERNELS[name](dim)
     S, E, y = _data(dim)
     theta = np.r_[kernel.theta, np.log(0.05)]
-    quadrature = ClenshawCurtis()
-
-    def value(t):
-        return loo_log_predictive(t, kernel, quadrature, S, E, y)[0]
-
-    v, grad = loo_log_predictive(theta, kernel, quadrature, S, E, y)
-    assert grad.shape == theta.shape
-    assert_allclose(grad, approx_fprime(theta, value, 1e-7), rtol=1e-4, atol=1e-5)
+    assert_gradient_matches(loo_log_predictive, theta, kernel, ClenshawCurtis(), S, E, y)
 
 
 def test_loo_value_is_the_sum_of_left_out_predictions():

@@ -8,6 +8,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 
+from _helpers import assert_prediction_shapes
 from occgp.gp._gpom import GPOM
 from occgp.gp._gpr import JITTER, log_marginal_likelihood
 from occgp.gp._kernels import Matern32, SparseKernel, SquaredExponential
@@ -75,14 +76,7 @@ def test_output_shapes(dim):
     rng = np.random.default_rng(0)
     hits = rng.uniform(1.0, 2.0, (6, dim))
     m = GPOM(optimizer=False).fit(hits, np.zeros_like(hits), hits)
-    X = rng.uniform(-1.0, 3.0, (5, dim))
-    mean = m.predict(X)
-    mean2, var = m.predict(X, return_var=True)
-    proba = m.predict_proba(X)
-    assert mean.shape == var.shape == proba.shape == (5,)
-    assert_array_equal(mean, mean2)
-    assert ((proba >= 0) & (proba <= 1)).all()
-    assert m.predict(np.empty((0, dim))).shape == (0,)
+    assert_prediction_shapes(m, rng.uniform(-1.0, 3.0, (5, dim)))
 
 
 def _reference(m, X):

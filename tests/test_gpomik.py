@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 from numpy.testing import assert_allclose, assert_array_equal
-from scipy.optimize import approx_fprime
 from scipy.stats import multivariate_normal
 from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 from sklearn.gaussian_process.kernels import RBF
 
+from _helpers import assert_gradient_matches, assert_prediction_shapes
 from occgp.gp import (GPOMIK, ClenshawCurtis, Matern32, Simpson, SparseKernel,
                       SquaredExponential, integral_kernel)
 from occgp.gp._gpr import log_marginal_likelihood
@@ -82,14 +82,8 @@ def test_log_marginal_likelihood_gradient(name, dim):
     X_starts, X_ends = np.vstack([hits, starts]), np.vstack([hits, ends])
     y = np.r_[np.ones(5), -np.linalg.norm(ends - starts, axis=1)]
     theta = np.r_[kernel.theta, np.log(0.05)]
-    quadrature = ClenshawCurtis()
-
-    def lml(t):
-        return log_marginal_likelihood(t, kernel, quadrature, X_starts, X_ends, y)[0]
-
-    value, grad = log_marginal_likelihood(theta, kernel, quadrature, X_starts, X_ends, y)
-    assert grad.shape == theta.shape
-    assert_allclose(grad, approx_fprime(theta, lml, 1e-7), rtol=1e-4, atol=1e-5)
+    value = assert_gradient_matches(log_marginal_likelihood, theta, kernel, ClenshawCurtis(),
+                                    X_starts, X_ends, y)
     # the value: a Gaussian log density with K + (noise + jitter) I
     K = integral_kernel(kernel, X_starts, X_ends)
     cov = K + (0.05 + 1e-10 * np.mean(np.diag(K))) * np.eye(len(y))
@@ -121,14 +115,8 @@ def test_fit_returns_self_and_output_shapes(dim):
     m = GPOMIK(optimizer=False)
     assert m.fit(hits, np.zeros_like(hits), hits) is m
     assert m.n_dims_ == dim and m.n_accepted_ == 10 and m.n_rejected_ == 0
-    X = rng.uniform(-1.0, 3.0, (7, dim))
-    mean = m.predict(X)
-    mean2, var = m.predict(X, return_var=True)
-    proba = m.predict_proba(X)
-    assert mean.shape == var.shape == proba.shape == (7,)
-    assert_array_equal(mean, mean2)
-    assert (var >= 0).all() and ((proba >= 0) & (proba <= 1)).all()
-    assert m.predict(np.empty((0, dim))).shape == (0,)
+    var = assert_prediction_shapes(m, rng.uniform(-1.0, 3.0, (7, dim)))
+    assert (var >= 0).all()
     assert len(m.plsc_) == 2 and m.plsc_[0] > 0
     assert m.update(hits + 0.5) is m and m.n_accepted_ == 15
 

@@ -36,8 +36,8 @@ import numbers
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_numeric, check_real
-from ._range import LidarModel
+from .._validation import check_real
+from ._range import LidarModel, check_pixels
 
 __all__ = ["SensorEffects", "apply_sensor_effects", "solid_reflectivity", "REFLECTIVITY"]
 
@@ -258,13 +258,7 @@ def _check_rng(rng):
 
 
 def _check_pixels(arr, model, name, low, high):
-    arr = as_numeric(arr, name)
-    if arr.shape != model.shape:
-        raise ValueError(f"{name} must have shape {model.shape} (the model's rows, cols), "
-                         f"got {arr.shape}")
-    arr = np.asarray(arr, dtype=np.float64)
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name} must be finite, found NaN or inf")
+    arr = check_pixels(arr, model, name)
     if arr.size and (arr.min() < low or arr.max() > high):
         raise ValueError(f"{name} must lie in [{low:g}, {high:g}], got values from "
                          f"{float(arr.min())!r} to {float(arr.max())!r}")

@@ -83,14 +83,22 @@ def _check_model(model):
     return model
 
 
-def _check_image(image, model, name="image"):
-    arr = as_numeric(image, name)
+def check_pixels(arr, model, name, note=""):
+    """`arr` as float64, checked to hold real numbers, to have `model`'s image shape
+    (rows, cols) and to be finite; the errors name `name` (`note` follows "must be
+    finite" in the last one)."""
+    arr = as_numeric(arr, name)
     if arr.shape != model.shape:
         raise ValueError(f"{name} must have shape {model.shape} (the model's rows, cols), "
                          f"got {arr.shape}")
     arr = np.asarray(arr, dtype=np.float64)
     if not np.isfinite(arr).all():
-        raise ValueError(f"{name} must be finite (0 marks no return), found NaN or inf")
+        raise ValueError(f"{name} must be finite{note}, found NaN or inf")
+    return arr
+
+
+def _check_image(image, model, name="image"):
+    arr = check_pixels(image, model, name, " (0 marks no return)")
     if (arr < 0).any():
         raise ValueError(f"{name} must hold ranges >= 0 (0 marks no return), "
                          f"found {float(arr.min())!r}")
