@@ -216,38 +216,8 @@ def m():
     return GridMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
 
 
-@pytest.mark.parametrize("bad", [np.zeros((5, 2)), np.zeros(3), [[1, 2]]])
-def test_insert_rejects_bad_shape(m, bad):
-    with pytest.raises(ValueError, match=r"points must have shape \(n_points, 3\), got"):
-        m.insert_scan(bad, [0.0, 0.0, 0.0])
-
-
-@pytest.mark.parametrize("bad", [[["a", "b", "c"]], np.zeros((2, 3), dtype=complex)])
-def test_insert_rejects_non_numeric(m, bad):
-    with pytest.raises(TypeError, match="points must hold real numbers, got dtype"):
-        m.insert_scan(bad, [0.0, 0.0, 0.0])
-
-
-@pytest.mark.parametrize("value", [np.nan, np.inf])
-def test_insert_rejects_non_finite_points_and_keeps_map(m, value):
-    before = grid_values(m)
-    pts = np.ones((10, 3))
-    pts[7, 1] = value
-    with pytest.raises(ValueError, match=r"points must be finite: 1 of 10 rows .* row 7"):
-        m.insert_scan(pts, [0, 0, 0])
-    assert grid_values(m) == before
-
-
-@pytest.mark.parametrize("bad, match", [
-    ([0, 0], r"origin must have shape \(3,\), got \(2,\)"),
-    ([0, np.nan, 0], "origin must be finite"),
-    (["x", "y", "z"], "origin must hold real numbers"),
-])
-def test_insert_rejects_bad_origin(m, bad, match):
-    err = TypeError if "real numbers" in match else ValueError
-    with pytest.raises(err, match=match):
-        m.insert_scan([[1.0, 1, 1]], bad)
-
+# the checks of `points` and `origin` the grid shares with the octree are in
+# test_octree_errors.py (its fixture any_map)
 
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 def test_points_outside_key_range_rejected_and_map_unchanged(m, mode):

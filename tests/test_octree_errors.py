@@ -1,10 +1,15 @@
-"""Bad input to OccupancyOctree: a clear error naming the argument, and the map unchanged."""
+"""Bad input to OccupancyOctree (and to GridMap, for the checks of insert_scan they share):
+a clear error naming the argument, and the map unchanged."""
 
 import numpy as np
 import pytest
 
-from occgp import OccupancyOctree
+from occgp import GridMap, OccupancyOctree
 from octomap_reference import leaf_values
+from test_grid import grid_values
+
+#: The value of each cell of a map, by its class.
+VALUES = {OccupancyOctree: leaf_values, GridMap: grid_values}
 
 
 @pytest.fixture
@@ -12,17 +17,23 @@ def m():
     return OccupancyOctree(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
 
 
+@pytest.fixture(params=[OccupancyOctree, GridMap], ids=["octree", "grid"])
+def any_map(request):
+    """The octree or the grid, after one scan (for the input checks they share)."""
+    return request.param(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
+
+
 @pytest.mark.parametrize("bad", [np.zeros((5, 2)), np.zeros(3), np.zeros((2, 3, 1)), [[1, 2]]])
-def test_insert_rejects_bad_shape(m, bad):
+def test_insert_rejects_bad_shape(any_map, bad):
     with pytest.raises(ValueError, match=r"points must have shape \(n_points, 3\), got"):
-        m.insert_scan(bad, [0.0, 0.0, 0.0])
+        any_map.insert_scan(bad, [0.0, 0.0, 0.0])
 
 
 @pytest.mark.parametrize("bad", [[["a", "b", "c"]], np.zeros((2, 3), dtype=complex),
                                  np.array([[None, 1, 2]], dtype=object)])
-def test_insert_rejects_non_numeric(m, bad):
+def test_insert_rejects_non_numeric(any_map, bad):
     with pytest.raises(TypeError, match="points must hold real numbers, got dtype"):
-        m.insert_scan(bad, [0.0, 0.0, 0.0])
+        any_map.insert_scan(bad, [0.0, 0.0, 0.0])
 
 
 def test_insert_rejects_ragged(m):
@@ -31,13 +42,14 @@ def test_insert_rejects_ragged(m):
 
 
 @pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf])
-def test_insert_rejects_non_finite_points_and_keeps_map(m, value):
-    before = leaf_values(m)
+def test_insert_rejects_non_finite_points_and_keeps_map(any_map, value):
+    values = VALUES[type(any_map)]
+    before = values(any_map)
     pts = np.ones((10, 3))
     pts[7, 1] = value
     with pytest.raises(ValueError, match=r"points must be finite: 1 of 10 rows .* row 7"):
-        m.insert_scan(pts, [0, 0, 0])
-    assert leaf_values(m) == before
+        any_map.insert_scan(pts, [0, 0, 0])
+    assert values(any_map) == before
 
 
 @pytest.mark.parametrize("bad, match", [
@@ -46,10 +58,10 @@ def test_insert_rejects_non_finite_points_and_keeps_map(m, value):
     ([0, np.nan, 0], "origin must be finite"),
     (["x", "y", "z"], "origin must hold real numbers"),
 ])
-def test_insert_rejects_bad_origin(m, bad, match):
+def test_insert_rejects_bad_origin(any_map, bad, match):
     err = TypeError if "real numbers" in match else ValueError
     with pytest.raises(err, match=match):
-        m.insert_scan([[1.0, 1, 1]], bad)
+        any_map.insert_scan([[1.0, 1, 1]], bad)
 
 
 def test_points_outside_key_range_rejected_and_map_unchanged(m):
