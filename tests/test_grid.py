@@ -216,8 +216,8 @@ def m():
     return GridMap(0.1).insert_scan([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 0])
 
 
-# the checks of `points` and `origin` the grid shares with the octree are in
-# test_octree_errors.py (its fixture any_map)
+# the checks the grid shares with the octree (points and origin of insert_scan, query
+# points, constructor parameters) are in test_octree_errors.py
 
 @pytest.mark.parametrize("mode", ["scan", "ray"])
 def test_points_outside_key_range_rejected_and_map_unchanged(m, mode):
@@ -242,28 +242,6 @@ def test_points_outside_key_range_rejected_and_map_unchanged(m, mode):
 def test_insert_rejects_bad_options(m, kwargs, err, match):
     with pytest.raises(err, match=match):
         m.insert_scan([[1.0, 0, 0]], [0, 0, 0], **kwargs)
-
-
-@pytest.mark.parametrize("kwargs, err, match", [
-    (dict(resolution=0.0), ValueError, r"resolution must lie in \(0.0, inf\), got 0.0"),
-    (dict(resolution="0.1"), TypeError, "resolution must be a real number, got str"),
-    (dict(prob_hit=1.0), ValueError, r"prob_hit must lie in \(0.5, 1.0\), got 1.0"),
-    (dict(prob_miss=0.6), ValueError, r"prob_miss must lie in \(0.0, 0.5\)"),
-    (dict(clamping_min=0.6), ValueError, r"clamping_min must lie in \(0.0, 0.5\)"),
-    (dict(clamping_max=0.4), ValueError, r"clamping_max must lie in \(0.5, 1.0\)"),
-    (dict(occupancy_threshold=1.5), ValueError, "occupancy_threshold must lie in"),
-])
-def test_constructor_rejects_bad_parameters(kwargs, err, match):
-    with pytest.raises(err, match=match):
-        GridMap(**{"resolution": 0.1, **kwargs})
-
-
-@pytest.mark.parametrize("method", ["occupancy", "log_odds", "is_occupied"])
-def test_queries_reject_bad_points(m, method):
-    with pytest.raises(ValueError, match=r"points must have shape \(n_points, 3\)"):
-        getattr(m, method)([1.0, 2.0, 3.0])
-    with pytest.raises(ValueError, match="points must be finite"):
-        getattr(m, method)([[np.nan, 0, 0]])
 
 
 def test_uninitialised_core_raises():

@@ -109,18 +109,19 @@ def test_insert_rejects_bad_options(m, kwargs, err, match):
     (dict(clamping_max=0.4), ValueError, r"clamping_max must lie in \(0.5, 1.0\)"),
     (dict(occupancy_threshold=1.5), ValueError, "occupancy_threshold must lie in"),
 ])
-def test_constructor_rejects_bad_parameters(kwargs, err, match):
+@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap], ids=["octree", "grid"])
+def test_constructor_rejects_bad_parameters(cls, kwargs, err, match):
     kwargs = {"resolution": 0.1, **kwargs}
     with pytest.raises(err, match=match):
-        OccupancyOctree(**kwargs)
+        cls(**kwargs)
 
 
 @pytest.mark.parametrize("method", ["occupancy", "log_odds", "is_occupied"])
-def test_queries_reject_bad_points(m, method):
+def test_queries_reject_bad_points(any_map, method):
     with pytest.raises(ValueError, match=r"points must have shape \(n_points, 3\)"):
-        getattr(m, method)([1.0, 2.0, 3.0])
+        getattr(any_map, method)([1.0, 2.0, 3.0])
     with pytest.raises(ValueError, match="points must be finite"):
-        getattr(m, method)([[np.nan, 0, 0]])
+        getattr(any_map, method)([[np.nan, 0, 0]])
 
 
 def test_queries_outside_key_range_are_unknown(m):
