@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._docfill import fill_doc
 from ._params import ParamsMixin
 from ._scan_input import check_min_range, far_enough
 from ._validation import (as_numeric, as_point, as_points, check_bool, check_choice, check_int,
@@ -327,6 +328,16 @@ def segment_ground(points: ArrayLike, *, distance: float = 0.04, angle: float = 
     return GroundPlane(np.abs(pts[:, 2] - ground_height) <= plane_distance, None)
 
 
+#: The Parameters of ScanFilter.masks and .apply (see :func:`occgp._docfill.fill_doc`).
+_FILTER_PARAMETERS = """\
+Parameters
+----------
+points : array-like of shape (n_points, 3)
+    The scan in the world frame, finite.
+origin : array-like of shape (3,)
+    The sensor's position in the world frame."""
+
+
 @dataclass(init=False, repr=True, eq=False)
 class ScanFilter(ParamsMixin):
     """The scan filters of octomap_server, in one object.
@@ -444,17 +455,13 @@ class ScanFilter(ParamsMixin):
         """
         return super().set_params(**params)
 
+    @fill_doc(filter_parameters=_FILTER_PARAMETERS)
     def masks(self, points: ArrayLike, origin: ArrayLike) -> tuple[NDArray[np.bool_],
                                                                   NDArray[np.bool_]]:
         """The masks :meth:`apply` selects with: the points to insert and the ground
         points (to insert as free with ``ground="free"``); disjoint.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            The scan in the world frame, finite.
-        origin : array-like of shape (3,)
-            The sensor's position in the world frame.
+        {filter_parameters}
 
         Returns
         -------
@@ -498,15 +505,11 @@ class ScanFilter(ParamsMixin):
             on_ground &= far
         return keep, on_ground
 
+    @fill_doc(filter_parameters=_FILTER_PARAMETERS)
     def apply(self, points: ArrayLike, origin: ArrayLike):
         """Filter one scan.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            The scan in the world frame, finite.
-        origin : array-like of shape (3,)
-            The sensor's position in the world frame.
+        {filter_parameters}
 
         Returns
         -------
