@@ -16,9 +16,10 @@ AUC of the map on the test set (:mod:`occgp.evaluation`). Data sets:
   ``n_jobs``), ``BGKMap(0.1)`` and ``AKIMap(0.1, random_state=0)``, each with
   its defaults otherwise, scan by scan; ``--max-range R`` gives all three the
   same range limit (the octree's ``insert_scan(..., max_range=R)`` cuts the
-  longer rays there, the kernel maps' ``max_range=R`` drops those beams whole;
-  an AKIMap without ``max_range``, in an older baseline, gets the scans with
-  those points dropped: the same map). Scans ``i % 10 == 5`` are
+  longer rays there, and so do the kernel maps' ``max_range=R``; a baseline
+  from before ``far_beams`` drops those beams whole, and an AKIMap without
+  ``max_range``, in an older one still, gets the scans with those points
+  dropped: the same map, so ``--compare`` differs there). Scans ``i % 10 == 5`` are
   held out: their end points are the occupied test points, and each gives one
   free test point drawn uniformly between 0.3 m and 0.2 m before it on its ray
   (seed 0). ``--scans`` picks a slice of the training scans (``::4``: every

@@ -27,7 +27,7 @@ MAPS = {
     "octree": "OccupancyOctree(0.05), method='auto' (culling region and super rays)",
     "plain": "OccupancyOctree(0.05), method='plain' (liboctomap's insertPointCloud)",
     "grid": "GridMap(0.05), method='auto'",
-    "bgk": "BGKMap(0.05, max_range=8) (la3dm's defaults)",
+    "bgk": "BGKMap(0.05, max_range=8, far_beams='drop') (la3dm's defaults)",
 }
 
 
@@ -54,7 +54,7 @@ def make_map(kind: str):
     from occgp import BGKMap, GridMap, OccupancyOctree
 
     if kind == "bgk":
-        m = BGKMap(0.05, max_range=8.0)
+        m = BGKMap(0.05, max_range=8.0, far_beams="drop")
         return m, m.insert_scan, m.memory_usage
     m = GridMap(0.05) if kind == "grid" else OccupancyOctree(0.05)
     method = "plain" if kind == "plain" else "auto"

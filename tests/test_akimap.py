@@ -562,10 +562,10 @@ def far_and_near_scan():
     return np.vstack([near, far[:, [1, 0, 2]]]), origin
 
 
-def test_max_range_drops_the_beams_beyond_it_whole():
+def test_far_beams_drop_drops_the_beams_beyond_max_range_whole():
     points, origin = far_and_near_scan()
-    samples, labels = AKIMap(0.1, max_range=3.0, random_state=0).training_data(points,
-                                                                              origin)
+    samples, labels = AKIMap(0.1, max_range=3.0, far_beams="drop",
+                             random_state=0).training_data(points, origin)
     hits, frees = samples[labels == 1], samples[labels == 0]
     assert_array_equal(hits[:, 0], 2.0)                        # only the near wall's
     # no free sample on a beam to the far wall (those run along +y, x at most 1 / 6)
@@ -576,13 +576,30 @@ def test_max_range_drops_the_beams_beyond_it_whole():
     assert (lab == 1).sum() == len(np.unique(np.floor(points / 0.1), axis=0))
 
 
-def test_max_range_is_the_map_of_the_pre_filtered_scan():
+def test_max_range_cuts_the_beams_beyond_it():
+    """far_beams="cut" (the default): the far wall gives no occupied sample, and free
+    samples on its beams up to max_range only, one beam per cell of the cut ends."""
+    points, origin = far_and_near_scan()
+    samples, labels = AKIMap(0.1, max_range=3.0, random_state=0).training_data(points,
+                                                                              origin)
+    hits, frees = samples[labels == 1], samples[labels == 0]
+    assert_array_equal(hits[:, 0], 2.0)                        # only the near wall's
+    on_far = frees[frees[:, 1] > np.abs(frees[:, 0]) * 6.0 + 0.01]
+    assert len(on_far) and np.linalg.norm(on_far - origin, axis=1).max() < 3.0
+    assert np.linalg.norm(on_far - origin, axis=1).max() > 2.5
+    # the far beams are drawn after the near ones: those free samples are unchanged
+    dropped, lab = AKIMap(0.1, max_range=3.0, far_beams="drop",
+                          random_state=0).training_data(points, origin)
+    assert_array_equal(dropped[lab == 0], frees[:int((lab == 0).sum())])
+
+
+def test_far_beams_drop_is_the_map_of_the_pre_filtered_scan():
     points, origin = far_and_near_scan()
     origin = np.array([0.03, -0.02, 0.01])
     for limit in (3.0, 5.9, float(np.linalg.norm(points[-1] - origin))):
         kept = points[np.linalg.norm(points - origin, axis=1) <= limit]
         assert 0 < len(kept) <= len(points)
-        got = AKIMap(0.1, max_range=limit, random_state=0, n_jobs=2)
+        got = AKIMap(0.1, max_range=limit, far_beams="drop", random_state=0, n_jobs=2)
         want = AKIMap(0.1, random_state=0)
         for _ in range(2):                                  # the random streams too
             got.update(points, origin)
@@ -600,7 +617,8 @@ def test_max_range_none_or_beyond_every_beam_keeps_all():
         for x, y in zip(m.cells(), default.cells()):
             assert_array_equal(x, y)
     # every beam dropped: the scan adds nothing (the origin alone is no sample)
-    assert AKIMap(0.1, max_range=1.0, random_state=0).update(points, origin).num_cells == 0
+    assert AKIMap(0.1, max_range=1.0, far_beams="drop",
+                  random_state=0).update(points, origin).num_cells == 0
 
 
 @pytest.mark.parametrize("value, exc, match", [

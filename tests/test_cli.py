@@ -117,15 +117,11 @@ def test_map_command_max_range_for_kernel_maps(tmp_path, capsys):
         out = tmp_path / f"{method}.ot"
         assert main(["map", *map(str, paths), "-o", str(out), "--method", method,
                      "--max-range", "3", "--no-progress"]) == 0
-        if method == "bgk":
-            expected = BGKMap(0.1, max_range=3.0)
-        else:                       # akimap gets the end points within 3 m only
-            expected = AKIMap(0.1, random_state=0)
+        # both get it as their max_range: the longer beams cut there
+        expected = (BGKMap(0.1, max_range=3.0) if method == "bgk"
+                    else AKIMap(0.1, max_range=3.0, random_state=0))
         for s in scans:
-            pts = s.points.astype(np.float64)
-            if method == "akimap":
-                pts = pts[np.linalg.norm(pts - s.origin, axis=1) <= 3.0]
-            expected.update(pts, s.origin)
+            expected.update(s.points.astype(np.float64), s.origin)
         got, want = OccupancyOctree.load(out).leaves(), expected.to_octree().leaves()
         assert len(got.centers) == len(want.centers) > 0
         np.testing.assert_array_equal(np.sort(got.log_odds), np.sort(want.log_odds))
@@ -520,8 +516,18 @@ def test_map_command_reports_beams_beyond_max_range(tmp_path, capsys):
     assert 0 < dropped < kept
     assert main(["map", *map(str, paths), "-o", str(tmp_path / "m.bt"), "--method", "bgk",
                  "--max-range", "3", "--n-jobs", "2", "--no-progress"]) == 0
+    assert (f"{far:,} of 1,000 points lie beyond max_range 3 m: BGK cut {dropped:,} of "
+            f"its {kept + dropped:,} beams (to the end points' centroids per cube of "
+            f"ds_resolution) there (free space only)") in capsys.readouterr().out
+    # la3dm's rule, asked for: the same beams dropped whole
+    assert main(["map", *map(str, paths), "-o", str(tmp_path / "m.bt"), "--method", "bgk",
+                 "--max-range", "3", "--param", "far_beams=drop", "--no-progress"]) == 0
     assert (f"{far:,} of 1,000 points lie beyond max_range 3 m: BGK dropped {dropped:,} of "
             f"its {kept + dropped:,} beams") in capsys.readouterr().out
+    assert main(["map", *map(str, paths), "-o", str(tmp_path / "m.bt"), "--method", "akimap",
+                 "--max-range", "3", "--no-progress"]) == 0
+    assert (f"{far:,} of 1,000 points lie beyond max_range 3 m: AKIMap cut their beams "
+            f"there (free space only)") in capsys.readouterr().out
     assert main(["map", *map(str, paths), "-o", str(tmp_path / "m.bt"), "--max-range", "3",
                  "--no-progress"]) == 0
     assert f"{far:,} of 1,000 points lie beyond max_range 3 m: their rays were cut" in \

@@ -46,9 +46,10 @@ def test_voxel_centroids():
 def test_bgk_training_data_follows_la3dm():
     """Hits reduced to centroids, free samples every free_resolution metres (d < length)
     along each beam, one more at length - free_resolution on beams longer than
-    free_resolution, and the origin; beams longer than max_range dropped whole
-    (la3dm's get_training_data gives 0, 0.5, 0.73, 1.0 for this 1.23 m beam)."""
-    m = BGKMap(0.1, free_resolution=0.5, max_range=3.0)
+    free_resolution, and the origin; beams longer than max_range dropped whole with
+    far_beams="drop" (la3dm's get_training_data gives 0, 0.5, 0.73, 1.0 for this 1.23 m
+    beam)."""
+    m = BGKMap(0.1, free_resolution=0.5, max_range=3.0, far_beams="drop")
     points = np.array([[1.22, 0.0, 0.0], [1.24, 0.0, 0.0], [0.0, 5.0, 0.0]])
     samples, labels = m.training_data(points, [0.0, 0.0, 0.0])
     hits = samples[labels == 1]
@@ -56,6 +57,26 @@ def test_bgk_training_data_follows_la3dm():
     assert_allclose(hits, [[1.23, 0.0, 0.0]])                   # one centroid, long beam gone
     assert_allclose(np.sort(frees[:, 0]), [0.0, 0.5, 0.73, 1.0])  # origin, 0.5, 1.23 - 0.5, 1.0
     assert_allclose(frees[:, 1:], 0.0)
+
+
+def test_bgk_cut_beam_gives_the_free_samples_of_a_beam_to_max_range():
+    """far_beams="cut" (the default): a beam longer than max_range gives no occupied
+    sample, and the free samples of a beam ending at max_range (la3dm's beam_sample:
+    every free_resolution metres, and one at max_range - free_resolution)."""
+    near, far, cut_end = [[1.23, 0.0, 0.0]], [[0.0, 5.0, 0.0]], [[0.0, 3.0, 0.0]]
+    m = BGKMap(0.1, free_resolution=0.5, max_range=3.0)
+    assert m.far_beams == "cut"
+    samples, labels = m.training_data(np.vstack([near, far]), np.zeros(3))
+    assert_allclose(samples[labels == 1], near)             # no hit at 5 m, none at 3 m
+    frees = samples[labels == 0]
+    on_far = frees[frees[:, 1] > 0]
+    assert_allclose(np.sort(on_far[:, 1]), [0.5, 1.0, 1.5, 2.0, 2.5])   # 2.5 twice, merged
+    assert_allclose(on_far[:, [0, 2]], 0.0)
+    # the same free samples as the scan whose far point lay at max_range
+    ref, ref_labels = BGKMap(0.1, free_resolution=0.5).training_data(
+        np.vstack([near, cut_end]), np.zeros(3))
+    want = ref[ref_labels == 0]
+    assert_allclose(frees[np.lexsort(frees.T)], want[np.lexsort(want.T)])
 
 
 def test_bgk_last_beams_counts_the_kept_and_dropped_beams_of_an_accepted_update():
@@ -66,7 +87,7 @@ def test_bgk_last_beams_counts_the_kept_and_dropped_beams_of_an_accepted_update(
     assert m.last_beams_ == (0, 0)
     m.update(points, [0.0, 0.0, 0.0])
     assert m.last_beams_ == (1, 2)                          # two cubes merged, two far
-    m.update(points[2:], [0.0, 0.0, 0.0])                   # every beam dropped: no sample
+    m.update(points[2:], [0.0, 0.0, 0.0])                   # every beam cut: free samples
     assert m.last_beams_ == (0, 2) and m.num_cells > 0
     with pytest.raises(ValueError, match="points"):
         m.update([[np.nan, 0.0, 0.0]], [0.0, 0.0, 0.0])
@@ -234,6 +255,73 @@ def test_to_octree_holds_the_posterior_means(tmp_path):
     from occgp import OccupancyOctree
     back = OccupancyOctree.load(tmp_path / "bgk.bt")
     assert_array_equal(back.is_occupied(cells.centers), tree.is_occupied(cells.centers))
+
+
+# ---------------------------------------------------------------------- max_range
+KERNEL_MAPS = {"bgk": lambda **kw: BGKMap(0.1, **kw),
+               "akimap": lambda **kw: AKIMap(0.1, random_state=0, **kw)}
+
+
+def wall_and_far_point():
+    """A wall 2 m ahead (+x) of the origin and one end point 6 m to its side (+y)."""
+    y, z = np.meshgrid(np.linspace(-1, 1, 21), np.linspace(-0.5, 0.5, 11))
+    wall = np.column_stack([np.full(y.size, 2.0), y.ravel(), z.ravel()])
+    return np.vstack([wall, [[0.0, 6.0, 0.0]]]), np.zeros(3)
+
+
+@pytest.mark.parametrize("make", KERNEL_MAPS.values(), ids=KERNEL_MAPS.keys())
+def test_max_range_cuts_a_far_beam_free_up_to_it_and_none_beyond(make):
+    points, origin = wall_and_far_point()
+    m = make(max_range=4.0).update(points, origin)
+    assert m.far_beams == "cut"
+    c = m.cells()
+    on_beam = (np.abs(c.centers[:, 0]) < 0.3) & (np.abs(c.centers[:, 2]) < 0.3) \
+        & (c.centers[:, 1] > 1.5)                      # away from the beams to the wall
+    y = c.centers[on_beam, 1]
+    occupancy = c.alpha[on_beam] / (c.alpha[on_beam] + c.beta[on_beam])
+    assert len(y) and y.max() > 3.3                    # free evidence up to max_range
+    assert y.max() < 4.0 + 0.25                        # and none beyond (a kernel's reach)
+    assert np.all(occupancy < 0.5)                     # free only: no occupied cut end
+    assert not m.is_occupied([[0.0, 4.0, 0.0], [0.0, 3.95, 0.0]]).any()
+    assert np.isnan(m.occupancy([[0.0, 6.0, 0.0], [0.0, 5.0, 0.0]])).all()
+    # without a limit the far point is occupied; la3dm's rule drops its beam whole
+    assert make().update(points, origin).is_occupied([[0.0, 6.0, 0.0]])[0]
+    dropped = make(max_range=4.0, far_beams="drop").update(points, origin).cells()
+    assert not np.any((np.abs(dropped.centers[:, 0]) < 0.3)
+                      & (np.abs(dropped.centers[:, 2]) < 0.3) & (dropped.centers[:, 1] > 1.5))
+
+
+@pytest.mark.parametrize("make", KERNEL_MAPS.values(), ids=KERNEL_MAPS.keys())
+def test_far_beams_changes_nothing_without_max_range_or_far_beams(make):
+    """The map of max_range=None is the one either rule gives, and a limit beyond every
+    beam gives it too (the map of a scan whose beams all lie within max_range)."""
+    points, origin = wall_and_far_point()
+    want = make().update(points, origin).update(points + 0.03, origin)
+    for kw in (dict(far_beams="cut"), dict(far_beams="drop"), dict(max_range=1e30),
+               dict(max_range=6.5, far_beams="drop")):
+        m = make(**kw).update(points, origin).update(points + 0.03, origin)
+        assert_same_cells(m, want)
+
+
+@pytest.mark.parametrize("make", KERNEL_MAPS.values(), ids=KERNEL_MAPS.keys())
+def test_every_beam_cut_gives_free_evidence_only(make):
+    points, origin = wall_and_far_point()
+    m = make(max_range=1.0).update(points, origin)
+    assert m.num_cells > 0 and not m.is_occupied(m.cells().centers).any()
+    assert make(max_range=1.0, far_beams="drop").update(points, origin).num_cells == 0
+
+
+@pytest.mark.parametrize("value, exc", [("keep", ValueError), (None, ValueError),
+                                        ("CUT", ValueError), (1, ValueError)])
+def test_bad_far_beams(value, exc):
+    for make in KERNEL_MAPS.values():
+        with pytest.raises(exc, match=r"far_beams must be one of \('cut', 'drop'\)"):
+            make(far_beams=value)
+        m = make(max_range=1.0)
+        m.far_beams = value                            # set as an attribute: checked on use
+        with pytest.raises(exc, match="far_beams must be one of"):
+            m.update(*wall_and_far_point())
+        assert m.num_cells == 0
 
 
 # ---------------------------------------------------------------------- limits and bad input

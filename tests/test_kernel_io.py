@@ -23,6 +23,8 @@ MAKERS = {
     "aki-int": lambda: AKIMap(0.1, random_state=3),
     "aki-pcg": lambda: AKIMap(0.1, random_state=np.random.default_rng(5)),
     "aki-range": lambda: AKIMap(0.1, max_range=2.1, random_state=3),
+    "bgk-range": lambda: BGKMap(0.1, max_range=2.1),
+    "aki-drop": lambda: AKIMap(0.1, max_range=2.1, far_beams="drop", random_state=3),
     "aki-mt": lambda: AKIMap(0.1, variant="published",
                              random_state=np.random.Generator(np.random.MT19937(7))),
     "aki-philox": lambda: AKIMap(0.1, random_state=np.random.Generator(np.random.Philox(1))),
@@ -290,6 +292,35 @@ def test_akimap_max_range_is_saved_and_older_files_without_it_load_with_none(sav
     keys, alpha, beta = m._cells_arrays()
     back = restore_kernel_map(AKIMap, params, keys, alpha, beta)
     assert back.max_range is None and back.num_cells == m.num_cells
+
+
+@pytest.mark.parametrize("cls", [BGKMap, AKIMap])
+def test_far_beams_is_saved_and_older_files_without_it_load_with_their_rule(cls, tmp_path):
+    """Files and pickles written before far_beams existed: with a max_range, their maps
+    dropped the beams beyond it (far_beams="drop"); without one, the default."""
+    from occgp.kernel._kernel_io import restore_kernel_map
+    kw = {"random_state": 0} if cls is AKIMap else {}
+    for far_beams in ("cut", "drop"):
+        m = cls(0.1, max_range=2.1, far_beams=far_beams, **kw).update(*wall())
+        m.save(tmp_path / "m.npz")
+        assert cls.load(tmp_path / "m.npz").far_beams == far_beams
+    for max_range, rule in ((2.1, "drop"), (None, "cut")):
+        written = cls(0.1, max_range=max_range, far_beams=rule, **kw).update(*wall())
+        written.save(tmp_path / "new.npz")
+        with np.load(tmp_path / "new.npz") as z:
+            params = json.loads(str(z["params"]))
+        del params["far_beams"]                  # as written before far_beams existed
+        old = cls.load(rewrite(tmp_path / "new.npz", tmp_path / "old.npz",
+                               params=np.array(json.dumps(params))))
+        assert old.far_beams == rule and old.max_range == max_range
+        assert_same_map(old, written)
+        old.update(*wall(0.3))
+        assert_same_map(old, written.update(*wall(0.3)))    # and goes on by the same rule
+        keys, alpha, beta = written._cells_arrays()
+        assert restore_kernel_map(cls, dict(params), keys, alpha, beta).far_beams == rule
+    with pytest.raises(ValueError, match=r"bad parameters of a .*far_beams must be one of"):
+        cls.load(rewrite(tmp_path / "new.npz", tmp_path / "bad.npz",
+                         params=params_with(tmp_path / "new.npz", far_beams="keep")))
 
 
 def mt_state(key):

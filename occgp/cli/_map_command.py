@@ -355,12 +355,14 @@ def map_scans(paths, output: str | Path, *, resolution: float | None = None,
         The update mode (None: ``"scan"``); only for maps whose
         ``insert_scan`` takes it (the octree and the grid).
     max_range : float, default=None
-        Range limit in metres; None means none (a loaded BGK map keeps its
-        own). A map whose
+        Range limit in metres; None means none (a loaded kernel map keeps
+        its own). A map whose
         ``insert_scan`` takes ``max_range`` (the octree, the grid) inserts
         longer beams up to it as free space only; one with a ``max_range``
-        parameter (BGK) gets it and drops them whole; any other map (AKIMap)
-        gets only the end points within `max_range` of the sensor; the k-NN
+        parameter (BGK, AKIMap) gets it and cuts them there too (or drops
+        them whole, la3dm's rule, when its ``far_beams`` is ``"drop"``, set
+        with `params` or kept from `input_map`); any other map gets only the
+        end points within `max_range` of the sensor; the k-NN
         map (``method="knn"``) gets it as its own ``max_range`` parameter (it
         cuts the rays; also settable in `knn_params`, not in both). The points beyond
         the limit are counted and reported (raw points: BGK applies its
@@ -657,11 +659,15 @@ def _beyond_message(mapper, how, n, total, limit, beams) -> str:
         return (f"{where} {type(mapper).RANGE_PARAM} {limit:g} m: not inserted, their rays "
                 f"were cut there")
     name = type(mapper).__name__
+    cut = getattr(mapper, "far_beams", None) == "cut"
     if how == "param" and hasattr(mapper, "last_beams_"):
-        kept, dropped = (int(b) for b in beams)
-        return (f"{where} max_range {limit:g} m: {name.removesuffix('Map')} dropped "
-                f"{dropped:,} of its {kept + dropped:,} beams (to the end points' centroids "
-                f"per cube of ds_resolution) beyond it")
+        kept, beyond = (int(b) for b in beams)
+        return (f"{where} max_range {limit:g} m: {name.removesuffix('Map')} "
+                f"{'cut' if cut else 'dropped'} {beyond:,} of its {kept + beyond:,} beams "
+                f"(to the end points' centroids per cube of ds_resolution) "
+                + ("there (free space only)" if cut else "beyond it"))
+    if how == "param" and cut:
+        return f"{where} max_range {limit:g} m: {name} cut their beams there (free space only)"
     if how == "param":
         return f"{where} max_range {limit:g} m: {name} dropped them"
     return f"{where} max_range {limit:g} m: dropped ({name} got only the nearer ones)"

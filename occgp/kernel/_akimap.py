@@ -16,7 +16,7 @@ from .._validation import as_point, as_points, check_real, n_threads
 from ..maps import register
 from ._kernel_map import KernelMapBase
 from ._kernel_samples import (MAX_CELLS_PER_UPDATE, beam_chunks, check_free_count,
-                              packed_keys, search_cell, voxel_first, within_range)
+                              packed_keys, search_cell, split_range, voxel_first)
 from ._kernel_utils import Bandwidths
 
 _RANDOM_STATE = "random_state must be None, a non-negative int or a numpy.random.Generator"
@@ -83,10 +83,15 @@ class AKIMap(KernelMapBase):
     prior : float, default=0.001
         Prior alpha and beta of every cell.
     max_range : float, default=None
-        Beams longer than this are dropped whole, as :class:`BGKMap`'s
-        `max_range` (la3dm's rule): an end point farther than this from the
-        origin gives no occupied sample and no free sample on its beam (the map
-        is the one of the scan without those points); None keeps all.
+        The sensor's range limit, in metres, as :class:`BGKMap`'s: a beam
+        longer than this is cut there, as the octree's and the grid's rays
+        are (`far_beams`); None keeps every beam whole.
+    far_beams : {"cut", "drop"}, default="cut"
+        What a beam longer than `max_range` gives: "cut" (occgp's rule, the
+        octree's) no occupied sample and its free samples up to `max_range`,
+        drawn as on a beam of that length (one beam per cell of the cut
+        ends); "drop" (la3dm's rule) nothing: the map is the one of the scan
+        without those points. Only read when `max_range` is set.
     random_state : int, numpy.random.Generator or None, default=None
         Seed of the free samples; an int makes every run draw the same ones.
     n_jobs : int, default=None
@@ -121,7 +126,9 @@ class AKIMap(KernelMapBase):
     origin (always, as the reference code) and one uniformly random point in each
     `free_sample_distance` interval of every beam (free, label 0; intervals
     start half a distance from the origin, cells already holding a sample
-    are skipped). Each sample gets its own bandwidth matrix H:
+    are skipped). A beam longer than `max_range` is cut there and gives only
+    free samples, drawn after those of the beams to the end points (with
+    ``far_beams="drop"`` it gives none). Each sample gets its own bandwidth matrix H:
 
     * the same-label samples within ``r(d) = min((R - resolution) / schedule_range
       * d + resolution, R)`` of it (d its distance to the origin,
@@ -216,6 +223,7 @@ class AKIMap(KernelMapBase):
         bandwidth_floor: float | None = None,
         prior: float = 0.001,
         max_range: float | None = None,
+        far_beams: str = "cut",
         random_state: int | np.random.Generator | None = None,
         n_jobs: int | None = None,
         max_cells_per_update: int = MAX_CELLS_PER_UPDATE,
@@ -233,6 +241,7 @@ class AKIMap(KernelMapBase):
         self.bandwidth_floor = bandwidth_floor
         self.prior = prior
         self.max_range = max_range
+        self.far_beams = far_beams
         self.random_state = random_state
         self.n_jobs = n_jobs
         self.max_cells_per_update = max_cells_per_update
@@ -367,23 +376,26 @@ class AKIMap(KernelMapBase):
 
     def _training_data(self, p, pts, org):
         res, step = p.resolution, p.free_step
-        pts = within_range(pts, org, p.max_range)
-        if len(pts) == 0:
-            return np.empty((0, 3)), np.empty(0)
+        pts, cut = split_range(pts, org, p.max_range, p.far_beams)
         hits = pts[voxel_first(pts, res)]
-        length = np.linalg.norm(hits - org, axis=1)
+        # the beams: to the hits, then those beyond max_range cut there (no hit), one
+        # per cell of its cut end
+        ends = np.vstack([hits, cut[voxel_first(cut, res)]])
+        if len(ends) == 0:
+            return np.empty((0, 3)), np.empty(0)
+        length = np.linalg.norm(ends - org, axis=1)
         # one random point in each interval [step/2 + j step, step/2 + (j+1) step)
         # that starts before the end point, kept when it falls before it
         with np.errstate(over="ignore"):
             n_free_f = np.maximum(np.ceil((length - 0.5 * step) / step), 0)
         check_free_count(n_free_f.sum(), "free_sample_distance", step)
         n_free = n_free_f.astype(np.int64)
-        unit = (hits - org) / np.where(length > 0, length, 1.0)[:, None]
+        unit = (ends - org) / np.where(length > 0, length, 1.0)[:, None]
         # the origin is always a free sample (the reference code's first one, even in
         # the cell of an end point); a cell already holding a sample (end points, the
         # origin, then the free samples in order) takes no further free one. The free
         # samples are drawn chunk by chunk (the same stream as at once).
-        low = np.minimum(hits.min(axis=0), org) - res
+        low = np.minimum(ends.min(axis=0), org) - res
         # the cells taken, each once (the hits' are distinct: one hit a cell); a chunk's
         # new cells join them before the next chunk
         taken = packed_keys(np.vstack([hits, org[None]]), res, "resolution", low)

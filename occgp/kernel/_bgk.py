@@ -13,7 +13,7 @@ from .._validation import check_real
 from ..maps import register
 from ._kernel_map import KernelMapBase
 from ._kernel_samples import (MAX_CELLS_PER_UPDATE, beam_chunks, check_free_count,
-                              cube_sums, merge_cube_sums, packed_keys, within_range)
+                              cube_sums, merge_cube_sums, packed_keys, split_range)
 
 
 @register("bgk", formats=(".npz",),
@@ -48,14 +48,22 @@ class BGKMap(KernelMapBase):
     prior : float, default=0.001
         Prior alpha and beta of every cell.
     max_range : float, default=None
-        Beams longer than this are dropped whole (la3dm's rule); None keeps
-        all. la3dm's default is 8 m (its simulated 8 m sensor); on a real
-        LiDAR sequence (``hku_mb``, Livox Avia, hits to 349 m, held-out scans
-        scored to 30 m by ``bench/bench_real.py``) 8 m leaves 42 % of the
-        test points unknown (AUC 0.877), 15 m 8 % (0.980), 30 m, 60 m and no
-        limit 0.1 % (0.993): no limit by default, as OctoMap has none, and a
-        limit at the sensor's useful range saves time (there 60 m halves it
-        at the same scores).
+        The sensor's range limit, in metres: a beam longer than this is cut
+        there, as the octree's and the grid's rays are (`far_beams`); None
+        keeps every beam whole. la3dm's default is 8 m (its simulated 8 m
+        sensor); on a real LiDAR sequence (``hku_mb``, Livox Avia, hits to
+        349 m, held-out scans scored to 30 m by ``bench/bench_real.py``),
+        measured with the beams beyond dropped (``far_beams="drop"``), 8 m
+        leaves 42 % of the test points unknown (AUC 0.877), 15 m 8 %
+        (0.980), 30 m, 60 m and no limit 0.1 % (0.993): no limit by default,
+        as OctoMap has none, and a limit at the sensor's useful range saves
+        time (there 60 m halved it at the same scores).
+    far_beams : {"cut", "drop"}, default="cut"
+        What a beam longer than `max_range` gives: "cut" (occgp's rule, the
+        octree's) its free samples along the beam up to `max_range`, as a
+        beam of that length, and no occupied sample; "drop" (la3dm's rule)
+        nothing, the beam is dropped whole. Only read when `max_range` is
+        set.
     n_jobs : int, default=None
         Threads for the accumulation: None means 1, -1 every core, never more
         than the cores. The map is the same for any number.
@@ -73,9 +81,10 @@ class BGKMap(KernelMapBase):
     num_cells : int
         Number of cells any kernel reached.
     last_beams_ : tuple of (int, int)
-        ``(kept, dropped)`` of the last accepted :meth:`update`: its beams
+        ``(kept, beyond)`` of the last accepted :meth:`update`: its beams
         (end points reduced to one centroid per cube of `ds_resolution`)
-        within `max_range`, and those beyond it, dropped whole. ``(0, 0)``
+        within `max_range`, and those beyond it (cut at `max_range`, or
+        dropped whole with ``far_beams="drop"``). ``(0, 0)``
         before any update; not saved by :meth:`save` or pickled (a loaded map
         starts at ``(0, 0)``).
 
@@ -91,11 +100,13 @@ class BGKMap(KernelMapBase):
     more at ``length - free_resolution`` on every beam longer than
     `free_resolution`, and the sensor origin (free, label 0; la3dm's
     ``beam_sample``), both reduced to one centroid per cube of edge
-    `ds_resolution`. Every cell whose center lies within `ell` of a sample
-    gets ``k(r) y`` added to alpha and ``k(r) (1 - y)`` to beta, with
-    ``r = distance / ell`` and k the sparse kernel times `sf2`. The occupancy
-    of a cell is the posterior mean ``alpha / (alpha + beta)`` with `prior`
-    added to both.
+    `ds_resolution`. A beam (to such a centroid) longer than `max_range` is
+    cut there: its free samples are those of a beam of length `max_range`
+    (la3dm drops it whole: ``far_beams="drop"``). Every cell whose center
+    lies within `ell` of a sample gets ``k(r) y`` added to alpha and
+    ``k(r) (1 - y)`` to beta, with ``r = distance / ell`` and k the sparse
+    kernel times `sf2`. The occupancy of a cell is the posterior mean
+    ``alpha / (alpha + beta)`` with `prior` added to both.
 
     Why `ell` and `free_resolution` grow with coarse cells: the samples are
     reduced to one centroid per cell, so a cell weighs its hits against the
@@ -148,6 +159,7 @@ class BGKMap(KernelMapBase):
         ds_resolution: float | None = None,
         prior: float = 0.001,
         max_range: float | None = None,
+        far_beams: str = "cut",
         n_jobs: int | None = None,
         max_cells_per_update: int = MAX_CELLS_PER_UPDATE,
         occupancy_threshold: float = 0.5,
@@ -159,6 +171,7 @@ class BGKMap(KernelMapBase):
         self.ds_resolution = ds_resolution
         self.prior = prior
         self.max_range = max_range
+        self.far_beams = far_beams
         self.n_jobs = n_jobs
         self.max_cells_per_update = max_cells_per_update
         self.occupancy_threshold = occupancy_threshold
@@ -229,24 +242,26 @@ class BGKMap(KernelMapBase):
         _, sums, counts = cube_sums(pts, ds, "ds_resolution")
         hits = sums / counts[:, None]
         n_beams = len(hits)
-        hits = within_range(hits, org, p.max_range)
+        hits, cut = split_range(hits, org, p.max_range, p.far_beams)
         self._beams = (len(hits), n_beams - len(hits))
-        if len(hits) == 0:
+        # the beams: to the hits, then those beyond max_range cut there (no hit)
+        ends = np.vstack([hits, cut])
+        if len(ends) == 0:
             return np.empty((0, 3)), np.empty(0)
         # free samples every free_resolution metres along each beam (d < length), one
         # more at length - free_resolution on every beam longer than free_resolution,
         # and the origin once per beam (so it weighs in its cube's centroid), as la3dm's
         # beam_sample and get_training_data
-        length = np.linalg.norm(hits - org, axis=1)
+        length = np.linalg.norm(ends - org, axis=1)
         fr = p.free_step
         with np.errstate(over="ignore"):
             n_step_f = np.maximum(np.ceil(length / fr) - 1, 0)
         n_free_f = n_step_f + (length > fr)
         check_free_count(n_free_f.sum(), "free_resolution", fr)
         n_step, n_free = n_step_f.astype(np.int64), n_free_f.astype(np.int64)
-        unit = (hits - org) / np.where(length > 0, length, 1.0)[:, None]
+        unit = (ends - org) / np.where(length > 0, length, 1.0)[:, None]
         # centroids per cube of ds, the free samples made and reduced chunk by chunk
-        low = np.minimum(hits.min(axis=0), org) - ds
+        low = np.minimum(ends.min(axis=0), org) - ds
         parts = []
         for beam, j in beam_chunks(n_free):
             dist = (j + 1) * fr
@@ -255,7 +270,7 @@ class BGKMap(KernelMapBase):
             parts.append(cube_sums(org + unit[beam] * dist[:, None], ds, "ds_resolution",
                                    low))
         parts.append((packed_keys(org[None], ds, "ds_resolution", low),
-                      org[None] * len(hits), np.array([len(hits)])))
+                      org[None] * len(ends), np.array([len(ends)])))
         _, sums, counts = merge_cube_sums(parts)
         frees = sums / counts[:, None]
         samples = np.vstack([hits, frees])

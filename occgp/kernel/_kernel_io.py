@@ -3,9 +3,12 @@
 Files are NumPy ``.npz`` archives of plain arrays in the ``occgp.kernel_map``
 format (described in :meth:`KernelMapFiles.save`), written and checked by
 :mod:`occgp.io._npz`; files written before ``occupancy_threshold`` existed lack
-that parameter and read with its default; parameters renamed since a file was
-written (AKIMap's ``sensor_range``, now ``schedule_range``) read under their new
-names. Pickles rebuild a map from its
+that parameter and read with its default; files written before ``far_beams``
+existed read with ``far_beams="drop"`` where they set ``max_range`` (the rule
+their maps were built with; the default, "cut", otherwise); parameters renamed
+since a file was written (AKIMap's ``sensor_range``, now ``schedule_range``)
+read under their new names. Pickles of earlier versions read the same way.
+Pickles rebuild a map from its
 parameters and cells through :func:`restore_kernel_map`.
 """
 
@@ -49,7 +52,7 @@ class KernelMapFiles:
     _EXTRA_SPEC: dict = {}
     _EXTRA_OPTIONAL: tuple = ()
     #: Constructor parameters added after version 1 of the format: a file may lack them.
-    _PARAMS_ADDED: tuple = ("occupancy_threshold",)
+    _PARAMS_ADDED: tuple = ("occupancy_threshold", "far_beams")
 
     def _io_params(self) -> dict:
         return self.get_params()
@@ -143,7 +146,7 @@ class KernelMapFiles:
         """
         name = cls.__name__
         source, _, params, arrays = read_kernel_file(cls, path)
-        params = renamed_params(cls, params)
+        params = older_params(cls, params)
         expected = cls._get_param_names()
         missing = set(expected) - set(params)
         if set(params) - set(expected) or missing - set(cls._PARAMS_ADDED):
@@ -193,7 +196,7 @@ def restore_kernel_map(cls, params, keys, alpha, beta, extra=None):
                          f"{beta.shape}")
     if not (np.isfinite(alpha).all() and np.isfinite(beta).all()):
         raise ValueError(f"corrupt pickle of a {cls.__name__}: alpha and beta must be finite")
-    m = cls(**renamed_params(cls, params))
+    m = cls(**older_params(cls, params))
     m._set_cells(np.ascontiguousarray(keys), np.ascontiguousarray(alpha, dtype=np.float64),
                  np.ascontiguousarray(beta, dtype=np.float64))
     for name, value in (extra or {}).items():
@@ -207,6 +210,17 @@ def renamed_params(cls, params: dict) -> dict:
     files and pickles of earlier versions stay readable."""
     renames = getattr(cls, "_deprecated_params", {})
     return {renames.get(name, name): value for name, value in params.items()}
+
+
+def older_params(cls, params: dict) -> dict:
+    """`params` of a file or pickle of `cls`, read as written: renamed parameters under
+    their new names (:func:`renamed_params`), and ``far_beams="drop"`` where one written
+    before ``far_beams`` existed sets ``max_range`` (those maps dropped the beams beyond
+    it whole)."""
+    params = renamed_params(cls, params)
+    if "far_beams" not in params and params.get("max_range") is not None:
+        params["far_beams"] = "drop"
+    return params
 
 
 def read_kernel_file(cls, path):

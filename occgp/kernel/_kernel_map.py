@@ -20,14 +20,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
 from .._kernel import _KernelCells
-from .._params import Check, Interval, ParamsMixin
-from .._validation import (as_point, as_points, check_bool, check_n_jobs, check_probability,
-                           check_real, n_threads)
+from .._params import Check, Interval, Options, ParamsMixin
+from .._validation import (as_point, as_points, check_bool, check_choice, check_n_jobs,
+                           check_probability, check_real, n_threads)
 from ..octree._tree import OccupancyOctree
 from .._scan_input import prefilter
 from ._kernel_io import KernelMapFiles
-from ._kernel_samples import (MAX_VAL, MAX_WEIGHT, check_max_cells, check_max_range,
-                              support_cells)
+from ._kernel_samples import (FAR_BEAMS, MAX_VAL, MAX_WEIGHT, check_max_cells,
+                              check_max_range, support_cells)
 from ._kernel_utils import KernelCells
 
 #: The Parameters section of the queries (see :func:`occgp._docs.fill_doc`).
@@ -51,6 +51,7 @@ class KernelMapBase(ParamsMixin, KernelMapFiles, _KernelCells):
     _SUPPORT_HINT = ""
     n_jobs: int | None
     max_range: float | None
+    far_beams: str
     max_cells_per_update: int
     prior: float
     occupancy_threshold: float
@@ -63,6 +64,7 @@ class KernelMapBase(ParamsMixin, KernelMapFiles, _KernelCells):
         "max_cells_per_update": [Interval(Integral, 1, None)],
         "occupancy_threshold": [Interval(Real, 0, 1, closed="neither")],
         "max_range": [None, Interval(Real, 0, None, closed="neither")],
+        "far_beams": [Options(FAR_BEAMS)],
     }
 
     # ------------------------------------------------------------ parameters
@@ -87,7 +89,8 @@ class KernelMapBase(ParamsMixin, KernelMapFiles, _KernelCells):
             max_cells_per_update=check_max_cells(params["max_cells_per_update"]),
             occupancy_threshold=check_probability(params["occupancy_threshold"],
                                                   "occupancy_threshold"),
-            max_range=check_max_range(params["max_range"]))
+            max_range=check_max_range(params["max_range"]),
+            far_beams=check_choice(params["far_beams"], "far_beams", FAR_BEAMS))
 
     def _validated_params(self, params: dict | None = None) -> SimpleNamespace:
         """The checked parameters (the map's own by default) as attributes."""

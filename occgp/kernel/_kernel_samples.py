@@ -101,13 +101,25 @@ def check_max_range(value) -> float | None:
     return None if value is None else check_real(value, "max_range", low=0.0)
 
 
-def within_range(points: NDArray[np.float64], origin: NDArray[np.float64],
-                 max_range: float | None) -> NDArray[np.float64]:
-    """The points at most `max_range` from `origin` (all of them when None): the end
-    points whose beams a kernel map keeps."""
+#: How a kernel map meets a beam longer than its `max_range` (see `far_beams`).
+FAR_BEAMS = ("cut", "drop")
+
+
+def split_range(points: NDArray[np.float64], origin: NDArray[np.float64],
+                max_range: float | None, far_beams: str = "cut"
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(the end points at most `max_range` from `origin`, the ends of the longer beams
+    cut at `max_range`): every point and no cut end when `max_range` is None; no cut
+    end with ``far_beams="drop"`` (la3dm's rule: such beams are dropped whole)."""
     if max_range is None:
-        return points
-    return points[np.linalg.norm(points - origin, axis=1) <= max_range]
+        return points, points[:0]
+    length = np.linalg.norm(points - origin, axis=1)
+    near = length <= max_range
+    if far_beams == "drop":
+        return points[near], points[:0]
+    far = ~near
+    cut = origin + (points[far] - origin) * (max_range / length[far])[:, None]
+    return points[near], cut
 
 
 def check_max_cells(value) -> int:
