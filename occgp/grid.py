@@ -283,7 +283,7 @@ class GridMap(LogOddsMap, _Grid):
         -------
         cells : Leaves
             Named tuple ``(centers, sizes, log_odds)``; every size is the
-            resolution, centres are liboctomap's (``keyToCoord``).
+            resolution, centers are liboctomap's (``keyToCoord``).
 
         Examples
         --------

@@ -306,7 +306,11 @@ class MapType:
         """
         known = self.parameters()
         unknown = [p for p in params if p not in known]
-        if unknown and "**" not in known:
+        # a constructor whose **keywords only take deprecated names (occgp._params)
+        renamed = getattr(self.cls, "_deprecated_params", None)
+        if renamed is not None:
+            unknown = [p for p in unknown if p not in renamed]
+        if unknown and ("**" not in known or renamed is not None):
             raise ValueError(f"the {self.name!r} map takes no parameter {unknown[0]!r}; it "
                              f"takes {', '.join(k for k in known if k != '**') or 'none'}")
         try:

@@ -434,6 +434,15 @@ def _ray_intersection_reference(origin, direction, center, resolution, delta):
     return (d * f32(out_d + delta) + o).astype(np.float64)
 
 
+def test_ray_intersections_old_keyword_centres_warns():
+    m = OccupancyOctree(0.1).insert_scan([[1.0, 0.05, 0.05]], [0.05, 0.05, 0.05])
+    new = m.ray_intersections([0.05, 0.05, 0.05], [[1.0, 0, 0]], centers=[[1.05, 0.05, 0.05]])
+    with pytest.warns(DeprecationWarning, match="'centres' is deprecated.*'centers'"):
+        old = m.ray_intersections([0.05, 0.05, 0.05], [[1.0, 0, 0]],
+                                  centres=[[1.05, 0.05, 0.05]])
+    np.testing.assert_array_equal(old[0], new[0])
+
+
 @pytest.mark.parametrize("delta", [0.0, 0.01])
 def test_ray_intersections_are_liboctomaps(delta):
     m = OccupancyOctree(RES)
@@ -474,11 +483,11 @@ def test_ray_intersection_of_cast_rays_hits():
     (lambda m: m.ray_intersections([0, 0, 0], [[0, 0, 0]], [[1, 0, 0]]), ValueError,
      r"directions must be non-zero"),
     (lambda m: m.ray_intersections([0, 0, 0], [[1, 0, 0]], [[1, 0, 0], [2, 0, 0]]),
-     ValueError, r"centres must have shape \(3,\) or \(1, 3\)"),
+     ValueError, r"centers must have shape \(3,\) or \(1, 3\)"),
     (lambda m: m.ray_intersections([[0, 0, 0]] * 2, [[1, 0, 0]], [[1, 0, 0]]), ValueError,
      r"origins must have shape \(3,\) or \(1, 3\)"),
     (lambda m: m.ray_intersections([0, 0, 0], [[1, 0, 0]], [[1e30, 0, 0]]), ValueError,
-     r"centres.*key range"),
+     r"centers.*key range"),
     (lambda m: m.ray_intersections([1e30, 0, 0], [[1, 0, 0]], [[1, 0, 0]]), ValueError,
      r"origins.*key range"),
     (lambda m: m.ray_intersections([0, 0, 0], [[np.nan, 0, 0]], [[1, 0, 0]]), ValueError,

@@ -27,7 +27,7 @@ class Changes(NamedTuple):
 
     #: Keys of the finest cells, uint16, shape (n, 3), sorted.
     keys: NDArray[np.uint16]
-    #: Their centres, metres, shape (n, 3).
+    #: Their centers, metres, shape (n, 3).
     centers: NDArray[np.float64]
     #: True where the cell was new (unknown before), False where its state flipped.
     new: NDArray[np.bool_]
@@ -77,7 +77,7 @@ def changed_cells(self) -> "Changes":
     -------
     changes : Changes
         Named tuple ``(keys, centers, new)``: the finest cells' keys
-        (uint16, shape (n, 3), sorted), their centres and whether each
+        (uint16, shape (n, 3), sorted), their centers and whether each
         was new (unknown before) rather than flipped. Empty when
         :attr:`track_changes` was never set.
     """
@@ -85,8 +85,8 @@ def changed_cells(self) -> "Changes":
     order = np.argsort(packed, kind="stable")
     packed, new = packed[order], new[order]
     keys = unpack_keys(packed)
-    centres = self.key_to_coord(keys) if len(keys) else np.empty((0, 3))
-    return Changes(keys, centres, new)
+    centers = self.key_to_coord(keys) if len(keys) else np.empty((0, 3))
+    return Changes(keys, centers, new)
 
 
 def reset_changes(self) -> "OccupancyOctree":

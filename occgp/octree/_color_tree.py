@@ -43,7 +43,7 @@ UNSET = (255, 255, 255)
 class ColorLeaves(NamedTuple):
     """The leaves (cells) of a :class:`ColorOctree`, as arrays (one row per leaf)."""
 
-    #: Cell centres, shape (n_leaves, 3), in metres.
+    #: Cell centers, shape (n_leaves, 3), in metres.
     centers: NDArray[np.float64]
     #: Cell edge lengths, shape (n_leaves,): the resolution times a power of two.
     sizes: NDArray[np.float64]
@@ -387,7 +387,7 @@ class ColorOctree(LogOddsMap, _ColorOcTree):
         return ColorLeaves(*self._leaves(occupied_only))
 
     def extract_points(self, occupied: bool = True):
-        """Centres, edges and colours of the occupied (or the free) leaves.
+        """Centers, edges and colours of the occupied (or the free) leaves.
 
         Parameters
         ----------
@@ -397,15 +397,15 @@ class ColorOctree(LogOddsMap, _ColorOcTree):
 
         Returns
         -------
-        centres : ndarray of shape (n, 3)
+        centers : ndarray of shape (n, 3)
         sizes : ndarray of shape (n,)
         colors : ndarray of uint8, shape (n, 3)
             ``(255, 255, 255)`` for leaves without colour.
         """
         occupied = check_bool(occupied, "occupied")
-        centres, sizes, values, rgb = self._leaves(False)
+        centers, sizes, values, rgb = self._leaves(False)
         keep = (values >= np.float32(self._log_odds_thresholds()[2])) == occupied
-        return centres[keep], sizes[keep], rgb[keep]
+        return centers[keep], sizes[keep], rgb[keep]
 
     # ------------------------------------------------------------------ structure
     # ------------------------------------------------------------------ I/O

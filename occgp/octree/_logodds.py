@@ -83,7 +83,7 @@ bounds : tuple of ndarray of shape (3,)
 class Leaves(NamedTuple):
     """The leaves (cells) of a map, as arrays (one row per leaf)."""
 
-    #: Cell centres, shape (n_leaves, 3), in metres.
+    #: Cell centers, shape (n_leaves, 3), in metres.
     centers: NDArray[np.float64]
     #: Cell edge lengths, shape (n_leaves,): the resolution times a power of two.
     sizes: NDArray[np.float64]

@@ -64,7 +64,7 @@ def merge(self, other: Any, transform: ArrayLike | None = None, *, rule: str = "
 
     With `transform`, `other` is first moved by that rigid transform (its
     frame into this map's): each cell of this map within reach takes the
-    value of the cell of `other` holding the preimage of its centre
+    value of the cell of `other` holding the preimage of its center
     (nearest-cell resampling, so no cell is left out or counted twice).
     Transforms by whole cells (and quarter turns about the axes through
     cell corners) map cells onto cells exactly.
@@ -166,16 +166,16 @@ def _resampled(other: Any, keys: NDArray[np.int64], t: NDArray[np.float64],
     r, shift = t[:3, :3], t[:3, 3]
     found: list[NDArray[np.int64]] = []
     for start in range(0, len(keys), _CHUNK):   # bounded memory: 27 candidates a cell
-        centres = (keys[start:start + _CHUNK] - _HALF + 0.5) * res
-        moved_f = np.floor((centres @ r.T + shift) / res)
+        centers = (keys[start:start + _CHUNK] - _HALF + 0.5) * res
+        moved_f = np.floor((centers @ r.T + shift) / res)
         if (np.abs(moved_f) > _HALF + 1).any():
             raise ValueError("transform moves cells of other outside this map's key range")
         moved = moved_f.astype(np.int64) + _HALF
         cand = (moved[:, None, :] + _NEIGHBOURS[None]).reshape(-1, 3)
         found.append(np.unique(cand, axis=0))
     cand = np.unique(np.concatenate(found), axis=0)
-    centres = (cand - _HALF + 0.5) * res
-    values = other.log_odds((centres - shift) @ r)    # r is orthonormal: r^-1 = r^T
+    centers = (cand - _HALF + 0.5) * res
+    values = other.log_odds((centers - shift) @ r)    # r is orthonormal: r^-1 = r^T
     known = ~np.isnan(values)
     cand, values = cand[known], values[known]
     if ((cand < 0) | (cand > 2 * _HALF - 1)).any():

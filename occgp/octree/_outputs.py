@@ -23,12 +23,12 @@ def save_ply(self, path, *, occupied: bool = True, binary: bool = True,
     """Write the occupied (or the free) cells of a map to a PLY file.
 
     With ``cubes=False`` the file is a point cloud: one vertex per leaf, at
-    its centre. With ``cubes=True`` it is a triangle mesh: each leaf is a cube
+    its center. With ``cubes=True`` it is a triangle mesh: each leaf is a cube
     of 8 vertices and 12 triangles (counter-clockwise seen from outside), so
     that mesh viewers (MeshLab, CloudCompare, Open3D) show the voxels. Every
     vertex carries the properties
 
-    * ``x y z`` (float): the centre (points) or a corner (cubes), in metres;
+    * ``x y z`` (float): the center (points) or a corner (cubes), in metres;
     * ``size`` (float): the leaf's edge (pruned leaves are larger than the
       resolution);
     * ``probability`` (float): the leaf's occupancy probability;
@@ -96,7 +96,7 @@ def save_ply(self, path, *, occupied: bool = True, binary: bool = True,
 
 
 def save_pcd(self, path, *, occupied: bool = True, binary: bool = True):
-    """Write the centres of the occupied (or the free) leaves to a PCD v0.7 file.
+    """Write the centers of the occupied (or the free) leaves to a PCD v0.7 file.
 
     Fields ``x y z intensity`` (float32), ``intensity`` being the leaf's
     occupancy probability (PCL's ``PointXYZI``); the viewpoint is the origin.
@@ -104,7 +104,7 @@ def save_pcd(self, path, *, occupied: bool = True, binary: bool = True):
     the leaf's colour packed as ``r << 16 | g << 8 | b`` in a uint32
     (``TYPE U``; PCL's ``PointXYZRGB`` holds the same bits), ``0xFFFFFF`` for
     leaves without colour.
-    Pruned leaves give one point at their centre (see
+    Pruned leaves give one point at their center (see
     :meth:`~occgp.OccupancyOctree.expand` for finest cells).
 
     The file is written atomically: a temporary file beside `path` replaces
@@ -164,7 +164,7 @@ def to_open3d(self, *, kind: str = "voxels", occupied: bool = True,
         ``"voxels"``: an ``open3d.geometry.VoxelGrid`` of voxel size
         ``resolution``, aligned to the map's cells; pruned leaves are expanded
         to their finest cells. ``"points"``: an ``open3d.geometry.PointCloud``
-        of the leaf centres (one point per leaf, pruned or not).
+        of the leaf centers (one point per leaf, pruned or not).
     occupied : bool, default=True
         True: the leaves at or above the occupancy threshold; False: the
         known leaves below it.
@@ -204,10 +204,10 @@ def distance_field(self, bbox: ArrayLike, resolution: float | None = None, *,
     aligned to its multiples: its minimum corner is
     ``floor(bbox[0] / resolution) * resolution`` and it reaches at least
     ``bbox[1]`` (a corner within 1e-9 cell of a multiple of `resolution`
-    counts as on it). Each cell takes the map's state at its centre (occupied,
+    counts as on it). Each cell takes the map's state at its center (occupied,
     free or unknown); obstacle cells are the occupied ones, plus the unknown
     ones when ``unknown="occupied"``. The distance, in metres, is from each
-    cell's centre to the nearest obstacle cell's centre (scipy's exact
+    cell's center to the nearest obstacle cell's center (scipy's exact
     feature transform, ``scipy.ndimage.distance_transform_edt``; the
     distance is ``sqrt(i² + j² + k²) * resolution`` for the integer offset
     ``(i, j, k)`` to that cell), so obstacle cells hold 0 and a cell next to
@@ -234,19 +234,19 @@ def distance_field(self, bbox: ArrayLike, resolution: float | None = None, *,
     signed : bool, default=False
         Signed distances, as voxblox's and nvblox's ESDF: positive outside
         obstacles (the distance above), and in each obstacle cell minus the
-        distance from its centre to the nearest non-obstacle cell's centre.
+        distance from its center to the nearest non-obstacle cell's center.
         A boundary obstacle cell holds ``-resolution``, its free neighbour
         ``+resolution``; no cell holds 0 (``-inf`` in every cell when the
         grid holds no non-obstacle cell).
     return_closest : bool, default=False
-        Also return, per cell, the centre of the cell its distance is
+        Also return, per cell, the center of the cell its distance is
         measured to: the nearest obstacle cell (an obstacle cell's own
-        centre in an unsigned field; with `signed`, for obstacle cells, the
+        center in an unsigned field; with `signed`, for obstacle cells, the
         nearest non-obstacle cell). NaN where there is none. Ties between
         equally near cells are broken by scipy's transform.
     return_gradient : bool, default=False
         Also return the gradient of the distance as the unit vector
-        ``(centre - closest) / distance``: away from the nearest obstacle
+        ``(center - closest) / distance``: away from the nearest obstacle
         outside obstacles, towards free space inside them (signed), so that
         it points where the distance grows; 0 in the obstacle cells of an
         unsigned field, NaN where `closest` is NaN.
@@ -259,7 +259,7 @@ def distance_field(self, bbox: ArrayLike, resolution: float | None = None, *,
         no obstacle), `origin` the grid's minimum corner, `resolution` its
         cell edge.
     closest : ndarray of shape (nx, ny, nz, 3)
-        Only with `return_closest`: centres in metres.
+        Only with `return_closest`: centers in metres.
     gradient : ndarray of shape (nx, ny, nz, 3)
         Only with `return_gradient`.
 

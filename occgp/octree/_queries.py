@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
+from .._params import renamed_keywords
 from ._logodds import Leaves
 from ._options import check_bbox
 from .._octree import TREE_DEPTH, TREE_MAX_VAL
@@ -28,7 +29,7 @@ __all__ = ["Nodes", "num_leaves", "num_nodes", "tree_repr", "as_float32_directio
 class Nodes(NamedTuple):
     """The nodes of an octree, inner ones included (see :meth:`OccupancyOctree.nodes`)."""
 
-    #: Node centres, metres, shape (n_nodes, 3).
+    #: Node centers, metres, shape (n_nodes, 3).
     centers: NDArray[np.float64]
     #: Edge lengths, shape (n_nodes,): ``resolution * 2**(16 - depths)``.
     sizes: NDArray[np.float64]
@@ -79,9 +80,9 @@ def coord_to_key(self, points: ArrayLike, depth: int = TREE_DEPTH) -> NDArray[np
     single-precision coordinate as liboctomap computes it. With `depth`
     below 16, the key of the depth-`depth` node holding the point, as
     liboctomap's ``coordToKey(coord, depth)`` and ``adjustKeyAtDepth``
-    give it: the key at the node's centre, ``(key >> s << s) + (1 << (s -
+    give it: the key at the node's center, ``(key >> s << s) + (1 << (s -
     1))`` per axis with ``s = 16 - depth``; ``key_to_coord(keys, depth)``
-    gives the node's centre.
+    gives the node's center.
 
     Parameters
     ----------
@@ -124,7 +125,7 @@ def coord_to_key(self, points: ArrayLike, depth: int = TREE_DEPTH) -> NDArray[np
 
 
 def key_to_coord(self, keys: ArrayLike, depth: int = TREE_DEPTH) -> NDArray[np.float64]:
-    """Centres of the cells of `keys` at `depth` (liboctomap's ``keyToCoord``).
+    """Centers of the cells of `keys` at `depth` (liboctomap's ``keyToCoord``).
 
     Parameters
     ----------
@@ -137,7 +138,7 @@ def key_to_coord(self, keys: ArrayLike, depth: int = TREE_DEPTH) -> NDArray[np.f
 
     Returns
     -------
-    centres : ndarray of shape (n_keys, 3)
+    centers : ndarray of shape (n_keys, 3)
 
     Raises
     ------
@@ -166,7 +167,7 @@ def key_to_coord(self, keys: ArrayLike, depth: int = TREE_DEPTH) -> NDArray[np.f
 
 def extract_points(self, occupied: bool = True) -> tuple[NDArray[np.float64],
                                                         NDArray[np.float64]]:
-    """Centres and sizes of the occupied (or the free) leaves.
+    """Centers and sizes of the occupied (or the free) leaves.
 
     Parameters
     ----------
@@ -176,7 +177,7 @@ def extract_points(self, occupied: bool = True) -> tuple[NDArray[np.float64],
 
     Returns
     -------
-    centres : ndarray of shape (n_leaves, 3)
+    centers : ndarray of shape (n_leaves, 3)
     sizes : ndarray of shape (n_leaves,)
         Edge of each leaf (pruned leaves are larger than the resolution).
 
@@ -184,14 +185,14 @@ def extract_points(self, occupied: bool = True) -> tuple[NDArray[np.float64],
     --------
     >>> from occgp import OccupancyOctree
     >>> m = OccupancyOctree(0.1).insert_scan([[0.55, 0.05, 0.05]], [0.05, 0.05, 0.05])
-    >>> centres, sizes = m.extract_points()
-    >>> centres.round(2).tolist(), len(m.extract_points(occupied=False)[0])
+    >>> centers, sizes = m.extract_points()
+    >>> centers.round(2).tolist(), len(m.extract_points(occupied=False)[0])
     ([[0.55, 0.05, 0.05]], 5)
     """
     occupied = check_bool(occupied, "occupied")
-    centres, sizes, values = self._leaves(False)
+    centers, sizes, values = self._leaves(False)
     keep = (values >= np.float32(self._log_odds_thresholds()[2])) == occupied
-    return centres[keep], sizes[keep]
+    return centers[keep], sizes[keep]
 
 
 def occupancy(self, points: ArrayLike, *, depth: int = 0) -> NDArray[np.float64]:
@@ -332,7 +333,7 @@ def cast_rays(
     Returns
     -------
     ends : ndarray of shape (n_rays, 3)
-        Centre of the cell where each ray stopped.
+        Center of the cell where each ray stopped.
     hits : ndarray of bool, shape (n_rays,)
         True where the ray stopped at an occupied cell.
 
@@ -465,7 +466,7 @@ def nodes(self, *, max_depth: int = 0, bbox: ArrayLike | None = None) -> "Nodes"
     The nodes come in the order of liboctomap's tree iterator: depth first,
     each node before its children, children in liboctomap's child order
     (``x`` in bit 0, ``y`` in bit 1, ``z`` in bit 2 of the child index).
-    The root (depth 0, centre at the origin, edge ``resolution * 2**16``)
+    The root (depth 0, center at the origin, edge ``resolution * 2**16``)
     comes first when the map is not empty. An inner node's log-odds is the
     largest of its children's (liboctomap's ``updateInnerOccupancy``,
     which occgp keeps current after every update and deletion).
@@ -543,11 +544,12 @@ def is_at_threshold(self, points: ArrayLike, *, depth: int = 0) -> NDArray[np.bo
     return self._query_depth(self._as_float32_points(points, "points"), 3, depth) == 1
 
 
+@renamed_keywords(centres="centers")
 def ray_intersections(
     self,
     origins: ArrayLike,
     directions: ArrayLike,
-    centres: ArrayLike,
+    centers: ArrayLike,
     *,
     delta: float = 0.0,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
@@ -555,13 +557,13 @@ def ray_intersections(
 
     For row ``i``, the line through ``origins[i]`` along ``directions[i]``
     is intersected with the six faces of the cube of edge ``resolution``
-    centred at ``centres[i]`` (liboctomap's computation, in its mixed
+    centered at ``centers[i]`` (liboctomap's computation, in its mixed
     single and double precision, faces widened by 1e-6); of the faces it
     meets, the one nearest along the direction is kept (the smallest
     signed distance: behind the origin when the origin lies inside the
     cube), and the point ``origin + unit_direction * (distance + delta)``
     is returned. Typical use: the `ends` of :meth:`cast_rays` as
-    `centres`, to get the surface point where each ray hit.
+    `centers`, to get the surface point where each ray hit.
 
     Parameters
     ----------
@@ -570,8 +572,8 @@ def ray_intersections(
     directions : array-like of shape (n_rays, 3)
         Ray directions; normalised (in single precision, as ``castRay``
         normalises them), must not be zero.
-    centres : array-like of shape (n_rays, 3) or (3,)
-        Centres of the cells, in the key range (used as given, not snapped
+    centers : array-like of shape (n_rays, 3) or (3,)
+        Centers of the cells, in the key range (used as given, not snapped
         to the cell grid).
     delta : float, default=0.0
         Metres to move the point along the ray (liboctomap's ``delta``):
@@ -590,9 +592,9 @@ def ray_intersections(
     TypeError
         If an array does not hold real numbers or `delta` is not a real number.
     ValueError
-        If a shape is wrong (or the rows of `origins` or `centres` do not
+        If a shape is wrong (or the rows of `origins` or `centers` do not
         match `directions`), an array holds NaN or inf, `origins` or
-        `centres` lie outside the key range, a direction is zero, or
+        `centers` lie outside the key range, a direction is zero, or
         `delta` is out of range.
 
     Examples
@@ -607,7 +609,7 @@ def ray_intersections(
     dirs = as_float32_directions(directions)
     n = len(dirs)
     orgs = self._rows_in_range(origins, "origins", n)
-    cens = self._rows_in_range(centres, "centres", n)
+    cens = self._rows_in_range(centers, "centers", n)
     reach = 2 * np.sqrt(3) * (self.key_range[1] - self.key_range[0])
     delta = check_real(delta, "delta", low=-reach, high=reach, low_open=False,
                        high_open=False)

@@ -40,7 +40,7 @@ class Stamps(NamedTuple):
 
     #: Keys of the finest cells, uint16, shape (n, 3), sorted.
     keys: NDArray[np.uint16]
-    #: Their centres, metres, shape (n, 3).
+    #: Their centers, metres, shape (n, 3).
     centers: NDArray[np.float64]
     #: The stamp of the last stamped update that reached each cell, shape (n,).
     stamps: NDArray[np.float64]
