@@ -42,8 +42,8 @@ demo: $(STAMP)
 # its kernels by CPU); the tests compare them with stated tolerances. The GP, grid and
 # mixture tests run again under two other kernel sets, so that a bit-equality claim on
 # BLAS output fails here and not only on someone else's machine.
-BLAS_GUARD ?= tests/test_gp_grid.py tests/test_gp_mixture.py tests/test_gpomik.py \
-              tests/test_gp_committee.py tests/test_grid.py
+BLAS_GUARD ?= tests/gp/test_gp_grid.py tests/gp/test_gp_mixture.py tests/gp/test_gpomik.py \
+              tests/gp/test_gp_committee.py tests/grid/test_grid.py
 # the layer contract (.importlinter, docs/architecture.rst) first: an upward import or an
 # import circle fails here before the tests run; import-linter comes with the test extra,
 # and is installed here too where an older .venv lacks it

@@ -107,3 +107,15 @@ def test_no_two_modules_share_a_name():
     names += [p.stem for p in (ROOT / "ext").glob("*.pyx")]
     clashes = {n: c for n, c in Counter(names).items() if c > 1 and n.startswith("_")}
     assert not clashes, f"modules sharing a name: {sorted(clashes)}"
+
+
+def test_test_folders_mirror_the_package():
+    """tests/<name>/ holds the tests of occgp.<name> (a package, or grid.py); the tests
+    left at the top of tests/ are package-wide (the protocol, the docs, the layers)."""
+    folders = [p.name for p in (ROOT / "tests").iterdir()
+               if p.is_dir() and p.name not in ("reference", "__pycache__")]
+    assert folders, "no test folders"
+    for name in folders:
+        assert ((ROOT / "occgp" / name / "__init__.py").exists()
+                or (ROOT / "occgp" / f"{name}.py").exists()), name
+        assert any((ROOT / "tests" / name).glob("test_*.py")), name

@@ -13,7 +13,7 @@ from numpy.testing import assert_array_equal
 
 from occgp import GridMap, OccupancyOctree
 from occgp._validation import RESOLUTION_RANGE
-from test_octree import assert_same_leaves
+from _helpers import assert_same_leaves
 
 ALL_METHODS = ["plain", "auto", "culling", "superray", "superray+culling"]
 

@@ -8,7 +8,7 @@ from numpy.testing import assert_array_equal
 
 from occgp import GridMap, OccupancyOctree
 from occgp.filters import GroundPlane, ScanFilter, box_filter, height_band, segment_ground
-from test_octree import assert_same_leaves
+from _helpers import assert_same_leaves
 
 
 def scene(seed=0, n_floor=400, n_wall=150, n_table=0, tilt=0.0, floor_z=0.0):

@@ -15,7 +15,7 @@ from numpy.testing import assert_array_equal
 
 from occgp import AKIMap, BGKMap, ColorOctree, GridMap, KNNMap, OccupancyOctree
 from octomap_reference import MAX_VAL, _key, _ray_end, leaf_values, logodds32, ray_keys
-from test_octree import assert_same_leaves
+from _helpers import assert_same_leaves
 
 f32 = np.float32
 METHODS = ["plain", "culling", "superray", "superray+culling", "auto"]

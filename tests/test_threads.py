@@ -11,7 +11,7 @@ from occgp.cli import main
 from occgp.datasets import structured_room
 from occgp.io import write_pcd
 from occgp.knn import ScanReplay
-from test_culling import room_sequence
+from _helpers import room_sequence
 
 N_JOBS = [1, 2, 3, 4, -1]
 METHODS = ["plain", "culling", "superray", "superray+culling"]
@@ -218,7 +218,7 @@ def test_knn_map_is_identical_for_every_n_jobs():
     ref = None
     for n_jobs in (1, 2, -1):
         for method in ("plain", "superray+culling"):
-            m = KNNMap(res, k=2, sensor_range=1.8, n_jobs=n_jobs)
+            m = KNNMap(res, k=2, max_range=1.8, n_jobs=n_jobs)
             for points, origin in scans:
                 m.insert_scan(points, origin, method=method)
             if ref is None:
@@ -237,7 +237,7 @@ def test_knn_map_is_identical_for_every_n_jobs():
             base = got
         for a, b in zip(got, base):
             assert_array_equal(a, b)
-    replay = [ScanReplay(scans, res, sensor_range=1.8, ks=(2,), n_jobs=n).octomap_log_odds(
+    replay = [ScanReplay(scans, res, max_range=1.8, ks=(2,), n_jobs=n).octomap_log_odds(
         [dict(prob_hit=0.7, prob_miss=0.4, clamping_min=0.12, clamping_max=0.97)])
         for n in (1, 2)]
     assert_array_equal(replay[0], replay[1])

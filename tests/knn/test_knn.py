@@ -11,30 +11,8 @@ from occgp import KNNMap, OccupancyOctree
 from occgp._octree import _welford
 from occgp.knn import ScanReplay, check_knn_params, mean_knn_distances, point_log_odds
 from octomap_reference import knn_reference, leaf_values, logodds32
-from test_culling import room_sequence
-
-PARAMS = dict(k=3, p_u=0.9, p_l=0.3, p_m=0.2, p_m_out=0.4, p_min=0.05, p_max=0.95)
-
-
-def noisy_scans(rng, n_scans=3, n_wall=40, n_speckle=8, n_far=8):
-    """A wall at x = 2 with depth noise, speckle between sensor and wall, far points."""
-    scans = []
-    for _ in range(n_scans):
-        origin = rng.uniform(-0.3, 0.3, 3)
-        wall = np.column_stack([2.0 + 0.05 * rng.standard_normal(n_wall),
-                                rng.uniform(-1, 1, (n_wall, 2))])
-        speckle = origin + rng.uniform(0.2, 0.9, (n_speckle, 1)) * (wall[:n_speckle] - origin)
-        far = origin + rng.normal(size=(n_far, 3)) * 0 + np.column_stack(
-            [np.full(n_far, 6.0), rng.uniform(-2, 2, (n_far, 2))])
-        scans.append((np.vstack([wall, speckle, far]), origin))
-    return scans
-
-
-def build(scans, resolution=0.2, method="plain", **params):
-    m = KNNMap(resolution, max_range=3.0, **{**PARAMS, **params})
-    for points, origin in scans:
-        m.insert_scan(points, origin, method=method)
-    return m
+from _helpers import room_sequence
+from _helpers import KNN_PARAMS as PARAMS, noisy_scans, build_knn as build
 
 
 # ---------------------------------------------------------------------- the model

@@ -8,6 +8,7 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from occgp import AKIMap, BGKMap
+from _helpers import rewrite_npz as rewrite
 
 
 def wall(shift=0.0):
@@ -98,17 +99,6 @@ def test_file_is_plain_arrays(saved):
 
 
 # ---------------------------------------------------------------- bad files
-def rewrite(src, dst, **changes):
-    """Copy the .npz `src` to `dst` with entries replaced (None deletes one)."""
-    with np.load(src, allow_pickle=False) as z:
-        arrays = {k: z[k] for k in z.files}
-    for k, v in changes.items():
-        if v is None:
-            arrays.pop(k)
-        else:
-            arrays[k] = v
-    np.savez_compressed(dst, **arrays)
-    return dst
 
 
 def params_with(path, **changes):

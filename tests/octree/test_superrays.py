@@ -13,9 +13,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from occgp import GridMap, OccupancyOctree
-from test_culling import build
-from test_grid import assert_same_cells, grid_values
-from test_octree import assert_same_leaves
+from _helpers import build_octree as build
+from _helpers import assert_same_cells, grid_values
+from _helpers import assert_same_leaves
 
 METHODS = ["superray", "superray+culling"]
 

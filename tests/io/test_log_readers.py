@@ -20,7 +20,7 @@ from occgp.io import (
     write_pcd,
 )
 
-DATA = pathlib.Path(__file__).resolve().parents[2] / "shared" / "data"
+DATA = pathlib.Path(__file__).resolve().parents[3] / "shared" / "data"
 CARMEN = DATA / "carmen"
 HKU = DATA / "lidar_seq" / "hku_mb"
 needs_carmen = pytest.mark.skipif(not (CARMEN / "intel-corrected.log.gz").exists(),

@@ -129,7 +129,7 @@ BOX = np.array([[-1.0, -0.7, 0.1], [1.3, 0.9, 1.6]])
 @pytest.mark.parametrize("method", ["culling", "superray", "superray+culling"])
 @pytest.mark.parametrize("max_range", [None, 1.5])
 def test_bbox_insert_equals_liboctomap(method, max_range):
-    from test_culling import room_sequence
+    from _helpers import room_sequence
     scans = room_sequence(np.random.default_rng(3), n_scans=6, n_points=600)
     ref, other = OccupancyOctree(0.1), OccupancyOctree(0.1)
     for points, origin in scans:
@@ -179,7 +179,7 @@ def record(changes, before, after, occ_log):
 @pytest.mark.slow
 @pytest.mark.parametrize("method", ["plain", "culling", "superray+culling"])
 def test_change_detection_follows_liboctomaps_rule(method):
-    from test_culling import room_sequence
+    from _helpers import room_sequence
     scans = room_sequence(np.random.default_rng(6), n_scans=6, n_points=400)
     occ_log = logodds32(0.5)
     m = OccupancyOctree(0.1)

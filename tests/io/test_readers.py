@@ -25,7 +25,7 @@ from occgp.io import (
     write_scan_graph,
 )
 
-DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
+DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
 LA3DM = DATA / "la3dm_sim_structured"
 OCTOMAP = DATA / "octomap"
 

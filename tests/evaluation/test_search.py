@@ -12,7 +12,7 @@ from occgp.evaluation import (
 )
 from occgp.knn import ScanReplay
 from occgp.metrics import tpr_fdr_auc
-from test_knn import noisy_scans
+from _helpers import noisy_scans
 
 
 class Wall:

@@ -8,7 +8,7 @@ from numpy.testing import assert_array_equal
 from sklearn.exceptions import NotFittedError
 
 from occgp.gp import GPOM, GPOMIK, Matern32, Simpson, SquaredExponential
-from test_kernel_io import rewrite
+from _helpers import rewrite_npz as rewrite
 
 X = np.random.default_rng(0).uniform([-1, -2], [4, 2], (300, 2))
 

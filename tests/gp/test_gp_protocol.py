@@ -191,7 +191,7 @@ def test_loaded_map_goes_on_inserting_scans(name, scans, mapped, queries, tmp_pa
 def test_old_files_without_occupancy_threshold_load(mapped, tmp_path):
     import json
 
-    from test_kernel_io import rewrite
+    from _helpers import rewrite_npz as rewrite
 
     path = mapped["gpomik"].save(tmp_path / "new.npz") and tmp_path / "new.npz"
     with np.load(path) as f:

@@ -11,17 +11,7 @@ from _helpers import random_scans, share_between_threads
 from conftest import data_path
 from occgp import OccupancyOctree
 from octomap_reference import leaf_values, octomap_insert, ray_mode_reference
-
-
-def assert_same_leaves(a, b):
-    """Every leaf of two trees: same center, size and log-odds."""
-    la, lb = a.leaves(), b.leaves()
-    order_a = np.lexsort((la.sizes, *la.centers.T))
-    order_b = np.lexsort((lb.sizes, *lb.centers.T))
-    assert len(la.sizes) == len(lb.sizes)
-    assert_array_equal(la.centers[order_a], lb.centers[order_b])
-    assert_array_equal(la.sizes[order_a], lb.sizes[order_b])
-    assert_array_equal(la.log_odds[order_a], lb.log_odds[order_b])
+from _helpers import assert_same_leaves
 
 
 # ---------------------------------------------------------------------- behaviour

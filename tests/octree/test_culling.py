@@ -6,34 +6,8 @@ import pytest
 from occgp import GridMap, OccupancyOctree
 from conftest import data_path
 from _helpers import random_scans
-from test_octree import assert_same_leaves
-
-
-def room_sequence(rng, n_scans=8, n_points=600):
-    """A box room scanned from nearby poses, then a new obstacle in its free space."""
-    scans = []
-    for k in range(n_scans):
-        origin = np.array([0.0, 0.0, 0.5]) + rng.uniform(-0.15, 0.15, 3)
-        d = rng.normal(size=(n_points, 3))
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        # distance to the walls of a 4 x 4 x 2 m box around (0, 0, 1)
-        t = np.min(np.where(d > 0, (np.array([2.0, 2.0, 2.0]) - origin) / np.where(d > 0, d, 1),
-                            (np.array([-2.0, -2.0, 0.0]) - origin) / np.where(d < 0, d, -1)),
-                   axis=1)
-        points = origin + d * t[:, None]
-        if k == n_scans - 1:            # something appears where space was free
-            points[:80] = origin + d[:80] * rng.uniform(0.3, 1.0, (80, 1))
-        scans.append((points, origin))
-    return scans
-
-
-def build(scans, resolution, **kwargs):
-    """Insert `scans` in order; the method is "plain" unless `kwargs` name one."""
-    kwargs.setdefault("method", "plain")
-    m = OccupancyOctree(resolution)
-    for points, origin in scans:
-        m.insert_scan(points, origin, **kwargs)
-    return m
+from _helpers import assert_same_leaves
+from _helpers import room_sequence, build_octree as build
 
 
 @pytest.mark.parametrize("mode", ["scan", "ray"])

@@ -6,7 +6,7 @@ import pytest
 
 from occgp import GridMap, OccupancyOctree
 from octomap_reference import leaf_values
-from test_grid import grid_values
+from _helpers import grid_values
 
 #: The value of each cell of a map, by its class.
 VALUES = {OccupancyOctree: leaf_values, GridMap: grid_values}

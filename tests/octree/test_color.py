@@ -20,7 +20,7 @@ from occgp.io._export import pack_rgb, unpack_rgb
 from occgp.octree import ColorLeaves, ColorOctree
 from occgp.io import read_pcd
 
-from test_export import read_ply
+from _helpers import read_ply
 
 ORIGIN = np.array([0.05, 0.05, 0.55])
 

@@ -13,6 +13,7 @@ from occgp.nav._distance import distance_field
 from occgp.io._export import (_CUBE_TRIANGLES, _finest_cells, leaf_cells, save_pcd, save_ply,
                               to_open3d)
 from occgp.io import read_pcd
+from _helpers import read_ply
 
 
 # --------------------------------------------------------------------------- #
@@ -28,53 +29,6 @@ def small_map():
                         block, [[2.25, 2.25, 0.25], [2.75, 2.25, 0.25]]])
     values = np.r_[1.0, 2.0, 3.0, np.full(8, 1.5), -1.0, -0.5]
     return m.set_cells(points, values).prune()
-
-
-_PLY_TYPES = {"float": "<f4", "double": "<f8", "uchar": "u1", "int": "<i4", "uint": "<u4"}
-
-
-def read_ply(path):
-    """Parse a PLY file (ascii or binary_little_endian, triangle lists) with numpy."""
-    raw = open(path, "rb").read()
-    end = raw.index(b"end_header\n") + len(b"end_header\n")
-    lines = raw[:end].decode("ascii").splitlines()
-    assert lines[0] == "ply"
-    fmt = lines[1].split()[1]
-    elements, comments = [], []
-    for line in lines[2:-1]:
-        words = line.split()
-        if words[0] == "comment":
-            comments.append(line[8:])
-        elif words[0] == "element":
-            elements.append((words[1], int(words[2]), []))
-        elif words[0] == "property" and words[1] == "list":
-            elements[-1][2].append(("n", _PLY_TYPES[words[2]]))
-            elements[-1][2].append(("v", _PLY_TYPES[words[3]], (3,)))
-        else:
-            elements[-1][2].append((words[2], _PLY_TYPES[words[1]]))
-    out, pos = {}, end
-    text = raw[end:].decode("ascii").splitlines() if fmt == "ascii" else None
-    for name, count, props in elements:
-        dt = np.dtype(props)
-        if fmt == "binary_little_endian":
-            out[name] = np.frombuffer(raw, dtype=dt, count=count, offset=pos)
-            pos += count * dt.itemsize
-        else:
-            assert fmt == "ascii"
-            rows = np.array([[float(v) for v in t.split()] for t in text[:count]])
-            text = text[count:]
-            arr = np.zeros(count, dtype=dt)
-            col = 0
-            for p in props:
-                width = p[2][0] if len(p) == 3 else 1
-                arr[p[0]] = rows[:, col:col + width].reshape(arr[p[0]].shape)
-                col += width
-            out[name] = arr
-    if fmt == "binary_little_endian":
-        assert pos == len(raw), "trailing bytes after the last element"
-    else:
-        assert not text, "trailing rows after the last element"
-    return out, comments
 
 
 # --------------------------------------------------------------------------- #

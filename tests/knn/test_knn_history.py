@@ -12,7 +12,7 @@ from occgp._octree import _welford
 from occgp.evaluation import cell_labels, grid_search
 from occgp.knn import ScanReplay, history_knn_distances, mean_knn_distances
 from octomap_reference import leaf_values
-from test_knn import PARAMS, build, noisy_scans
+from _helpers import KNN_PARAMS as PARAMS, build_knn as build, noisy_scans
 
 
 def brute_scores(points, history, k):

@@ -11,6 +11,7 @@ from _helpers import random_scans, share_between_threads
 from conftest import data_path
 from occgp import GridMap, OccupancyOctree
 from octomap_reference import MAX_VAL, leaf_values, ray_mode_reference
+from _helpers import grid_values, assert_same_cells
 
 PARAMS = dict(prob_hit=0.75, prob_miss=0.35, clamping_min=0.12, clamping_max=0.97)
 
@@ -24,21 +25,6 @@ def with_revisits(scans):
     """`scans`, the first again, then four times one that saturates its cells (clamping)."""
     points, origin = scans[1]
     return [*scans, scans[0], *[(np.repeat(points[:8], 10, axis=0), origin)] * 4, scans[2]]
-
-
-def grid_values(grid):
-    """Cell key → float32 log-odds, keys computed from the centers as `leaf_values` does."""
-    centers, sizes, values = grid.cells()
-    assert np.all(sizes == grid.resolution)
-    keys = np.floor(centers / grid.resolution).astype(np.int64) + MAX_VAL
-    return {tuple(k): v for k, v in zip(keys.tolist(), values)}
-
-
-def assert_same_cells(got, expected):
-    assert got.keys() == expected.keys()
-    keys = sorted(expected)
-    assert_array_equal(np.array([got[k] for k in keys], np.float32).view(np.uint32),
-                       np.array([expected[k] for k in keys], np.float32).view(np.uint32))
 
 
 def build_both(scans, resolution, **kwargs):
@@ -255,7 +241,7 @@ def test_uninitialised_core_raises():
 def test_every_method_gives_the_plain_grid(mode, resolution):
     """Super rays and the culling region on the grid: the same cells, bit for bit, as
     the plain method and as the octree (revisits saturate free space for culling)."""
-    from test_culling import room_sequence
+    from _helpers import room_sequence
     scans = room_sequence(np.random.default_rng(7), n_scans=8, n_points=1500)
     maps = {}
     for method in ("plain", "culling", "superray", "superray+culling"):
