@@ -41,12 +41,13 @@ import inspect
 import numbers
 import warnings
 from collections.abc import Callable, Iterable
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar, Protocol, TypeVar
 
 from ._validation import check_bool, check_choice, check_int, check_real
 
 __all__ = ["DEFAULT_RESOLUTION", "Interval", "Options", "Check", "ParamsMixin",
-           "validate_params", "check_renamed", "deprecated_alias", "renamed_keywords"]
+           "validate_params", "check_renamed", "deprecated_alias", "renamed_keywords",
+           "param_names"]
 
 #: The default edge length (metres) of the cells of every map that has cells.
 DEFAULT_RESOLUTION = 0.1
@@ -262,6 +263,43 @@ def deprecated_alias(new: str, old: str) -> property:
     return property(fget, fset, doc=f"Deprecated alias of :attr:`{new}`.")
 
 
+def param_names(cls: type[object]) -> list[str]:
+    """The constructor's parameters of `cls`, in the signature's order (``**kwargs``,
+    where deprecated names arrive, left out): :class:`ParamsMixin`'s
+    ``_get_param_names``, and that of a class that binds ``get_params`` in its class
+    body instead of deriving from it (``_get_param_names = classmethod(param_names)``).
+
+    Parameters
+    ----------
+    cls : type
+        The class.
+
+    Returns
+    -------
+    names : list of str
+    """
+    init = cls.__init__
+    if init is object.__init__:
+        return []
+    names = []
+    for p in inspect.signature(init).parameters.values():
+        if p.name == "self" or p.kind == p.VAR_KEYWORD:
+            continue
+        if p.kind == p.VAR_POSITIONAL:
+            raise RuntimeError(f"{cls.__name__}'s constructor must not take *args "
+                               f"(scikit-learn's convention)")
+        names.append(p.name)
+    return names
+
+
+class _ParamsSource(Protocol):
+    """What :meth:`ParamsMixin.get_params` reads: a :class:`ParamsMixin`, or a class
+    that binds ``get_params`` in its class body (``occgp.octree.LogOddsMap``)."""
+
+    def _get_param_names(self) -> list[str]: ...
+    def _get_param(self, name: str) -> Any: ...
+
+
 class ParamsMixin:
     """``get_params`` / ``set_params`` from a table of constraints (scikit-learn's
     convention, and what :func:`sklearn.base.clone` needs).
@@ -285,19 +323,8 @@ class ParamsMixin:
     @classmethod
     def _get_param_names(cls) -> list[str]:
         """The constructor's parameters, in the signature's order (``**kwargs``,
-        where deprecated names arrive, left out)."""
-        init = cls.__init__
-        if init is object.__init__:
-            return []
-        names = []
-        for p in inspect.signature(init).parameters.values():
-            if p.name == "self" or p.kind == p.VAR_KEYWORD:
-                continue
-            if p.kind == p.VAR_POSITIONAL:
-                raise RuntimeError(f"{cls.__name__}'s constructor must not take *args "
-                                   f"(scikit-learn's convention)")
-            names.append(p.name)
-        return names
+        where deprecated names arrive, left out): :func:`param_names`."""
+        return param_names(cls)
 
     @classmethod
     def _renamed(cls, deprecated: dict[str, Any], **given: Any) -> dict[str, Any]:
@@ -314,7 +341,7 @@ class ParamsMixin:
                             cls.__name__, stacklevel=4)
         return {name: out[name] for name in given}
 
-    def get_params(self, deep: bool = True) -> dict[str, Any]:
+    def get_params(self: _ParamsSource, deep: bool = True) -> dict[str, Any]:
         """The constructor's parameters (scikit-learn's ``get_params``).
 
         Parameters
@@ -396,7 +423,7 @@ class ParamsMixin:
         current = self.get_params(deep=False)
         checked = validate_params(cls._parameter_constraints, own, cls.__name__)
         checked = self._check_params_together({**current, **checked})
-        for name, sub in nested.items():       # each object's set_params checks its own
-            own.get(name, self._get_param(name)).set_params(**sub)
+        for name, sub_params in nested.items():  # each object's set_params checks its own
+            own.get(name, self._get_param(name)).set_params(**sub_params)
         self._set_checked_params(own, checked)
         return self

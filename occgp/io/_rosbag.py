@@ -80,7 +80,7 @@ class _Edge:
     """The transform parent <- child: static, or a time series interpolated in time."""
 
     def __init__(self, parent, child, static, stamps, trans, quats, source):
-        from scipy.spatial.transform import Rotation
+        from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
 
         self.parent, self.child, self.static = parent, child, static
         what = f"{source}: TF transform '{parent}' -> '{child}'"

@@ -208,7 +208,7 @@ class ScanSequence:
         return apply_poses([scan], self.poses[index:index + 1])[0]
 
     def __iter__(self):
-        from tqdm.auto import tqdm
+        from tqdm.auto import tqdm  # type: ignore[import-untyped]
 
         disable = None if self.progress is None else not self.progress
         with tqdm(total=len(self), unit="scan", disable=disable) as bar:

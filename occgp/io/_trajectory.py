@@ -162,7 +162,7 @@ def read_tum_trajectory(path, *, tol: float = _ROT_TOL):
     >>> t.tolist(), poses[0, :3, 3].tolist()
     ([0.5], [1.0, 2.0, 3.0])
     """
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
 
     tol = _check_tol(tol)
     lines, table = _parse_table(path, 8, "timestamp tx ty tz qx qy qz qw")
@@ -188,7 +188,7 @@ def read_tum_trajectory(path, *, tol: float = _ROT_TOL):
     return table[:, 0].copy(), poses
 
 
-def check_poses(poses, n_scans, tol):
+def check_poses(poses, n_scans: int, tol: float) -> NDArray[np.float64]:
     if isinstance(poses, tuple) and len(poses) == 2 and np.ndim(poses[0]) == 1:
         raise TypeError("poses must be an array of shape (n_scans, 4, 4) or (n_scans, 3, 4), "
                         "got a pair (read_tum_trajectory returns (timestamps, poses): pass "

@@ -21,6 +21,13 @@ class BlockStore:
     """Allocation and lookup of a :class:`~occgp.nav.DistanceMap`'s blocks (a mixin; the
     map's ``_setup`` sets the block size and the domain it reads)."""
 
+    # set by the map's ``_setup``: the block side in cells, the domain's cell bounds
+    # [lo, hi) per axis, the slot of each allocated block and the released slots
+    _B: int
+    _domain: tuple[np.ndarray, np.ndarray]
+    _slot: dict[tuple[int, ...], int]
+    _free: list[int]
+
     def _alloc_arrays(self, capacity: int) -> None:
         B = self._B
         self._state = np.full((capacity, B, B, B), UNKNOWN, dtype=np.uint8)

@@ -10,13 +10,16 @@ argument is the map, named ``self``.
 from __future__ import annotations
 
 import warnings
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ._queries import unpack_keys
 from .._validation import check_bool
+
+if TYPE_CHECKING:
+    from ._tree import OccupancyOctree
 
 __all__ = ["Changes", "track_changes", "set_track_changes", "changed_cells",
            "reset_changes"]
@@ -41,7 +44,7 @@ class Changes(NamedTuple):
         return self.centers
 
 
-def track_changes(self) -> bool:
+def track_changes(self: OccupancyOctree) -> bool:
     """Whether the map records which cells change (liboctomap's change detection).
 
     Set it to True to start recording: from then on, every update
@@ -66,11 +69,11 @@ def track_changes(self) -> bool:
     return bool(self._is_tracking())
 
 
-def set_track_changes(self, value: bool) -> None:
+def set_track_changes(self: OccupancyOctree, value: bool) -> None:
     self._set_tracking(check_bool(value, "track_changes"))
 
 
-def changed_cells(self) -> "Changes":
+def changed_cells(self: OccupancyOctree) -> "Changes":
     """The cells recorded since tracking began or :meth:`reset_changes`.
 
     Returns
@@ -89,7 +92,7 @@ def changed_cells(self) -> "Changes":
     return Changes(keys, centers, new)
 
 
-def reset_changes(self) -> "OccupancyOctree":
+def reset_changes(self: OccupancyOctree) -> "OccupancyOctree":
     """Forget the recorded changes (tracking stays as it is).
 
     Returns

@@ -9,18 +9,23 @@ map, named ``self``.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ._queries import pack_keys
 from .._validation import as_numeric
 
+if TYPE_CHECKING:
+    from ._tree import OccupancyOctree
+
 __all__ = ["update_cells", "set_cells", "delete_cells", "to_max_likelihood", "prune",
            "expand"]
 
 
-def update_cells(self, points: ArrayLike, log_odds: ArrayLike | None = None, *,
-                 occupied: ArrayLike | None = None,
+def update_cells(self: OccupancyOctree, points: ArrayLike,
+                 log_odds: ArrayLike | None = None, *, occupied: ArrayLike | None = None,
                  stamp: float | None = None) -> "OccupancyOctree":
     """Add log-odds to the cells holding `points` (liboctomap's ``updateNode``).
 
@@ -87,7 +92,7 @@ def update_cells(self, points: ArrayLike, log_odds: ArrayLike | None = None, *,
     return self
 
 
-def set_cells(self, points: ArrayLike, log_odds: ArrayLike, *,
+def set_cells(self: OccupancyOctree, points: ArrayLike, log_odds: ArrayLike, *,
               stamp: float | None = None) -> "OccupancyOctree":
     """Set the log-odds of the cells holding `points` (liboctomap's ``setNodeValue``).
 
@@ -129,7 +134,7 @@ def set_cells(self, points: ArrayLike, log_odds: ArrayLike, *,
     return self
 
 
-def delete_cells(self, points: ArrayLike, depth: int = 0) -> int:
+def delete_cells(self: OccupancyOctree, points: ArrayLike, depth: int = 0) -> int:
     """Make the nodes holding `points` unknown again (liboctomap's ``deleteNode``).
 
     Row ``i`` deletes the node at `depth` that holds ``points[i]``, with its
@@ -188,7 +193,7 @@ def delete_cells(self, points: ArrayLike, depth: int = 0) -> int:
     return int(self._delete(keys, depth))
 
 
-def to_max_likelihood(self) -> "OccupancyOctree":
+def to_max_likelihood(self: OccupancyOctree) -> "OccupancyOctree":
     """Set every cell to its clamping bound by its state (liboctomap's ``toMaxLikelihood``).
 
     Occupied cells go to ``clamping_max``, free ones to ``clamping_min``;
@@ -203,7 +208,7 @@ def to_max_likelihood(self) -> "OccupancyOctree":
     return self
 
 
-def prune(self) -> "OccupancyOctree":
+def prune(self: OccupancyOctree) -> "OccupancyOctree":
     """Merge every set of eight identical leaves into their parent (liboctomap's ``prune``).
 
     Returns
@@ -215,7 +220,7 @@ def prune(self) -> "OccupancyOctree":
     return self
 
 
-def expand(self) -> "OccupancyOctree":
+def expand(self: OccupancyOctree) -> "OccupancyOctree":
     """Split every pruned leaf down to the finest resolution (liboctomap's ``expand``).
 
     Returns
@@ -227,7 +232,7 @@ def expand(self) -> "OccupancyOctree":
     return self
 
 
-def _cell_values(self, n: int, log_odds, occupied) -> np.ndarray:
+def _cell_values(self: OccupancyOctree, n: int, log_odds, occupied) -> np.ndarray:
     """The float32 log-odds of :meth:`update_cells` / :meth:`set_cells`, checked."""
     if (log_odds is None) == (occupied is None):
         raise ValueError("give exactly one of log_odds and occupied")

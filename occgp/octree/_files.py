@@ -9,7 +9,7 @@ octree's stamps block (``_stamps.py``)."""
 from __future__ import annotations
 
 import os
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 
@@ -21,10 +21,13 @@ from .._validation import as_path, check_choice, check_resolution
 
 __all__ = ["to_bytes", "from_bytes", "save", "load", "check_format"]
 
-T = TypeVar("T")
+if TYPE_CHECKING:
+    from ._tree import OccupancyOctree
+
+T = TypeVar("T", bound="OccupancyOctree")
 
 
-def to_bytes(self, format: str = "ot") -> bytes:
+def to_bytes(self: OccupancyOctree, format: str = "ot") -> bytes:
     """Serialise the map in an OctoMap file format.
 
     Parameters
@@ -52,7 +55,7 @@ def to_bytes(self, format: str = "ot") -> bytes:
     return fmt.write_header(binary, size, self.resolution) + body + self._trailer()
 
 
-def from_bytes(cls: type[T], data: bytes, **params) -> T:
+def from_bytes(cls: type[OccupancyOctree], data: bytes, **params) -> OccupancyOctree:
     """Build a map from the contents of a ``.bt`` or ``.ot`` file.
 
     Parameters
@@ -105,7 +108,7 @@ def save(self: T, path: str | os.PathLike, format: str | None = None) -> T:
     return self
 
 
-def load(cls: type[T], path: str | os.PathLike, **params) -> T:
+def load(cls: type[OccupancyOctree], path: str | os.PathLike, **params) -> OccupancyOctree:
     """Read a map from an OctoMap ``.bt`` or ``.ot`` file.
 
     Parameters
@@ -132,7 +135,8 @@ def load(cls: type[T], path: str | os.PathLike, **params) -> T:
     return cls._from_data(data, path, params)
 
 
-def _from_data(cls: type[T], data: bytes, source: str, params: dict) -> T:
+def _from_data(cls: type[OccupancyOctree], data: bytes, source: str,
+               params: dict) -> OccupancyOctree:
     header = fmt.parse_header(data, source)
     if header.tree_type != "OcTree":
         hint = (" (read ColorOcTree files with occgp.ColorOctree.load)"

@@ -12,13 +12,13 @@ projection and frontiers (``occgp/nav/_planning.py``).
 from __future__ import annotations
 
 from numbers import Real
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
-from .._params import Check, Interval, ParamsMixin
+from .._params import Check, Interval, ParamsMixin, param_names
 from .._octree import TREE_MAX_VAL
 from ..nav import _planning
 from . import _outputs
@@ -102,7 +102,7 @@ class LogOddsMap:
 
     #: The constructor's parameters and what each may be (occgp._params; the maps'
     #: get_params / set_params read it).
-    _parameter_constraints = {
+    _parameter_constraints: ClassVar[dict[str, list]] = {
         "resolution": [Check(check_resolution, "a resolution in RESOLUTION_RANGE")],
         "prob_hit": [Interval(Real, 0.5, 1.0, closed="neither")],
         "prob_miss": [Interval(Real, 0.0, 0.5, closed="neither")],
@@ -111,10 +111,10 @@ class LogOddsMap:
         "occupancy_threshold": [Check(check_probability, "a probability")],
         "n_jobs": [None, Check(check_n_jobs, "an int != 0, or None")],
     }
-    _deprecated_params: dict[str, str] = {}
+    _deprecated_params: ClassVar[dict[str, str]] = {}
     # occgp's one parameter mechanism, bound here rather than inherited (the maps'
     # class chain stays short): the table above, the values in self._params
-    _get_param_names = classmethod(ParamsMixin._get_param_names.__func__)
+    _get_param_names = classmethod(param_names)
     get_params = ParamsMixin.get_params
 
     #: What the map is called in error messages.
@@ -137,6 +137,8 @@ class LogOddsMap:
         def _setup(self, resolution: float, prob_hit: float, prob_miss: float,
                    clamping_min: float, clamping_max: float,
                    occupancy_threshold: float) -> None: ...
+        def _set_sensor_model(self, prob_hit: float, prob_miss: float, clamping_min: float,
+                              clamping_max: float, occupancy_threshold: float) -> None: ...
         def _in_range(self, points: NDArray[np.float32]) -> NDArray[np.bool_]: ...
         def _check_rays(self, points: NDArray[np.float32], origin: NDArray[np.float32],
                         max_range: float) -> tuple[NDArray[np.uint8], NDArray[np.int64]]: ...
