@@ -13,7 +13,7 @@ from __future__ import annotations
 import warnings
 from numbers import Integral, Real
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -57,7 +57,7 @@ class KernelMapBase(ParamsMixin, KernelMapFiles, _KernelCells):
     occupancy_threshold: float
 
     #: What each parameter may be (see :mod:`occgp._params`); a subclass extends it.
-    _parameter_constraints: dict = {
+    _parameter_constraints: ClassVar[dict[str, list]] = {
         "resolution": [Interval(Real, 0, None, closed="neither")],
         "prior": [Interval(Real, 0, None, closed="neither")],
         "n_jobs": [Check(check_n_jobs, "None or a non-zero int")],
