@@ -21,7 +21,15 @@ Measured, at 0.1 m and 0.2 m, each the best of several repeats:
 * inserting the scan into a fresh tree, in points per second: the peers'
   ``insertPointCloud(points, origin)`` and occgp's ``insert_scan(points, origin)``
   (``mode="scan"``, the default method), and occgp with ``n_jobs=2`` as an extra
-  row (the peers' calls run on one thread);
+  row (the peers' calls run on one thread); then, each with ``n_jobs=1``, occgp's
+  ``GridMap.insert_scan(points, origin)`` (the same map as the octree, against the
+  peers' ``insertPointCloud``), the discretized insertion
+  ``insert_scan(points, origin, discretize=True)`` of the octree and of the grid
+  (one ray per distinct end cell: liboctomap's ``insertPointCloud(points, origin,
+  discretize=True)``, the peers' call it is timed against), and the grid's
+  ``ray_model="bresenham"`` (Bonxai's ``ProbabilisticMap`` rules: one integer
+  Bresenham line per distinct end cell; another map, timed against the peers'
+  discretized call, the nearest they have);
 * querying 1,000,000 points (half of them within 5 cm of a scan point, half
   uniform in the scan's bounding box, float32 values), in points per second, with
   each package's fastest public call: the occupancy probability (occgp's vectorised
@@ -33,7 +41,11 @@ Measured, at 0.1 m and 0.2 m, each the best of several repeats:
 Every map is checked identical: each worker writes its tree as ``.ot`` (full
 log-odds) and ``.bt`` (maximum likelihood) files and the parent compares the
 bytes with occgp's (and, where bytes differ, the leaves read back with
-``OccupancyOctree.load``); the query results are compared value for value.
+``OccupancyOctree.load``); the query results are compared value for value. The
+grid's maps (as ``GridMap.to_octree()``) are checked against occgp's octree, and the
+discretized maps against each other and the peers' discretized ``.ot``; for the
+Bresenham map the bench prints the Jaccard index of its free and of its occupied
+cells against the discretized 3D-DDA map's (they differ by design).
 
 Run: ``python bench/bench_peers.py [--repeats 5] [--query-repeats 3]``; the README's
 "Speed" section is one run of it.
@@ -58,6 +70,20 @@ PEERS = {  # package name on PyPI -> (pinned version, module)
     "pyoctomap": ("1.2.2", "pyoctomap"),
 }
 PACKAGES = ["octomap-python", "pyoctomap", "occgp"]
+# occgp's extra insertion rows: result key -> (class name, insert_scan options, table label,
+# the peers' timing it is compared with, suffix of the .ot it writes or None)
+OCCGP_INSERTS = {
+    "insert_grid_s": ("GridMap", {}, "insert, occgp grid", "insert_s", "_grid"),
+    "insert_discretize_s": ("OccupancyOctree", dict(discretize=True),
+                            "insert discretize, occgp octree", "insert_discretize_s",
+                            "_discretize"),
+    "insert_grid_discretize_s": ("GridMap", dict(discretize=True),
+                                 "insert discretize, occgp grid", "insert_discretize_s",
+                                 "_grid_discretize"),
+    "insert_grid_bresenham_s": ("GridMap", dict(ray_model="bresenham"),
+                                "insert, occgp grid bresenham (another map)",
+                                "insert_discretize_s", None),
+}
 
 
 # ---------------------------------------------------------------------- worker
@@ -75,10 +101,12 @@ def _best(repeats, setup, fn):
 
 
 def _occgp_ops():
-    from occgp import OccupancyOctree, __version__
+    from occgp import GridMap, OccupancyOctree, __version__
 
-    def new(resolution, n_jobs=None):
-        return OccupancyOctree(resolution, n_jobs=n_jobs)
+    classes = {"GridMap": GridMap, "OccupancyOctree": OccupancyOctree}
+
+    def new(resolution, n_jobs=None, cls="OccupancyOctree"):
+        return classes[cls](resolution, n_jobs=n_jobs)
 
     def insert(tree, points, origin):
         tree.insert_scan(points, origin)
@@ -92,6 +120,8 @@ def _occgp_ops():
         occupancy=lambda tree, q: tree.occupancy(q), labels=labels,
         write_ot=lambda tree, path: tree.save(path), write_bt=lambda tree, path: tree.save(path),
         calls=dict(insert="insert_scan(points, origin)",
+                   insert_discretize="insert_scan(points, origin, discretize=True)",
+                   insert_grid_bresenham='insert_scan(points, origin, ray_model="bresenham")',
                    occupancy="occupancy(points)",
                    labels="is_occupied(points, return_unknown=True)"))
 
@@ -118,14 +148,30 @@ def _peer_ops(package):
     return dict(
         version=version(package), new=mod.OcTree,
         insert=lambda tree, points, origin: tree.insertPointCloud(points, origin),
+        insert_discretize=lambda tree, points, origin: tree.insertPointCloud(
+            points, origin, discretize=True),
         occupancy=occupancy,
         labels=lambda tree, q: np.asarray(tree.getLabels(q), dtype=np.int32),
         # writeBinary turns the tree to maximum likelihood: write the .ot first
         write_ot=lambda tree, path: tree.write(str(path)),
         write_bt=lambda tree, path: tree.writeBinary(str(path)),
         calls=dict(insert="insertPointCloud(points, origin)",
+                   insert_discretize="insertPointCloud(points, origin, discretize=True)",
                    occupancy="loop: search(point).getOccupancy()",
                    labels="getLabels(points)"))
+
+
+def _jaccards(a, b):
+    """Jaccard indices of the free and of the occupied cells of two grids: [free, occupied]."""
+    out = []
+    for free in (True, False):
+        sets = []
+        for m in (a, b):
+            cells = m.cells()
+            keys = np.floor(cells.centers[(cells.log_odds < 0) == free] / m.resolution)
+            sets.append(set(map(tuple, keys.astype(np.int64).tolist())))
+        out.append(len(sets[0] & sets[1]) / max(1, len(sets[0] | sets[1])))
+    return out
 
 
 def run_worker(job):
@@ -157,6 +203,23 @@ def run_worker(job):
                                     lambda tree: (ops["insert"](tree, points, origin), tree)[1])
                     run[f"insert_n_jobs_{n}_s"] = t
                     tree.save(f"{stem}_n_jobs_{n}.ot")
+                maps = {}
+                for key, (cls, options, _, _, suffix) in OCCGP_INSERTS.items():
+                    t, maps[key] = _best(
+                        job["repeats"], lambda: ops["new"](res, 1, cls),
+                        lambda m: (m.insert_scan(points, origin, **options), m)[1])
+                    run[key] = t
+                    if suffix:
+                        (maps[key].to_octree() if cls == "GridMap" else maps[key]).save(
+                            f"{stem}{suffix}.ot")
+                run["bresenham_jaccard"] = _jaccards(maps["insert_grid_bresenham_s"],
+                                                     maps["insert_grid_discretize_s"])
+            else:
+                t, tree = _best(job["repeats"], lambda: ops["new"](res),
+                                lambda tree: (ops["insert_discretize"](tree, points, origin),
+                                              tree)[1])
+                run["insert_discretize_s"] = t
+                ops["write_ot"](tree, f"{stem}_discretize.ot")
             tree = ops["new"](res)
             ops["insert"](tree, points, origin)
             for what in ("occupancy", "labels"):
@@ -279,25 +342,38 @@ def same_map(path_a, path_b):
 
 
 def check_identical(results, out, n_jobs):
-    """Compare every package's maps and query answers with occgp's; a list of problems."""
+    """Compare every package's maps and query answers with occgp's; a list of problems.
+
+    The grid's maps and the discretized maps (occgp's and the peers') are compared
+    where their runs wrote them.
+    """
     problems = []
     for run in results["occgp"]["runs"]:
+        where = f"({run['dataset']}, {run['resolution']} m)"
         ref = Path(out) / f"occgp_{run['dataset']}_{run['resolution']}"
-        others = [(f"occgp n_jobs={n}", Path(f"{ref}_n_jobs_{n}.ot"), ".ot") for n in n_jobs]
+        discretized = Path(f"{ref}_discretize.ot")
+        # (who, its map, occgp's map it must equal, required)
+        pairs = [(f"occgp n_jobs={n}", Path(f"{ref}_n_jobs_{n}.ot"), Path(f"{ref}.ot"), True)
+                 for n in n_jobs]
+        pairs += [("occgp grid", Path(f"{ref}_grid.ot"), Path(f"{ref}.ot"), False),
+                  ("occgp grid discretize", Path(f"{ref}_grid_discretize.ot"), discretized, False)]
         for package in results:
             if package != "occgp":
                 stem = Path(out) / f"{package}_{run['dataset']}_{run['resolution']}"
-                others += [(package, Path(f"{stem}{ext}"), ext) for ext in (".ot", ".bt")]
+                pairs += [(package, Path(f"{stem}{ext}"), Path(f"{ref}{ext}"), True)
+                          for ext in (".ot", ".bt")]
+                pairs += [(f"{package} discretize", Path(f"{stem}_discretize.ot"), discretized,
+                           False)]
                 for what in ("occupancy", "labels"):
                     mine = np.load(f"{ref}_{what}.npy")
                     theirs = np.load(f"{stem}_{what}.npy")
                     if not np.array_equal(mine, theirs, equal_nan=what == "occupancy"):
-                        problems.append(f"{package} {what} answers differ "
-                                        f"({run['dataset']}, {run['resolution']} m)")
-        for who, path, ext in others:
-            if not same_map(f"{ref}{ext}", path):
-                problems.append(f"{who} {ext} map differs ({run['dataset']}, "
-                                f"{run['resolution']} m)")
+                        problems.append(f"{package} {what} answers differ {where}")
+        for who, path, mine, required in pairs:
+            if not required and not (path.exists() and mine.exists()):
+                continue
+            if not same_map(mine, path):
+                problems.append(f"{who} {path.suffix} map differs {where}")
     return problems
 
 
@@ -342,22 +418,34 @@ def markdown_table(results, missing, n_jobs):
     by = {p: {(r["dataset"], r["resolution"]): r for r in results[p]["runs"]} for p in results}
     for key, run in by["occgp"].items():
         data = f"{key[0]} ({run['n_points']:,} pts)"
-        rows = [("insert", "insert_s", "insert_s", run["n_points"])]
-        rows += [(f"insert, occgp n_jobs={n}", "insert_s", f"insert_n_jobs_{n}_s", run["n_points"])
-                 for n in n_jobs]
-        rows += [("occupancy, 1M queries", "occupancy_s", "occupancy_s", run["n_queries"]),
-                 ("label, 1M queries", "labels_s", "labels_s", run["n_queries"])]
-        for label, peer_key, own_key, n in rows:
+        # (label, the peers' timing, occgp's, count, what the peers' column shows instead of
+        # their rate: None for the rate)
+        rows = [("insert", "insert_s", "insert_s", run["n_points"], None)]
+        rows += [(f"insert, occgp n_jobs={n}", "insert_s", f"insert_n_jobs_{n}_s", run["n_points"],
+                  "(1 thread)") for n in n_jobs]
+        shown = {"insert_s"}
+        for own_key, (_, _, label, peer_key, _) in OCCGP_INSERTS.items():
+            if own_key in run:
+                rows.append((label, peer_key, own_key, run["n_points"],
+                             "(as above)" if peer_key in shown else None))
+                shown.add(peer_key)
+        rows += [("occupancy, 1M queries", "occupancy_s", "occupancy_s", run["n_queries"], None),
+                 ("label, 1M queries", "labels_s", "labels_s", run["n_queries"], None)]
+        for label, peer_key, own_key, n, instead in rows:
             if run["n_queries"] != 1_000_000:
                 label = label.replace("1M", f"{run['n_queries']:,}")
             own = run[own_key]
+            theirs = [by[p][key].get(peer_key) for p in peers]
             cells = [data, f"{key[1]:g}", label]
-            cells += [_rate(n, by[p][key][peer_key]) if peer_key == own_key else "(1 thread)"
-                      for p in peers]
+            cells += [instead or _rate(n, t) if t else "–" for t in theirs]
             cells += [_rate(n, own)]
-            cells += [f"{by[p][key][peer_key] / own:.1f}x" for p in peers]
+            cells += [f"{t / own:.1f}x" if t else "–" for t in theirs]
             lines.append("| " + " | ".join(cells) + " |")
     notes = [f"{p}: not measured ({why})" for p, why in missing.items() if why]
+    notes += [f"occgp grid bresenham vs the discretized 3D-DDA map, {r['dataset']} "
+              f"{r['resolution']:g} m: Jaccard of the free cells {r['bresenham_jaccard'][0]:.3f}, "
+              f"of the occupied cells {r['bresenham_jaccard'][1]:.3f}"
+              for r in results["occgp"]["runs"] if "bresenham_jaccard" in r]
     return "\n".join(lines), notes
 
 
@@ -373,6 +461,8 @@ def main(argv=None):
     parser.add_argument("--datasets", nargs="+", default=["scan.dat", "geb079"])
     parser.add_argument("--out", default=str(ROOT / "build" / "peers-bench"),
                         help="folder for the points, maps and answers")
+    parser.add_argument("--venv", default=str(VENV),
+                        help="the peers' virtual environment (created once, then reused)")
     args = parser.parse_args(argv)
     if args.worker:
         run_worker(json.loads(Path(args.worker).read_text()))
@@ -383,7 +473,7 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     print(f"load average before the run: {os.getloadavg()[0]:.2f}", flush=True)
     datasets = prepare_datasets(out, args.queries, names=args.datasets)
-    python, missing = peers_python()
+    python, missing = peers_python(args.venv)
     job = dict(datasets=datasets, resolutions=args.resolutions, repeats=args.repeats,
                query_repeats=args.query_repeats, n_jobs=args.n_jobs, out=str(out))
     results = {}
@@ -416,7 +506,8 @@ def main(argv=None):
         print(f"{p}: " + "; ".join(f"{k}: {v}" for k, v in r["calls"].items()))
     for note in notes:
         print(note)
-    print("maps (.ot and .bt bytes) and query answers identical to occgp's: "
+    print("maps (.ot and .bt bytes; the grid's and the discretized maps too) and query answers "
+          "identical to occgp's: "
           + ("all" if not problems else "NO\n  " + "\n  ".join(problems)))
 
 
