@@ -15,7 +15,7 @@ poses) and the ``hku_mb`` Livox LiDAR sequence
 (:class:`occgp.io.ScanSequence`: 457 keyframes of about 5,100 points with
 FAST-LIO2 poses). The logs are not part of occgp: without them this example
 says so and stops. ``bench/bench_real.py`` runs every map on every log; the
-user guide's "Which map when" section has its tables.
+"Which map when" page (``docs/which_map.rst``) has its tables.
 """
 
 # Author: the occgp developers

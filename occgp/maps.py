@@ -9,7 +9,7 @@ map types they read: a new map type is one module and one decorator.
 Other packages add map types as plugins: a distribution that declares an entry
 point in the ``occgp.maps`` group (:data:`ENTRY_POINT_GROUP`) has its maps
 registered the first time the registry is read, beside the built-in ones
-(see :func:`register` and the user guide's "Writing a map").
+(see :func:`register` and the user guide's "Map types and plugins").
 
 Examples
 --------
