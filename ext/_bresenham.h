@@ -45,8 +45,12 @@ struct BresenhamStats {
 // The key of a coordinate (OctoMap's: floor(c / resolution) + 2^15), or -1 outside the
 // 16-bit key range.
 static inline int64_t bresenham_key(double c, double inv_resolution) {
-  const double k = std::floor(c * inv_resolution) + 32768.0;
-  return (k >= 0.0 && k <= 65535.0) ? static_cast<int64_t>(k) : -1;
+  // floor by truncation, less one below a negative non-integer (std::floor is a dozen
+  // instructions on x86-64 without SSE4.1), once the value is known to be in range
+  const double scaled = c * inv_resolution;
+  if (!(scaled >= -32768.0 && scaled < 32768.0)) return -1;
+  const int64_t truncated = static_cast<int64_t>(scaled);
+  return truncated - (truncated > scaled) + 32768;
 }
 
 static inline uint64_t pack3(const int64_t k[3]) {
