@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
 from .._params import Check, Interval, ParamsMixin, param_names
-from .._octree import TREE_MAX_VAL
+from .._octree import TREE_MAX_VAL, _discretize
 from ..nav import _planning
 from . import _outputs
 from ._options import METHODS
@@ -463,20 +463,15 @@ class LogOddsMap:
     def _discretized_points(self, points: ArrayLike) -> np.ndarray:
         """liboctomap's ``discretize``: the center of each distinct cell that holds a
         point of `points` (as single-precision points, keys as ``coordToKey`` computes
-        them), in key order. Raises ValueError if a point lies outside the key range
-        (liboctomap discretizes before it truncates at max_range, with unchecked keys)."""
+        them), compiled (``ext/_discretize.h``). Raises ValueError if a point lies
+        outside the key range (liboctomap discretizes before it truncates at max_range,
+        with unchecked keys)."""
         pts = self._as_float32_points(points, "points")
-        inside = self._in_range(pts)
-        if not inside.all():
-            self._raise_out_of_range("points", inside,
+        bad, centers = _discretize(self.resolution, pts)
+        if bad >= 0:
+            self._raise_out_of_range("points", self._in_range(pts),
                                      " (with discretize=True, before truncation)")
-        keys = np.floor(pts.astype(np.float64) * (1.0 / self.resolution)).astype(np.int64)
-        keys += 32768                                  # 0 .. 65535 on each axis
-        packed = np.unique(keys[:, 0] | keys[:, 1] << 16 | keys[:, 2] << 32)
-        cells = np.stack([packed & 0xFFFF, packed >> 16 & 0xFFFF, packed >> 32], axis=1)
-        # keyToCoord: (key - 2^15 + 0.5) * resolution in double, stored as float
-        return np.ascontiguousarray((cells - 32768 + 0.5) * self.resolution,
-                                    dtype=np.float32)
+        return centers
 
     def _as_float32_points(self, x: ArrayLike, name: str) -> np.ndarray:
         # beyond float range is beyond every key range: inf, which no key holds
