@@ -59,6 +59,28 @@ cdef extern from "_grid_apply.h" namespace "occgp" nogil:
     void apply_grid_updates(BlockGrid& cells, const vector[ScanCell]& found,
                             float lo, float hi, int n_threads) except +
 
+cdef extern from "_discretize.h" namespace "occgp" nogil:
+    Py_ssize_t discretize_points(const float* points, Py_ssize_t n, double resolution,
+                                 vector[float]& centers) except +
+
+
+def _discretize(double resolution, const float[:, ::1] points):
+    """liboctomap's discretize (``ext/_discretize.h``): (first point outside the key
+    range or -1, the centers of the distinct cells holding the points, float32 (n, 3),
+    in the order of each cell's first point)."""
+    cdef vector[float] centers
+    cdef Py_ssize_t bad
+    cdef const float* first = &points[0, 0] if points.shape[0] else NULL
+    with nogil:
+        bad = discretize_points(first, points.shape[0], resolution, centers)
+    out = np.empty((centers.size() // 3, 3), dtype=np.float32)
+    cdef float[:, ::1] view = out
+    cdef Py_ssize_t i
+    for i in range(<Py_ssize_t>centers.size()):
+        view[i // 3, i % 3] = centers[i]
+    return bad, out
+
+
 include "_scan_result.pxi"
 
 import threading

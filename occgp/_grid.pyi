@@ -7,6 +7,9 @@ from ._status import Status
 
 RAY_VISITS: int
 
+def _discretize(resolution: float,
+                points: NDArray[np.float32]) -> tuple[int, NDArray[np.float32]]: ...
+
 @disjoint_base
 class _Grid:
     def _set_sensor_model(self, prob_hit: float, prob_miss: float, clamping_min: float,

@@ -129,9 +129,11 @@ def test_knnmap_old_names():
     with pytest.warns(DeprecationWarning, match="'occupancy_threshold'"):
         m.set_params(p_t=0.7)
     assert m.occupancy_threshold == 0.7
-    with pytest.warns(DeprecationWarning, match="'max_range'"):
+    with pytest.warns(DeprecationWarning) as caught:
         q = check_knn_params(dict(k=1, p_u=0.9, p_l=0.3, p_m=0.2, p_m_out=0.4, p_min=0.05,
                                   p_max=0.95, p_t=0.5, sensor_range=4.0))
+    messages = " ".join(str(w.message) for w in caught)
+    assert "'p_t' is deprecated" in messages and "'sensor_range' is deprecated" in messages
     assert q["max_range"] == 4.0 and q["occupancy_threshold"] == 0.5 and "p_t" not in q
 
 

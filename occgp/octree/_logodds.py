@@ -19,7 +19,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._docfill import fill_doc
 from .._params import Check, Interval, ParamsMixin, param_names
-from .._octree import TREE_MAX_VAL, _discretize
+from .._grid import _discretize
+from .._octree import TREE_MAX_VAL
 from ..nav import _planning
 from . import _outputs
 from ._options import METHODS
