@@ -133,18 +133,7 @@ class GridMap(LogOddsMap, _Grid):
         as free and its end cell as occupied, cell for cell as
         :meth:`OccupancyOctree.insert_scan` does, with the same methods.
 
-        Parameters
-        ----------
-        points : array-like of shape (n_points, 3)
-            Ray end points in the world frame, in metres. Must be finite. An
-            empty scan (``n_points == 0``) changes nothing.
-        origin : array-like of shape (3,)
-            Sensor position in the world frame, in metres.
-        max_range : float, default=None
-            Rays longer than this are truncated: the cells up to `max_range`
-            are marked free and the end cell is not marked occupied. None means
-            no limit. Points may then lie beyond the key range, or beyond float
-            range: their rays are cut at `max_range` all the same.
+        {ray_scan_parameters}
         mode : {"scan", "ray"}, default="scan"
             ``"scan"`` follows liboctomap's ``insertPointCloud``: the scan's sets
             of free and occupied cells are computed first, a cell in both counts

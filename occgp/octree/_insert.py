@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._docfill import fill_doc
 from ._logodds import MODES
 from .._octree import KEYRAY_CELLS
 from ._options import InsertOptions, resolve_options
@@ -26,6 +27,7 @@ from .._validation import check_choice, n_threads
 __all__ = ["insert_scan"]
 
 
+@fill_doc()
 def insert_scan(
     self,
     points: ArrayLike,
@@ -52,18 +54,7 @@ def insert_scan(
     ``insert_scan(p, o, options=InsertOptions(method="plain"))``. The threads
     are the map's `n_jobs` (a constructor parameter).
 
-    Parameters
-    ----------
-    points : array-like of shape (n_points, 3)
-        Ray end points in the world frame, in metres. Must be finite. An
-        empty scan (``n_points == 0``) changes nothing.
-    origin : array-like of shape (3,)
-        Sensor position in the world frame, in metres.
-    max_range : float, default=None
-        Rays longer than this are truncated: the cells up to `max_range`
-        are marked free and the end cell is not marked occupied. None means
-        no limit. Points may then lie beyond the key range, or beyond float
-        range: their rays are cut at `max_range` all the same.
+    {ray_scan_parameters}
     mode : {"scan", "ray"}, default="scan"
         ``"scan"`` is liboctomap's ``insertPointCloud``: the scan's sets of
         free and occupied cells are computed first, a cell in both counts as
