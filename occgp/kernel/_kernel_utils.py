@@ -31,7 +31,7 @@ class Bandwidths(NamedTuple):
     precision: NDArray[np.float64]
     #: Half-size of each support's bounding box per axis, shape (n_samples, 3), metres.
     extent: NDArray[np.float64]
-    #: Kernel weights |H|^-1/2, shape (n_samples,).
+    #: Kernel weights ``|H|^-1/2``, shape (n_samples,).
     weight: NDArray[np.float64]
     #: Length-scale factor c of H = c^2 Sigma (1 for the isotropic fallback).
     scale: NDArray[np.float64]
