@@ -475,6 +475,9 @@ class LogOddsMap:
         return centers
 
     def _as_float32_points(self, x: ArrayLike, name: str) -> np.ndarray:
+        if (type(x) is np.ndarray and x.dtype == np.float32 and x.ndim == 2
+                and x.shape[1] == 3 and np.isfinite(x).all()):
+            return np.ascontiguousarray(x)      # already what as_points would accept
         # beyond float range is beyond every key range: inf, which no key holds
         with np.errstate(over="ignore"):
             return np.ascontiguousarray(as_points(x, name), dtype=np.float32)
