@@ -31,26 +31,24 @@
 #include <vector>
 
 #include "_block_grid.h"
+#include "_keys.h"
 #include "_grid_apply.h"
 #include "_status.h"
 
 namespace occgp {
 
 struct BresenhamStats {
-  uint64_t rays;     // distinct end cells, each one ray
-  uint64_t visits;   // cells visited by the rays
-  uint64_t updated;  // cells updated (end cells and free cells)
+  uint64_t rays;      // distinct end cells, each one ray
+  uint64_t visits;    // cells visited by the rays
+  uint64_t updated;   // cells updated (end cells and free cells)
+  int64_t first_bad;  // with out_of_range: the first point whose end cell has no key
 };
 
-// The key of a coordinate (OctoMap's: floor(c / resolution) + 2^15), or -1 outside the
-// 16-bit key range.
+// The key of a coordinate in double precision (OctoMap's floor(c / resolution) + 2^15,
+// scaled_key), or -1 outside the 16-bit key range.
 static inline int64_t bresenham_key(double c, double inv_resolution) {
-  // floor by truncation, less one below a negative non-integer (std::floor is a dozen
-  // instructions on x86-64 without SSE4.1), once the value is known to be in range
-  const double scaled = c * inv_resolution;
-  if (!(scaled >= -32768.0 && scaled < 32768.0)) return -1;
-  const int64_t truncated = static_cast<int64_t>(scaled);
-  return truncated - (truncated > scaled) + 32768;
+  int64_t key;
+  return scaled_key(c * inv_resolution, &key) ? key : -1;
 }
 
 static inline uint64_t pack3(const int64_t k[3]) {
@@ -94,6 +92,7 @@ static inline Status bresenham_scan(BlockGrid& grid, const float* points, ptrdif
   const double inv = 1.0 / resolution;
   const double o[3] = {origin[0], origin[1], origin[2]};
   int64_t ko[3];
+  stats->first_bad = -1;
   for (int a = 0; a < 3; ++a)
     if ((ko[a] = bresenham_key(o[a], inv)) < 0) return Status::out_of_range;
   const double max_sq = max_range < 0 ? INFINITY : max_range * max_range;
@@ -110,8 +109,12 @@ static inline Status bresenham_scan(BlockGrid& grid, const float* points, ptrdif
       for (int a = 0; a < 3; ++a) p[a] = o[a] + (v[a] / norm) * max_range;
     }
     int64_t k[3];
-    for (int a = 0; a < 3; ++a)
-      if ((k[a] = bresenham_key(p[a], inv)) < 0) return Status::out_of_range;
+    for (int a = 0; a < 3; ++a) {
+      if ((k[a] = bresenham_key(p[a], inv)) < 0) {
+        stats->first_bad = i;
+        return Status::out_of_range;
+      }
+    }
     ends[i] = pack3(k) | (is_miss ? kMiss : 0);
   }
   grid.begin_scan();

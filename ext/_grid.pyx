@@ -17,7 +17,7 @@ per-map lock serialises the operations on one map.
 
 cimport cython
 from libc.math cimport exp
-from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
+from libc.stdint cimport int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 from libcpp cimport bool
 from libcpp.algorithm cimport sort
 from libcpp.memory cimport unique_ptr
@@ -50,6 +50,7 @@ cdef extern from "_bresenham.h" namespace "occgp" nogil:
         uint64_t rays
         uint64_t visits
         uint64_t updated
+        int64_t first_bad
     Status bresenham_scan(BlockGrid& grid, const float* points, Py_ssize_t n,
                           const float* origin, double resolution, double max_range,
                           float hit, float miss, float lo, float hi,
@@ -203,8 +204,8 @@ cdef class _Grid:
                           double max_range):
         """Insert a scan with Bonxai's ray model (``ext/_bresenham.h``): one integer
         Bresenham line per distinct end cell, each cell updated once. `max_range` < 0:
-        no limit. Returns (status, rays, visited cells, updated cells); nothing changed
-        unless status is ok."""
+        no limit. Returns (status, rays, visited cells, updated cells, the first point
+        without a key or -1); nothing changed unless status is ok."""
         cdef OcTree* tree = self._get()
         cdef BresenhamStats stats
         cdef Status status
@@ -216,7 +217,7 @@ cdef class _Grid:
                 status = bresenham_scan(self._cells, first, points.shape[0], &origin[0],
                                         tree.getResolution(), max_range, hit, miss, lo, hi,
                                         &stats)
-        return int(status), stats.rays, stats.visits, stats.updated
+        return int(status), stats.rays, stats.visits, stats.updated, stats.first_bad
 
     # ------------------------------------------------------------------ queries
     def _query(self, const float[:, ::1] points, int what):

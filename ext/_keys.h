@@ -27,6 +27,27 @@ inline octomap::OcTreeKey unpack_key(uint64_t packed) {
                             static_cast<octomap::key_type>((packed >> 32) & 0xFFFF));
 }
 
+// The key of a scaled coordinate (coordinate / resolution, in double precision):
+// floor(scaled) + 32768, as liboctomap's coordToKey; false outside the 16-bit key range,
+// tested on the double first, where liboctomap would cast a huge value to int unchecked.
+// In range, the floor is the truncation, less one below a negative non-integer
+// (std::floor takes a dozen instructions on x86-64 without SSE4.1).
+inline bool scaled_key(double scaled, int64_t* key) {
+  if (!(scaled >= -32768.0 && scaled < 32768.0)) return false;
+  const int64_t truncated = static_cast<int64_t>(scaled);
+  *key = truncated - (truncated > scaled) + 32768;
+  return true;
+}
+
+// liboctomap's coordToKeyChecked on one axis, with its arithmetic (the float coordinate
+// times the double resolution factor).
+inline bool key_checked(double resolution_factor, float coordinate, octomap::key_type* key) {
+  int64_t k;
+  if (!scaled_key(resolution_factor * static_cast<double>(coordinate), &k)) return false;
+  *key = static_cast<octomap::key_type>(k);
+  return true;
+}
+
 // Set `end` to the ray's end as liboctomap's computeUpdate does; true when truncated.
 // `max_range` < 0 means no limit.
 inline bool effective_end(const octomap::point3d& origin, const octomap::point3d& point,

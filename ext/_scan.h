@@ -186,20 +186,6 @@ static inline float update_value(uint32_t n_free, uint32_t n_hit, bool ray_mode,
   return n_hit ? l_hit : l_miss;
 }
 
-// liboctomap's coordToKeyChecked on one axis, with its arithmetic (floor of the double
-// product, plus 32768); the range is tested on the double first, where liboctomap
-// would cast a huge value to int unchecked.
-static inline bool key_checked(double resolution_factor, float coordinate, octomap::key_type* key) {
-  // floor(scaled) is in range exactly when scaled is; then the floor is the truncation,
-  // less one below a negative non-integer (std::floor takes a dozen instructions on
-  // x86-64 without SSE4.1)
-  const double scaled = resolution_factor * static_cast<double>(coordinate);
-  if (!(scaled >= -kMaxVal && scaled < kMaxVal)) return false;
-  const int truncated = static_cast<int>(scaled);
-  key[0] = static_cast<octomap::key_type>(truncated - (truncated > scaled) + kMaxVal);
-  return true;
-}
-
 }  // namespace scan_detail
 
 // Grow the scan's culling region (Kwon, dissertation 2.3.5, Alg. 3).

@@ -11,6 +11,7 @@ from numpy.typing import ArrayLike
 from ._docfill import fill_doc
 from .io import _npz as _npz_io
 from ._grid import _Grid
+from ._status import Status
 from .octree._logodds import MODES, N_JOBS, SENSOR_MODEL, Leaves, LogOddsMap
 from .octree._options import InsertOptions, resolve_options
 from .maps import register
@@ -248,12 +249,14 @@ class GridMap(LogOddsMap, _Grid):
         rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
         pts = self._as_float32_points(points, "points")
         org = self._as_float32_origin(origin)
-        status, rays, visits, updated = self._insert_bresenham(pts, org, rng)
+        status, rays, visits, updated, first_bad = self._insert_bresenham(pts, org, rng)
         if status:
-            # an end cell without a key (the scan changed nothing): name the points
-            inside = self._in_range(pts) if rng < 0 else np.isfinite(pts).all(axis=1)
-            self._raise_out_of_range("points", inside if not inside.all()
-                                     else np.zeros(len(pts), bool),
+            # an end cell without a key (the scan changed nothing): the rows whose ends,
+            # cut as the octree cuts them, lie outside, and the row the core stopped at
+            ok = self._check_rays(pts, org, rng)[0] != Status.OUT_OF_RANGE
+            if first_bad >= 0:
+                ok[first_bad] = False
+            self._raise_out_of_range("points", ok,
                                      " (after truncation at max_range)" if rng >= 0 else "")
         self.last_insert_ = {"rays": int(rays), "traversed_cells": int(visits),
                              "updated_cells": int(updated), "ray_model": "bresenham"}
