@@ -1,15 +1,18 @@
 // The cells of occgp.GridMap (ext/_grid.pyx): a hashed root of dense 8 x 8 x 8 blocks.
 //
 // A cell is liboctomap's 16-bit key (packed by pack_key, ext/_keys.h) and a float32
-// log-odds. The root maps a block's key (the cell keys shifted right by 3 on each
-// axis) to a block that holds the 512 log-odds of its cells and a bit mask of the
-// known ones. A lookup hashes once per block, not once per cell; an Accessor keeps the
-// last block it found, so the cells of one ray or one scan, which are mostly in the
-// same block as the cell before them, are found without hashing at all.
+// log-odds. The root (the project's open-addressing KeyMap, ext/_keytable.h: a power
+// of two of slots, so a lookup takes a multiply and a mask, no division) maps a
+// block's key (the cell keys shifted right by 3 on each axis) to a block that holds
+// the 512 log-odds of its cells and a bit mask of the known ones. A lookup hashes once
+// per block, not once per cell; an Accessor keeps the last block it found, so the
+// cells of one ray or one scan, which are mostly in the same block as the cell before
+// them, are found without hashing at all.
 //
 // Memory: a block is 2,184 bytes (512 floats, a mask of the known cells, a mask of the
-// cells updated in the current scan and the scan it belongs to) plus its root entry;
-// memory_usage() counts both, and the bucket array.
+// cells updated in the current scan and the scan it belongs to) plus its root slots
+// (16 bytes each, at most half of them used) and its owning pointer; memory_usage()
+// counts them all.
 #ifndef OCCGP_BLOCK_GRID_H
 #define OCCGP_BLOCK_GRID_H
 
@@ -17,9 +20,10 @@
 #include <cstdint>
 #include <cstring>
 #include <memory>
-#include <unordered_map>
 #include <utility>
 #include <vector>
+
+#include "_keytable.h"
 
 namespace occgp {
 
@@ -55,26 +59,34 @@ inline uint64_t key_of(uint64_t block, int index) {
          (((block >> 32) & 0xFFFF) << kBlockBits | ((i >> (2 * kBlockBits)) & kBlockMask)) << 32;
 }
 
+// A root slot: a block's key and the block (nullptr until get_block creates it).
+struct BlockRef {
+  uint64_t key;
+  GridBlock* block;
+};
+
 class BlockGrid {
  public:
-  typedef std::unordered_map<uint64_t, std::unique_ptr<GridBlock>> Root;
+  BlockGrid() { root_.reset(8); }
 
   // The block of `block_key`, or nullptr.
   GridBlock* find_block(uint64_t block_key) const {
-    const Root::const_iterator it = root_.find(block_key);
-    return it == root_.end() ? nullptr : it->second.get();
+    const BlockRef* ref = root_.find(block_key);
+    return ref == nullptr ? nullptr : ref->block;
   }
 
   // The block of `block_key`, created (no cell known) if missing.
   GridBlock* get_block(uint64_t block_key) {
-    std::unique_ptr<GridBlock>& slot = root_[block_key];
-    if (!slot) {
-      slot.reset(new GridBlock);
-      std::memset(slot->known, 0, sizeof(slot->known));
-      std::memset(slot->marked, 0, sizeof(slot->marked));
-      slot->epoch = 0;  // no scan's marks
+    BlockRef* ref = root_.get(block_key);
+    if (ref->block == nullptr) {
+      blocks_.emplace_back(new GridBlock);
+      GridBlock* block = blocks_.back().get();
+      std::memset(block->known, 0, sizeof(block->known));
+      std::memset(block->marked, 0, sizeof(block->marked));
+      block->epoch = 0;  // no scan's marks
+      ref->block = block;
     }
-    return slot.get();
+    return ref->block;
   }
 
   // The log-odds of a known cell, or nullptr.
@@ -105,34 +117,38 @@ class BlockGrid {
   }
 
   size_t size() const { return n_cells_; }
-  size_t num_blocks() const { return root_.size(); }
+  size_t num_blocks() const { return blocks_.size(); }
 
   void clear() {
-    Root empty;
-    root_.swap(empty);  // frees the buckets too
+    root_.reset(8);  // frees the slots too
+    std::vector<std::unique_ptr<GridBlock>>().swap(blocks_);
     n_cells_ = 0;
   }
 
-  void reserve_blocks(size_t n) { root_.reserve(n); }
+  void reserve_blocks(size_t n) {
+    if (n > root_.size()) root_.reserve(n);
+    blocks_.reserve(n);
+  }
 
-  // Bytes of the blocks, their root entries (a node with the key, the pointer and the
-  // next pointer) and the bucket array.
+  // Bytes of the blocks, their owning pointers and the root's slots.
   size_t memory_usage() const {
-    return root_.size() * (sizeof(GridBlock) + sizeof(Root::value_type) + sizeof(void*)) +
-           root_.bucket_count() * sizeof(void*);
+    return blocks_.size() * sizeof(GridBlock) + blocks_.capacity() * sizeof(void*) +
+           root_.capacity() * sizeof(BlockRef);
   }
 
   // Calls f(packed key, log-odds) for every known cell, block by block.
   template <class F>
   void for_each(F f) const {
-    for (Root::const_iterator it = root_.begin(); it != root_.end(); ++it) {
-      const GridBlock* block = it->second.get();
+    for (size_t slot = 0; slot < root_.capacity(); ++slot) {
+      const BlockRef& ref = root_.slot(slot);
+      if (ref.key == BlockRoot::kEmpty) continue;
+      const GridBlock* block = ref.block;
       for (int w = 0; w < kBlockCells / 64; ++w) {
         uint64_t bits = block->known[w];
         while (bits) {
           const int i = w * 64 + __builtin_ctzll(bits);
           bits &= bits - 1;
-          f(key_of(it->first, i), block->value[i]);
+          f(key_of(ref.key, i), block->value[i]);
         }
       }
     }
@@ -165,7 +181,7 @@ class BlockGrid {
   // lazily, when a block is first touched in the new scan (its epoch is behind).
   void begin_scan() {
     if (++epoch_ == 0) {  // wrapped after 2^32 scans: reset every block once
-      for (Root::iterator it = root_.begin(); it != root_.end(); ++it) it->second->epoch = 0;
+      for (const std::unique_ptr<GridBlock>& block : blocks_) block->epoch = 0;
       epoch_ = 1;
     }
   }
@@ -185,7 +201,10 @@ class BlockGrid {
   }
 
  private:
-  Root root_;
+  typedef KeyMap<BlockRef> BlockRoot;
+
+  BlockRoot root_;
+  std::vector<std::unique_ptr<GridBlock>> blocks_;  // owns the blocks, in creation order
   size_t n_cells_ = 0;
   uint32_t epoch_ = 0;
 };

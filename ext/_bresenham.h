@@ -71,12 +71,11 @@ static inline uint64_t bresenham_walk(const int64_t from[3], const int64_t to[3]
   const int64_t longest = std::max(std::max(delta[0], delta[1]), delta[2]);
   f(pack3(coord));
   for (int64_t i = 0; i < longest - 1; ++i) {
-    for (int a = 0; a < 3; ++a) {
+    for (int a = 0; a < 3; ++a) {  // without branches: the steps of two axes are erratic
       error[a] += delta[a];
-      if ((error[a] << 1) >= longest) {
-        coord[a] += step[a];
-        error[a] -= longest;
-      }
+      const int64_t go = -static_cast<int64_t>((error[a] << 1) >= longest);  // 0 or all ones
+      coord[a] += step[a] & go;
+      error[a] -= longest & go;
     }
     f(pack3(coord));
   }

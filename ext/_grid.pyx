@@ -163,7 +163,7 @@ cdef class _Grid:
         """Insert a scan: one update per cell (see ``scan_updates`` in ``ext/_scan.pxd``).
 
         The cells, their counts and updates are the octree's; each update is
-        applied to the hash map as liboctomap's ``updateNode`` applies it. With
+        applied to the block grid as liboctomap's ``updateNode`` applies it. With
         `culling` the scan's culling region is grown over this grid's cells;
         with `weights` (ray mode), ray i counts ``weights[i]`` times; with
         `superray_threshold` != 0 the rays are grouped into super rays first (as the
@@ -298,7 +298,7 @@ cdef class _Grid:
             return self._cells.size()
 
     def _memory_usage(self):
-        """Bytes of the block grid: the blocks, their root entries and the bucket array."""
+        """Bytes of the block grid: the blocks, their owning pointers and the root's slots."""
         with self._lock:
             return self._cells.memory_usage()
 
@@ -325,4 +325,4 @@ cdef class _Grid:
     def _clear(self):
         with self._lock:
             with nogil:
-                self._cells.clear()            # frees the blocks and the buckets
+                self._cells.clear()            # frees the blocks and the root's slots

@@ -5,7 +5,8 @@
 //   slot, linear probing, at most half full.
 //   KeyTable = KeyMap<KeyCounts>: the rays that pass through a cell and end in it
 //   during one scan (replaces liboctomap's std::tr1 unordered sets).
-//   KeyMap<BlockSlot> indexes the kernel maps' blocks of cells (_beta_blocks.h).
+//   KeyMap<BlockSlot> indexes the kernel maps' blocks of cells (_beta_blocks.h),
+//   KeyMap<BlockRef> the grid's (_block_grid.h).
 // CellBox: a bitset over a box of keys (the culling region of one scan).
 // StopFlag: a flag that the threads of one scan's traversal set and poll.
 #ifndef OCCGP_KEYTABLE_H
@@ -59,11 +60,20 @@ class KeyMap {
     }
   }
 
+  // Room for `expected` keys in all without growing; the entries stay.
+  void reserve(size_t expected) {
+    while (slots_.size() < 2 * expected) grow();
+  }
+
   // The entry of `key`, or nullptr when absent.
   Slot* find(uint64_t key) {
+    return const_cast<Slot*>(static_cast<const KeyMap*>(this)->find(key));
+  }
+
+  const Slot* find(uint64_t key) const {
     size_t i = hash(key) & mask_;
     while (true) {
-      Slot& s = slots_[i];
+      const Slot& s = slots_[i];
       if (s.key == key) return &s;
       if (s.key == kEmpty) return nullptr;
       i = (i + 1) & mask_;

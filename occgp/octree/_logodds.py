@@ -241,7 +241,7 @@ class LogOddsMap:
 
     def memory_usage(self) -> int:
         """Bytes used by the map's cells: the octree's nodes (liboctomap's
-        ``memoryUsage``), the grid's hash map (an estimate of its nodes and buckets).
+        ``memoryUsage``), the grid's blocks and the slots of their hashed root.
 
         Returns
         -------
