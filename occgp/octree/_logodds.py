@@ -422,14 +422,12 @@ class LogOddsMap:
         walked), and cells is None. `name`: the points' name in errors."""
         mode = check_choice(mode, "mode", MODES)
         rng = -1.0 if max_range is None else check_real(max_range, "max_range", low=0.0)
-        pts64 = as_points(points, name)
+        pts = self._as_float32_points(points, name)
         org = self._as_float32_origin(origin)
-        with np.errstate(over="ignore"):
-            pts = pts64.astype(np.float32)
         if len(pts) == 0:
             return None
         if rng >= 0:
-            pts = _cut_far_rays(pts64, pts, org, rng)
+            pts = _cut_far_rays(points, pts, org, rng, name)
         cells = self._raise_bad_ends(pts, org, rng, name) if check_ends else None
         return pts, org, rng, cells
 
@@ -513,8 +511,10 @@ def check_params(params: dict) -> dict:
     return out
 
 
-def _cut_far_rays(pts64: np.ndarray, pts: np.ndarray, org: np.ndarray, rng: float) -> np.ndarray:
-    """Make rays to far points cut at `rng` as they should be.
+def _cut_far_rays(points: ArrayLike, pts: np.ndarray, org: np.ndarray, rng: float,
+                  name: str) -> np.ndarray:
+    """Make rays to far points cut at `rng` as they should be (`points`: the scan as
+    given, checked; `pts`: its float32 copy).
 
     liboctomap truncates a ray at ``max_range`` along ``(p - origin).normalized()``, in
     single precision: a point so far (over ~1.8e19 m, or beyond float range) that its
@@ -530,7 +530,7 @@ def _cut_far_rays(pts64: np.ndarray, pts: np.ndarray, org: np.ndarray, rng: floa
     far = ~np.isfinite(nsq)
     if not far.any():
         return pts
-    delta = pts64[far] - org.astype(np.float64)
+    delta = as_points(points, name)[far] - org.astype(np.float64)
     scale = np.abs(delta).max(axis=1, keepdims=True)
     unit = delta / scale
     dist = scale[:, 0] * np.linalg.norm(unit, axis=1)
