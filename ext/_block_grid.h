@@ -210,10 +210,20 @@ class BlockGrid {
 };
 
 // Finds cells of one BlockGrid, remembering the last block it looked in: the cells of
-// a scan come in runs that share a block, so most lookups never hash.
+// a scan come in runs that share a block, so most lookups never hash. It may remember
+// that a block is missing: use one for lookups (find) or for inserts, not for lookups
+// across inserts.
 class BlockAccessor {
  public:
+  BlockAccessor() : grid_(nullptr) {}
   explicit BlockAccessor(BlockGrid* grid) : grid_(grid) {}
+
+  // Look in `grid` from now on, remembering nothing.
+  void reset(BlockGrid* grid) {
+    grid_ = grid;
+    last_key_ = ~0ull;
+    last_ = nullptr;
+  }
 
   float* find(uint64_t packed) {
     GridBlock* block = block_for(block_of(packed), false);

@@ -44,6 +44,9 @@ cdef extern from "_block_grid.h" namespace "occgp" nogil:
         void collect(vector[pair[uint64_t, float]]& out, bool occupied_only,
                      float threshold) except +
         void key_bounds(uint16_t* lo, uint16_t* hi)
+    cdef cppclass BlockAccessor:
+        void reset(BlockGrid* grid)
+        float* find(uint64_t packed)
 
 cdef extern from "_bresenham.h" namespace "occgp" nogil:
     cdef struct BresenhamStats:
@@ -92,8 +95,8 @@ ctypedef pair[uint64_t, float] Cell                     # packed key, log-odds
 
 
 cdef struct GridView:
-    BlockGrid* cells
-    float floor      # lower clamping bound (log-odds)
+    BlockAccessor* cells  # lookups only: the culling region is grown before any update
+    float floor           # lower clamping bound (log-odds)
 
 
 cdef bool _fully_free(void* view, const OcTreeKey& key) noexcept nogil:
@@ -185,10 +188,12 @@ cdef class _Grid:
         cdef vector[ScanCell] found
         cdef ScanStats stats
         cdef GridView view
+        cdef BlockAccessor cache
         cdef float lo = tree.getClampingThresMinLog(), hi = tree.getClampingThresMaxLog()
         cdef timespec done
         cdef Status status = Status.ok
-        view.cells = &self._cells
+        cache.reset(&self._cells)
+        view.cells = &cache
         view.floor = lo
         with self._lock:
             with nogil:
