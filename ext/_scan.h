@@ -461,6 +461,8 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   truncated.resize(n);
   table.reset(static_cast<size_t>(n) / 8);
   // end cells first: they bound the region and may never join it
+  uint64_t last_key = KeyTable::kEmpty;
+  KeyCounts* last_entry = nullptr;  // valid until the next table.get (which may grow it)
   for (ptrdiff_t i = 0; i < n; ++i) {
     const float* p = points + 3 * i;
     truncated[i] = effective_end(o, point3d(p[0], p[1], p[2]), max_range, &ends[i]);
@@ -484,7 +486,14 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
       level += std::abs(static_cast<int>(key[axis]) - static_cast<int>(ko[axis]));
     }
     max_level = std::max(max_level, level);
-    if (!truncated[i]) table.get(pack_key(key))->n_hit += weighted ? weights[i] : 1;
+    if (truncated[i]) continue;
+    // consecutive points of a scan often end in one cell: its entry is kept
+    const uint64_t packed = pack_key(key);
+    if (packed != last_key) {
+      last_entry = table.get(packed);
+      last_key = packed;
+    }
+    last_entry->n_hit += weighted ? weights[i] : 1;
   }
   clock_gettime(CLOCK_MONOTONIC, &stats->clock[1]);
   // nothing changed: the caller reports the bad rows
