@@ -59,7 +59,7 @@ inline uint64_t key_of(uint64_t block, int index) {
          (((block >> 32) & 0xFFFF) << kBlockBits | ((i >> (2 * kBlockBits)) & kBlockMask)) << 32;
 }
 
-// A root slot: a block's key and the block (nullptr until get_block creates it).
+// A root slot: a block's key and the block.
 struct BlockRef {
   uint64_t key;
   GridBlock* block;
@@ -75,17 +75,23 @@ class BlockGrid {
     return ref == nullptr ? nullptr : ref->block;
   }
 
-  // The block of `block_key`, created (no cell known) if missing.
+  // The block of `block_key`, created (no cell known) if missing. When memory runs out
+  // it throws and the grid is unchanged.
   GridBlock* get_block(uint64_t block_key) {
-    BlockRef* ref = root_.get(block_key);
-    if (ref->block == nullptr) {
-      blocks_.emplace_back(new GridBlock);
-      GridBlock* block = blocks_.back().get();
-      std::memset(block->known, 0, sizeof(block->known));
-      std::memset(block->marked, 0, sizeof(block->marked));
-      block->epoch = 0;  // no scan's marks
-      ref->block = block;
-    }
+    if (const BlockRef* found = root_.find(block_key)) return found->block;
+    return add_block(block_key);
+  }
+
+  // A new block for `block_key` (off the lookups' hot path).
+  __attribute__((noinline)) GridBlock* add_block(uint64_t block_key) {
+    root_.reserve(root_.size() + 1);  // the allocations first, each undone if it throws
+    std::unique_ptr<GridBlock> block(new GridBlock);
+    std::memset(block->known, 0, sizeof(block->known));
+    std::memset(block->marked, 0, sizeof(block->marked));
+    block->epoch = 0;  // no scan's marks
+    blocks_.push_back(std::move(block));
+    BlockRef* ref = root_.get(block_key);  // room reserved: no allocation
+    ref->block = blocks_.back().get();
     return ref->block;
   }
 
@@ -126,7 +132,7 @@ class BlockGrid {
   }
 
   void reserve_blocks(size_t n) {
-    if (n > root_.size()) root_.reserve(n);
+    root_.reserve(n);
     blocks_.reserve(n);
   }
 

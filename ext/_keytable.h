@@ -113,17 +113,18 @@ class KeyMap {
     return s;
   }
 
+  // Twice the slots; when the allocation throws, the table is unchanged.
   void grow() {
-    std::vector<Slot> old;
-    old.swap(slots_);
-    slots_.assign(old.size() * 2, empty_slot());
-    mask_ = slots_.size() - 1;
-    for (const Slot& s : old) {
+    std::vector<Slot> bigger(slots_.size() * 2, empty_slot());
+    const size_t mask = bigger.size() - 1;
+    for (const Slot& s : slots_) {
       if (s.key == kEmpty) continue;
-      size_t i = hash(s.key) & mask_;
-      while (slots_[i].key != kEmpty) i = (i + 1) & mask_;
-      slots_[i] = s;
+      size_t i = hash(s.key) & mask;
+      while (bigger[i].key != kEmpty) i = (i + 1) & mask;
+      bigger[i] = s;
     }
+    slots_.swap(bigger);
+    mask_ = mask;
   }
 
   std::vector<Slot> slots_;
