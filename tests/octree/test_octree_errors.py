@@ -81,6 +81,23 @@ def test_far_points_are_fine_when_max_range_truncates_them(m):
     assert not m.is_occupied([[1.5, 0, 0]])[0]
 
 
+@pytest.mark.parametrize("cls", [OccupancyOctree, GridMap], ids=["octree", "grid"])
+@pytest.mark.parametrize("far", [
+    np.array([[1e39, 0, 0]]),                          # beyond float range
+    np.array([[1e20, 1e20, 0]]),                       # a float square overflows
+    np.array([[1e20, 0, 0]], dtype=np.float32),        # the same in float32 points
+    np.array([[-3e38, 0, 3e38]], dtype=np.float32),
+], ids=["float64-beyond-float", "float64-overflowing-square", "float32", "float32-max"])
+def test_rays_to_overflowing_points_are_cut_at_max_range(cls, far):
+    """A ray whose float squared length overflows is cut at max_range as a near point on
+    its line is (the double-precision cut of insert_scan), in float32 points too."""
+    m = cls(0.1).insert_scan(far, [0, 0, 0], max_range=2.0)
+    near = far.astype(np.float64) / np.linalg.norm(far.astype(np.float64)) * 4.0
+    ref = cls(0.1).insert_scan(near, [0, 0, 0], max_range=2.0)
+    assert VALUES[cls](m) == VALUES[cls](ref)
+    assert m.num_cells == ref.num_cells > 0
+
+
 @pytest.mark.parametrize("kwargs, err, match", [
     (dict(mode="fast"), ValueError, r"mode must be one of \('scan', 'ray'\), got 'fast'"),
     (dict(max_range=0.0), ValueError, r"max_range must lie in \(0.0, inf\), got 0.0"),
