@@ -192,12 +192,17 @@ class BlockGrid {
     }
   }
 
-  // Mark cell `packed` of `block` as updated in this scan; false if it already was.
-  bool mark(GridBlock* block, uint64_t packed) const {
+  // Make the marks of `block` this scan's (none, if it was last marked in another).
+  void mark_scan(GridBlock* block) const {
     if (block->epoch != epoch_) {
       std::memset(block->marked, 0, sizeof(block->marked));
       block->epoch = epoch_;
     }
+  }
+
+  // Mark cell `packed` of `block` as updated in this scan; false if it already was.
+  bool mark(GridBlock* block, uint64_t packed) const {
+    mark_scan(block);
     const int i = cell_of(packed);
     uint64_t& word = block->marked[i >> 6];
     const uint64_t bit = 1ull << (i & 63);

@@ -28,7 +28,7 @@ from liboctomap cimport OcTree, OcTreeKey, point3d
 from _keys cimport (
     KEY_DEPTH, ray_codes, in_range_mask, pack_key, set_sensor_model, unpack_key,
 )
-from _scan cimport ScanCell, ScanStats, scan_updates_free_only
+from _scan cimport FreeTest, ScanCell, ScanStats
 from _status cimport Status
 
 
@@ -62,6 +62,17 @@ cdef extern from "_bresenham.h" namespace "occgp" nogil:
 cdef extern from "_grid_apply.h" namespace "occgp" nogil:
     void apply_grid_updates(BlockGrid& cells, const vector[ScanCell]& found,
                             float lo, float hi, int n_threads) except +
+    cdef cppclass GridDirect:
+        uint64_t updated
+        void reset(BlockGrid* grid, float lo, float hi)
+    # scan_updates with the grid's in-place updates (ext/_scan.h, `direct`)
+    Status scan_updates_in_place "occgp::scan_updates"(
+        const OcTree& keys, const float* points, Py_ssize_t n, const point3d& o,
+        double max_range, bool ray_mode, bool culling, const uint32_t* weights,
+        int superray_threshold, FreeTest fully_free, void* map, vector[uint32_t]& counts,
+        bool& counts_dirty, vector[ScanCell]& found, ScanStats* stats, bool diagnose,
+        uint64_t max_cells, int n_threads, const uint8_t* free_only,
+        GridDirect* direct) except +
 
 cdef extern from "_discretize.h" namespace "occgp" nogil:
     Py_ssize_t discretize_points(const float* points, Py_ssize_t n, double resolution,
@@ -172,7 +183,9 @@ cdef class _Grid:
         `superray_threshold` != 0 the rays are grouped into super rays first (as the
         octree's). The rays
         are walked, and the updates applied (``ext/_grid_apply.h``), on up to `n_threads`
-        threads (the walk on one with `diagnose`); the grid and the statistics are the
+        threads (the walk on one with `diagnose`); in scan mode on one thread the cells
+        are updated in place as the walk reaches them (``GridDirect``, no flags over
+        the scan's box and no update pass). The grid and the statistics are the
         same for every `n_threads`. Rays i with ``free_only[i]``
         (None: none) only clear, as rays cut at `max_range`.
 
@@ -189,6 +202,7 @@ cdef class _Grid:
         cdef ScanStats stats
         cdef GridView view
         cdef BlockAccessor cache
+        cdef GridDirect direct
         cdef float lo = tree.getClampingThresMinLog(), hi = tree.getClampingThresMaxLog()
         cdef timespec done
         cdef Status status = Status.ok
@@ -197,13 +211,15 @@ cdef class _Grid:
         view.floor = lo
         with self._lock:
             with nogil:
-                status = scan_updates_free_only(
+                direct.reset(&self._cells, lo, hi)
+                status = scan_updates_in_place(
                     tree[0], scan_points(points), points.shape[0], o, max_range, ray_mode,
                     culling, w, superray_threshold, _fully_free, &view, self._counts,
-                    self._counts_dirty, found, &stats, diagnose, max_cells, n_threads, fo)
+                    self._counts_dirty, found, &stats, diagnose, max_cells, n_threads, fo,
+                    &direct)
                 apply_grid_updates(self._cells, found, lo, hi, n_threads)
                 clock_gettime(CLOCK_MONOTONIC, &done)
-        return scan_result(status, stats, found.size(), done)
+        return scan_result(status, stats, found.size() + direct.updated, done)
 
     def _insert_bresenham(self, const float[:, ::1] points, const float[::1] origin,
                           double max_range):

@@ -172,7 +172,8 @@ class RayWalker {
 
   // The culling region's shortcut (Kwon, dissertation 2.3.5): right after start(),
   // append to `cells` the cells of the ray that lie outside `region`, as indices
-  // into the region's box (CellBox::index), found walking back from the end
+  // into the region's box (CellBox::index), or as packed keys (pack_key) with `Keys`,
+  // found walking back from the end
   // cell, and return
   // true -- or return false, appending nothing, when that walk cannot be
   // certified to give the cells that next() gives; walk forward then.
@@ -185,6 +186,7 @@ class RayWalker {
   // next() takes the same cells there (a tie broken the other way inside the
   // region only swaps cells that are in the region too: it is closed under a
   // step toward the origin on any axis), and reaches the end cell.
+  template <bool Keys = false>
   bool walk_back(const CellBox& region, std::vector<uint64_t>& cells) const {
     const int step[3] = {s0_, s1_, s2_};
     const double t0[3] = {t0_, t1_, t2_};
@@ -237,7 +239,7 @@ class RayWalker {
         // the entry into a cell of the region is certified: the cells before it are in
         // the region, whichever way next() breaks their ties
         if (region.test_index(index)) return true;
-        cells.push_back(index);
+        cells.push_back(Keys ? packed(key) : index);
       }
       at_end = false;
       --remaining;
@@ -250,11 +252,17 @@ class RayWalker {
                                  : -std::numeric_limits<double>::infinity();
     }
     // the origin's cell
-    if (!region.test_index(index)) cells.push_back(index);
+    if (!region.test_index(index)) cells.push_back(Keys ? packed(key) : index);
     return true;
   }
 
  private:
+  // The packed key (pack_key) of the keys k.
+  static uint64_t packed(const int k[3]) {
+    return static_cast<uint64_t>(k[0] & 0xFFFF) | static_cast<uint64_t>(k[1] & 0xFFFF) << 16 |
+           static_cast<uint64_t>(k[2] & 0xFFFF) << 32;
+  }
+
   // One step of computeRayKeys's loop on the keys (k) and tMax values (t): along the
   // axis of the smallest tMax, ties resolved as computeRayKeys resolves them; false
   // when the end cell (keys e) is reached or the smallest tMax passes `length`.

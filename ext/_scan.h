@@ -2,7 +2,8 @@
 // region (declared for Cython in ext/_scan.pxd).
 //
 // scan_updates turns a scan into one update per cell, and each map applies them its
-// own way (ext/_octree.pyx in one pass over the tree, ext/_grid.pyx in its hash map).
+// own way (ext/_octree.pyx in one pass over the tree, ext/_grid.pyx to its blocks, in
+// place as the rays cross the cells where the scan is walked on one thread).
 // The rays of a scan may be walked on several OpenMP threads, each into its own
 // counts, merged (integer sums) before the cells are collected: the modules that use
 // this are built with OpenMP (OPENMP_MODULES in setup.py). Keys, ray ends and the
@@ -33,6 +34,7 @@
 #include "_keys.h"
 #include "_keytable.h"
 #include "_raywalk.h"
+#include "_scan_box.h"
 #include "_status.h"
 #include "_superrays.h"
 
@@ -99,83 +101,6 @@ static inline void add_walk_counts(ScanStats* stats, const WalkCounts& c) {
   stats->spared_cells += c.spared;
   stats->culled_rays += c.culled;
   stats->region_spared += c.region_spared;
-}
-
-// |a - b|_1 over the three keys: the cells a ray from the cell `a` visits before it
-// reaches the cell `b` (one a step; a walk that stops short of `b` visits fewer).
-static inline long key_distance(const octomap::OcTreeKey& a, const octomap::OcTreeKey& b) {
-  long d = 0;
-  for (int axis = 0; axis < 3; ++axis)
-    d += std::abs(static_cast<long>(a[axis]) - static_cast<long>(b[axis]));
-  return d;
-}
-
-static inline bool in_box(const octomap::OcTreeKey& key, const int* lo, const uint64_t* dims) {
-  return static_cast<uint64_t>(static_cast<int>(key[0]) - lo[0]) < dims[0] &&
-         static_cast<uint64_t>(static_cast<int>(key[1]) - lo[1]) < dims[1] &&
-         static_cast<uint64_t>(static_cast<int>(key[2]) - lo[2]) < dims[2];
-}
-
-static inline uint64_t box_index(const octomap::OcTreeKey& key, const int* lo, const uint64_t* dims) {
-  return (static_cast<uint64_t>(key[2] - lo[2]) * dims[1] +
-          static_cast<uint64_t>(key[1] - lo[1])) * dims[0] +
-         static_cast<uint64_t>(key[0] - lo[0]);
-}
-
-static inline octomap::OcTreeKey box_key(uint64_t idx, const int* lo, const uint64_t* dims) {
-  octomap::OcTreeKey key;
-  key[0] = static_cast<octomap::key_type>(lo[0] + idx % dims[0]);
-  idx /= dims[0];
-  key[1] = static_cast<octomap::key_type>(lo[1] + idx % dims[1]);
-  key[2] = static_cast<octomap::key_type>(lo[2] + idx / dims[1]);
-  return key;
-}
-
-// Count `w` rays through the cell (kx, ky, kz) in `table`: cells outside the scan's
-// dense box, off the hot path of count_free.
-__attribute__((noinline, cold)) static void count_free_table(int kx, int ky, int kz, uint32_t w,
-                                                             KeyTable* table) {
-  octomap::OcTreeKey key;
-  key[0] = static_cast<octomap::key_type>(kx);
-  key[1] = static_cast<octomap::key_type>(ky);
-  key[2] = static_cast<octomap::key_type>(kz);
-  table->get(pack_key(key))->n_free += w;
-}
-
-// Count `w` rays through the box cell `idx` of `counts`, appending it to `touched`
-// when it is new. Counts of one byte (scan mode) are flags: 1 once a ray crossed the
-// cell. With `shared` (scan mode, every thread flagging cells in one array), the
-// thread that sets a flag first, atomically, appends the cell, so each cell is
-// appended once over all threads.
-template <class Count>
-static inline void count_box(Count* counts, uint64_t idx, uint32_t w, bool shared,
-                             std::vector<uint64_t>* touched) {
-  if (shared) {
-    if (__atomic_load_n(counts + idx, __ATOMIC_RELAXED) == 0 &&
-        __atomic_exchange_n(counts + idx, Count(1), __ATOMIC_RELAXED) == 0)
-      touched->push_back(idx);
-  } else {
-    if (counts[idx] == 0) touched->push_back(idx);
-    counts[idx] = sizeof(Count) == 1 ? Count(1) : static_cast<Count>(counts[idx] + w);
-  }
-}
-
-// Count `w` rays through the cell (kx, ky, kz): in the scan's dense box (`free_counts`,
-// see count_box), or the table.
-template <class Count>
-static inline void count_free(int kx, int ky, int kz, uint32_t w, bool dense, bool shared,
-                              const int* lo, const uint64_t* dims, Count* free_counts,
-                              std::vector<uint64_t>* touched, KeyTable* table) {
-  const uint64_t x = static_cast<uint64_t>(kx - lo[0]);
-  const uint64_t y = static_cast<uint64_t>(ky - lo[1]);
-  const uint64_t z = static_cast<uint64_t>(kz - lo[2]);
-  // liboctomap's traversal may step past the end cell before its length test stops
-  // it: such cells lie outside the box and go to the table
-  if (dense && x < dims[0] && y < dims[1] && z < dims[2]) {
-    count_box(free_counts, (z * dims[1] + y) * dims[0] + x, w, shared, touched);
-  } else {
-    count_free_table(kx, ky, kz, w, table);
-  }
 }
 
 // One cell's update of a scan: liboctomap's insertPointCloud rule, or ray counting.
@@ -269,29 +194,26 @@ struct Rays {
   const CellBox* region;    // the culling region over the scan's key box
   bool cull;                // the region holds more than the sensor's cell: hide rays
   bool walk_back;           // and at least kMinWalkBackRegion cells: walk rays back
-  bool dense;               // counts in box arrays (else in tables)
-  bool shared;              // dense, scan mode: one array of flags for every thread
   const int* lo;            // the scan's key box
   const uint64_t* dims;
   uint64_t max_cells;  // 0: no limit
 };
 
 // Walk rays r0 <= r < r1 of a scan (of its super rays when it has them) into one
-// thread's counts: cells of the scan's key box in `counts` (dense; new ones appended
-// to `touched`), other cells in `table`'s n_free. Adds to `tally` the cell visits,
+// thread's `sink` (CountSink, or a map's in-place updates: scan_updates' `direct`),
+// which takes each visit with the ray's weight. Adds to `tally` the cell visits,
 // those that super rays spared (each walked ray's visits times the other rays of its
 // class), the rays the culling region hid whole, and the visits the region spared (a
 // hidden ray's key_distance: one too many where its walk would stop short of its end
 // cell); with
 // `visits` (diagnose), counts every visit there too.
 //
-// With s.max_cells, stops (setting `stop`) once `touched` and the entries of `table`
-// past its first `table_base` ones -- distinct cells of the scan, as no two of them
-// are one -- outnumber it; stops when another thread set `stop`.
-template <class Count>
-static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* counts,
-                      std::vector<uint64_t>* touched, KeyTable* table, size_t table_base,
-                      KeyTable* visits, WalkCounts* tally, StopFlag* stop) {
+// With s.max_cells, stops (setting `stop`) once the sink's distinct cells outnumber
+// it; stops when another thread set `stop`. The sink is a copy, local to the walk,
+// which the stores to its counts (bytes, which may alias anything) cannot alias.
+template <class Sink>
+static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Sink sink,
+                             KeyTable* visits, WalkCounts* tally, StopFlag* stop) {
   uint32_t w = 1;
   long n_spared = 0, n_culled = 0, n_region_spared = 0;
   RayWalker walker;
@@ -299,10 +221,6 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
   long n_visits = 0;
   const CellBox* region = s->region;
   const double inv_res = 1.0 / s->res;
-  // copies, which the counts' stores cannot alias
-  const bool dense = s->dense, shared = s->shared;
-  const int lo[3] = {s->lo[0], s->lo[1], s->lo[2]};
-  const uint64_t dims[3] = {s->dims[0], s->dims[1], s->dims[2]};
   for (ptrdiff_t r = r0; r < r1; ++r) {
     if (stop->get()) break;
     ptrdiff_t i;
@@ -326,16 +244,13 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
     bool more = walker.start(s->res, *s->origin, *s->key_origin, s->ends[i], s->end_keys[i]);
     if (more && s->walk_back) {
       back.clear();
-      if (walker.walk_back(*region, back)) {
-        // the region's box is the scan's key box, the one `counts` covers
+      if (walker.template walk_back<Sink::kKeys>(*region, back)) {
+        // the region's box is the scan's key box
         for (size_t j = 0; j < back.size(); ++j) {
-          const uint64_t idx = back[j];
-          if (dense) {
-            count_box(counts, idx, w, shared, touched);
-          } else {
-            table->get(pack_key(box_key(idx, lo, dims)))->n_free += w;
-          }
-          if (visits != nullptr) visits->get(pack_key(box_key(idx, lo, dims)))->n_free += 1;
+          sink.box(back[j], w);
+          if (visits != nullptr)
+            visits->get(Sink::kKeys ? back[j] : pack_key(box_key(back[j], s->lo, s->dims)))
+                ->n_free += 1;
         }
         n_visits += back.size();
         // certified to reach the end cell: key_distance visits, `back` of them made
@@ -354,7 +269,7 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
     }
     if (more) {
       n_visits += walker.visit_rest([&](int kx, int ky, int kz) {
-        count_free(kx, ky, kz, w, dense, shared, lo, dims, counts, touched, table);
+        sink.cell(kx, ky, kz, w);
         if (visits != nullptr) {
           octomap::OcTreeKey key;
           key[0] = static_cast<octomap::key_type>(kx);
@@ -365,7 +280,7 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
       });
     }
     if (s->ray_ids != nullptr) n_spared += (n_visits - visits_before) * (w - 1);
-    if (s->max_cells && touched->size() + (table->size() - table_base) > s->max_cells) {
+    if (s->max_cells && sink.distinct() > s->max_cells) {
       stop->set();
       break;
     }
@@ -420,13 +335,21 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Count* c
 // cells up to its (possibly truncated) end count as free, its end cell gets nothing
 // from it, it is never grouped into a super ray, and its end does not keep a cell out
 // of the culling region -- so every method stays exact.
+//
+// With `direct` (nullptr: none; scan mode, one thread, a key box within the dense
+// limit, and `max_cells` out of reach of the rays), the map updates its cells in place
+// instead: direct->begin_scan(lo, dims) with the scan's key box, direct->update(kx, ky,
+// kz, update) for each end cell (l_hit) and then for each cell a walk visits (l_miss;
+// the map ignores a cell it has updated in this scan), direct->finish() after the walk.
+// `cells` then stays empty; the statistics are the same.
+template <class Direct = scan_detail::NoDirect>
 static inline Status scan_updates(const octomap::OcTree& keys, const float* points, ptrdiff_t n,
                            const octomap::point3d& o, double max_range, bool ray_mode,
                            bool culling, const uint32_t* weights, int superray_threshold,
                            FreeTest fully_free, void* map, std::vector<uint32_t>& counts,
                            bool& counts_dirty, std::vector<ScanCell>& cells, ScanStats* stats,
                            bool diagnose, uint64_t max_cells, int n_threads,
-                           const uint8_t* free_only = nullptr) {
+                           const uint8_t* free_only = nullptr, Direct* direct = nullptr) {
   using namespace scan_detail;
   using octomap::OcTreeKey;
   using octomap::point3d;
@@ -441,6 +364,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   OcTreeKey ko, key;
   int lo[3], hi[3];
   int max_level = 0;
+  uint64_t reach = 0;  // at least the distinct cells the rays can visit
   const float l_hit = keys.getProbHitLog(), l_miss = keys.getProbMissLog();
   std::vector<uint64_t> touched;  // box indices with a nonzero count
   uint64_t dims[3];
@@ -486,6 +410,7 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
       level += std::abs(static_cast<int>(key[axis]) - static_cast<int>(ko[axis]));
     }
     max_level = std::max(max_level, level);
+    reach += level + 4;  // the cells a walk can visit: a step a key, past the end by few
     if (truncated[i]) continue;
     // consecutive points of a scan often end in one cell: its entry is kept
     const uint64_t packed = pack_key(key);
@@ -520,6 +445,47 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   if (diagnose || n_threads < 1) n_threads = 1;
   n_threads = std::min(std::min(n_threads, kMaxThreads),
                        static_cast<int>(std::max<ptrdiff_t>(n_trav / kMinThreadRays, 1)));
+  // walking back to a region of the sensor's cell alone would spare one visit a ray and
+  // cost more than the visits it spares
+  const bool cull = stats->region_cells > 1;
+  rays.res = res;
+  rays.origin = &o;
+  rays.key_origin = &ko;
+  rays.ends = ends.data();
+  rays.end_keys = end_keys.data();
+  rays.end_ok = end_ok.data();
+  rays.ray_ids = superray_threshold != 0 ? ray_ids.data() : nullptr;
+  rays.ray_weights = superray_threshold != 0 ? ray_weights.data() : nullptr;
+  rays.weights = weighted ? weights : nullptr;
+  rays.region = &region;
+  rays.cull = cull;
+  rays.walk_back = stats->region_cells >= kMinWalkBackRegion;
+  rays.lo = lo;
+  rays.dims = dims;
+  rays.max_cells = max_cells;
+  // `direct` (scan mode, one thread): the map updates its cells in place during the
+  // walk (Direct::update marks a cell for this scan and gives it its one update; the
+  // end cells first, l_hit, so that no walk updates them), without flags, collected
+  // cells or an update pass afterwards -- where the cells the rays can reach stay
+  // within max_cells, so that the scan cannot be refused once it has begun
+  if (direct != nullptr && !ray_mode && !diagnose && n_threads == 1 &&
+      box_cells <= kMaxDenseCells && (max_cells == 0 || reach + table.size() <= max_cells)) {
+    direct->begin_scan(lo, dims);
+    for (size_t slot = 0; slot < table.capacity(); ++slot) {
+      if (table.slot(slot).key == KeyTable::kEmpty) continue;
+      key = unpack_key(table.slot(slot).key);
+      direct->update(key[0], key[1], key[2], l_hit);
+    }
+    if (origin_in && cull) direct->update(ko[0], ko[1], ko[2], l_miss);  // no walk visits it
+    DirectSink<Direct> sink{direct, l_miss};
+    WalkCounts tally;
+    walk_rays(&rays, 0, n_trav, sink, nullptr, &tally, &stop);
+    add_walk_counts(stats, tally);
+    clock_gettime(CLOCK_MONOTONIC, &stats->clock[4]);
+    direct->finish();
+    stats->rays = n_trav;
+    return Status::ok;
+  }
   // in scan mode a cell's update asks only whether a ray crossed it, so every thread
   // sets flags in one array (count_box); in ray mode each thread's counts get their own
   // slice of `counts`, within the dense limit: no more threads than slices fit (counting
@@ -557,9 +523,6 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
     }
   };
   if (ends_flagged) for_end_cells([&](uint64_t idx) { flags[idx] = 2; });
-  // walking back to a region of the sensor's cell alone would spare one visit a ray and
-  // cost more than the visits it spares
-  const bool cull = stats->region_cells > 1;
   if (origin_in && cull) {  // no walk visits the sensor's cell now
     if (dense) {
       const uint64_t idx = box_index(ko, lo, dims);
@@ -576,31 +539,17 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
                         KeyTable* t_table, size_t base, KeyTable* t_visits,
                         WalkCounts* t_tally) {
     if (ray_mode) {
-      walk_rays(&rays, r0, r1, dense ? counts.data() + static_cast<uint64_t>(t) * box_cells
-                                     : nullptr,
-                t_touched, t_table, base, t_visits, t_tally, &stop);
+      CountSink<uint32_t> sink{
+          dense ? counts.data() + static_cast<uint64_t>(t) * box_cells : nullptr,
+          t_touched, t_table, base, dense, shared, {lo[0], lo[1], lo[2]},
+          {dims[0], dims[1], dims[2]}};
+      walk_rays(&rays, r0, r1, sink, t_visits, t_tally, &stop);
     } else {  // one array of flags for every thread
-      walk_rays(&rays, r0, r1, dense ? flags : nullptr, t_touched, t_table, base, t_visits,
-                t_tally, &stop);
+      CountSink<uint8_t> sink{dense ? flags : nullptr, t_touched, t_table, base, dense, shared,
+                              {lo[0], lo[1], lo[2]}, {dims[0], dims[1], dims[2]}};
+      walk_rays(&rays, r0, r1, sink, t_visits, t_tally, &stop);
     }
   };
-  rays.res = res;
-  rays.origin = &o;
-  rays.key_origin = &ko;
-  rays.ends = ends.data();
-  rays.end_keys = end_keys.data();
-  rays.end_ok = end_ok.data();
-  rays.ray_ids = superray_threshold != 0 ? ray_ids.data() : nullptr;
-  rays.ray_weights = superray_threshold != 0 ? ray_weights.data() : nullptr;
-  rays.weights = weighted ? weights : nullptr;
-  rays.region = &region;
-  rays.cull = cull;
-  rays.walk_back = stats->region_cells >= kMinWalkBackRegion;
-  rays.dense = dense;
-  rays.shared = shared;
-  rays.lo = lo;
-  rays.dims = dims;
-  rays.max_cells = max_cells;
   // thread 0 counts into the scan's own table (its first `hits` entries: the end
   // cells), the others into tables of their own
   const size_t hits = table.size();
