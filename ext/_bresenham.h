@@ -51,11 +51,6 @@ static inline int64_t bresenham_key(double c, double inv_resolution) {
   return scaled_key(c * inv_resolution, &key) ? key : -1;
 }
 
-static inline uint64_t pack3(const int64_t k[3]) {
-  return static_cast<uint64_t>(k[0]) | static_cast<uint64_t>(k[1]) << 16 |
-         static_cast<uint64_t>(k[2]) << 32;
-}
-
 // Walk the Bresenham line from `from` to `to` (keys): f(packed key) for the start cell
 // and the cells before `to`.
 template <class F>
@@ -69,7 +64,7 @@ static inline uint64_t bresenham_walk(const int64_t from[3], const int64_t to[3]
     delta[a] = d < 0 ? -d : d;
   }
   const int64_t longest = std::max(std::max(delta[0], delta[1]), delta[2]);
-  f(pack3(coord));
+  f(pack_keys(coord[0], coord[1], coord[2]));
   for (int64_t i = 0; i < longest - 1; ++i) {
     for (int a = 0; a < 3; ++a) {  // without branches: the steps of two axes are erratic
       error[a] += delta[a];
@@ -77,7 +72,7 @@ static inline uint64_t bresenham_walk(const int64_t from[3], const int64_t to[3]
       coord[a] += step[a] & go;
       error[a] -= longest & go;
     }
-    f(pack3(coord));
+    f(pack_keys(coord[0], coord[1], coord[2]));
   }
   return static_cast<uint64_t>(longest);
 }
@@ -114,7 +109,7 @@ static inline Status bresenham_scan(BlockGrid& grid, const float* points, ptrdif
         return Status::out_of_range;
       }
     }
-    ends[i] = pack3(k) | (is_miss ? kMiss : 0);
+    ends[i] = pack_keys(k[0], k[1], k[2]) | (is_miss ? kMiss : 0);
   }
   grid.begin_scan();
   BlockAccessor cache(&grid);

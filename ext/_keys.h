@@ -21,6 +21,12 @@ inline uint64_t pack_key(const octomap::OcTreeKey& key) {
          (static_cast<uint64_t>(key[2]) << 32);
 }
 
+// The same of three keys given as integers (each taken modulo 2^16, as OcTreeKey does).
+inline uint64_t pack_keys(int64_t kx, int64_t ky, int64_t kz) {
+  return static_cast<uint64_t>(kx & 0xFFFF) | static_cast<uint64_t>(ky & 0xFFFF) << 16 |
+         static_cast<uint64_t>(kz & 0xFFFF) << 32;
+}
+
 inline octomap::OcTreeKey unpack_key(uint64_t packed) {
   return octomap::OcTreeKey(static_cast<octomap::key_type>(packed & 0xFFFF),
                             static_cast<octomap::key_type>((packed >> 16) & 0xFFFF),

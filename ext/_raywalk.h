@@ -19,6 +19,7 @@
 #include <octomap/OcTreeKey.h>
 #include <octomap/octomap_types.h>
 
+#include "_keys.h"
 #include "_keytable.h"
 
 namespace occgp {
@@ -239,7 +240,7 @@ class RayWalker {
         // the entry into a cell of the region is certified: the cells before it are in
         // the region, whichever way next() breaks their ties
         if (region.test_index(index)) return true;
-        cells.push_back(Keys ? packed(key) : index);
+        cells.push_back(Keys ? pack_keys(key[0], key[1], key[2]) : index);
       }
       at_end = false;
       --remaining;
@@ -252,17 +253,11 @@ class RayWalker {
                                  : -std::numeric_limits<double>::infinity();
     }
     // the origin's cell
-    if (!region.test_index(index)) cells.push_back(Keys ? packed(key) : index);
+    if (!region.test_index(index)) cells.push_back(Keys ? pack_keys(key[0], key[1], key[2]) : index);
     return true;
   }
 
  private:
-  // The packed key (pack_key) of the keys k.
-  static uint64_t packed(const int k[3]) {
-    return static_cast<uint64_t>(k[0] & 0xFFFF) | static_cast<uint64_t>(k[1] & 0xFFFF) << 16 |
-           static_cast<uint64_t>(k[2] & 0xFFFF) << 32;
-  }
-
   // One step of computeRayKeys's loop on the keys (k) and tMax values (t): along the
   // axis of the smallest tMax, ties resolved as computeRayKeys resolves them; false
   // when the end cell (keys e) is reached or the smallest tMax passes `length`.

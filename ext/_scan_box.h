@@ -128,7 +128,7 @@ struct CountSink {
 // scan_updates without a map's in-place updates (its default `direct`).
 struct NoDirect {
   void begin_scan(const int*, const uint64_t*) {}
-  void update(int, int, int, float) {}
+  void update(uint64_t, float) {}
   void finish() {}
 };
 
@@ -140,11 +140,8 @@ struct DirectSink {
   float l_miss;
   static constexpr bool kKeys = true;  // box() takes packed keys
 
-  void box(uint64_t key, uint32_t) {
-    direct->update(static_cast<int>(key & 0xFFFF), static_cast<int>((key >> 16) & 0xFFFF),
-                   static_cast<int>(key >> 32), l_miss);
-  }
-  void cell(int kx, int ky, int kz, uint32_t) { direct->update(kx, ky, kz, l_miss); }
+  void box(uint64_t key, uint32_t) { direct->update(key, l_miss); }
+  void cell(int kx, int ky, int kz, uint32_t) { direct->update(pack_keys(kx, ky, kz), l_miss); }
   uint64_t distinct() const { return 0; }  // the caller bounds the cells beforehand
 };
 
