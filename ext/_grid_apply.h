@@ -53,19 +53,19 @@ class GridDirect {
     grid_->begin_scan();
     uint64_t n = 1;
     for (int a = 0; a < 3; ++a) {
-      blo_[a] = static_cast<uint64_t>(lo[a]) >> kBlockBits;
-      bdims_[a] = ((static_cast<uint64_t>(lo[a]) + dims[a] - 1) >> kBlockBits) - blo_[a] + 1;
+      blo_[a] = lo[a] >> kBlockBits;
+      bdims_[a] = static_cast<uint64_t>(((lo[a] + static_cast<int>(dims[a]) - 1) >> kBlockBits) -
+                                        blo_[a] + 1);
       n *= bdims_[a];
     }
     index_.assign(n, nullptr);
   }
 
-  // Give cell `packed` (pack_key) the update `value`, once a scan.
-  __attribute__((always_inline)) void update(uint64_t packed, float value) {
-    const uint64_t b = block_of(packed);
-    const uint64_t bx = (b & 0xFFFF) - blo_[0];  // wraps below the box: out of it
-    const uint64_t by = ((b >> 16) & 0xFFFF) - blo_[1];
-    const uint64_t bz = (b >> 32) - blo_[2];
+  __attribute__((always_inline)) void update(int kx, int ky, int kz, float value) {
+    const uint64_t bx = static_cast<uint64_t>((kx >> kBlockBits) - blo_[0]);
+    const uint64_t by = static_cast<uint64_t>((ky >> kBlockBits) - blo_[1]);
+    const uint64_t bz = static_cast<uint64_t>((kz >> kBlockBits) - blo_[2]);
+    const uint64_t packed = pack_keys(kx, ky, kz);
     GridBlock* block;
     if (bx < bdims_[0] && by < bdims_[1] && bz < bdims_[2]) {
       GridBlock*& slot = index_[(bz * bdims_[1] + by) * bdims_[0] + bx];
@@ -113,7 +113,7 @@ class GridDirect {
   BlockGrid* grid_ = nullptr;
   BlockAccessor cache_;
   float lo_ = 0, hi_ = 0;
-  uint64_t blo_[3] = {0, 0, 0};  // the box's blocks: their lowest block keys, and dims
+  int blo_[3] = {0, 0, 0};
   uint64_t bdims_[3] = {0, 0, 0};
   std::vector<GridBlock*> index_;  // the blocks of the scan's box, nullptr until reached
   struct Pending {

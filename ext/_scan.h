@@ -338,8 +338,8 @@ static inline void walk_rays(const Rays* s, ptrdiff_t r0, ptrdiff_t r1, Sink sin
 //
 // With `direct` (nullptr: none; scan mode, one thread, a key box within the dense
 // limit, and `max_cells` out of reach of the rays), the map updates its cells in place
-// instead: direct->begin_scan(lo, dims) with the scan's key box, direct->update(packed
-// key, update) for each end cell (l_hit) and then for each cell a walk visits (l_miss;
+// instead: direct->begin_scan(lo, dims) with the scan's key box, direct->update(kx, ky,
+// kz, update) for each end cell (l_hit) and then for each cell a walk visits (l_miss;
 // the map ignores a cell it has updated in this scan), direct->finish() after the walk.
 // `cells` then stays empty; the statistics are the same.
 template <class Direct = scan_detail::NoDirect>
@@ -471,9 +471,12 @@ static inline Status scan_updates(const octomap::OcTree& keys, const float* poin
   if (direct != nullptr && !ray_mode && !diagnose && n_threads == 1 &&
       box_cells <= kMaxDenseCells && (max_cells == 0 || reach + table.size() <= max_cells)) {
     direct->begin_scan(lo, dims);
-    for (size_t slot = 0; slot < table.capacity(); ++slot)
-      if (table.slot(slot).key != KeyTable::kEmpty) direct->update(table.slot(slot).key, l_hit);
-    if (origin_in && cull) direct->update(pack_key(ko), l_miss);  // no walk visits it
+    for (size_t slot = 0; slot < table.capacity(); ++slot) {
+      if (table.slot(slot).key == KeyTable::kEmpty) continue;
+      key = unpack_key(table.slot(slot).key);
+      direct->update(key[0], key[1], key[2], l_hit);
+    }
+    if (origin_in && cull) direct->update(ko[0], ko[1], ko[2], l_miss);  // no walk visits it
     DirectSink<Direct> sink{direct, l_miss};
     WalkCounts tally;
     walk_rays(&rays, 0, n_trav, sink, nullptr, &tally, &stop);

@@ -128,7 +128,7 @@ struct CountSink {
 // scan_updates without a map's in-place updates (its default `direct`).
 struct NoDirect {
   void begin_scan(const int*, const uint64_t*) {}
-  void update(uint64_t, float) {}
+  void update(int, int, int, float) {}
   void finish() {}
 };
 
@@ -140,8 +140,11 @@ struct DirectSink {
   float l_miss;
   static constexpr bool kKeys = true;  // box() takes packed keys
 
-  void box(uint64_t key, uint32_t) { direct->update(key, l_miss); }
-  void cell(int kx, int ky, int kz, uint32_t) { direct->update(pack_keys(kx, ky, kz), l_miss); }
+  void box(uint64_t key, uint32_t) {
+    const octomap::OcTreeKey k = unpack_key(key);
+    direct->update(k[0], k[1], k[2], l_miss);
+  }
+  void cell(int kx, int ky, int kz, uint32_t) { direct->update(kx, ky, kz, l_miss); }
   uint64_t distinct() const { return 0; }  // the caller bounds the cells beforehand
 };
 
